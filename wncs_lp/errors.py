@@ -1,0 +1,37 @@
+"""The toolkit's exception classes.
+
+Every error that bad input can trigger is a :class:`WncsError` (a ``ValueError``), so a
+caller can catch one class and always get a message naming what was wrong.
+"""
+from __future__ import annotations
+
+__all__ = ["WncsError", "ScenarioError", "ModelError", "SolverError", "PolicyError"]
+
+
+class WncsError(ValueError):
+    """Base class of every error raised by wncs_lp on bad input or a failed computation."""
+
+
+class ScenarioError(WncsError):
+    """A scenario file, dictionary or override is invalid.
+
+    The message names the source (file or ``<dict>``), the field and what was expected.
+    """
+
+    def __init__(self, source: str, field: str, expected: str):
+        self.source = source
+        self.field = field
+        self.expected = expected
+        super().__init__(f"{source}: field '{field}': {expected}")
+
+
+class ModelError(WncsError):
+    """An MDP is malformed (bad shapes, rows not summing to one, a state without action...)."""
+
+
+class SolverError(WncsError):
+    """A solver failed or returned an answer that did not pass its accuracy checks."""
+
+
+class PolicyError(WncsError):
+    """A policy is infeasible for the MDP, or its induced chain cannot be evaluated."""

@@ -1,0 +1,520 @@
+"""Scenario files (TOML) -> validated, frozen :class:`Scenario` objects.
+
+The format is the one of ``shared/spec/model.md`` section 4::
+
+    [model]     kind, allow_idle, distinct, preemptive, tau_cap
+    [channel]   success_probability
+    [[process]] name, A, R, weight, tau_cap
+    [[server]]  name, uplink_delay, downlink_delay,
+                slots_per_dimension | processing_time, p_up, p_down
+
+Loading goes raw TOML -> plain dict -> overrides -> validation -> frozen dataclasses, so an
+override is validated exactly like a field written in the file, and every error is one
+:class:`~wncs_lp.errors.ScenarioError` naming the source, the field and the expectation.
+"""
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from .errors import ScenarioError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = [
+    "ModelOptions",
+    "ProcessSpec",
+    "ServerSpec",
+    "Scenario",
+    "load_scenario",
+    "scenario_from_dict",
+    "parse_overrides",
+    "apply_overrides",
+]
+
+KINDS = ("wncs", "preemption")
+_MODEL_FIELDS = {"kind", "allow_idle", "distinct", "preemptive", "tau_cap"}
+_CHANNEL_FIELDS = {"success_probability"}
+_PROCESS_FIELDS = {"name", "A", "R", "weight", "tau_cap"}
+_SERVER_FIELDS = {
+    "name",
+    "uplink_delay",
+    "downlink_delay",
+    "slots_per_dimension",
+    "processing_time",
+    "p_up",
+    "p_down",
+}
+_TOP_FIELDS = {"model", "channel", "process", "server"}
+#: Largest AoI cap accepted on load; far beyond anything enumerable, it only stops absurd input.
+MAX_TAU_CAP = 100_000
+
+
+# ----------------------------------------------------------------------------- dataclasses
+def _frozen_array(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class ModelOptions:
+    """The ``[model]`` table: which MDP to build and its options."""
+
+    kind: str = "wncs"
+    allow_idle: bool = False
+    distinct: bool = True
+    preemptive: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class ProcessSpec:
+    """One LTI process x(t+1) = A x + B u + z, z ~ N(0, R), with weight and AoI cap."""
+
+    name: str
+    A: np.ndarray
+    R: np.ndarray
+    weight: float
+    tau_cap: int
+
+    @property
+    def dim(self) -> int:
+        """n_k, the dimension of the process state."""
+        return int(self.A.shape[0])
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, ProcessSpec)
+            and self.name == other.name
+            and self.weight == other.weight
+            and self.tau_cap == other.tau_cap
+            and np.array_equal(self.A, other.A)
+            and np.array_equal(self.R, other.R)
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.name, self.weight, self.tau_cap, self.A.tobytes(), self.R.tobytes()))
+
+
+@dataclass(frozen=True)
+class ServerSpec:
+    """One server m: delays U, D, processing times T_{m,k}, link success probabilities."""
+
+    name: str
+    uplink_delay: int
+    downlink_delay: int
+    processing_time: tuple[int, ...]
+    p_up: float
+    p_down: float
+
+    @property
+    def loop(self) -> tuple[int, ...]:
+        """U + T_k + D for every process k: the age a delivered command carries."""
+        return tuple(self.uplink_delay + t + self.downlink_delay for t in self.processing_time)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario. Build it with :func:`load_scenario` or :func:`scenario_from_dict`.
+
+    Attributes
+    ----------
+    model : ModelOptions
+    p : float
+        The channel's success probability (default for every link).
+    processes, servers : tuple
+        The processes and servers, in file order (process k of the paper is ``processes[k-1]``).
+    source : str
+        Where it came from (file path or ``<dict>``), for messages.
+    """
+
+    model: ModelOptions
+    p: float
+    processes: tuple[ProcessSpec, ...]
+    servers: tuple[ServerSpec, ...]
+    source: str = field(default="<dict>", compare=False)
+    raw: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def n_processes(self) -> int:
+        return len(self.processes)
+
+    @property
+    def n_servers(self) -> int:
+        return len(self.servers)
+
+    @property
+    def tau_caps(self) -> tuple[int, ...]:
+        return tuple(pr.tau_cap for pr in self.processes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The raw (pre-validation) dictionary this scenario was built from, overrides applied."""
+        return copy.deepcopy(dict(self.raw))
+
+    def with_overrides(self, overrides: Mapping[str, Any] | Iterable[str]) -> "Scenario":
+        """A new scenario with overrides applied (``{"p": 0.8}`` or ``["p=0.8", ...]``)."""
+        if not isinstance(overrides, Mapping):
+            overrides = parse_overrides(overrides)
+        raw = apply_overrides(self.to_dict(), overrides, self.source)
+        return scenario_from_dict(raw, source=self.source)
+
+    def fingerprint(self) -> str:
+        """A stable hash of the validated content (for caches keyed by scenario)."""
+        payload = json.dumps(_canonical(self.to_dict()), sort_keys=True)
+        return hashlib.sha256(payload.encode()).hexdigest()[:16]
+
+    def describe(self) -> str:
+        """A one-paragraph human summary."""
+        procs = ", ".join(f"{pr.name} (n={pr.dim}, cap={pr.tau_cap}, w={pr.weight:g})" for pr in self.processes)
+        servs = ", ".join(
+            f"{s.name} (U={s.uplink_delay}, D={s.downlink_delay}, T={list(s.processing_time)}, "
+            f"pu={s.p_up:g}, pd={s.p_down:g})"
+            for s in self.servers
+        )
+        return f"kind={self.model.kind}; processes: {procs}; servers: {servs}"
+
+
+def _canonical(obj: Any) -> Any:
+    if isinstance(obj, Mapping):
+        return {str(k): _canonical(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_canonical(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _canonical(obj.tolist())
+    return obj
+
+
+# ----------------------------------------------------------------------------- loading
+def load_scenario(path: str | Path, overrides: Mapping[str, Any] | Iterable[str] | None = None) -> Scenario:
+    """Load and validate a TOML scenario file, applying overrides on top.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file.
+    overrides : mapping or iterable of ``"key=value"`` strings, optional
+        Applied before validation: ``p`` (channel success probability), ``tau_cap`` (every
+        process's cap), or a dotted path such as ``process.2.weight`` / ``server.edge.p_up``
+        (processes and servers addressed by 1-based index or by name).
+
+    Raises
+    ------
+    ScenarioError
+        The file cannot be read or parsed, or a field or override is invalid.
+    """
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_bytes()
+    except OSError as exc:
+        raise ScenarioError(source, "<file>", f"cannot be read ({exc.strerror or exc})") from None
+    try:
+        raw = tomllib.loads(text.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ScenarioError(source, "<file>", "expected UTF-8 TOML text, found undecodable bytes") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(source, "<file>", f"malformed TOML: {exc}") from None
+    if overrides:
+        if not isinstance(overrides, Mapping):
+            overrides = parse_overrides(overrides)
+        raw = apply_overrides(raw, overrides, source)
+    return scenario_from_dict(raw, source=source)
+
+
+def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
+    """Parse ``["p=0.8", "process.1.A=[[1.1]]"]`` into ``{"p": 0.8, ...}``.
+
+    Values are read as TOML values (numbers, booleans, arrays, quoted strings); a bare word
+    that is not valid TOML is taken as a string (``--set model.kind=preemption``).
+    """
+    out: dict[str, Any] = {}
+    for item in items:
+        if not isinstance(item, str) or "=" not in item:
+            raise ScenarioError("<override>", str(item), "expected KEY=VALUE")
+        key, value = item.split("=", 1)
+        key, value = key.strip(), value.strip()
+        if not key:
+            raise ScenarioError("<override>", item, "expected a non-empty KEY in KEY=VALUE")
+        try:
+            parsed = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            parsed = value
+        out[key] = parsed
+    return out
+
+
+def _find_entry(entries: list, selector: str, kind: str, source: str, key: str) -> dict:
+    if selector.isdigit():
+        i = int(selector)
+        if not 1 <= i <= len(entries):
+            raise ScenarioError(
+                source, f"override '{key}'", f"{kind} index {i} out of range: expected 1..{len(entries)}"
+            )
+        entry = entries[i - 1]
+    else:
+        matches = [e for e in entries if isinstance(e, dict) and e.get("name") == selector]
+        if not matches:
+            names = [e.get("name") for e in entries if isinstance(e, dict)]
+            raise ScenarioError(
+                source, f"override '{key}'", f"no {kind} named '{selector}': expected a 1-based index or one of {names}"
+            )
+        entry = matches[0]
+    if not isinstance(entry, dict):
+        raise ScenarioError(source, f"{kind}[{selector}]", "expected a table")
+    return entry
+
+
+def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any], source: str = "<dict>") -> dict[str, Any]:
+    """Apply overrides to a raw scenario dictionary (returns a new dict; input untouched).
+
+    Keys: ``p`` (alias ``success_probability``), ``tau_cap`` (the model default *and* every
+    process), ``model.FIELD``, ``channel.FIELD``, ``process.K.FIELD``, ``server.M.FIELD``
+    (K, M a 1-based index or a name). Unknown keys raise :class:`ScenarioError`.
+    """
+    out = copy.deepcopy(dict(raw))
+    for key, value in overrides.items():
+        parts = key.split(".")
+        if key in ("p", "success_probability"):
+            out.setdefault("channel", {})
+            if not isinstance(out["channel"], dict):
+                raise ScenarioError(source, "channel", "expected a table")
+            out["channel"]["success_probability"] = value
+        elif key == "tau_cap":
+            out.setdefault("model", {})
+            if not isinstance(out["model"], dict):
+                raise ScenarioError(source, "model", "expected a table")
+            out["model"]["tau_cap"] = value
+            for entry in out.get("process", []) or []:
+                if isinstance(entry, dict):
+                    entry["tau_cap"] = value
+        elif len(parts) == 2 and parts[0] in ("model", "channel"):
+            allowed = _MODEL_FIELDS if parts[0] == "model" else _CHANNEL_FIELDS
+            if parts[1] not in allowed:
+                raise ScenarioError(
+                    source, f"override '{key}'", f"unknown key: expected one of {sorted(allowed)}"
+                )
+            out.setdefault(parts[0], {})
+            out[parts[0]][parts[1]] = value
+        elif len(parts) == 3 and parts[0] in ("process", "server"):
+            allowed = _PROCESS_FIELDS if parts[0] == "process" else _SERVER_FIELDS
+            if parts[2] not in allowed:
+                raise ScenarioError(
+                    source, f"override '{key}'", f"unknown key: expected one of {sorted(allowed)}"
+                )
+            entries = out.get(parts[0])
+            if not isinstance(entries, list):
+                raise ScenarioError(source, f"override '{key}'", f"the scenario has no [[{parts[0]}]] entries")
+            entry = _find_entry(entries, parts[1], parts[0], source, key)
+            entry[parts[2]] = value
+            if parts[0] == "server" and parts[2] in ("slots_per_dimension", "processing_time"):
+                # the two ways of giving T are exclusive: an override of one replaces the other
+                other = "processing_time" if parts[2] == "slots_per_dimension" else "slots_per_dimension"
+                entry.pop(other, None)
+        else:
+            raise ScenarioError(
+                source,
+                f"override '{key}'",
+                "unknown key: expected p, tau_cap, model.FIELD, channel.FIELD, process.K.FIELD or server.M.FIELD",
+            )
+    return out
+
+
+# ----------------------------------------------------------------------------- validation
+class _V:
+    """Field validators bound to a source name, so every message names the file."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def err(self, fld: str, expected: str) -> ScenarioError:
+        return ScenarioError(self.source, fld, expected)
+
+    def table(self, obj: Any, fld: str, allowed: set[str]) -> dict:
+        if not isinstance(obj, dict):
+            raise self.err(fld, f"expected a table, found {type(obj).__name__}")
+        unknown = sorted(set(obj) - allowed)
+        if unknown:
+            raise self.err(f"{fld}.{unknown[0]}", f"unknown field: expected one of {sorted(allowed)}")
+        return obj
+
+    def boolean(self, obj: Any, fld: str) -> bool:
+        if not isinstance(obj, bool):
+            raise self.err(fld, f"expected true or false, found {obj!r}")
+        return obj
+
+    def integer(self, obj: Any, fld: str, lo: int, hi: int | None = None) -> int:
+        if isinstance(obj, bool) or not isinstance(obj, (int, np.integer)):
+            if isinstance(obj, float) and math.isfinite(obj) and obj.is_integer():
+                obj = int(obj)
+            else:
+                raise self.err(fld, f"expected an integer >= {lo}, found {obj!r}")
+        obj = int(obj)
+        if obj < lo or (hi is not None and obj > hi):
+            rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+            raise self.err(fld, f"expected an integer {rng}, found {obj}")
+        return obj
+
+    def real(self, obj: Any, fld: str) -> float:
+        if isinstance(obj, bool) or not isinstance(obj, (int, float, np.integer, np.floating)):
+            raise self.err(fld, f"expected a number, found {obj!r}")
+        val = float(obj)
+        if not math.isfinite(val):
+            raise self.err(fld, f"expected a finite number, found {obj!r}")
+        return val
+
+    def probability(self, obj: Any, fld: str) -> float:
+        val = self.real(obj, fld)
+        if not 0.0 <= val <= 1.0:
+            raise self.err(fld, f"expected a probability in [0, 1], found {val:g}")
+        return val
+
+    def string(self, obj: Any, fld: str) -> str:
+        if not isinstance(obj, str) or not obj.strip():
+            raise self.err(fld, f"expected a non-empty string, found {obj!r}")
+        return obj
+
+    def matrix(self, obj: Any, fld: str) -> np.ndarray:
+        if not isinstance(obj, list) or not obj:
+            raise self.err(fld, f"expected a non-empty square matrix (list of rows), found {obj!r:.60}")
+        rows = []
+        for i, row in enumerate(obj):
+            if not isinstance(row, list):
+                raise self.err(fld, f"row {i + 1}: expected a list of numbers, found {row!r:.40}")
+            rows.append([self.real(x, f"{fld}[{i + 1}]") for x in row])
+        n = len(rows)
+        if any(len(r) != n for r in rows):
+            shape = f"{n} rows of lengths {[len(r) for r in rows]}"
+            raise self.err(fld, f"expected a square matrix, found {shape}")
+        return np.array(rows, dtype=float)
+
+
+def scenario_from_dict(raw: Mapping[str, Any], source: str = "<dict>") -> Scenario:
+    """Validate a raw scenario dictionary (the TOML structure) into a :class:`Scenario`."""
+    v = _V(source)
+    raw = v.table(dict(raw) if isinstance(raw, Mapping) else raw, "<top>", _TOP_FIELDS)
+    if "model" not in raw:
+        raise v.err("model", "missing table [model] (with at least kind = \"wncs\" or \"preemption\")")
+    mt = v.table(raw["model"], "model", _MODEL_FIELDS)
+    if "kind" not in mt:
+        raise v.err("model.kind", f"missing: expected one of {list(KINDS)}")
+    kind = mt["kind"]
+    if kind not in KINDS:
+        raise v.err("model.kind", f"expected one of {list(KINDS)}, found {kind!r}")
+    model = ModelOptions(
+        kind=kind,
+        allow_idle=v.boolean(mt.get("allow_idle", False), "model.allow_idle"),
+        distinct=v.boolean(mt.get("distinct", True), "model.distinct"),
+        preemptive=v.boolean(mt.get("preemptive", True), "model.preemptive"),
+    )
+    default_cap = (
+        v.integer(mt["tau_cap"], "model.tau_cap", 1, MAX_TAU_CAP) if "tau_cap" in mt else None
+    )
+
+    ct = v.table(raw.get("channel", {}), "channel", _CHANNEL_FIELDS)
+    p = v.probability(ct["success_probability"], "channel.success_probability") if "success_probability" in ct else None
+
+    plist = raw.get("process")
+    if not isinstance(plist, list) or not plist:
+        raise v.err("process", "expected at least one [[process]] table")
+    processes = []
+    for i, entry in enumerate(plist, start=1):
+        f = f"process[{i}]"
+        entry = v.table(entry, f, _PROCESS_FIELDS)
+        name = v.string(entry.get("name", f"process-{i}"), f"{f}.name")
+        if "A" not in entry:
+            raise v.err(f"{f}.A", "missing: expected a square matrix")
+        A = v.matrix(entry["A"], f"{f}.A")
+        n = A.shape[0]
+        r_raw = entry.get("R", "identity")
+        if isinstance(r_raw, str):
+            if r_raw != "identity":
+                raise v.err(f"{f}.R", f"expected \"identity\" or a {n}x{n} matrix, found {r_raw!r}")
+            R = np.eye(n)
+        else:
+            R = v.matrix(r_raw, f"{f}.R")
+            if R.shape != (n, n):
+                raise v.err(f"{f}.R", f"expected a {n}x{n} matrix (A is {n}x{n}), found {R.shape[0]}x{R.shape[1]}")
+            scale = max(1.0, float(np.abs(R).max()))
+            if not np.allclose(R, R.T, rtol=0, atol=1e-12 * scale):
+                raise v.err(f"{f}.R", "expected a symmetric matrix")
+            lam = float(np.linalg.eigvalsh(R).min())
+            if lam < -1e-10 * scale:
+                raise v.err(f"{f}.R", f"expected positive semi-definite, found eigenvalue {lam:.3g}")
+        weight = v.real(entry.get("weight", 1.0), f"{f}.weight")
+        if weight <= 0:
+            raise v.err(f"{f}.weight", f"expected a number > 0, found {weight:g}")
+        if "tau_cap" in entry:
+            cap = v.integer(entry["tau_cap"], f"{f}.tau_cap", 1, MAX_TAU_CAP)
+        elif default_cap is not None:
+            cap = default_cap
+        else:
+            raise v.err(f"{f}.tau_cap", "missing: set it here or as [model].tau_cap")
+        processes.append(ProcessSpec(name, _frozen_array(A), _frozen_array(R), weight, cap))
+    _unique([pr.name for pr in processes], "process", v)
+    N = len(processes)
+
+    slist = raw.get("server")
+    if not isinstance(slist, list) or not slist:
+        raise v.err("server", "expected at least one [[server]] table")
+    servers = []
+    for m, entry in enumerate(slist, start=1):
+        f = f"server[{m}]"
+        entry = v.table(entry, f, _SERVER_FIELDS)
+        name = v.string(entry.get("name", f"server-{m}"), f"{f}.name")
+        for key in ("uplink_delay", "downlink_delay"):
+            if key not in entry:
+                raise v.err(f"{f}.{key}", "missing: expected an integer >= 0 (whole slots)")
+        U = v.integer(entry["uplink_delay"], f"{f}.uplink_delay", 0, 10_000)
+        D = v.integer(entry["downlink_delay"], f"{f}.downlink_delay", 0, 10_000)
+        has_spd, has_pt = "slots_per_dimension" in entry, "processing_time" in entry
+        if has_spd == has_pt:
+            raise v.err(
+                f"{f}.processing_time",
+                "expected exactly one of slots_per_dimension (integer >= 1) or processing_time (one integer >= 1 per process)",
+            )
+        if has_spd:
+            spd = v.integer(entry["slots_per_dimension"], f"{f}.slots_per_dimension", 1, 10_000)
+            T = tuple(spd * pr.dim for pr in processes)
+        else:
+            pt = entry["processing_time"]
+            if not isinstance(pt, list) or len(pt) != N:
+                raise v.err(f"{f}.processing_time", f"expected a list of {N} integers >= 1 (one per process), found {pt!r}")
+            T = tuple(v.integer(x, f"{f}.processing_time[{k + 1}]", 1, 100_000) for k, x in enumerate(pt))
+        pu = v.probability(entry["p_up"], f"{f}.p_up") if "p_up" in entry else p
+        pd = v.probability(entry["p_down"], f"{f}.p_down") if "p_down" in entry else p
+        if pu is None or pd is None:
+            raise v.err(
+                "channel.success_probability",
+                f"missing: needed by {f} (which sets no own p_up/p_down); expected a probability in [0, 1]",
+            )
+        servers.append(ServerSpec(name, U, D, T, pu, pd))
+    _unique([s.name for s in servers], "server", v)
+    if model.kind == "preemption" and len(servers) != 1:
+        raise v.err("server", f"a preemption scenario has exactly one server, found {len(servers)}")
+    return Scenario(
+        model=model,
+        p=p if p is not None else float("nan"),
+        processes=tuple(processes),
+        servers=tuple(servers),
+        source=source,
+        raw=copy.deepcopy(dict(raw)),
+    )
+
+
+def _unique(names: list[str], kind: str, v: _V) -> None:
+    seen: set[str] = set()
+    for i, name in enumerate(names, start=1):
+        if name in seen:
+            raise v.err(f"{kind}[{i}].name", f"expected a unique name, '{name}' is used twice")
+        seen.add(name)
