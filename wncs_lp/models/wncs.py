@@ -1,0 +1,188 @@
+"""The Section II model (``model.md`` section 2): sensors, links with delays, servers.
+
+A server's configuration is the tuple ``(up, job, d, down)``:
+
+* ``up``   -- the uplink pipeline, ``max(U - 1, 0)`` places; ``up[i]`` holds the process whose
+  update was sent ``i + 1`` slots ago (0 = empty). It starts service ``U - 1 - i`` slots from now.
+* ``job``, ``d`` -- the job in service and its remaining slots (``(0, 0)`` = idle).
+* ``down`` -- the downlink pipeline, ``D`` places; ``down[i]`` holds the process whose command
+  completed ``i + 1`` slots ago (0 = empty); ``down[D - 1]`` is delivered this slot.
+
+A joint configuration is the tuple of the servers' configurations. One slot of one server, for
+an action (the process sent to it, or 0), follows the order of the spec exactly:
+uplink loss -> start at once if U = 0 -> service -> downlink -> start from the uplink if U >= 1
+-> downlink loss. A delivered command of process k sets delta_k = U + T_k + D (its age).
+"""
+from __future__ import annotations
+
+import itertools
+from functools import lru_cache
+
+import numpy as np
+
+from ..cost import cost_tables
+from ..errors import ModelError
+from ..mdp import MDP
+from ..scenario import Scenario, ServerSpec
+from .space import ConfigAutomaton, build_aoi_mdp, explore_configs
+
+__all__ = ["build_wncs", "wncs_automaton", "server_accepts", "describe_wncs_config", "idle_config"]
+
+ServerState = tuple  # (up: tuple[int,...], job: int, d: int, down: tuple[int,...])
+
+
+def idle_server(server: ServerSpec) -> ServerState:
+    return ((0,) * max(server.uplink_delay - 1, 0), 0, 0, (0,) * server.downlink_delay)
+
+
+def idle_config(scenario: Scenario) -> tuple:
+    """The joint configuration with every server idle and every pipeline empty."""
+    return tuple(idle_server(s) for s in scenario.servers)
+
+
+def server_accepts(server: ServerSpec, state: ServerState) -> bool:
+    """Whether an update sent now would find the server idle when it starts service.
+
+    busy = max(d, max over uplink updates starting in j slots of j + T_k); accept iff
+    busy <= U (for U = 0 that is d = 0, there being no uplink places).
+    """
+    up, _, d, _ = state
+    U = server.uplink_delay
+    busy = d
+    for i, k in enumerate(up):
+        if k:
+            busy = max(busy, (U - 1 - i) + server.processing_time[k - 1])
+    return busy <= U
+
+
+def server_step(server: ServerSpec, state: ServerState, a: int) -> list[tuple[ServerState, int, float]]:
+    """One slot of one server: ``[(next_state, delivered_process (0 = none), prob), ...]``."""
+    up, job, d, down = state
+    U, D, T = server.uplink_delay, server.downlink_delay, server.processing_time
+    pu, pd = server.p_up, server.p_down
+    sends = [(a, pu), (0, 1.0 - pu)] if a else [(0, 1.0)]
+    out: list[tuple[ServerState, int, float]] = []
+    for arrived, p1 in sends:
+        j, dd = job, d
+        if U == 0 and arrived:  # 2. start at once
+            if dd != 0:
+                raise ModelError(f"internal error: server {server.name} busy (d={dd}) when a job starts")
+            j, dd = arrived, T[arrived - 1]
+        completed = 0
+        if dd > 0:  # 3. service
+            dd -= 1
+            if dd == 0:
+                completed, j = j, 0
+        if D == 0:  # 4. downlink
+            delivered, new_down = completed, ()
+        else:
+            delivered, new_down = down[-1], (completed,) + down[:-1]
+        new_up = up
+        if U >= 1:  # 5. the update leaving the uplink starts service next slot
+            if U == 1:
+                leaving = arrived
+            else:
+                leaving, new_up = up[-1], (arrived,) + up[:-1]
+            if leaving:
+                if dd != 0:
+                    raise ModelError(f"internal error: server {server.name} busy (d={dd}) when a job starts")
+                j, dd = leaving, T[leaving - 1]
+        nxt = (new_up, j, dd, new_down)
+        if delivered:  # 6. downlink loss
+            out.append((nxt, delivered, p1 * pd))
+            out.append((nxt, 0, p1 * (1.0 - pd)))
+        else:
+            out.append((nxt, 0, p1))
+    return out
+
+
+def feasible_actions(scenario: Scenario, config: tuple) -> list[tuple[int, ...]]:
+    """The feasible actions (a_1..a_M) of a joint configuration, in the MDP's action order.
+
+    Non-accepting servers get 0. An accepting server gets a process 1..N, or 0 when
+    ``allow_idle`` or when more servers accept than there are processes. With ``distinct``, no
+    process goes to two servers. Order: lexicographic, each server's options listed 1..N then 0,
+    so ties between equally good actions break towards sending rather than idling.
+    """
+    N = scenario.n_processes
+    accepts = [server_accepts(s, st) for s, st in zip(scenario.servers, config)]
+    n_acc = sum(accepts)
+    idle_ok = scenario.model.allow_idle or n_acc > N
+    choices = []
+    for acc in accepts:
+        if acc:
+            choices.append(list(range(1, N + 1)) + ([0] if idle_ok else []))
+        else:
+            choices.append([0])
+    out = []
+    for a in itertools.product(*choices):
+        if scenario.model.distinct:
+            sent = [k for k in a if k]
+            if len(sent) != len(set(sent)):
+                continue
+        out.append(a)
+    return out
+
+
+def wncs_automaton(scenario: Scenario) -> ConfigAutomaton:
+    """Explore the joint server configurations reachable from the all-idle one."""
+    if scenario.model.kind != "wncs":
+        raise ModelError(f"{scenario.source}: build_wncs needs kind = \"wncs\", found {scenario.model.kind!r}")
+    servers = scenario.servers
+    N = scenario.n_processes
+    steps = [lru_cache(maxsize=None)(lambda st, a, s=s: server_step(s, st, a)) for s in servers]
+
+    def step(config: tuple):
+        result = []
+        for action in feasible_actions(scenario, config):
+            per_server = [steps[m](config[m], action[m]) for m in range(len(servers))]
+            outs = []
+            for combo in itertools.product(*per_server):
+                prob = 1.0
+                delta = [0] * N
+                for m, (_, delivered, pr) in enumerate(combo):
+                    prob *= pr
+                    if delivered:
+                        age = servers[m].loop[delivered - 1]
+                        k = delivered - 1
+                        delta[k] = age if delta[k] == 0 else min(delta[k], age)
+                outs.append((tuple(c[0] for c in combo), tuple(delta), prob))
+            result.append((action, outs))
+        return result
+
+    return explore_configs([idle_config(scenario)], step)
+
+
+def describe_wncs_config(servers: tuple[ServerSpec, ...], config: tuple) -> str:
+    parts = []
+    for s, (up, job, d, down) in zip(servers, config):
+        if not job and not any(up) and not any(down):
+            parts.append(f"{s.name}: idle")
+            continue
+        bits = []
+        if any(up):
+            bits.append("up[" + ",".join(str(k) for k in up) + "]")
+        bits.append(f"job {job} d={d}" if job else "no job")
+        if any(down):
+            bits.append("down[" + ",".join(str(k) for k in down) + "]")
+        parts.append(f"{s.name}: " + " ".join(bits))
+    return "; ".join(parts)
+
+
+def build_wncs(scenario: Scenario) -> MDP:
+    """Build the Section II MDP of a ``kind = "wncs"`` scenario.
+
+    Returns an :class:`~wncs_lp.mdp.MDP` whose ``states`` is a
+    :class:`~wncs_lp.models.space.StateSpace` (tau per process, joint server configuration) and
+    whose ``action_table`` rows are the actions (a_1..a_M), 0 = nothing sent.
+    """
+    auto = wncs_automaton(scenario)
+    servers = scenario.servers
+    return build_aoi_mdp(
+        auto,
+        scenario.tau_caps,
+        cost_tables(scenario),
+        describe_config=lambda cfg: describe_wncs_config(servers, cfg),
+        name=f"wncs:{scenario.source}",
+        meta={"kind": "wncs", "source": scenario.source, "fingerprint": scenario.fingerprint()},
+    )
