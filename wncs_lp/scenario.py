@@ -171,7 +171,15 @@ class Scenario:
 
     def fingerprint(self) -> str:
         """A stable hash of the validated content (for caches keyed by scenario)."""
-        payload = json.dumps(_canonical(self.to_dict()), sort_keys=True)
+        content = {
+            "model": vars(self.model),
+            "p": None if math.isnan(self.p) else self.p,
+            "processes": [
+                [pr.name, pr.A.tolist(), pr.R.tolist(), pr.weight, pr.tau_cap] for pr in self.processes
+            ],
+            "servers": [vars(s) for s in self.servers],
+        }
+        payload = json.dumps(_canonical(content), sort_keys=True)
         return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
     def describe(self) -> str:
@@ -360,9 +368,10 @@ class _V:
             else:
                 raise self.err(fld, f"expected an integer >= {lo}, found {obj!r}")
         obj = int(obj)
-        if obj < lo or (hi is not None and obj > hi):
-            rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
-            raise self.err(fld, f"expected an integer {rng}, found {obj}")
+        if obj < lo:
+            raise self.err(fld, f"expected an integer >= {lo}, found {obj}")
+        if hi is not None and obj > hi:
+            raise self.err(fld, f"expected an integer <= {hi} (a sanity bound), found {obj}")
         return obj
 
     def real(self, obj: Any, fld: str) -> float:
