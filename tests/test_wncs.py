@@ -140,7 +140,10 @@ def test_hand_traced_remote_delivery_and_acceptance():
     sc = load_scenario(FORMULATIONS / "paper_p12.toml")
     mdp = build(sc)
     cfg = (((), 0, 0, (1,)), ((), 0, 0, ()))
-    s = mdp.states.find((10, 3), cfg)
+    # (10, 3) would be unreachable: a command of process 1 in the downlink means >= 5 slots
+    # since the servers were idle, with no delivery of process 2 meanwhile, so tau_2 >= 6.
+    assert mdp.states.find((10, 3), cfg) == -1
+    s = mdp.states.find((10, 6), cfg)
     assert s >= 0
     got = _row(mdp, s, (2, 1))
     r_busy, r_idle = ((), 2, 3, (0,)), ((), 0, 0, (0,))
@@ -148,8 +151,8 @@ def test_hand_traced_remote_delivery_and_acceptance():
     expected = {}
     for r_cfg, pr in ((r_busy, 0.9), (r_idle, 0.1)):
         for e_cfg, pe in ((e_busy, 0.9), (e_idle, 0.1)):
-            expected[((6, 4), (r_cfg, e_cfg))] = pr * pe * 0.9
-            expected[((11, 4), (r_cfg, e_cfg))] = pr * pe * 0.1
+            expected[((6, 7), (r_cfg, e_cfg))] = pr * pe * 0.9
+            expected[((11, 7), (r_cfg, e_cfg))] = pr * pe * 0.1
     assert got.keys() == expected.keys()
     for k, v in expected.items():
         assert got[k] == pytest.approx(v, abs=1e-15)
