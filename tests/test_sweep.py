@@ -1,0 +1,159 @@
+"""Sweeps (table, resume, warm start, figure) and the evaluate / simulate / sweep commands."""
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wncs_lp.cli import main
+from wncs_lp.errors import WncsError
+from wncs_lp.scenario import load_scenario
+from wncs_lp.sweep import COLUMNS, parse_values, read_rows, run_sweep
+
+FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
+P12 = str(FORMULATIONS / "paper_p12.toml")
+
+
+def test_parse_values():
+    assert parse_values("0.8:1.0:0.05") == [0.8, 0.85, 0.9, 0.95, 1.0]
+    assert parse_values("0.8,0.9") == [0.8, 0.9]
+    for bad in ("0.8:1.0", "a,b", "1:2:0", ""):
+        with pytest.raises(WncsError):
+            parse_values(bad)
+
+
+def _gains(rows):
+    return [(r.value, r.policy, r.gain, r.sim_mean, r.status) for r in rows]
+
+
+def test_sweep_table_resume_and_figure(tmp_path):
+    sc = load_scenario(P12, ["tau_cap=6"])
+    out = tmp_path / "sw"
+    pols = ["optimal", "suboptimal", "static", "greedy", "random"]
+    kw = dict(method="pi", simulate_slots=300, reps=3, burn_in=20, seed=3)
+    first = run_sweep(sc, "p", "0.8:0.9:0.05", pols, out, **kw)
+    assert first.computed == 15 and first.reused == 0
+    assert [(r.value, r.policy) for r in first.rows] == [(v, p) for v in (0.8, 0.85, 0.9) for p in pols]
+    for v in (0.8, 0.85, 0.9):
+        g = {r.policy: r.gain for r in first.rows if r.value == v}
+        assert g["optimal"] <= g["suboptimal"] * (1 + 1e-9) <= g["random"] * (1 + 1e-9)
+        assert g["optimal"] <= min(g["static"], g["greedy"]) * (1 + 1e-9)
+    # warm start of the optimal solve from the previous grid value
+    assert [r.warm_start for r in first.rows if r.policy == "optimal"] == [False, True, True]
+    # files: CSV with the documented columns, JSON with the same rows, figure
+    with open(out / "sweep.csv", newline="") as fh:
+        recs = list(csv.DictReader(fh))
+    assert tuple(recs[0].keys()) == COLUMNS and len(recs) == 15
+    payload = json.loads((out / "sweep.json").read_text())
+    assert len(payload["rows"]) == 15 and payload["settings"]["param"] == "p"
+    assert (out / "sweep.png").stat().st_size > 0 and (out / "sweep.svg").stat().st_size > 0
+
+    # interrupted run: delete one row and truncate the last one
+    lines = (out / "sweep.csv").read_text().splitlines(keepends=True)
+    deleted = lines.pop(4)  # the 4th data row
+    lines[-1] = lines[-1][: len(lines[-1]) // 2]  # a half-written last row
+    (out / "sweep.csv").write_text("".join(lines))
+    assert len(read_rows(out / "sweep.csv")) == 13
+    again = run_sweep(sc, "p", "0.8:0.9:0.05", pols, out, **kw)
+    assert again.computed == 2 and again.reused == 13
+    assert _gains(again.rows) == _gains(first.rows)
+    # untouched rows are the stored ones (their timings are kept, not recomputed)
+    seconds_first = {(r.value, r.policy): r.seconds for r in first.rows}
+    recomputed = {(r.value, r.policy) for r in again.rows if r.seconds != seconds_first[(r.value, r.policy)]}
+    assert recomputed == {(float(deleted.split(",")[1]), deleted.split(",")[2]), (0.9, "random")}
+    # a complete folder is not recomputed at all
+    third = run_sweep(sc, "p", "0.8:0.9:0.05", pols, out, **kw)
+    assert third.computed == 0 and _gains(third.rows) == _gains(first.rows)
+    # other settings in the same folder: a clear error
+    with pytest.raises(WncsError, match="other settings"):
+        run_sweep(sc, "p", "0.8:0.9:0.05", pols, out, method="rvi", simulate_slots=300, reps=3, burn_in=20, seed=3)
+
+
+def test_sweep_p_one_and_parallel(tmp_path):
+    """p = 1: PI meets multichain iterates (RVI fallback) and static policies are multichain."""
+    sc = load_scenario(P12, ["tau_cap=6"])
+    res = run_sweep(sc, "p", [0.95, 1.0], ["optimal", "static", "suboptimal"], tmp_path / "a", max_workers=2,
+                    plot=False)
+    assert res.computed == 6
+    assert all(r.status.startswith("ok") for r in res.rows)
+    g1 = {r.policy: r.gain for r in res.rows if r.value == 1.0}
+    assert g1["optimal"] <= g1["static"] * (1 + 1e-9) and g1["optimal"] <= g1["suboptimal"] * (1 + 1e-9)
+    seq = run_sweep(sc, "p", [0.95, 1.0], ["optimal", "static", "suboptimal"], None, plot=False)
+    np.testing.assert_allclose([r.gain for r in seq.rows], [r.gain for r in res.rows], rtol=1e-9)
+
+
+def test_plot_returns_axes():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from wncs_lp.plots import plot_sweep
+
+    sc = load_scenario(P12, ["tau_cap=5"])
+    res = run_sweep(sc, "p", [0.8, 0.9], ["suboptimal", "random"], None, plot=False)
+    fig, ax = plt.subplots()
+    assert plot_sweep(res.rows, ax=ax) is ax
+    assert len(ax.get_lines()) == 2
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------------------- CLI
+def _json_out(capsys):
+    out = capsys.readouterr().out
+    return json.loads(out)  # exactly one JSON object, nothing else on stdout
+
+
+def test_cli_evaluate_json(capsys):
+    rc = main(["evaluate", P12, "--policy", "suboptimal", "--set", "tau_cap=6", "--json"])
+    data = _json_out(capsys)
+    assert rc == 0
+    assert {"gain", "mse", "utilisation", "states"} <= set(data)
+    assert data["policy_info"]["base_gain"] > data["gain"]
+
+
+def test_cli_evaluate_static_assignment(capsys):
+    rc = main(["evaluate", P12, "--policy", "static", "--assignment", "edge,remote", "--set", "tau_cap=5", "--json"])
+    data = _json_out(capsys)
+    assert rc == 0 and data["policy"] == "static[edge,remote]"
+
+
+def test_cli_simulate_json(capsys):
+    rc = main(["simulate", P12, "--policy", "greedy", "--set", "tau_cap=10", "--slots", "400", "--reps", "3",
+               "--seed", "5", "--burn-in", "10", "--json"])
+    data = _json_out(capsys)
+    assert rc == 0
+    assert {"mean", "stderr", "rep_means", "slots", "reps", "seed", "burn_in"} <= set(data)
+    assert data["slots"] == 400 and data["reps"] == 3 and len(data["rep_means"]) == 3
+
+
+def test_cli_simulate_optimal(capsys):
+    rc = main(["simulate", P12, "--policy", "optimal", "--method", "pi", "--set", "tau_cap=6", "--slots", "200",
+               "--reps", "2", "--json"])
+    assert rc == 0 and _json_out(capsys)["policy"] == "optimal"
+
+
+@pytest.mark.parametrize("cmd", [
+    ["evaluate", P12, "--policy", "bogus"],
+    ["simulate", P12, "--policy", "bogus", "--slots", "10"],
+    ["sweep", P12, "--values", "0.8", "--policies", "optimal,bogus", "--out", "unused"],
+])
+def test_cli_bad_policy_exit_2(cmd, capsys, tmp_path):
+    if cmd[0] == "sweep":
+        cmd = cmd[:-1] + [str(tmp_path / "unused")]
+    rc = main(cmd + ["--json"])
+    err = capsys.readouterr()
+    assert rc == 2
+    assert err.out == ""
+    assert "unknown policy 'bogus'" in err.err and "optimal" in err.err
+
+
+def test_cli_sweep_json(capsys, tmp_path):
+    rc = main(["sweep", P12, "--set", "tau_cap=5", "--param", "p", "--values", "0.8:0.9:0.1", "--policies",
+               "optimal,greedy", "--out", str(tmp_path / "s"), "--no-plot", "--json"])
+    data = _json_out(capsys)
+    assert rc == 0 and len(data["rows"]) == 4 and data["computed"] == 4
+    assert (tmp_path / "s" / "sweep.csv").exists()
