@@ -1,0 +1,72 @@
+"""Average-cost MDP solvers, each returning a certified :class:`Solution`.
+
+``solve(mdp, method)`` dispatches to
+
+* ``"lp"``       -- occupation-measure LP, Clarabel called directly (:func:`solve_lp`);
+* ``"lp-cvxpy"`` -- the same LP built with cvxpy and solved by Clarabel;
+* ``"rvi"``      -- relative value iteration with the aperiodicity transform;
+* ``"pi"``       -- Howard policy iteration with exact sparse evaluation.
+
+Every solution carries the bracket ``gain_lower <= g* <= gain_upper`` from one Bellman
+step on its bias (:func:`bracket`).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from ..errors import SolverError
+from ..mdp import MDP
+from .certify import bellman_step, bracket, certificate_closed, greedy_first, q_values
+from .dp import PolicyEvaluation, evaluate_policy, policy_iteration, recurrent_classes, relative_value_iteration
+from .lp import LPData, build_lp, extract_policy, solve_lp
+from .result import Solution
+
+__all__ = [
+    "METHODS",
+    "solve",
+    "Solution",
+    "q_values",
+    "bellman_step",
+    "bracket",
+    "greedy_first",
+    "certificate_closed",
+    "PolicyEvaluation",
+    "evaluate_policy",
+    "recurrent_classes",
+    "relative_value_iteration",
+    "policy_iteration",
+    "LPData",
+    "build_lp",
+    "extract_policy",
+    "solve_lp",
+]
+
+#: The method names accepted by :func:`solve`.
+METHODS = ("lp", "lp-cvxpy", "rvi", "pi")
+
+
+def solve(mdp: MDP, method: str = "lp", **kw: Any) -> Solution:
+    """Solve an average-cost MDP with the named method.
+
+    Parameters
+    ----------
+    mdp : MDP
+    method : {"lp", "lp-cvxpy", "rvi", "pi"}
+    **kw
+        Passed to :func:`solve_lp` (``backend`` is set by the method name),
+        :func:`relative_value_iteration` or :func:`policy_iteration`.
+
+    Raises
+    ------
+    SolverError
+        Unknown method (the message lists the allowed ones), or a solver failure.
+    """
+    if method == "lp":
+        return solve_lp(mdp, backend="clarabel", **kw)
+    if method == "lp-cvxpy":
+        return solve_lp(mdp, backend="cvxpy", **kw)
+    if method == "rvi":
+        return relative_value_iteration(mdp, **kw)
+    if method == "pi":
+        return policy_iteration(mdp, **kw)
+    raise SolverError(f"unknown solver method {method!r}; expected one of {', '.join(map(repr, METHODS))}")

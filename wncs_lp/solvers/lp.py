@@ -1,0 +1,421 @@
+"""The occupation-measure linear program of an average-cost MDP, solved with Clarabel.
+
+Primal (Manne 1960; Puterman, *Markov Decision Processes*, Sec. 8.8). With x_l the
+long-run frequency of pair l = (s_l, a_l):
+
+.. math::
+
+    \\min_x \\; \\sum_l c_l x_l \\quad \\text{s.t.} \\quad
+    \\sum_{l:\\, s_l = s'} x_l - \\sum_l P(s' \\mid l)\\, x_l = 0 \\;\\; (s' = 0..n-1), \\qquad
+    \\sum_l x_l = 1, \\qquad x \\ge 0.
+
+In matrix form the balance rows are ``(E - P^T) x = 0`` with ``E[s', l] = [s_l = s']``.
+They sum to zero (every column of E - P^T sums to 1 - 1 = 0), so one is redundant; the row
+of state 0 is dropped, which pins the dual bias to h(0) = 0.
+
+Dual: :math:`\\max g` s.t. :math:`g + h(s_l) \\le c_l + \\sum_{s'} P(s'|l) h(s')` for all
+pairs, whose optimum is g*, and complementary slackness gives equality on the pairs with
+x_l > 0.
+
+Scaling (what the solver sees)
+------------------------------
+Variables ``y = n * x`` (so ``sum y = n`` and a uniformly visited state has y = O(1)) and
+costs ``q = c / c_s`` with ``c_s`` = mean |c| (1 if all costs are zero):
+
+.. math::
+
+    \\min_y q^T y \\quad\\text{s.t.}\\quad (E - P^T)_{1:} y = 0,\\; 1^T y = n,\\; y \\ge 0,
+
+so ``c^T x = (c_s / n) q^T y``. With Clarabel's form ``A y + s = b``, ``s in K`` (zero cone
+for the n equality rows, nonnegative cone for the rows ``-y + s = 0``) and KKT stationarity
+``q + A^T z = 0`` (P = 0), writing z = (z_bal, z_norm, -mu) the pair-l component reads
+
+.. math:: q_l + z_{bal}(s_l) - (P z_{bal})_l + z_{norm} = \\mu_l \\ge 0,
+
+i.e. ``g + h(s_l) <= c_l + (P h)_l`` with
+
+    ``h = -c_s * z_bal`` (h(0) = 0),   ``g = -c_s * z_norm``.
+
+(These signs are checked numerically in ``tests/test_solvers.py``. cvxpy reports the same
+sign for the ``A y == b`` constraint's ``dual_value``.)
+"""
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import PolicyError, SolverError
+from ..mdp import MDP
+from .certify import bracket, certificate_closed, greedy_first, q_values
+from .dp import policy_iteration
+from .result import Solution
+
+__all__ = ["LPData", "build_lp", "solve_lp", "extract_policy", "VISIT_TOL"]
+
+#: A state counts as visited when its scaled frequency n * sum_a x(s, a) exceeds this, i.e.
+#: x(s) > VISIT_TOL / n. Interior-point "zeros" are not tiny: at tol = 1e-9 they were
+#: measured at 1e-8 .. 1e-6 in y units on a 5000-state banded random MDP (the central path
+#: spreads mu / reduced-cost mass on every pair), and reading argmax x there is noise
+#: (16 polishing steps at 1e-7 vs 7 at 1e-5). States below the threshold get the
+#: reachability-aware dual-greedy action of :func:`extract_policy`; polishing (policy
+#: iteration) then corrects whatever is wrong, so the threshold affects speed, not answers.
+VISIT_TOL = 1e-5
+
+_FAILED = {"PrimalInfeasible", "DualInfeasible", "AlmostPrimalInfeasible", "AlmostDualInfeasible", "Unsolved"}
+
+
+@dataclass(frozen=True, eq=False)
+class LPData:
+    """The scaled occupation-measure LP ``min q^T y  s.t.  A_eq y = b_eq, y >= 0``.
+
+    Attributes
+    ----------
+    A_eq : (n, L) CSC matrix
+        Rows 0..n-2: balance rows ``(E - P^T)`` of states 1..n-1 (state 0's row dropped);
+        row n-1: the normalisation ``1^T``.
+    b_eq : (n,) array
+        ``(0, ..., 0, n)``.
+    q : (L,) array
+        Scaled costs ``c / cost_scale``.
+    cost_scale : float
+        ``c_s`` = mean |c| (1.0 if that is 0).
+    x_scale : float
+        ``n``: ``y = x_scale * x``.
+    dropped_state : int
+        The state whose balance row was dropped (0): its dual bias is 0.
+    """
+
+    A_eq: sp.csc_matrix
+    b_eq: np.ndarray
+    q: np.ndarray
+    cost_scale: float
+    x_scale: float
+    dropped_state: int = 0
+
+    @property
+    def n_eq(self) -> int:
+        return int(self.A_eq.shape[0])
+
+    @property
+    def n_pairs(self) -> int:
+        return int(self.A_eq.shape[1])
+
+    def unscale_x(self, y: np.ndarray) -> np.ndarray:
+        """x = y / n."""
+        return np.asarray(y, dtype=float) / self.x_scale
+
+    def unscale_duals(self, z_eq: np.ndarray) -> tuple[float, np.ndarray]:
+        """(g, h) from the equality duals z_eq (Clarabel / cvxpy sign): h = -c_s z_bal, g = -c_s z_norm."""
+        z_eq = np.asarray(z_eq, dtype=float)
+        n = z_eq.shape[0]
+        h = np.zeros(n)
+        keep = np.delete(np.arange(n), self.dropped_state)
+        h[keep] = -self.cost_scale * z_eq[:-1]
+        g = -self.cost_scale * float(z_eq[-1])
+        return g, h
+
+    def objective(self, obj_scaled: float) -> float:
+        """c^T x = (c_s / n) q^T y."""
+        return float(obj_scaled) * self.cost_scale / self.x_scale
+
+
+def build_lp(mdp: MDP) -> LPData:
+    """Assemble the scaled occupation-measure LP (see the module docstring).
+
+    Parameters
+    ----------
+    mdp : MDP
+
+    Returns
+    -------
+    LPData
+        Sparse CSC ``A_eq`` with nnz = nnz(P) + 2L (minus cancellations from self-loops).
+    """
+    n, L = mdp.n_states, mdp.n_pairs
+    E = sp.csr_matrix((np.ones(L), (mdp.s_indices, np.arange(L))), shape=(n, L))
+    B = (E - mdp.P.T.tocsr()).tocsr()
+    keep = np.delete(np.arange(n), 0)
+    A = sp.vstack([B[keep], sp.csr_matrix(np.ones((1, L)))], format="csc")
+    A.eliminate_zeros()
+    A.sort_indices()
+    b = np.zeros(n)
+    b[-1] = float(n)
+    cs = float(np.mean(np.abs(mdp.cost))) if L else 1.0
+    if not np.isfinite(cs) or cs <= 0:
+        cs = 1.0
+    return LPData(A_eq=A, b_eq=b, q=np.asarray(mdp.cost, float) / cs, cost_scale=cs, x_scale=float(n), dropped_state=0)
+
+
+def extract_policy(mdp: MDP, x: np.ndarray, h: np.ndarray, visit_tol: float = VISIT_TOL) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic policy read off an occupation measure.
+
+    * Visited states (``n * sum_a x(s, a) > visit_tol``): the pair of largest x (ties to
+      the first pair).
+    * Unvisited states, in breadth-first layers backwards from the visited set: a state
+      gets, among its pairs with positive probability of moving into the already assigned
+      set, the one minimising ``Q_h = c + P h`` for the dual bias h (first on ties). This
+      makes every unvisited state drain into the visited set, so the policy stays unichain
+      when the visited part is (an interior-point dual keeps slack on such states, so
+      plain greedy-for-h could pick a self-loop that creates a second recurrent class).
+    * States that cannot reach the visited set (only in multichain MDPs): greedy for h.
+
+    Returns
+    -------
+    policy : (n,) int64 pair indices
+    visited : (n,) bool
+    """
+    starts = mdp.pair_ptr[:-1]
+    L, n = mdp.n_pairs, mdp.n_states
+    xc = np.maximum(np.asarray(x, float), 0.0)
+    freq = np.add.reduceat(xc, starts) * n
+    visited = freq > visit_tol
+    xmax = np.maximum.reduceat(xc, starts)
+    cand = np.where(xc == xmax[mdp.s_indices], np.arange(L, dtype=np.int64), np.int64(L))
+    by_x = np.minimum.reduceat(cand, starts)
+    q = q_values(mdp, h)
+    policy = np.where(visited, by_x, greedy_first(mdp, q))
+    assigned = visited.copy()
+    if assigned.any():
+        idx = np.arange(L, dtype=np.int64)
+        while not assigned.all():
+            into = (mdp.P @ assigned.astype(float)) > 0
+            ok = into & ~assigned[mdp.s_indices]
+            if not ok.any():
+                break
+            qm = np.where(ok, q, np.inf)
+            best = np.minimum.reduceat(qm, starts)
+            new = np.isfinite(best)
+            pick = np.minimum.reduceat(np.where(ok & (qm == best[mdp.s_indices]), idx, np.int64(L)), starts)
+            policy[new] = pick[new]
+            assigned |= new
+    return policy, visited
+
+
+def _kkt(lp: LPData, y: np.ndarray, z_eq: np.ndarray) -> dict[str, float]:
+    """Our own KKT numbers in the scaled problem (independent of the solver's report)."""
+    r_p = float(np.max(np.abs(lp.A_eq @ y - lp.b_eq))) / (1.0 + float(np.max(np.abs(lp.b_eq))))
+    red = lp.q + lp.A_eq.T @ z_eq  # reduced costs mu, must be >= 0
+    r_d = float(max(0.0, -float(red.min()))) / (1.0 + float(np.max(np.abs(lp.q))))
+    pobj, dobj = float(lp.q @ y), float(-lp.b_eq @ z_eq)
+    gap = abs(pobj - dobj) / (1.0 + abs(pobj))
+    return {"kkt_primal_residual": r_p, "kkt_dual_residual": r_d, "kkt_gap_rel": gap,
+            "negative_y": float(max(0.0, -float(y.min())))}
+
+
+def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settings: dict | None):
+    import clarabel
+
+    L, m = lp.n_pairs, lp.n_eq
+    A = sp.vstack([lp.A_eq, -sp.identity(L, format="csc")], format="csc")
+    b = np.concatenate([lp.b_eq, np.zeros(L)])
+    Pz = sp.csc_matrix((L, L))
+    st = clarabel.DefaultSettings()
+    st.verbose = bool(verbose)
+    st.max_iter = int(max_iter)
+    st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = float(tol)
+    for k, v in (settings or {}).items():
+        if not hasattr(st, k):
+            raise SolverError(f"unknown Clarabel setting {k!r}")
+        setattr(st, k, v)
+    solver = clarabel.DefaultSolver(Pz, lp.q, A, b, [clarabel.ZeroConeT(m), clarabel.NonnegativeConeT(L)], st)
+    sol = solver.solve()
+    info = solver.get_info()
+    status = str(sol.status)
+    y = np.asarray(sol.x, float)
+    z = np.asarray(sol.z, float)
+    stats = {
+        "solver": "clarabel",
+        "solver_status": status,
+        "solver_iterations": int(sol.iterations),
+        "r_prim": float(sol.r_prim),
+        "r_dual": float(sol.r_dual),
+        "duality_gap": float(info.gap_rel),
+        "duality_gap_abs": float(info.gap_abs),
+        "solve_time": float(sol.solve_time),
+        "obj_scaled": float(sol.obj_val),
+        "obj_dual_scaled": float(sol.obj_val_dual),
+    }
+    return status, status == "Solved", y, z[:m], stats
+
+
+def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings: dict | None):
+    import cvxpy as cp
+
+    L = lp.n_pairs
+    y = cp.Variable(L, nonneg=True)
+    eq = lp.A_eq @ y == lp.b_eq
+    prob = cp.Problem(cp.Minimize(lp.q @ y), [eq])
+    opts: dict[str, Any] = {"tol_gap_abs": float(tol), "tol_gap_rel": float(tol), "tol_feas": float(tol),
+                            "max_iter": int(max_iter)}
+    opts.update(settings or {})
+    try:
+        with warnings.catch_warnings():  # "Solution may be inaccurate": reported via our status instead
+            warnings.simplefilter("ignore", UserWarning)
+            prob.solve(solver=cp.CLARABEL, verbose=bool(verbose), **opts)
+    except cp.error.SolverError as exc:
+        raise SolverError(f"cvxpy/Clarabel failed: {exc}") from exc
+    status = str(prob.status)
+    if y.value is None or eq.dual_value is None:
+        raise SolverError(f"cvxpy/Clarabel returned no solution (status {status})")
+    yv = np.asarray(y.value, float)
+    zv = np.asarray(eq.dual_value, float).ravel()
+    ss = prob.solver_stats
+    k = _kkt(lp, yv, zv)
+    stats = {
+        "solver": "cvxpy+clarabel",
+        "solver_status": status,
+        "solver_iterations": int(ss.num_iters or 0),
+        "r_prim": k["kkt_primal_residual"],
+        "r_dual": k["kkt_dual_residual"],
+        "duality_gap": k["kkt_gap_rel"],
+        "solve_time": float(ss.solve_time or 0.0),
+        "obj_scaled": float(prob.value),
+    }
+    return status, status == "optimal", yv, zv, stats
+
+
+def solve_lp(
+    mdp: MDP,
+    *,
+    backend: str = "clarabel",
+    tol: float = 1e-9,
+    polish: bool = True,
+    max_iter: int = 200,
+    verbose: bool = False,
+    cert_rtol: float = 1e-6,
+    visit_tol: float = VISIT_TOL,
+    polish_max_iter: int = 50,
+    settings: dict | None = None,
+) -> Solution:
+    """Solve the occupation-measure LP and certify the answer.
+
+    Steps: build the scaled LP (:func:`build_lp`); solve it with Clarabel, either directly
+    (``backend="clarabel"``, ``method="lp"``) or through cvxpy (``backend="cvxpy"``,
+    ``method="lp-cvxpy"``); unscale x and the dual (g, h); read a deterministic policy off x
+    (:func:`extract_policy`); then
+
+    * ``polish=True``: run :func:`~wncs_lp.solvers.dp.policy_iteration` from that policy
+      (exact sparse evaluation, usually 0-2 improvements); ``gain`` = exact gain of the final
+      policy, ``bias`` its exact bias, ``(gain_lower, gain_upper)`` = bracket on that bias.
+      If an iterate is multichain (PolicyError) the dual certificate below is used instead
+      and the policy becomes the dual-greedy one.
+    * ``polish=False``: ``gain`` = LP objective, ``bias`` = dual h, bracket on the dual h.
+      Note that an interior-point dual may keep slack in states that no optimal policy
+      visits, which widens ``hi``; polishing removes that.
+
+    Parameters
+    ----------
+    mdp : MDP
+    backend : {"clarabel", "cvxpy"}
+    tol : float
+        Clarabel ``tol_gap_abs = tol_gap_rel = tol_feas`` (on the scaled problem).
+    polish : bool
+    max_iter : int
+        Clarabel iteration limit.
+    verbose : bool
+        Solver log to stdout.
+    cert_rtol : float
+        ``status == "optimal"`` requires the solver's "Solved" and (hi - lo)/|g| <= cert_rtol.
+    visit_tol : float
+        Visited-state threshold on n * x(s), see :data:`VISIT_TOL`.
+    polish_max_iter : int
+        Cap on the polishing policy-iteration evaluations.
+    settings : dict, optional
+        Extra Clarabel settings (``DefaultSettings`` attribute names).
+
+    Returns
+    -------
+    Solution
+        ``occupation`` = x (clipped at 0, renormalised to sum 1). ``stats``: ``solver_status``,
+        ``solver_iterations``, ``r_prim``, ``r_dual``, ``duality_gap``, ``solve_time``,
+        ``lp_objective`` (c^T x from the solver's objective, unscaled, not polished),
+        ``lp_dual_gain`` (-c_s z_norm), ``n_visited_states``, ``polish_iterations``,
+        ``kkt_*`` (our own residual check), ``dual_bias`` (array), ``extracted_policy``
+        (array), ``cost_scale``.
+        ``status``: ``"optimal"``; ``"inaccurate:<solver status>"`` when the solver did not
+        report success; ``"inaccurate:certificate"`` when the bracket stays wider than
+        cert_rtol; ``"inaccurate:polish_max_iter"``.
+
+    Raises
+    ------
+    SolverError
+        Unknown backend, or the solver failed outright (infeasible/unsolved status or
+        non-finite x); the message carries its status and residuals.
+    """
+    t0 = time.perf_counter()
+    if backend not in ("clarabel", "cvxpy"):
+        raise SolverError(f"unknown LP backend {backend!r}; expected 'clarabel' or 'cvxpy'")
+    method = "lp" if backend == "clarabel" else "lp-cvxpy"
+    lp = build_lp(mdp)
+    runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
+    status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings)
+    if status in _FAILED or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (mdp.n_pairs,):
+        raise SolverError(
+            f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
+            f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution"
+        )
+    stats.update(_kkt(lp, y, z_eq))
+    x = lp.unscale_x(y)
+    g_dual, h_dual = lp.unscale_duals(z_eq)
+    lp_obj = lp.objective(stats["obj_scaled"])
+    policy0, visited = extract_policy(mdp, x, h_dual, visit_tol)
+    stats.update(
+        lp_objective=lp_obj,
+        lp_dual_gain=g_dual,
+        n_visited_states=int(np.count_nonzero(visited)),
+        cost_scale=lp.cost_scale,
+        dual_bias=h_dual,
+        extracted_policy=policy0,
+    )
+
+    issue = None
+    use_dual = not polish
+    iterations = stats["solver_iterations"]
+    if polish:
+        try:
+            pi = policy_iteration(mdp, policy0=policy0, max_iter=polish_max_iter, cert_rtol=cert_rtol)
+        except PolicyError as exc:
+            stats["polish_error"] = str(exc)
+            use_dual = True
+        else:
+            gain, lo, hi, bias, policy = pi.gain, pi.gain_lower, pi.gain_upper, pi.bias, pi.policy
+            stats["polish_iterations"] = int(sum(1 for c in pi.stats["changes"] if c))
+            stats["polish_changed_states"] = int(np.count_nonzero(policy != policy0))
+            if not pi.stats["stable"]:
+                issue = "polish_max_iter"
+    if use_dual:
+        lo, hi = bracket(mdp, h_dual)
+        gain, bias = lp_obj, h_dual - h_dual[0]
+        policy = policy0 if not polish else greedy_first(mdp, q_values(mdp, h_dual))
+    closed = certificate_closed(mdp, lo, hi, gain, cert_rtol)
+    stats["certificate_closed"] = bool(closed)
+    stats["lp_error"] = lp_obj - gain
+    if not solved:
+        out_status = f"inaccurate:{status}"
+    elif issue is not None:
+        out_status = f"inaccurate:{issue}"
+    elif not closed:
+        out_status = "inaccurate:certificate"
+    else:
+        out_status = "optimal"
+    occ = np.maximum(x, 0.0)
+    tot = occ.sum()
+    occ = occ / tot if tot > 0 else occ
+    return Solution(
+        method=method,
+        status=out_status,
+        gain=float(gain),
+        gain_lower=float(lo),
+        gain_upper=float(hi),
+        bias=np.asarray(bias, float),
+        policy=np.asarray(policy, np.int64),
+        occupation=occ,
+        iterations=int(iterations),
+        seconds=time.perf_counter() - t0,
+        stats=stats,
+    )
