@@ -5,13 +5,13 @@ do not depend on ``wncs_lp.solvers``), and additionally with ``wncs_lp.solvers.s
 package provides it.
 
 Tests marked ``slow`` (the LP solve of the reference row, the 3-process instance at cap 12:
-tens of seconds each) also only run when ``WNCS_LP_SLOW=1`` is set, so the default run stays fast.
+tens of seconds each) run in the default suite too; ``-m "not slow"`` deselects them locally.
 """
 from __future__ import annotations
 
 import copy
 import itertools
-import os
+
 from pathlib import Path
 
 import numpy as np
@@ -34,10 +34,7 @@ from wncs_lp.scenario import load_scenario, scenario_from_dict
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "formulations" / "paper_preemption_p12.toml"
 THREE = ROOT / "formulations" / "preemption_p123_u0d0.toml"
-slow = [
-    pytest.mark.slow,
-    pytest.mark.skipif(os.environ.get("WNCS_LP_SLOW") != "1", reason="slow; set WNCS_LP_SLOW=1"),
-]
+slow = [pytest.mark.slow]
 REF_STATES, REF_PAIRS, REF_GAIN = 23_268, 46_536, 1078.548921698
 
 A1 = [[1.02, 1, 0, 1], [0, 1, 0.2, 0], [0, 0, 1, 0], [0, 0, 0, 1.01]]
@@ -168,10 +165,9 @@ def test_reference_gain(paper_mdp):
 
 @pytest.mark.parametrize("method", ["pi", "rvi", pytest.param("lp", marks=slow)])
 def test_reference_gain_with_package_solvers(paper_mdp, method):
-    solvers = pytest.importorskip("wncs_lp.solvers")
-    if not hasattr(solvers, "solve"):
-        pytest.skip("wncs_lp.solvers.solve not available yet")
-    sol = solvers.solve(paper_mdp, method=method)
+    from wncs_lp.solvers import solve
+
+    sol = solve(paper_mdp, method=method)
     assert sol.gain_lower - 1e-9 * REF_GAIN <= REF_GAIN <= sol.gain_upper + 1e-9 * REF_GAIN
     assert abs(sol.gain - REF_GAIN) <= 1e-9 * REF_GAIN
 
@@ -394,7 +390,6 @@ def test_three_processes_without_delays_builds_and_validates():
 
 
 @slow[0]
-@slow[1]
 def test_three_processes_cap12_builds():
     mdp = build(load_scenario(THREE))
     mdp.validate()
