@@ -18,11 +18,11 @@ class ScenarioError(WncsError):
     The message names the source (file or ``<dict>``), the field and what was expected.
     """
 
-    def __init__(self, source: str, field: str, expected: str):
+    def __init__(self, source: str, field: str, expected: str, what: str = "field"):
         self.source = source
         self.field = field
         self.expected = expected
-        super().__init__(f"{source}: field '{field}': {expected}")
+        super().__init__(f"{source}: {what} '{field}': {expected}")
 
 
 class ModelError(WncsError):

@@ -249,11 +249,11 @@ def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for item in items:
         if not isinstance(item, str) or "=" not in item:
-            raise ScenarioError("<override>", str(item), "expected KEY=VALUE")
+            raise ScenarioError("<command line>", str(item), "expected KEY=VALUE", what="override")
         key, value = item.split("=", 1)
         key, value = key.strip(), value.strip()
         if not key:
-            raise ScenarioError("<override>", item, "expected a non-empty KEY in KEY=VALUE")
+            raise ScenarioError("<command line>", item, "expected a non-empty KEY in KEY=VALUE", what="override")
         try:
             parsed = tomllib.loads(f"v = {value}")["v"]
         except tomllib.TOMLDecodeError:
@@ -267,7 +267,7 @@ def _find_entry(entries: list, selector: str, kind: str, source: str, key: str) 
         i = int(selector)
         if not 1 <= i <= len(entries):
             raise ScenarioError(
-                source, f"override '{key}'", f"{kind} index {i} out of range: expected 1..{len(entries)}"
+                source, key, f"{kind} index {i} out of range: expected 1..{len(entries)}", what="override"
             )
         entry = entries[i - 1]
     else:
@@ -275,7 +275,7 @@ def _find_entry(entries: list, selector: str, kind: str, source: str, key: str) 
         if not matches:
             names = [e.get("name") for e in entries if isinstance(e, dict)]
             raise ScenarioError(
-                source, f"override '{key}'", f"no {kind} named '{selector}': expected a 1-based index or one of {names}"
+                source, key, f"no {kind} named '{selector}': expected a 1-based index or one of {names}", what="override"
             )
         entry = matches[0]
     if not isinstance(entry, dict):
@@ -310,7 +310,7 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any], source
             allowed = _MODEL_FIELDS if parts[0] == "model" else _CHANNEL_FIELDS
             if parts[1] not in allowed:
                 raise ScenarioError(
-                    source, f"override '{key}'", f"unknown key: expected one of {sorted(allowed)}"
+                    source, key, f"unknown key: expected one of {sorted(allowed)}", what="override"
                 )
             out.setdefault(parts[0], {})
             out[parts[0]][parts[1]] = value
@@ -318,11 +318,11 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any], source
             allowed = _PROCESS_FIELDS if parts[0] == "process" else _SERVER_FIELDS
             if parts[2] not in allowed:
                 raise ScenarioError(
-                    source, f"override '{key}'", f"unknown key: expected one of {sorted(allowed)}"
+                    source, key, f"unknown key: expected one of {sorted(allowed)}", what="override"
                 )
             entries = out.get(parts[0])
             if not isinstance(entries, list):
-                raise ScenarioError(source, f"override '{key}'", f"the scenario has no [[{parts[0]}]] entries")
+                raise ScenarioError(source, key, f"the scenario has no [[{parts[0]}]] entries", what="override")
             entry = _find_entry(entries, parts[1], parts[0], source, key)
             entry[parts[2]] = value
             if parts[0] == "server" and parts[2] in ("slots_per_dimension", "processing_time"):
@@ -332,8 +332,9 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any], source
         else:
             raise ScenarioError(
                 source,
-                f"override '{key}'",
+                key,
                 "unknown key: expected p, tau_cap, model.FIELD, channel.FIELD, process.K.FIELD or server.M.FIELD",
+                what="override",
             )
     return out
 
@@ -395,11 +396,11 @@ class _V:
 
     def matrix(self, obj: Any, fld: str) -> np.ndarray:
         if not isinstance(obj, list) or not obj:
-            raise self.err(fld, f"expected a non-empty square matrix (list of rows), found {obj!r:.60}")
+            raise self.err(fld, f"expected a non-empty square matrix (list of rows), found {repr(obj)[:60]}")
         rows = []
         for i, row in enumerate(obj):
             if not isinstance(row, list):
-                raise self.err(fld, f"row {i + 1}: expected a list of numbers, found {row!r:.40}")
+                raise self.err(fld, f"row {i + 1}: expected a list of numbers, found {repr(row)[:40]}")
             rows.append([self.real(x, f"{fld}[{i + 1}]") for x in row])
         n = len(rows)
         if any(len(r) != n for r in rows):
