@@ -1,0 +1,190 @@
+"""Size guard: estimate an MDP's size and memory from its scenario, before building it.
+
+The configuration automaton of a model (server pipelines, jobs, arrivals) is small and cheap to
+explore; the state space is that automaton times the AoI box. The estimate runs the reachability
+fixed point of :mod:`wncs_lp.models.space` on *per-axis* masks (for each configuration and each
+process, the set of reachable tau_k values) instead of full boxes. The product of the per-axis
+sets contains the true reachable set, so
+
+    states_est = sum_c prod_k |T_k(c)|  >=  true number of states,
+
+an upper bound that costs O(configs x sum_k tau_hat_k) instead of O(configs x prod_k tau_hat_k).
+Pairs and transition nonzeros follow by weighting each configuration's count with its number of
+actions and outcomes (upper bounds too: merging of equal successors only lowers the truth).
+"""
+from __future__ import annotations
+
+import os
+from collections import deque
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .errors import WncsError
+from .scenario import Scenario
+
+__all__ = ["SizeEstimate", "SizeLimitError", "estimate_size", "check_size", "available_memory"]
+
+#: Bytes per stored transition nonzero while building (COO row/col/val, CSR copy, sort scratch).
+BUILD_BYTES_PER_NNZ = 64
+#: Bytes per pair and per state kept by the MDP and its decoded view.
+BYTES_PER_PAIR = 40
+BYTES_PER_STATE = 48
+#: Extra factor for an interior-point LP (KKT matrix and its sparse factorisation), measured on
+#: the paper's instances to be 10-40x the MDP's own size.
+LP_FACTOR = 40.0
+#: Fraction of the available memory a build may use before it is refused.
+MEMORY_FRACTION = 0.5
+
+
+class SizeLimitError(WncsError):
+    """The MDP a scenario would build exceeds the memory limit (use ``force`` to build anyway)."""
+
+    def __init__(self, message: str, estimate: "SizeEstimate"):
+        self.estimate = estimate
+        super().__init__(message)
+
+
+@dataclass(frozen=True)
+class SizeEstimate:
+    """Upper-bound estimate of an MDP's size, from its scenario.
+
+    Attributes
+    ----------
+    configs : int
+        Configurations of the automaton (exact).
+    box : int
+        prod_k tau_hat_k.
+    states, pairs, nnz : int
+        Upper bounds on states, state-action pairs and transition nonzeros.
+    build_bytes : int
+        Estimated peak memory of the build.
+    lp_bytes : int
+        Estimated peak memory of an interior-point LP solve.
+    """
+
+    configs: int
+    box: int
+    states: int
+    pairs: int
+    nnz: int
+    build_bytes: int
+    lp_bytes: int
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def available_memory() -> int:
+    """Bytes of memory available now (``MemAvailable`` of /proc/meminfo; 8 GiB if unknown)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+def _automaton(scenario: Scenario):
+    if scenario.model.kind == "wncs":
+        from .models.wncs import wncs_automaton
+
+        return wncs_automaton(scenario)
+    from .models.preemption import preemption_automaton
+
+    return preemption_automaton(scenario)
+
+
+def estimate_size(scenario: Scenario, automaton=None) -> SizeEstimate:
+    """Estimate (upper bounds) the size of the MDP of a scenario without building it."""
+    auto = automaton if automaton is not None else _automaton(scenario)
+    caps = scenario.tau_caps
+    N = len(caps)
+    nC = len(auto.configs)
+    # per-axis reachable masks: masks[k][c, i] = tau_k = i + 1 reachable with configuration c
+    masks = [np.zeros((nC, cap), dtype=bool) for cap in caps]
+    work: deque[int] = deque()
+    queued = np.zeros(nC, dtype=bool)
+    for c in auto.initial:
+        for k in range(N):
+            masks[k][c] = True
+        if not queued[c]:
+            work.append(c)
+            queued[c] = True
+    idx = [np.arange(cap) for cap in caps]
+    while work:
+        c = work.popleft()
+        queued[c] = False
+        for outs in auto.outcomes[c]:
+            for nxt, delta, _ in outs:
+                grew = False
+                for k in range(N):
+                    src = idx[k][masks[k][c]]
+                    img = np.minimum(src + 1, caps[k] - 1)
+                    if delta[k] > 0:
+                        img = np.minimum(img, delta[k] - 1)
+                    row = masks[k][nxt]
+                    if not row[img].all():
+                        row[img] = True
+                        grew = True
+                if grew and not queued[nxt]:
+                    work.append(nxt)
+                    queued[nxt] = True
+    per_cfg = np.ones(nC, dtype=np.float64)
+    for k in range(N):
+        per_cfg *= masks[k].sum(axis=1)
+    n_act = np.array([len(a) for a in auto.actions], dtype=np.float64)
+    n_out = np.array([sum(len(o) for o in outs) for outs in auto.outcomes], dtype=np.float64)
+    states = int(per_cfg.sum())
+    pairs = int((per_cfg * n_act).sum())
+    nnz = int((per_cfg * n_out).sum())
+    build = nnz * BUILD_BYTES_PER_NNZ + pairs * BYTES_PER_PAIR + states * BYTES_PER_STATE + nC * int(np.prod(caps))
+    lp = int(LP_FACTOR * (nnz * 16 + pairs * 8))
+    return SizeEstimate(nC, int(np.prod(caps)), states, pairs, nnz, int(build), lp)
+
+
+def _gib(b: float) -> str:
+    return f"{b / 2**30:.1f} GiB"
+
+
+def check_size(
+    scenario: Scenario,
+    *,
+    force: bool = False,
+    need_lp: bool = False,
+    limit_bytes: int | None = None,
+    automaton=None,
+) -> SizeEstimate:
+    """Refuse (raise :class:`SizeLimitError`) a build whose estimate exceeds the memory limit.
+
+    The limit is ``MEMORY_FRACTION`` of :func:`available_memory` unless ``limit_bytes`` is given.
+    With ``need_lp`` the LP's memory counts too. ``force=True`` only returns the estimate.
+    The message gives the estimate and the cheaper routes that exist.
+    """
+    est = estimate_size(scenario, automaton)
+    if force:
+        return est
+    limit = int(MEMORY_FRACTION * available_memory()) if limit_bytes is None else int(limit_bytes)
+    need = est.build_bytes + (est.lp_bytes if need_lp else 0)
+    if need <= limit:
+        return est
+    routes = []
+    if need_lp and est.build_bytes <= limit:
+        routes.append("value iteration (--method rvi) instead of the LP, which fits")
+    if scenario.model.kind == "wncs":
+        routes.append("the separable suboptimal policy with Monte Carlo simulation (needs no enumeration)")
+    routes.append(f"a smaller cap (--set tau_cap=...; the box is {est.box:,} AoI vectors per configuration)")
+    raise SizeLimitError(
+        f"{scenario.source}: the MDP would have up to {est.states:,} states, {est.pairs:,} state-action pairs "
+        f"and {est.nnz:,} transition nonzeros, needing about {_gib(need)}"
+        f"{' (LP included)' if need_lp else ''}, over the limit of {_gib(limit)} "
+        f"({MEMORY_FRACTION:.0%} of the memory available now). Cheaper routes: "
+        + "; ".join(routes)
+        + ". Use --force (force=True) to build anyway.",
+        est,
+    )
