@@ -89,7 +89,6 @@ def case(request):
     mdp = build(sc)
     sol = solve(mdp, "pi")
     assert sol.ok
-    gains = {"optimal": sol.gain}
     pols = {
         "optimal": OptimalPolicy(mdp, sol, system),
         "suboptimal": SuboptimalPolicy(system),

@@ -40,17 +40,16 @@ import io
 import json
 import math
 import os
-import sys
 import tempfile
 import time
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .errors import PolicyError, WncsError
+from .errors import WncsError
 from .policies import POLICY_NAMES, System, make_policy, parse_policy_names, solve_optimal
 from .scenario import Scenario
 
