@@ -1,0 +1,127 @@
+"""On-disk step cache for the reproduction: resumable, atomic, keyed by content.
+
+Each step's result is a JSON document (plus optional numpy arrays in an ``.npz`` beside it) under
+``DIR/cache/``, named by a hash of the step name and its parameters (scenario fingerprints
+included). Files are written to a temporary name and moved into place with :func:`os.replace`,
+so an interrupted run never leaves a half-written entry, and two runs into the same folder at
+worst compute a step twice.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+__all__ = ["StepCache", "atomic_write_text", "atomic_write_bytes", "json_ready"]
+
+
+def json_ready(obj: Any) -> Any:
+    """Convert numpy scalars/arrays and tuples recursively so ``json.dumps`` accepts them."""
+    if isinstance(obj, dict):
+        return {str(k): json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_ready(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, float) and (obj != obj or obj in (float("inf"), float("-inf"))):
+        return None
+    return obj
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+class StepCache:
+    """A folder of cached step results.
+
+    Parameters
+    ----------
+    root : Path
+        The cache folder (created).
+    force : bool
+        Recompute every step (existing entries are overwritten).
+    """
+
+    def __init__(self, root: Path, force: bool = False):
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.force = force
+        self.hits = 0
+        self.misses = 0
+
+    @staticmethod
+    def key(step: str, params: dict[str, Any]) -> str:
+        blob = json.dumps(json_ready({"step": step, "params": params}), sort_keys=True)
+        return f"{step}-{hashlib.sha256(blob.encode()).hexdigest()[:16]}"
+
+    def _paths(self, key: str) -> tuple[Path, Path]:
+        return self.root / f"{key}.json", self.root / f"{key}.npz"
+
+    def load(self, step: str, params: dict[str, Any]) -> tuple[dict, dict[str, np.ndarray]] | None:
+        if self.force:
+            return None
+        jpath, npath = self._paths(self.key(step, params))
+        if not jpath.exists():
+            return None
+        try:
+            doc = json.loads(jpath.read_text())
+            arrays: dict[str, np.ndarray] = {}
+            if doc.get("_has_arrays"):
+                with np.load(npath, allow_pickle=False) as z:
+                    arrays = {k: z[k] for k in z.files}
+        except (OSError, ValueError, KeyError):
+            return None  # a damaged entry is recomputed
+        return doc["result"], arrays
+
+    def store(self, step: str, params: dict[str, Any], result: dict, arrays: dict[str, np.ndarray] | None = None) -> None:
+        key = self.key(step, params)
+        jpath, npath = self._paths(key)
+        if arrays:
+            import io
+
+            buf = io.BytesIO()
+            np.savez_compressed(buf, **arrays)
+            atomic_write_bytes(npath, buf.getvalue())  # arrays first: the JSON marks completion
+        doc = {"step": step, "params": json_ready(params), "result": json_ready(result), "_has_arrays": bool(arrays)}
+        atomic_write_text(jpath, json.dumps(doc, indent=1))
+
+    def get_or_compute(
+        self,
+        step: str,
+        params: dict[str, Any],
+        compute: Callable[[], tuple[dict, dict[str, np.ndarray] | None]],
+    ) -> tuple[dict, dict[str, np.ndarray]]:
+        """Return the cached (result, arrays) of a step, computing and storing it if absent."""
+        hit = self.load(step, params)
+        if hit is not None:
+            self.hits += 1
+            return hit
+        self.misses += 1
+        result, arrays = compute()
+        self.store(step, params, result, arrays)
+        # round-trip through JSON so a fresh and a cached run see the same types
+        return json.loads(json.dumps(json_ready(result))), dict(arrays or {})
