@@ -95,7 +95,7 @@ def run_reproduction(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = log or (lambda m: print(m, file=sys.stderr))
-    ctx = Context(out, prof, force=force, log=lambda m: None)
+    ctx = Context(out, prof, force=force, log=(lambda m: say(f"  {m}")) if progress else (lambda m: None))
     todo = list(claims or CLAIMS)
     table = _claims()
     results: list[ClaimResult] = []
@@ -105,6 +105,8 @@ def run_reproduction(
         from tqdm import tqdm
 
         bar = tqdm(total=len(todo), desc="reproduce", unit="claim", file=sys.stderr, disable=None)
+        if bar.disable:  # not a terminal: one line per step instead of a bar
+            bar = None
     for cid in todo:
         if bar is not None:
             bar.set_postfix_str(cid)
@@ -124,7 +126,7 @@ def run_reproduction(
         results.append(res)
         if bar is not None:
             bar.update(1)
-        else:
+        elif progress:
             say(f"{cid}: {res.verdict} ({res.seconds:.1f} s)")
     if bar is not None:
         bar.close()

@@ -212,8 +212,12 @@ class Context:
             }
             return res, {"policy": sol.policy, "bias": sol.bias, "stationary": stationary}
 
-        self.log(f"solve {scenario.source} ({mdp.n_states:,} states)")
-        res, arr = self.cache.get_or_compute("solve", {"fingerprint": key}, compute)
+        def logged():
+            self.log(f"solving {Path(scenario.source).name} caps {scenario.tau_caps} p={scenario.p:g} "
+                     f"({mdp.n_states:,} states)")
+            return compute()
+
+        res, arr = self.cache.get_or_compute("solve", {"fingerprint": key}, logged)
         solved = Solved(
             scenario,
             mdp,
