@@ -379,6 +379,155 @@ subcommand("reproduce", "reproduce every figure and claim of the paper into a re
            _configure_reproduce)(cmd_reproduce)
 
 
+# ----------------------------------------------------------------------------- verify / map
+def cmd_verify(args: argparse.Namespace) -> int:
+    from .models import build
+    from .solvers import solve
+    from .structure import Tolerance, verify_all
+
+    scenario = load(args)
+    t0 = time.perf_counter()
+    mdp = build(scenario)
+    sol = solve(mdp, method=args.method)
+    reports = verify_all(mdp, sol, tolerance=Tolerance(args.atol, args.rtol), examples=args.examples)
+    payload = {
+        "scenario": scenario.source,
+        "overrides": args.overrides,
+        "kind": scenario.model.kind,
+        "states": mdp.n_states,
+        "pairs": mdp.n_pairs,
+        "method": sol.method,
+        "solve_status": sol.status,
+        "gain": sol.gain,
+        "gain_lower": sol.gain_lower,
+        "gain_upper": sol.gain_upper,
+        "checks": [r.to_json() for r in reports],
+        "seconds": time.perf_counter() - t0,
+    }
+    if args.json:
+        emit_json(payload)
+    else:
+        print(scenario.describe())
+        print(f"MDP: {mdp.n_states:,} states; {sol.method}: {sol.status}, gain {sol.gain:.10g} "
+              f"(certificate width {sol.gap:.1e})")
+        print(f"{'check':<13} {'verdict':<7} {'checked':>9} {'violations':>10} {'recurrent':>9} {'at cap':>7} "
+              f"{'ties':>6} {'worst':>11}  unit")
+        for r in reports:
+            w = "" if r.worst is None else f"{r.worst.size:.4g}"
+            print(f"{r.name:<13} {r.verdict:<7} {r.checked:>9} {r.violations:>10} {r.recurrent_violations:>9} "
+                  f"{r.at_cap_violations:>7} {r.ties:>6} {w:>11}  {r.unit}")
+        print(f"tie tolerance: tol = {reports[0].atol:g} + {reports[0].rtol:g} * span(V) = {reports[0].tol:.3g}; "
+              f"recurrent = {reports[0].recurrence_rule}")
+        for r in reports:
+            if r.examples:
+                e = r.examples[0]
+                print(f"{r.name}: first example ({'recurrent' if e.recurrent else 'transient'}, "
+                      f"{'at' if e.at_cap else 'below'} the cap, size {e.size:.4g}):")
+                for lab in e.labels:
+                    print(f"    {lab}")
+                for step in e.info.get("trajectory", []):
+                    print(f"      -> {step['label']}  action {tuple(step['action'])}  p={step['prob']:.3g}"
+                          + (f"  [{step['event']}]" if "event" in step else ""))
+    return 0 if sol.ok else 1
+
+
+def _configure_verify(p: argparse.ArgumentParser) -> None:
+    add_scenario_args(p)
+    p.add_argument("--method", default="pi", choices=["pi", "rvi", "lp"], help="solver (default: pi)")
+    p.add_argument("--atol", type=float, default=1e-9, help="absolute part of the tie tolerance (default 1e-9)")
+    p.add_argument("--rtol", type=float, default=1e-9,
+                   help="part of the tie tolerance relative to span(V) = max V - min V (default 1e-9)")
+    p.add_argument("--examples", type=int, default=10, help="example violations kept per check (default 10)")
+
+
+subcommand("verify", "check Theorems 1-3 (monotone V, threshold policy, consistency) on the solved model",
+           _configure_verify)(cmd_verify)
+
+
+def _parse_fix(items: Sequence[str]) -> dict[int, int]:
+    from .errors import ModelError
+
+    out: dict[int, int] = {}
+    for item in (x.strip() for chunk in items for x in chunk.split(",") if x.strip()):
+        k, sep, v = item.partition("=")
+        if not sep or not k.strip().isdigit() or not v.strip().isdigit():
+            raise ModelError(f"--fix {item!r}: expected PROCESS=TAU with 1-based integers, e.g. 3=5")
+        out[int(k)] = int(v)
+    return out
+
+
+def cmd_map(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .errors import ModelError
+    from .maps import parse_config_spec, plot_policy_map, plot_policy_slice, region_stats
+    from .models import build
+    from .solvers import solve
+
+    scenario = load(args)
+    try:
+        axes = tuple(int(x) for x in args.axes.split(","))
+    except ValueError:
+        raise ModelError(f"--axes {args.axes!r}: expected comma-separated process indices, e.g. 1,2") from None
+    fixed = _parse_fix(args.fix)
+    mdp = build(scenario)
+    config = parse_config_spec(mdp, args.servers)
+    sol = solve(mdp, method=args.method)
+    if args.slice is not None:
+        axes = axes if len(axes) == 3 else (1, 2, 3)
+        ax = plot_policy_slice(mdp, sol, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
+        stats = region_stats(mdp, sol, config, axes=axes, fixed_tau=fixed, total=args.slice, scenario=scenario)
+    else:
+        ax = plot_policy_map(mdp, sol, config, axes=axes, fixed_tau=fixed, scenario=scenario)
+        stats = region_stats(mdp, sol, config, axes=axes, fixed_tau=fixed, scenario=scenario)
+    ax.figure.savefig(args.out, dpi=args.dpi, bbox_inches="tight")
+    plt.close(ax.figure)
+    payload = {
+        "scenario": scenario.source,
+        "overrides": args.overrides,
+        "out": args.out,
+        "configuration": mdp.states.describe_config(mdp.states.configs[config]),
+        "configuration_id": config,
+        "axes": list(axes),
+        "slice_total": args.slice,
+        "gain": sol.gain,
+        "regions": stats,
+    }
+    if args.json:
+        emit_json(payload)
+    else:
+        print(f"map of [{payload['configuration']}] written to {args.out}")
+        for name, r in stats["per_action"].items():
+            print(f"  {name}: {r['cells']} cells, {r['components']} region(s), {r['holes']} hole(s)"
+                  f"{'' if r['connected'] else '  -- not connected'}")
+    return 0
+
+
+def _configure_map(p: argparse.ArgumentParser) -> None:
+    add_scenario_args(p)
+    p.add_argument("--servers", required=True, metavar="SPEC",
+                   help="the configuration: 'idle'; '#ID'; its description as in state labels, e.g. "
+                        "'edge: job 3 d=3' (servers not named are idle) or 'b=10 | serving 2(d=2,g=2) | down [-]'; "
+                        "or a Python literal of the configuration tuple")
+    p.add_argument("--out", required=True, help="output image (.png, .svg, .pdf)")
+    p.add_argument("--axes", default="1,2", help="processes on the x,y axes, 1-based (default 1,2); with --slice "
+                                                 "three of them (default 1,2,3)")
+    p.add_argument("--fix", action="append", default=[], metavar="K=TAU",
+                   help="AoI of a process not on the axes, e.g. 3=5 (repeatable; default: the value with the "
+                        "most reachable states)")
+    p.add_argument("--slice", type=int, default=None, metavar="TOTAL",
+                   help="draw the plane tau_i + tau_j + tau_k = TOTAL as a triangle (three processes)")
+    p.add_argument("--method", default="pi", choices=["pi", "rvi", "lp"], help="solver (default: pi)")
+    p.add_argument("--dpi", type=int, default=120, help="resolution of raster output (default 120)")
+
+
+subcommand("map", "draw the optimal action over two AoIs (or a 3-process slice) for one server configuration",
+           _configure_map)(cmd_map)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="wncs-lp",
