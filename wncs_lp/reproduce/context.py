@@ -184,7 +184,7 @@ class Context:
         mdp = self.mdp(scenario)
 
         def compute():
-            from ..solvers import evaluate_policy, solve
+            from ..solvers import solve
 
             t0 = time.perf_counter()
             method = "pi" if mdp.n_states <= 60_000 else "rvi"
@@ -193,12 +193,8 @@ class Context:
             except Exception:  # a multichain PI iterate (e.g. deterministic p = 1): value iteration
                 method = "rvi"
                 sol = solve(mdp, method=method)
-            try:
-                stationary = evaluate_policy(mdp, sol.policy).stationary
-                unichain = True
-            except Exception:
-                stationary = _stationary_from_initial(mdp, sol.policy)
-                unichain = False
+            stationary, n_classes = stationary_law(mdp, sol.policy)
+            unichain = n_classes == 1
             res = {
                 "gain": float(sol.gain),
                 "gain_lower": float(sol.gain_lower),
@@ -270,14 +266,33 @@ def _fmt(v: Any) -> Any:
     return v
 
 
-def _stationary_from_initial(mdp: MDP, policy: np.ndarray, iters: int = 20_000) -> np.ndarray:
-    """Long-run state frequencies from the first state (multichain fallback): Cesaro average of
-    the distribution's iterates under the policy's chain."""
-    P = mdp.P[policy].T.tocsr()
+def stationary_law(mdp: MDP, policy: np.ndarray, tol: float = 1e-14, max_iter: int = 200_000):
+    """Stationary law of a deterministic policy's chain, exact in its support.
+
+    The recurrent classes are found graph-theoretically (closed strongly connected components,
+    :func:`wncs_lp.solvers.dp.recurrent_classes`), so "recurrent" is exact, not a threshold on
+    a numerical solve; on each class the law is the fixed point of the lazy chain
+    (I + P)/2 restricted to it, by power iteration (a sparse LU of the whole chain fills in
+    badly past ~10^5 states). With several classes each gets equal weight.
+
+    Returns
+    -------
+    stationary : (n,) array (zero exactly on transient states), n_classes : int
+    """
+    from ..solvers.dp import recurrent_classes
+
+    P_pi = mdp.P[policy]
+    classes = recurrent_classes(P_pi)
     x = np.zeros(mdp.n_states)
-    x[0] = 1.0
-    acc = np.zeros_like(x)
-    for _ in range(iters):
-        x = P @ x
-        acc += x
-    return acc / iters
+    for cl in classes:
+        sub = P_pi[cl][:, cl].T.tocsr()
+        v = np.full(cl.size, 1.0 / cl.size)
+        for _ in range(max_iter):
+            w = 0.5 * (v + sub @ v)
+            w /= w.sum()
+            done = np.abs(w - v).sum() < tol
+            v = w
+            if done:
+                break
+        x[cl] = v / len(classes)
+    return x, len(classes)
