@@ -14,7 +14,6 @@ import traceback
 from pathlib import Path
 from typing import Callable, Sequence
 
-from .cache import atomic_write_text
 from .context import PROFILES, ClaimResult, Context, Profile
 from .report import write_report
 
