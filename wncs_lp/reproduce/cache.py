@@ -20,6 +20,22 @@ import numpy as np
 __all__ = ["StepCache", "atomic_write_text", "atomic_write_bytes", "json_ready"]
 
 
+_CODE_VERSION: str | None = None
+
+
+def code_version() -> str:
+    """A hash of the package's source files: a cached result is reused only by the same code."""
+    global _CODE_VERSION
+    if _CODE_VERSION is None:
+        root = Path(__file__).resolve().parents[1]
+        h = hashlib.sha256()
+        for f in sorted(root.rglob("*.py")):
+            h.update(str(f.relative_to(root)).encode())
+            h.update(f.read_bytes())
+        _CODE_VERSION = h.hexdigest()[:16]
+    return _CODE_VERSION
+
+
 def json_ready(obj: Any) -> Any:
     """Convert numpy scalars/arrays and tuples recursively so ``json.dumps`` accepts them."""
     if isinstance(obj, dict):
@@ -75,7 +91,7 @@ class StepCache:
 
     @staticmethod
     def key(step: str, params: dict[str, Any]) -> str:
-        blob = json.dumps(json_ready({"step": step, "params": params}), sort_keys=True)
+        blob = json.dumps(json_ready({"step": step, "params": params, "code": code_version()}), sort_keys=True)
         return f"{step}-{hashlib.sha256(blob.encode()).hexdigest()[:16]}"
 
     def _paths(self, key: str) -> tuple[Path, Path]:

@@ -37,7 +37,7 @@ class Profile:
     mc_reps: int
     mc_slots_3p: int
     mc_reps_3p: int
-    slice_total_3p: tuple[int, ...]  # the tau_1 + tau_2 + tau_3 plane, one per cap in caps_3p
+    slice_total_3p: tuple[int, ...]  # the tau_1 + tau_2 + tau_3 plane, one per cap in caps_3p (1.5 x cap)
     c13_caps: tuple[int, ...]
     c13_big_cap: int
     seed: int = 20221
@@ -74,7 +74,7 @@ PROFILES: dict[str, Profile] = {
         mc_reps=20,
         mc_slots_3p=10_000,
         mc_reps_3p=10,
-        slice_total_3p=(18, 45),
+        slice_total_3p=(18, 24),
         c13_caps=(6, 8, 10, 12),
         c13_big_cap=30,
     ),
@@ -266,7 +266,7 @@ def _fmt(v: Any) -> Any:
     return v
 
 
-def stationary_law(mdp: MDP, policy: np.ndarray, tol: float = 1e-14, max_iter: int = 200_000):
+def stationary_law(mdp: MDP, policy: np.ndarray, tol: float = 1e-14, max_iter: int = 200_000, classes=None):
     """Stationary law of a deterministic policy's chain, exact in its support.
 
     The recurrent classes are found graph-theoretically (closed strongly connected components,
@@ -275,6 +275,8 @@ def stationary_law(mdp: MDP, policy: np.ndarray, tol: float = 1e-14, max_iter: i
     (I + P)/2 restricted to it, by power iteration (a sparse LU of the whole chain fills in
     badly past ~10^5 states). With several classes each gets equal weight.
 
+    ``classes`` restricts the law to given recurrent classes (default: all of them).
+
     Returns
     -------
     stationary : (n,) array (zero exactly on transient states), n_classes : int
@@ -282,7 +284,8 @@ def stationary_law(mdp: MDP, policy: np.ndarray, tol: float = 1e-14, max_iter: i
     from ..solvers.dp import recurrent_classes
 
     P_pi = mdp.P[policy]
-    classes = recurrent_classes(P_pi)
+    if classes is None:
+        classes = recurrent_classes(P_pi)
     x = np.zeros(mdp.n_states)
     for cl in classes:
         sub = P_pi[cl][:, cl].T.tocsr()
