@@ -165,6 +165,15 @@ def test_plot_policy_map_fixes_other_aoi(p123):
         policy_grid(mdp, sol, "idle", axes=(1, 2), fixed_tau={2: 1})
 
 
+def test_default_fixed_aoi_follows_weights(p123):
+    _, mdp, sol = p123
+    c = parse_config_spec(mdp, "edge: job 3 d=3")
+    w = np.where((mdp.states.config == c) & (mdp.states.tau[:, 2] == 3), 1.0, 0.0)
+    _, S, fixed = policy_grid(mdp, sol, c, axes=(1, 2), stationary=w / w.sum())
+    assert fixed == {3: 3}
+    assert all(mdp.states.tau[s][2] == 3 for s in S[S >= 0])
+
+
 def test_plot_policy_slice(p123, tmp_path):
     sc, mdp, sol = p123
     total = 9

@@ -303,6 +303,37 @@ def test_consistency_planted_preemption(pre):
     assert rep.details["counterexample"] is not None
 
 
+def test_consistency_breakdown_by_start_type(pre):
+    _, mdp, sol = pre
+    rep = check_consistency(mdp, sol)
+    by = rep.details["by_start_type"]
+    kinds = ("idle_server", "preempting", "restarting_own")
+    assert sum(by[k]["checked"] for k in kinds) == rep.checked
+    assert sum(by[k]["violations"] for k in kinds) == rep.violations
+    assert sum(by[k]["recurrent_violations"] for k in kinds) == rep.recurrent_violations
+    assert by["preempting_with_other_available"]["checked"] <= by["preempting"]["checked"]
+    for k, v in by.items():
+        if v["violations"]:
+            assert v["counterexample"]["info"]["trajectory"][0]["state"] == v["counterexample"]["states"][0]
+
+
+def test_recurrent_means_every_state_involved(p12):
+    _, mdp, sol = p12
+    V = monotone_bias(mdp)
+    rec = policy_context(mdp, sol).recurrent
+    up = {}
+    for a, b in adjacent_pairs(mdp):
+        up.setdefault(a, []).append(b)
+    # a recurrent state with one recurrent and one transient upper neighbour, if any
+    s = next((a for a, bs in up.items() if rec[a] and len({bool(rec[b]) for b in bs}) == 2),
+             next(a for a, bs in up.items() if rec[a]))
+    V[s] += 1000.0
+    rep = check_monotonicity(mdp, dataclasses.replace(sol, bias=V), examples=100)
+    assert rep.violations == len(up[s]) >= 1
+    assert rep.recurrent_violations == sum(1 for b in up[s] if rec[b])
+    assert rep.details["violations_with_some_recurrent_state"] == len(up[s])  # s itself is recurrent
+
+
 def test_consistency_rejects_wncs(p12):
     _, mdp, sol = p12
     with pytest.raises(ModelError, match="preemption model only"):

@@ -280,8 +280,11 @@ def _check_axes(N: int, axes: Sequence[int], need: int) -> tuple[int, ...]:
     return axes
 
 
-def _fixed(mdp: MDP, config: int, axes: Sequence[int], fixed_tau: Mapping[int, int] | None) -> dict[int, int]:
-    """Values of the AoIs not on the axes: given, or the value with the most reachable cells."""
+def _fixed(mdp: MDP, config: int, axes: Sequence[int], fixed_tau: Mapping[int, int] | None,
+           weights: np.ndarray | None = None) -> dict[int, int]:
+    """Values of the AoIs not on the axes: given, or else the value carrying the most weight
+    (e.g. stationary probability, or number of recurrent states) in the configuration, ties and
+    weightless configurations broken by the number of reachable cells (then the smaller value)."""
     space = mdp.states
     caps = space.caps
     N = len(caps)
@@ -291,19 +294,37 @@ def _fixed(mdp: MDP, config: int, axes: Sequence[int], fixed_tau: Mapping[int, i
             raise ModelError(f"fixed_tau: process {k} must be in 1..{N} and not on the axes {tuple(axes)}")
         if not 1 <= v <= caps[k - 1]:
             raise ModelError(f"fixed_tau: tau_{k} = {v} outside 1..{caps[k - 1]}")
-    G = space.lookup_grid(config) >= 0
+    ids = space.lookup_grid(config)
+    G = ids >= 0
+    W = np.zeros(G.shape) if weights is None else np.where(G, np.asarray(weights, float)[np.maximum(ids, 0)], 0.0)
     for k in range(1, N + 1):
         if k in axes or k in fixed:
             continue
         other = tuple(i for i in range(N) if i != k - 1)
         counts = G.sum(axis=other)
-        fixed[k] = int(np.argmax(counts)) + 1
+        mass = W.sum(axis=other)
+        fixed[k] = int(np.lexsort((-counts, -mass))[0]) + 1
     return fixed
 
 
+def _weights(mdp: MDP, pol: np.ndarray, stationary: Any) -> np.ndarray | None:
+    """Per-state weights for the default fixed AoIs: the stationary distribution if given, else
+    the recurrent indicator of the policy's chain (only computed when N > 2)."""
+    if len(mdp.states.caps) <= 2 or stationary is False:
+        return None
+    if stationary is not None:
+        return np.asarray(stationary, float)
+    return _recurrent_mask(mdp, pol, pol, None).astype(float)
+
+
 def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[int] = (1, 2),
-                fixed_tau: Mapping[int, int] | None = None) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
+                fixed_tau: Mapping[int, int] | None = None, stationary: Any = None
+                ) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
     """The chosen action over (tau_i, tau_j) for one configuration.
+
+    The AoIs not on the axes take ``fixed_tau`` or, by default, the value with the most
+    stationary probability (``stationary`` given) or the most recurrent states of the policy's
+    chain in this configuration (ties: the most reachable cells).
 
     Returns
     -------
@@ -319,7 +340,7 @@ def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[i
     axes = _check_axes(N, axes, 2)
     c = parse_config_spec(mdp, config)
     pol = _policy_pairs(mdp, policy_or_solution)
-    fixed = _fixed(mdp, c, axes, fixed_tau)
+    fixed = _fixed(mdp, c, axes, fixed_tau, _weights(mdp, pol, stationary) if len(fixed_tau or {}) < N - 2 else None)
     G = space.lookup_grid(c)
     idx = [slice(None) if k in axes else fixed[k] - 1 for k in range(1, N + 1)]
     S = G[tuple(idx)]
@@ -330,7 +351,8 @@ def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[i
 
 
 def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes: Sequence[int] = (1, 2, 3),
-               fixed_tau: Mapping[int, int] | None = None) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
+               fixed_tau: Mapping[int, int] | None = None, stationary: Any = None
+               ) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
     """The chosen action on the plane tau_i + tau_j + tau_k = total.
 
     Returns
@@ -351,7 +373,8 @@ def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes:
     axes = _check_axes(N, axes, 3)
     c = parse_config_spec(mdp, config)
     pol = _policy_pairs(mdp, policy_or_solution)
-    fixed = _fixed(mdp, c, axes, fixed_tau)
+    fixed = _fixed(mdp, c, axes, fixed_tau,
+                   _weights(mdp, pol, stationary) if len(fixed_tau or {}) < N - 3 else None)
     i, j, k = axes
     ci, cj, ck = caps[i - 1], caps[j - 1], caps[k - 1]
     if not 3 <= total <= ci + cj + ck:
@@ -386,15 +409,17 @@ _DUAL = {"grid4": "grid8", "grid8": "grid4", "tri6": "tri6"}
 
 def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any = None, *,
                  axes: Sequence[int] | None = None, fixed_tau: Mapping[int, int] | None = None,
-                 total: int | None = None, connectivity: str | None = None, scenario: Any = None) -> dict:
+                 total: int | None = None, connectivity: str | None = None, scenario: Any = None,
+                 stationary: Any = None) -> dict:
     """Number of regions of each action and whether each is connected / simply connected.
 
     Two ways to call it:
 
     * ``region_stats(labels, connectivity="grid4")`` on a 2-D integer array of action ids,
       with -1 for an unreachable cell and -2 for a cell outside the domain;
-    * ``region_stats(mdp, solution, config, axes=(1, 2), fixed_tau=...)`` for a 2-D map
-      (grid, 4-neighbour) or ``region_stats(mdp, solution, config, total=T, axes=(1, 2, 3))``
+    * ``region_stats(mdp, solution, config, axes=(1, 2), fixed_tau=..., stationary=...)`` for a
+      2-D map (the other AoIs chosen as in :func:`policy_grid` unless fixed)
+      on the grid (4-neighbour), or ``region_stats(mdp, solution, config, total=T, axes=(1, 2, 3))``
       for a slice (triangular lattice, 6-neighbour: on the plane sum = T the lattice points
       adjacent to (t_i, t_j, t_k) are those moving one unit between two coordinates).
 
@@ -418,15 +443,17 @@ def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any
     from scipy import ndimage
 
     names: dict[int, str] = {}
+    fixed: dict[int, int] | None = None
     if isinstance(labels_or_mdp, MDP):
         mdp = labels_or_mdp
         if policy_or_solution is None or config is None:
             raise ModelError("region_stats(mdp, ...) needs the policy (or solution) and the configuration")
         if total is None:
-            lab, _, _ = policy_grid(mdp, policy_or_solution, config, axes or (1, 2), fixed_tau)
+            lab, _, fixed = policy_grid(mdp, policy_or_solution, config, axes or (1, 2), fixed_tau, stationary)
             connectivity = connectivity or "grid4"
         else:
-            lab, _, _ = slice_grid(mdp, policy_or_solution, config, total, axes or (1, 2, 3), fixed_tau)
+            lab, _, fixed = slice_grid(mdp, policy_or_solution, config, total, axes or (1, 2, 3), fixed_tau,
+                                       stationary)
             connectivity = connectivity or "tri6"
         info = _context(mdp, scenario)
         cid = parse_config_spec(mdp, config)
@@ -448,6 +475,8 @@ def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any
         "unreachable": int(unreach.sum()),
         "per_action": {},
     }
+    if fixed is not None:
+        out["fixed_tau"] = {str(k): v for k, v in sorted(fixed.items())}
     total_regions = 0
     for a in np.unique(lab[lab >= 0]):
         mask = lab == a
@@ -529,7 +558,8 @@ def plot_policy_map(
     axes : (i, j)
         1-based processes on the x and y axes.
     fixed_tau : {k: tau_k}, optional
-        The other AoIs (default: the value with the most reachable cells).
+        The other AoIs (default: the value with the most stationary probability, or the most
+        recurrent states, in this configuration; see :func:`policy_grid`).
     ax : matplotlib Axes, optional
     stationary : (n,) array, False or None
         Stationary distribution for the shading (``> 0`` = recurrent); None (default) uses the
@@ -550,7 +580,7 @@ def plot_policy_map(
 
     cid = parse_config_spec(mdp, config)
     pol = _policy_pairs(mdp, policy_or_solution)
-    A, S, fixed = policy_grid(mdp, pol, cid, axes, fixed_tau)
+    A, S, fixed = policy_grid(mdp, pol, cid, axes, fixed_tau, stationary)
     rec_mask = _recurrent_mask(mdp, policy_or_solution, pol, stationary)
     info = _context(mdp, scenario)
     if ax is None:
@@ -644,7 +674,7 @@ def plot_policy_slice(
 
     cid = parse_config_spec(mdp, config)
     pol = _policy_pairs(mdp, solution)
-    A, S, fixed = slice_grid(mdp, pol, cid, total, axes, fixed_tau)
+    A, S, fixed = slice_grid(mdp, pol, cid, total, axes, fixed_tau, stationary)
     rec_mask = _recurrent_mask(mdp, solution, pol, stationary)
     info = _context(mdp, scenario)
     if ax is None:

@@ -23,13 +23,16 @@ Classification of a violation
 -----------------------------
 *Recurrent* states are those of the closed communicating classes of the chain ``P_pi`` of the
 solution's policy (an exact graph criterion: the states with positive stationary probability);
-with ``stationary_tol > 0`` the rule is instead ``stationary(s) > stationary_tol``. Which state
-decides is stated per check:
+with ``stationary_tol > 0`` the rule is instead ``stationary(s) > stationary_tol``. A violation
+is *recurrent* when **every** state involved is recurrent, i.e. when it is observable in the
+long-run behaviour of the optimal policy (the looser "some state involved is recurrent" count is
+given in ``details``):
 
-* monotonicity -- the pair is recurrent when at least one of its two states is;
-* threshold -- recurrent when the state whose action contradicts the claim is;
-* consistency -- recurrent when the state where the job is started is (then every state of its
-  tree is recurrent too, so the violation happens with positive long-run frequency).
+* monotonicity -- both states of the pair;
+* threshold -- both s and s' (``details["target_recurrent"]``: s' alone); a line gap -- all three
+  states;
+* consistency -- the start state (then every state of its tree is recurrent too, so the
+  violation happens with positive long-run frequency).
 
 A violation *touches the cap* when one of the states involved has some ``tau_k = tau_hat_k``
 (consistency: when every violating path from the start passes through such a state). The cap
@@ -369,8 +372,9 @@ def policy_context(
     stationary : (n,) array, False or None
         A precomputed stationary distribution of the policy; None (default): taken from a
         policy-iteration solution's occupation, else computed by one sparse LU when the model
-        has at most ``STATIONARY_SOLVE_LIMIT`` states; False: not computed (examples then carry
-        no probabilities; recurrence uses the graph criterion anyway).
+        has at most ``STATIONARY_SOLVE_LIMIT`` states and by the lazy power method above that;
+        False: not computed (examples then carry no probabilities; recurrence uses the graph
+        criterion anyway).
 
     Raises
     ------
@@ -396,6 +400,7 @@ def policy_context(
     tol = tolerance.resolve(scale)
 
     # recurrence
+    stationary_off = stationary is False
     if stationary is False:
         stationary = None
     elif stationary is None:
@@ -407,6 +412,10 @@ def policy_context(
                 stationary = evaluate_policy(mdp, pol).stationary
             except Exception:  # multichain or numerically hard: recurrence still comes from the graph
                 stationary = None
+    classes = None
+    if stationary is None and n > STATIONARY_SOLVE_LIMIT and not stationary_off:
+        classes = recurrent_classes(mdp.P[pol])
+        stationary = _power_stationary(mdp.P[pol], classes)
     if stationary_tol > 0:
         if stationary is None:
             raise ModelError("stationary_tol > 0 needs the stationary distribution, which could not be computed")
@@ -414,7 +423,7 @@ def policy_context(
         rule = f"stationary probability > {stationary_tol:g}"
     else:
         recurrent = np.zeros(n, bool)
-        for cl in recurrent_classes(mdp.P[pol]):
+        for cl in (classes if classes is not None else recurrent_classes(mdp.P[pol])):
             recurrent[cl] = True
         rule = "in a closed communicating class of the policy's chain (stationary probability > 0)"
 
@@ -440,6 +449,27 @@ def policy_context(
         raise ModelError("the action lists of the states of one configuration differ; structure checks need them equal")
     return PolicyContext(mdp, solution, q, act, q[pol], tolerance, tol, scale, recurrent,
                          None if stationary is None else np.asarray(stationary), at_cap, offsets, rule)
+
+
+def _power_stationary(P_pi: Any, classes: list[np.ndarray], *, max_iter: int = 50_000,
+                      tol: float = 1e-13) -> np.ndarray | None:
+    r"""Stationary distribution of a unichain policy by the lazy power method (large models).
+
+    Iterates :math:`\pi \leftarrow \tfrac12 \pi + \tfrac12 \pi P_\pi` (aperiodic, same fixed
+    point) from the uniform distribution on the recurrent class until the L1 change is below
+    ``tol``; None when the chain is multichain or the iteration does not converge.
+    """
+    if len(classes) != 1:
+        return None
+    PT = P_pi.T.tocsr()
+    pi = np.zeros(P_pi.shape[0])
+    pi[classes[0]] = 1.0 / classes[0].size
+    for _ in range(max_iter):
+        new = 0.5 * (pi + PT @ pi)
+        if np.abs(new - pi).sum() < tol:
+            return new / new.sum()
+        pi = new
+    return None
 
 
 def model_kind(mdp: MDP) -> str:
@@ -567,8 +597,8 @@ def check_monotonicity(
     -------
     CheckReport
         ``checked`` = adjacent comparable pairs; ``violations`` = adjacent pairs violating;
-        ``holds`` = no adjacent and no dominance violation. A pair is recurrent when one of its
-        states is, at the cap when one of them has some tau at its cap.
+        ``holds`` = no adjacent and no dominance violation. A pair is recurrent when both its
+        states are, at the cap when one of them has some tau at its cap.
     """
     t0 = time.perf_counter()
     ctx = _ctx(mdp, solution, tolerance, stationary_tol, ctx)
@@ -601,7 +631,8 @@ def check_monotonicity(
     s2 = np.concatenate(highs) if highs else np.zeros(0, np.int64)
     ax = np.concatenate(axes) if axes else np.zeros(0, np.int64)
     size = V[s1] - V[s2]
-    rec = ctx.recurrent[s1] | ctx.recurrent[s2]
+    rec = ctx.recurrent[s1] & ctx.recurrent[s2]
+    any_rec = int(np.count_nonzero(ctx.recurrent[s1] | ctx.recurrent[s2]))
     cap = ctx.at_cap[s1] | ctx.at_cap[s2]
 
     def make(i: int) -> Violation:
@@ -637,14 +668,15 @@ def check_monotonicity(
         sub = tuple(slice(0, t + 1) for t in tau0)
         block = np.where(grids[c][sub] >= 0, V[np.maximum(grids[c][sub], 0)], -np.inf)
         lo_state = int(grids[c][sub][np.unravel_index(int(np.argmax(block)), block.shape)])
-        r = bool(ctx.recurrent[lo_state] or ctx.recurrent[hi_state])
+        r = bool(ctx.recurrent[lo_state] and ctx.recurrent[hi_state])
         cp = bool(ctx.at_cap[lo_state] or ctx.at_cap[hi_state])
         dom["worst"] = ctx.violation("dominance", float(gap[(c, *tau0)]), (lo_state, hi_state), r, cp,
                                      {"V_low_tau": float(V[lo_state]), "V_high_tau": float(V[hi_state])}).to_json()
         dom_states = grids[dom_bad]
-        dom["recurrent"] = int(np.count_nonzero(ctx.recurrent[dom_states]))
+        dom["recurrent_states"] = int(np.count_nonzero(ctx.recurrent[dom_states]))
         dom["at_cap"] = int(np.count_nonzero(ctx.at_cap[dom_states]))
-    details = {"per_axis": per_axis, "dominance": dom, "configurations": nC}
+    details = {"per_axis": per_axis, "dominance": dom, "configurations": nC,
+               "violations_with_some_recurrent_state": any_rec}
     notes = (
         "Adjacent pairs (s, s+e_k) in one configuration; by transitivity they cover every comparable pair "
         "joined by a monotone path of reachable states. The dominance sub-check covers all comparable pairs, "
@@ -751,9 +783,8 @@ def _gap_violations(ctx: PolicyContext, gaps: list[tuple]) -> tuple[np.ndarray, 
     if not gaps:
         z = np.zeros(0, bool)
         return z, z, np.zeros(0)
-    g = np.asarray([x[4] for x in gaps], dtype=np.int64)
     trip = np.asarray([[x[3], x[4], x[5]] for x in gaps], dtype=np.int64)
-    rec = ctx.recurrent[g]
+    rec = ctx.recurrent[trip].all(axis=1)
     cap = ctx.at_cap[trip].any(axis=1)
     size = np.asarray([x[6] for x in gaps])
     return rec, cap, size
@@ -798,8 +829,10 @@ def check_threshold(
     ``s' = s + z * sum_{k in K} e_k`` reachable in the box, the claim is ``pi(s') = a``.
     If ``pi(s') != a`` the case is a *tie* when ``|Q(s', a) - Q(s', pi(s'))| <= tol`` (``a`` is
     optimal at s' within tol) and a *violation* otherwise; its size is
-    ``Q(s', a) - Q(s', pi(s'))``. One case = one (s, z). A violation is recurrent when s' is,
-    at the cap when s or s' has some tau at its cap.
+    ``Q(s', a) - Q(s', pi(s'))``. One case = one (s, z). A violation is recurrent when s and s'
+    both are (``details["target_recurrent"]`` counts those with s' recurrent), at the cap when s
+    or s' has some tau at its cap; ``details["violating_target_stationary_mass"]`` is the
+    stationary probability of the distinct states s' where the claim fails.
 
     Sub-counts (``details["lines"]``, not part of the verdict for this model): whether each
     action's region is an *interval* on every line parallel to a tau axis and to every
@@ -914,7 +947,7 @@ def check_threshold(
             recs.append(gap[bad])
     R = np.concatenate(rows) if rows else np.zeros((0, 4), np.int64)
     size = np.concatenate(recs) if recs else np.zeros(0)
-    rec = ctx.recurrent[R[:, 1]] if R.size else np.zeros(0, bool)
+    rec = (ctx.recurrent[R[:, 0]] & ctx.recurrent[R[:, 1]]) if R.size else np.zeros(0, bool)
     cap = (ctx.at_cap[R[:, 0]] | ctx.at_cap[R[:, 1]]) if R.size else np.zeros(0, bool)
 
     def make(i: int) -> Violation:
@@ -930,10 +963,15 @@ def check_threshold(
     ex = [make(int(i)) for i in _pick_examples(rec, cap, size, examples)]
     worst = make(int(np.argmax(np.abs(size)))) if size.size else None
     violating_sources = int(np.unique(R[:, 0]).size) if R.size else 0
+    targets = np.unique(R[:, 1]) if R.size else np.zeros(0, np.int64)
     details = {
         "configurations": [space.describe_config(space.configs[c]) for c in cfg_ids],
         "source_states": n_sources,
         "violating_source_states": violating_sources,
+        "violating_target_states": int(targets.size),
+        "target_recurrent": int(np.count_nonzero(ctx.recurrent[R[:, 1]])) if R.size else 0,
+        "violating_target_stationary_mass": (None if ctx.stationary is None
+                                             else float(ctx.stationary[targets].sum())),
         "per_action": per_action,
         "lines": line_summary,
         "line_gaps": {"count": len(gaps), "split": _split(grec, gcap),
@@ -980,7 +1018,10 @@ def check_consistency(
     so the exploration is memoised on the state x alone; each tree has depth <= T_k - 1.
 
     Counts: ``checked`` = start states; ``violations`` = start states whose tree contains a
-    violating path; ``details`` adds the number of paths and of violating paths (over all trees),
+    violating path; ``details["by_start_type"]`` splits both by the kind of start (on an idle
+    server, preempting another process's job -- claim C10's reading --, restarting its own
+    process; and whether another process's update was also available, i.e. the start was a
+    choice); ``details`` adds the number of paths and of violating paths (over all trees),
     the probability that a start is later preempted/cancelled (max, and the long-run frequency
     ``sum_s pi(s) P(violation | start at s)``), and the starts by type. A violating start is
     recurrent when the start state is; it is *at cap* when every violating path from it passes
@@ -1149,9 +1190,33 @@ def check_consistency(
     start_freq = float(stationary[starts].sum()) if stationary is not None and starts.size else None
     vnodes = np.flatnonzero(kind_of > 0)
     types = {0: "idle_server", 1: "preempting", 2: "restarting_own"}
+    # was another process's update available at the start (the start was a choice between two)?
+    other = np.array([any(x for j, x in enumerate(space.configs[cfg[s]][0], 1) if j != started[s])
+                      for s in starts], dtype=bool) if starts.size else np.zeros(0, bool)
+    rec_all = ctx.recurrent[starts]
+    cap_all = s_bad_free == 0
+
+    def breakdown(sel: np.ndarray) -> dict[str, int]:
+        v = sel & viol
+        return {"checked": int(np.count_nonzero(sel)), "violations": int(np.count_nonzero(v)),
+                "recurrent_violations": int(np.count_nonzero(v & rec_all)),
+                "at_cap_violations": int(np.count_nonzero(v & cap_all)),
+                "recurrent_below_cap": int(np.count_nonzero(v & rec_all & ~cap_all))}
+
+    selections = {types[t]: start_type == t for t in types}
+    selections["other_update_available"] = other
+    selections["preempting_with_other_available"] = (start_type == 1) & other
+    by_type = {name: breakdown(sel) for name, sel in selections.items()}
+    for name, sel in selections.items():  # one counterexample per kind of start
+        cand = np.flatnonzero(sel & viol)
+        if cand.size:
+            best = cand[np.lexsort((-s_pv[cand], cap_all[cand], ~rec_all[cand]))[0]]
+            i = int(np.searchsorted(vs, starts[best]))
+            by_type[name]["counterexample"] = make(i).to_json()
     details = {
         "starts_by_type": {types[t]: int(np.count_nonzero(start_type == t)) for t in types},
         "violating_starts_by_type": {types[t]: int(np.count_nonzero(start_type[viol] == t)) for t in types},
+        "by_start_type": by_type,
         "paths": int(s_paths.sum()),
         "violating_paths": int(s_bad.sum()),
         "cap_free_violating_paths": int(s_bad_free.sum()),
