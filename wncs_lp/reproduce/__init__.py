@@ -59,6 +59,23 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def _merge_previous(path: Path, results: list[ClaimResult]) -> list[ClaimResult]:
+    import json
+
+    fresh = {r.id: r for r in results}
+    try:
+        old = json.loads(path.read_text())["claims"]
+    except (OSError, ValueError, KeyError):
+        return results
+    merged = dict(fresh)
+    for c in old:
+        if c.get("id") in CLAIMS and c["id"] not in fresh:
+            merged[c["id"]] = ClaimResult(c["id"], c.get("paper", ""), c.get("statement", ""), c["verdict"],
+                                          c["summary"], c.get("numbers", {}), c.get("figures", []),
+                                          c.get("tables", []), seconds=c.get("seconds", 0.0))
+    return [merged[i] for i in CLAIMS if i in merged]
+
+
 def run_reproduction(
     out: str | Path,
     profile: str | Profile = "default",
@@ -146,5 +163,7 @@ def run_reproduction(
         "cache": {"hits": ctx.cache.hits, "misses": ctx.cache.misses},
         "platform": platform.platform(),
     }
+    if claims is not None:  # a partial run keeps the other claims of an earlier report in this folder
+        results = _merge_previous(out / "report.json", results)
     files = write_report(out, results, provenance)
     return {"files": files, "claims": [r.to_dict() for r in results], "seconds": provenance["total_seconds"]}
