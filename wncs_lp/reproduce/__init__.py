@@ -72,7 +72,7 @@ def _merge_previous(path: Path, results: list[ClaimResult]) -> list[ClaimResult]
         if c.get("id") in CLAIMS and c["id"] not in fresh:
             merged[c["id"]] = ClaimResult(c["id"], c.get("paper", ""), c.get("statement", ""), c["verdict"],
                                           c["summary"], c.get("numbers", {}), c.get("figures", []),
-                                          c.get("tables", []), seconds=c.get("seconds", 0.0))
+                                          c.get("tables", []), c.get("details", ""), c.get("seconds", 0.0))
     return [merged[i] for i in CLAIMS if i in merged]
 
 

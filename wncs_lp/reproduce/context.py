@@ -106,6 +106,7 @@ class ClaimResult:
             "numbers": self.numbers,
             "figures": self.figures,
             "tables": self.tables,
+            "details": self.details,
             "seconds": self.seconds,
         }
 
