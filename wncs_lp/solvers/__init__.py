@@ -5,7 +5,12 @@
 * ``"lp"``       -- occupation-measure LP, Clarabel called directly (:func:`solve_lp`);
 * ``"lp-cvxpy"`` -- the same LP built with cvxpy and solved by Clarabel;
 * ``"rvi"``      -- relative value iteration with the aperiodicity transform;
-* ``"pi"``       -- Howard policy iteration with exact sparse evaluation.
+* ``"vi"``       -- certified value iteration on the fused kernels (Gauss-Seidel modified
+  policy iteration with numba, Jacobi RVI with scipy; :func:`value_iteration`);
+* ``"pi"``       -- Howard policy iteration with exact sparse evaluation (falls back to
+  value iteration on a multichain iterate);
+* ``"auto"``     -- picks LP or value iteration by size and cross-checks them when both are
+  cheap (:func:`solve_auto`).
 
 Every solution carries the bracket ``gain_lower <= g* <= gain_upper`` from one Bellman
 step on its bias (:func:`bracket`).
@@ -17,7 +22,16 @@ from typing import Any
 from ..errors import SolverError
 from ..mdp import MDP
 from .certify import bellman_step, bracket, certificate_closed, greedy_first, q_values
-from .dp import PolicyEvaluation, evaluate_policy, policy_iteration, recurrent_classes, relative_value_iteration
+from .auto import solve_auto
+from .dp import (
+    MultichainPolicyError,
+    PolicyEvaluation,
+    evaluate_policy,
+    policy_iteration,
+    recurrent_classes,
+    relative_value_iteration,
+    value_iteration,
+)
 from .lp import LPData, build_lp, extract_policy, solve_lp
 from .result import Solution
 
@@ -34,7 +48,10 @@ __all__ = [
     "evaluate_policy",
     "recurrent_classes",
     "relative_value_iteration",
+    "value_iteration",
     "policy_iteration",
+    "MultichainPolicyError",
+    "solve_auto",
     "LPData",
     "build_lp",
     "extract_policy",
@@ -42,7 +59,7 @@ __all__ = [
 ]
 
 #: The method names accepted by :func:`solve`.
-METHODS = ("lp", "lp-cvxpy", "rvi", "pi")
+METHODS = ("lp", "lp-cvxpy", "rvi", "vi", "pi", "auto")
 
 
 def solve(mdp: MDP, method: str = "lp", **kw: Any) -> Solution:
@@ -51,10 +68,11 @@ def solve(mdp: MDP, method: str = "lp", **kw: Any) -> Solution:
     Parameters
     ----------
     mdp : MDP
-    method : {"lp", "lp-cvxpy", "rvi", "pi"}
+    method : {"lp", "lp-cvxpy", "rvi", "vi", "pi", "auto"}
     **kw
         Passed to :func:`solve_lp` (``backend`` is set by the method name),
-        :func:`relative_value_iteration` or :func:`policy_iteration`.
+        :func:`relative_value_iteration`, :func:`value_iteration`, :func:`policy_iteration`
+        or :func:`solve_auto`.
 
     Raises
     ------
@@ -67,6 +85,10 @@ def solve(mdp: MDP, method: str = "lp", **kw: Any) -> Solution:
         return solve_lp(mdp, backend="cvxpy", **kw)
     if method == "rvi":
         return relative_value_iteration(mdp, **kw)
+    if method == "vi":
+        return value_iteration(mdp, **kw)
     if method == "pi":
         return policy_iteration(mdp, **kw)
+    if method == "auto":
+        return solve_auto(mdp, **kw)
     raise SolverError(f"unknown solver method {method!r}; expected one of {', '.join(map(repr, METHODS))}")

@@ -20,11 +20,13 @@ from .certify import bracket, certificate_closed, greedy_first, q_values
 from .result import Solution
 
 __all__ = [
+    "MultichainPolicyError",
     "PolicyEvaluation",
     "policy_matrices",
     "recurrent_classes",
     "evaluate_policy",
     "relative_value_iteration",
+    "value_iteration",
     "policy_iteration",
 ]
 
@@ -32,6 +34,10 @@ __all__ = [
 EVAL_RESIDUAL_TOL = 1e-6
 #: Tolerance on the per-state sums of a randomised policy.
 PROB_SUM_TOL = 1e-9
+
+
+class MultichainPolicyError(PolicyError):
+    """The evaluated policy induces more than one recurrent class (a :class:`PolicyError`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,7 +189,7 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray) -> PolicyEvaluation:
     classes = recurrent_classes(P_pi)
     if len(classes) != 1:
         a, b = classes[0], classes[1]
-        raise PolicyError(
+        raise MultichainPolicyError(
             f"the policy induces a multichain Markov chain with {len(classes)} recurrent classes "
             f"(e.g. state {mdp.state_label(int(a[0]))} in a class of {a.size} state(s) and "
             f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost "
@@ -239,6 +245,8 @@ def relative_value_iteration(
     h0: np.ndarray | None = None,
     ref_state: int = 0,
     progress: bool = False,
+    kernel: str = "auto",
+    threads: int | None = None,
 ) -> Solution:
     """Relative value iteration with the aperiodicity transform and a span certificate.
 
@@ -275,6 +283,13 @@ def relative_value_iteration(
         The state whose value is subtracted each sweep.
     progress : bool
         Print the certificate to stderr every 1000 sweeps.
+    kernel : {"auto", "numba", "scipy"}
+        The sweep kernel (:mod:`wncs_lp.solvers.kernels`): numba's fused single pass when
+        importable (``"auto"``), else scipy's mat-vec + ``reduceat``. Same iterates up to
+        summation order.
+    threads : int, optional
+        numba threads for the sweep (default 1; >= 2 uses numba's parallel layer, which is
+        not fork-safe with GNU OpenMP -- do not fork worker processes afterwards).
 
     Returns
     -------
@@ -300,17 +315,19 @@ def relative_value_iteration(
         if h.shape != (n,) or not np.all(np.isfinite(h)):
             raise SolverError(f"h0 must be a finite array of shape ({n},)")
         h -= h[ref_state]
-    starts = mdp.pair_ptr[:-1]
-    cost, P = mdp.cost, mdp.P
+    from .kernels import get_kernel
+
+    try:
+        K = get_kernel(mdp, kernel, threads)
+    except ValueError as exc:
+        raise SolverError(str(exc)) from exc
     converged = False
     lo = hi = np.nan
-    q = Th = None
+    h_next = np.empty(n)
     it = 0
     for it in range(1, max_iter + 1):
-        q = cost + P @ h
-        Th = np.minimum.reduceat(q, starts)
-        d = Th - h
-        lo, hi = float(d.min()), float(d.max())
+        # one fused sweep: d = T h - h, its span, and h_next = h + tau (d - d(ref)) up to a constant
+        lo, hi = K.jacobi(h, h_next, tau, 0.0)
         width = hi - lo
         if width <= tol * abs(0.5 * (lo + hi)) or width <= atol:
             converged = True
@@ -318,8 +335,10 @@ def relative_value_iteration(
         if progress and it % 1000 == 0:
             print(f"[rvi] it={it} lo={lo:.12g} hi={hi:.12g} rel={width / max(abs(0.5 * (lo + hi)), 1e-300):.3g}",
                   file=sys.stderr)
-        h = h + tau * d
-        h -= h[ref_state]
+        h_next -= h_next[ref_state]
+        h, h_next = h_next, h
+    q = q_values(mdp, h)
+    Th = np.minimum.reduceat(q, mdp.pair_ptr[:-1])
     policy = greedy_first(mdp, q, Th)
     gain = 0.5 * (lo + hi)
     bias = h - h[0]
@@ -335,7 +354,191 @@ def relative_value_iteration(
         occupation=None,
         iterations=it,
         seconds=time.perf_counter() - t0,
-        stats={"tau": tau, "span": hi - lo, "rel_gap": rel, "converged": converged, "tol": tol},
+        stats={"tau": tau, "span": hi - lo, "rel_gap": rel, "converged": converged, "tol": tol,
+               "kernel": K.name, "threads": K.threads},
+    )
+
+
+# ---------------------------------------------------------------------------- VI / MPI
+#: Default relative certificate width of :func:`value_iteration`.
+VI_TOL = 1e-9
+
+
+def value_iteration(
+    mdp: MDP,
+    *,
+    tol: float = VI_TOL,
+    atol: float = 0.0,
+    max_iter: int = 100_000,
+    scheme: str = "auto",
+    relax: float = 0.8,
+    eval_sweeps: int = 1,
+    check_every: int = 5,
+    h0: np.ndarray | None = None,
+    kernel: str = "auto",
+    threads: int | None = None,
+    stall_checks: int = 40,
+    progress: bool = False,
+) -> Solution:
+    """Certified average-cost value iteration: Gauss-Seidel / modified policy iteration sweeps.
+
+    Schemes (all on the fused kernels of :mod:`wncs_lp.solvers.kernels`):
+
+    * ``"mpi"`` -- modified policy iteration: a Gauss-Seidel improvement sweep (states in
+      order, in place, relaxed by ``relax``: ``h(s) += relax ((T h)(s) - h(s) - shift)``,
+      recording the minimising pair) followed by ``eval_sweeps`` in-place sweeps of that
+      fixed policy (one pair per state instead of all of them);
+    * ``"gs"``  -- the same without the evaluation sweeps;
+    * ``"jacobi"`` -- relative value iteration with the aperiodicity transform
+      (``tau = 0.5``), exactly :func:`relative_value_iteration`'s iteration;
+    * ``"auto"`` -- ``"mpi"`` with the numba kernel, ``"jacobi"`` with the scipy one (which
+      has no in-place sweep).
+
+    Every ``check_every`` improvement sweeps, one Jacobi sweep computes ``d = T h - h`` on the
+    current h and the certificate ``lo = min d <= g* <= hi = max d`` (valid for any h, so the
+    in-place sweeps need no convergence theory to be trusted). It stops when
+    ``hi - lo <= tol * |(lo + hi)/2|`` or ``hi - lo <= atol``. If the width has not halved in
+    ``stall_checks`` checks the iteration switches to the Jacobi scheme, whose convergence is
+    guaranteed for unichain MDPs (``stats["fallback"]``).
+
+    Parameters
+    ----------
+    mdp : MDP
+    tol, atol : float
+        Relative (default 1e-9) and absolute certificate widths.
+    max_iter : int
+        Budget of sweeps of any kind.
+    scheme : {"auto", "mpi", "gs", "jacobi"}
+    relax : float
+        Relaxation of the in-place sweeps, in (0, 1]; 0.8 was the best of 0.5..1 on the
+        paper's instances (1.0 can fail to converge on near-periodic chains).
+    eval_sweeps : int
+        Fixed-policy sweeps after each improvement sweep (``"mpi"``).
+    check_every : int
+        Improvement sweeps between two certificate (Jacobi) sweeps.
+    h0 : (n,) array, optional
+        Warm start (e.g. the bias of a neighbouring parameter value in a sweep).
+    kernel : {"auto", "numba", "scipy"}
+    threads : int, optional
+        numba threads of the Jacobi sweeps (default 1; the in-place sweeps are sequential;
+        >= 2 uses numba's parallel layer, not fork-safe with GNU OpenMP).
+    stall_checks : int
+    progress : bool
+        Print the certificate to stderr at every check.
+
+    Returns
+    -------
+    Solution
+        ``method="vi"``; ``gain = (lo + hi)/2``; ``bias`` = the h the last certificate was
+        computed on (h[0] = 0); ``policy`` = its greedy pairs (first minimiser). ``stats``:
+        ``scheme``, ``kernel``, ``threads``, ``sweeps`` (improvement + certificate sweeps),
+        ``eval_sweeps``, ``checks``, ``relax``, ``rel_gap``, ``bytes_per_sweep``,
+        ``fallback`` (None or why the Jacobi scheme took over).
+    """
+    from .kernels import get_kernel
+
+    t0 = time.perf_counter()
+    n = mdp.n_states
+    if scheme not in ("auto", "mpi", "gs", "jacobi"):
+        raise SolverError(f"unknown value-iteration scheme {scheme!r}; expected auto, mpi, gs or jacobi")
+    if not (0.0 < relax <= 1.0):
+        raise SolverError(f"relax must be in (0, 1], got {relax}")
+    if max_iter < 1 or check_every < 1 or eval_sweeps < 0:
+        raise SolverError("max_iter and check_every must be >= 1 and eval_sweeps >= 0")
+    try:
+        K = get_kernel(mdp, kernel, threads)
+    except ValueError as exc:
+        raise SolverError(str(exc)) from exc
+    if scheme == "auto":
+        scheme = "mpi" if K.supports_gauss_seidel else "jacobi"
+    if scheme in ("mpi", "gs") and not K.supports_gauss_seidel:
+        raise SolverError(f"scheme {scheme!r} needs in-place sweeps, which the {K.name} kernel does not have")
+    if h0 is None:
+        h = np.zeros(n)
+    else:
+        h = np.array(h0, dtype=float)
+        if h.shape != (n,) or not np.all(np.isfinite(h)):
+            raise SolverError(f"h0 must be a finite array of shape ({n},)")
+        h -= h[0]
+    h_next = np.empty(n)
+    pol = mdp.pair_ptr[:-1].astype(np.int64)
+    n_eval = eval_sweeps if scheme == "mpi" else 0
+    used = 0
+    evals = 0
+    checks = 0
+    shift = 0.0
+    lo = hi = np.nan
+    converged = False
+    fallback = None
+    best_w, best_at = np.inf, 0
+    tau_j = 0.5
+    cur = scheme
+    first = True
+    while used < max_iter:
+        # the certificate comes first, so a warm start that is already good stops at once
+        # and the in-place sweeps start with shift ~ g (a wrong shift is not a constant
+        # offset for an in-place sweep: earlier states would see it and later ones not)
+        if cur != "jacobi" and not first:
+            for _ in range(min(check_every, max(max_iter - used - 1, 0))):
+                K.gauss_seidel(h, relax, shift, pol)
+                used += 1
+                for _ in range(n_eval):
+                    K.evaluate(h, relax, shift, pol)
+                    evals += 1
+        first = False
+        lo, hi = K.jacobi(h, h_next, tau_j if cur == "jacobi" else relax, shift)
+        used += 1
+        checks += 1
+        width = hi - lo
+        mid = 0.5 * (lo + hi)
+        if progress:
+            print(f"[vi:{cur}] sweeps={used} lo={lo:.12g} hi={hi:.12g} rel={width / max(abs(mid), 1e-300):.3g}",
+                  file=sys.stderr)
+        if width <= tol * abs(mid) or width <= atol:
+            converged = True
+            break
+        if width < 0.5 * best_w:
+            best_w, best_at = width, checks
+        elif cur != "jacobi" and checks - best_at >= stall_checks:
+            fallback = f"{cur} stalled at relative width {width / max(abs(mid), 1e-300):.3g} after {used} sweeps"
+            cur = "jacobi"
+            best_at = checks
+        shift = mid
+        h_next -= h_next[0]
+        h, h_next = h_next, h
+    q = q_values(mdp, h)
+    Th = np.minimum.reduceat(q, mdp.pair_ptr[:-1])
+    policy = greedy_first(mdp, q, Th)
+    gain = 0.5 * (lo + hi)
+    rel = (hi - lo) / max(abs(gain), 1e-300)
+    from .kernels import prepare
+
+    return Solution(
+        method="vi",
+        status="optimal" if converged else "max_iter",
+        gain=gain,
+        gain_lower=lo,
+        gain_upper=hi,
+        bias=h - h[0],
+        policy=policy,
+        occupation=None,
+        iterations=used,
+        seconds=time.perf_counter() - t0,
+        stats={
+            "scheme": scheme,
+            "kernel": K.name,
+            "threads": K.threads,
+            "sweeps": used,
+            "eval_sweeps": evals,
+            "checks": checks,
+            "relax": relax,
+            "span": hi - lo,
+            "rel_gap": rel,
+            "converged": converged,
+            "tol": tol,
+            "bytes_per_sweep": prepare(mdp).bytes_per_sweep,
+            "fallback": fallback,
+        },
     )
 
 
@@ -360,6 +563,8 @@ def policy_iteration(
     max_iter: int = 100,
     rtol: float = 1e-12,
     cert_rtol: float = 1e-6,
+    multichain: str = "fallback",
+    kernel: str = "auto",
 ) -> Solution:
     """Howard's policy iteration for unichain average-cost MDPs.
 
@@ -382,6 +587,16 @@ def policy_iteration(
         Relative tie tolerance for keeping the current action.
     cert_rtol : float
         Status is ``"optimal"`` only if the policy is stable and (hi - lo)/|g| <= cert_rtol.
+    multichain : {"fallback", "raise"}
+        What to do when an iterate induces several recurrent classes (exact evaluation is
+        then undefined; it happens at p = 1, e.g. the preemption paper instance). With
+        ``"fallback"`` (default), :func:`value_iteration` is run, warm-started from the last
+        exact bias, and policy iteration restarts from its greedy policy; if that policy is
+        multichain as well, the value-iteration solution is returned (still certified by its
+        bracket; ``occupation`` None). ``stats["fallback"]`` says what happened.
+        ``"raise"`` re-raises the :class:`MultichainPolicyError`.
+    kernel : str
+        Sweep kernel of the fallback value iteration.
 
     Returns
     -------
@@ -392,7 +607,7 @@ def policy_iteration(
     Raises
     ------
     PolicyError
-        If an iterate induces a multichain chain (PI here assumes a unichain MDP).
+        A malformed ``policy0``; with ``multichain="raise"``, a multichain iterate.
     """
     t0 = time.perf_counter()
     n = mdp.n_states
@@ -403,12 +618,29 @@ def policy_iteration(
         if not np.issubdtype(d.dtype, np.integer):
             raise PolicyError(f"policy0 must be an integer array of pair indices, got dtype {d.dtype}")
         d = d.astype(np.int64)
+    if multichain not in ("fallback", "raise"):
+        raise SolverError(f"multichain must be 'fallback' or 'raise', got {multichain!r}")
     stable = False
     ev = None
     it = 0
     changes = []
+    vi = None
+    fallback = None
     for it in range(1, max_iter + 1):
-        ev = evaluate_policy(mdp, d)
+        try:
+            ev_k = evaluate_policy(mdp, d)
+        except MultichainPolicyError as exc:
+            if multichain == "raise":
+                raise
+            if vi is not None:  # the value-iteration policy is multichain too: its certificate stands
+                fallback = f"value iteration (its greedy policy is multichain too: {exc})"
+                return _vi_as_pi(mdp, vi, t0, it, changes, fallback, cert_rtol)
+            vi = value_iteration(mdp, h0=None if ev is None else ev.bias, kernel=kernel)
+            fallback = f"iterate {it} multichain; restarted from the value-iteration policy ({vi.iterations} sweeps)"
+            d = vi.policy.astype(np.int64)
+            changes.append(-1)
+            continue
+        ev = ev_k
         q = q_values(mdp, ev.bias)
         d_new = _improve(mdp, q, d, rtol)
         nchg = int(np.count_nonzero(d_new != d))
@@ -417,7 +649,9 @@ def policy_iteration(
             stable = True
             break
         d = d_new
-    assert ev is not None
+    if ev is None:  # every evaluation so far was multichain and the budget ran out
+        assert vi is not None
+        return _vi_as_pi(mdp, vi, t0, it, changes, fallback, cert_rtol)
     lo, hi = bracket(mdp, ev.bias)
     rel = (hi - lo) / max(abs(ev.gain), 1e-300)
     if not stable:
@@ -439,5 +673,24 @@ def policy_iteration(
         occupation=occ,
         iterations=it,
         seconds=time.perf_counter() - t0,
-        stats={"stable": stable, "changes": changes, "rel_gap": rel, "eval_residual": ev.residual},
+        stats={"stable": stable, "changes": changes, "rel_gap": rel, "eval_residual": ev.residual,
+               "fallback": fallback, "vi_sweeps": None if vi is None else vi.iterations},
+    )
+
+
+def _vi_as_pi(mdp: MDP, vi: Solution, t0: float, it: int, changes: list, fallback: str, cert_rtol: float) -> Solution:
+    closed = vi.status == "optimal" and certificate_closed(mdp, vi.gain_lower, vi.gain_upper, vi.gain, cert_rtol)
+    return Solution(
+        method="pi",
+        status="optimal" if closed else ("max_iter" if vi.status != "optimal" else "inaccurate"),
+        gain=vi.gain,
+        gain_lower=vi.gain_lower,
+        gain_upper=vi.gain_upper,
+        bias=vi.bias,
+        policy=vi.policy,
+        occupation=None,
+        iterations=it,
+        seconds=time.perf_counter() - t0,
+        stats={"stable": False, "changes": changes, "rel_gap": vi.gap, "eval_residual": None,
+               "fallback": fallback, "vi_sweeps": vi.iterations, "multichain_policy": True},
     )

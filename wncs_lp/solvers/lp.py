@@ -386,7 +386,13 @@ def solve_lp(
             gain, lo, hi, bias, policy = pi.gain, pi.gain_lower, pi.gain_upper, pi.bias, pi.policy
             stats["polish_iterations"] = int(sum(1 for c in pi.stats["changes"] if c))
             stats["polish_changed_states"] = int(np.count_nonzero(policy != policy0))
-            if not pi.stats["stable"]:
+            if pi.stats.get("fallback"):
+                # a multichain iterate: policy iteration went through value iteration
+                stats["polish_fallback"] = pi.stats["fallback"]
+            if pi.stats.get("multichain_policy"):
+                if pi.status != "optimal":
+                    issue = f"polish_{pi.status}"
+            elif not pi.stats["stable"]:
                 issue = "polish_max_iter"
     if use_dual:
         lo, hi = bracket(mdp, h_dual)

@@ -16,7 +16,8 @@ class Solution:
     Attributes
     ----------
     method : str
-        ``"lp"`` (Clarabel direct), ``"lp-cvxpy"``, ``"rvi"`` or ``"pi"``.
+        ``"lp"`` (Clarabel direct), ``"lp-cvxpy"``, ``"rvi"``, ``"vi"``, ``"pi"`` or ``"auto"``
+        (then ``stats["auto_choice"]`` says whose answer it is).
     status : str
         ``"optimal"`` when the certificate closes to the requested tolerance, otherwise a word
         saying what went wrong (``"inaccurate"``, ``"max_iter"``, the solver's own status...).

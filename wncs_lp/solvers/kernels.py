@@ -1,0 +1,253 @@
+"""Fused Bellman sweeps over the state-action-pair CSR layout, with numba or scipy.
+
+One Bellman sweep reads P (data, indices, indptr), the costs and the pair pointer once and
+the bias vector h at random. The scipy path does that in several passes (a CSR mat-vec into
+a length-L temporary, ``np.minimum.reduceat``, the span, the update); the numba kernels do it
+in one pass per state:
+
+    q_l = c_l + sum_k P_lk h(j_k)   for the pairs l of s,   (T h)(s) = min_l q_l,
+    d(s) = (T h)(s) - h(s),  lo = min d,  hi = max d,  h'(s) = h(s) + tau (d(s) - shift).
+
+and they read fewer bytes: the probabilities of these models take a handful of distinct
+values, so P's data is stored as uint8/uint16 codes into a small table (exact: the table
+holds the very same doubles), the cost as one number per state when it does not depend on
+the action, and the pointers as int32 when they fit.
+
+numba is optional (the ``fast`` extra): :func:`get_kernel` returns the numba kernel when it
+imports and the scipy kernel otherwise; both give the same sweeps up to summation order
+(``tests/test_perf_dp.py``). The numba kernels also offer in-place (Gauss-Seidel) sweeps and
+fixed-policy sweeps for modified policy iteration, which the scipy kernel emulates with
+Jacobi sweeps.
+"""
+from __future__ import annotations
+
+import os
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..mdp import MDP
+
+__all__ = ["SweepData", "prepare", "get_kernel", "numba_available", "ScipyKernel", "KERNELS"]
+
+#: kernel names accepted by :func:`get_kernel`
+KERNELS = ("auto", "numba", "scipy")
+
+_CACHE: "weakref.WeakKeyDictionary[MDP, SweepData]" = weakref.WeakKeyDictionary()
+
+
+@dataclass(frozen=True, eq=False)
+class SweepData:
+    """The arrays a sweep reads, in their most compact exact form.
+
+    Attributes
+    ----------
+    indptr, indices : P's CSR row pointer (L + 1) and column indices (int32 when they fit)
+    codes : (nnz,) uint8/uint16 index into ``table`` (or int64 0..nnz-1 when P has too many
+        distinct values, ``table`` then being P.data itself)
+    table : float64 distinct probability values
+    cost : per-state cost (n,) when ``cost_per_state`` else per-pair cost (L,)
+    cost_per_state : bool
+    pair_ptr : (n + 1,) pairs of state s are pair_ptr[s]:pair_ptr[s+1]
+    bytes_per_sweep : int
+        Bytes a Jacobi sweep streams: the arrays above plus three length-n vectors
+        (h read, h written, h gathered at least once).
+    """
+
+    n: int
+    L: int
+    indptr: np.ndarray
+    indices: np.ndarray
+    codes: np.ndarray
+    table: np.ndarray
+    cost: np.ndarray
+    cost_per_state: bool
+    pair_ptr: np.ndarray
+    bytes_per_sweep: int
+    bytes_per_sweep_plain: int
+
+
+def _small_int(a: np.ndarray, limit: int) -> np.ndarray:
+    return a.astype(np.int32) if limit < np.iinfo(np.int32).max else a.astype(np.int64)
+
+
+def prepare(mdp: MDP) -> SweepData:
+    """The compact sweep arrays of an MDP (cached per MDP object)."""
+    hit = _CACHE.get(mdp)
+    if hit is not None:
+        return hit
+    P = mdp.P
+    n, L = mdp.n_states, mdp.n_pairs
+    table, inv = np.unique(P.data, return_inverse=True)
+    if table.size <= 256:
+        codes = inv.astype(np.uint8)
+    elif table.size <= 65536:
+        codes = inv.astype(np.uint16)
+    else:
+        table, codes = np.asarray(P.data, float), np.arange(P.nnz, dtype=np.int64)
+    sc = mdp.cost[mdp.pair_ptr[:-1]]
+    per_state = bool(np.array_equal(mdp.cost, np.repeat(sc, mdp.n_actions)))
+    cost = np.ascontiguousarray(sc if per_state else mdp.cost, dtype=float)
+    indptr = _small_int(P.indptr, P.nnz)
+    indices = _small_int(P.indices, n)
+    pair_ptr = _small_int(mdp.pair_ptr, L)
+    vec = 3 * 8 * n
+    nbytes = indptr.nbytes + indices.nbytes + codes.nbytes + table.nbytes + cost.nbytes + pair_ptr.nbytes + vec
+    plain = P.indptr.nbytes + P.indices.nbytes + P.data.nbytes + mdp.cost.nbytes + mdp.pair_ptr.nbytes + vec
+    data = SweepData(n, L, indptr, indices, codes, np.ascontiguousarray(table, float), cost, per_state, pair_ptr,
+                     int(nbytes), int(plain))
+    _CACHE[mdp] = data
+    return data
+
+
+# ----------------------------------------------------------------------------- numba
+_NUMBA = None
+
+
+def numba_available() -> bool:
+    """Whether the numba kernels can be used (numba importable, not disabled by WNCS_LP_NO_NUMBA)."""
+    return _load_numba() is not None
+
+
+def _load_numba():
+    global _NUMBA
+    if _NUMBA is not None:
+        return _NUMBA or None
+    if os.environ.get("WNCS_LP_NO_NUMBA"):
+        _NUMBA = False
+        return None
+    try:
+        from . import _numba_kernels as mod
+    except Exception:  # numba missing or broken: the scipy kernel is used
+        _NUMBA = False
+        return None
+    _NUMBA = mod
+    return mod
+
+
+class NumbaKernel:
+    """Sweeps compiled with numba (see :mod:`wncs_lp.solvers._numba_kernels`)."""
+
+    name = "numba"
+    supports_gauss_seidel = True
+
+    def __init__(self, mdp: MDP, threads: int | None = None):
+        self.mod = _load_numba()
+        self.d = prepare(mdp)
+        import numba
+
+        # serial by default: numba's OpenMP layer (GNU libgomp) does not survive a fork, and
+        # parameter sweeps fork worker processes; threads >= 2 opts in to the parallel sweep
+        self.threads = max(1, min(int(threads or 1), numba.config.NUMBA_NUM_THREADS))
+        self.nchunk = max(1, min(8 * self.threads, self.d.n)) if self.threads > 1 else 1
+        self._lo = np.empty(self.nchunk)
+        self._hi = np.empty(self.nchunk)
+
+    def _with_threads(self, fn, *args):
+        import numba
+
+        old = numba.get_num_threads()
+        if old != self.threads:
+            numba.set_num_threads(self.threads)
+        try:
+            return fn(*args)
+        finally:
+            if old != self.threads:
+                numba.set_num_threads(old)
+
+    def jacobi(self, h: np.ndarray, h_out: np.ndarray, tau: float, shift: float) -> tuple[float, float]:
+        """d = T h - h; h_out = h + tau (d - shift); returns (min d, max d)."""
+        d = self.d
+        args = (d.indptr, d.indices, d.codes, d.table, d.cost, d.cost_per_state, d.pair_ptr, h, h_out,
+                float(tau), float(shift), self.nchunk, self._lo, self._hi)
+        if self.threads > 1:
+            self._with_threads(self.mod.jacobi_sweep, *args)
+        else:
+            self.mod.jacobi_sweep_serial(*args)
+        return float(self._lo.min()), float(self._hi.max())
+
+    def gauss_seidel(self, h: np.ndarray, tau: float, shift: float, pol: np.ndarray) -> None:
+        """In place, states in order: h(s) += tau ((T h)(s) - h(s) - shift); pol(s) = argmin pair."""
+        d = self.d
+        self.mod.gs_sweep(d.indptr, d.indices, d.codes, d.table, d.cost, d.cost_per_state, d.pair_ptr, h,
+                          float(tau), float(shift), pol)
+
+    def evaluate(self, h: np.ndarray, tau: float, shift: float, pol: np.ndarray) -> None:
+        """In place, fixed policy: h(s) += tau (c_pol + P_pol h - h - shift)(s)."""
+        d = self.d
+        self.mod.eval_sweep(d.indptr, d.indices, d.codes, d.table, d.cost, d.cost_per_state, d.pair_ptr, h,
+                            float(tau), float(shift), pol)
+
+
+class ScipyKernel:
+    """The same sweeps with scipy's CSR mat-vec (always available; Jacobi only)."""
+
+    name = "scipy"
+    supports_gauss_seidel = False
+
+    def __init__(self, mdp: MDP, threads: int | None = None):
+        self.mdp = mdp
+        self.d = prepare(mdp)
+        self.starts = mdp.pair_ptr[:-1]
+        self.threads = 1
+        self._pol_key = None
+        self._Pd = None
+
+    def jacobi(self, h, h_out, tau, shift):
+        mdp = self.mdp
+        q = mdp.cost + mdp.P @ h
+        Th = np.minimum.reduceat(q, self.starts)
+        dd = Th - h
+        np.multiply(dd - shift, tau, out=h_out)
+        h_out += h
+        return float(dd.min()), float(dd.max())
+
+    def gauss_seidel(self, h, tau, shift, pol):  # pragma: no cover - guarded by supports_gauss_seidel
+        raise NotImplementedError("the scipy kernel has no Gauss-Seidel sweep")
+
+    def evaluate(self, h, tau, shift, pol):
+        """Jacobi fixed-policy sweep (P_pol is extracted once per policy)."""
+        key = pol.tobytes()
+        if key != self._pol_key:
+            self._Pd = self.mdp.P[pol].tocsr()
+            self._cd = self.mdp.cost[pol]
+            self._pol_key = key
+        v = self._cd + self._Pd @ h - h
+        h += tau * (v - shift)
+
+
+def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None):
+    """A sweep kernel for ``mdp``: ``"numba"``, ``"scipy"`` or ``"auto"`` (numba when importable).
+
+    Raises
+    ------
+    ValueError
+        Unknown name, or ``"numba"`` requested but numba is not importable.
+    """
+    if kernel not in KERNELS:
+        raise ValueError(f"unknown kernel {kernel!r}; expected one of {', '.join(KERNELS)}")
+    if kernel == "scipy" or (kernel == "auto" and not numba_available()):
+        return ScipyKernel(mdp, threads)
+    if not numba_available():
+        raise ValueError("kernel 'numba' requested but numba is not importable (pip install 'wncs_lp[fast]')")
+    return NumbaKernel(mdp, threads)
+
+
+def stream_bandwidth(nbytes: int = 400_000_000, repeats: int = 5) -> float:
+    """Measured streaming read bandwidth in bytes/s: the best of ``repeats`` sums of a large array."""
+    import time
+
+    a = np.ones(nbytes // 8)
+    a.sum()
+    best = np.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        a.sum()
+        best = min(best, time.perf_counter() - t)
+    return a.nbytes / best
+
+
+def csr_like(P: sp.csr_matrix) -> bool:  # small helper for tests
+    return sp.isspmatrix_csr(P)
