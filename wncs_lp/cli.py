@@ -91,9 +91,17 @@ def cmd_solve(args: argparse.Namespace) -> int:
     else:
         print(scenario.describe())
         print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs, built in {t_build:.2f} s")
-        print(f"method {sol.method}: status {sol.status}, {sol.iterations} iterations, {sol.seconds:.2f} s")
+        used = f"{sol.method} -> {sol.stats['auto_choice']}" if "auto_choice" in sol.stats else sol.method
+        print(f"method {used}: status {sol.status}, {sol.iterations} iterations, {sol.seconds:.2f} s")
         print(f"optimal average cost (gain): {sol.gain:.10g}")
         print(f"certificate: {sol.gain_lower:.12g} <= g* <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e})")
+        if "auto_choice" in sol.stats:
+            st = sol.stats
+            print(f"auto: chose {st['auto_choice']} ({st['auto_reason']})")
+            if st.get("cross_check_method"):
+                verdict = {True: "agrees", False: "DISAGREES", None: "failed"}[st.get("cross_check_agree")]
+                extra = f", relative difference {st['cross_check_rel_diff']:.2e}" if "cross_check_rel_diff" in st else ""
+                print(f"cross-check with {st['cross_check_method']}: {verdict}{extra}")
         extra = {k: v for k, v in summary.items() if k not in payload or k in ()}
         for k, v in extra.items():
             print(f"  {k}: {v}")
@@ -118,10 +126,12 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
     p.add_argument(
         "--method",
-        default="lp",
-        choices=["lp", "lp-cvxpy", "rvi", "pi"],
-        help="lp: occupation-measure LP on Clarabel (direct); lp-cvxpy: same LP through cvxpy; "
-        "rvi: relative value iteration; pi: policy iteration (default: lp)",
+        default="auto",
+        choices=["auto", "lp", "lp-cvxpy", "rvi", "vi", "pi"],
+        help="auto: LP or value iteration by size, cross-checked when both are cheap (says which); "
+        "lp: occupation-measure LP on Clarabel (direct); lp-cvxpy: same LP through cvxpy; "
+        "rvi: relative value iteration; vi: certified value iteration on the fused kernel; "
+        "pi: policy iteration (default: auto)",
     )
 
 
@@ -526,6 +536,46 @@ def _configure_map(p: argparse.ArgumentParser) -> None:
 
 subcommand("map", "draw the optimal action over two AoIs (or a 3-process slice) for one server configuration",
            _configure_map)(cmd_map)
+
+
+# ----------------------------------------------------------------------------- export
+def cmd_export(args: argparse.Namespace) -> int:
+    from .export import save_npz
+    from .models import build
+
+    scenario = load(args)
+    t0 = time.perf_counter()
+    mdp = build(scenario)
+    t_build = time.perf_counter() - t0
+    path = save_npz(mdp, args.out, scenario=scenario, compress=args.compress)
+    payload = {
+        "scenario": scenario.source,
+        "overrides": args.overrides,
+        "fingerprint": scenario.fingerprint(),
+        "out": str(path),
+        "states": mdp.n_states,
+        "pairs": mdp.n_pairs,
+        "nnz": int(mdp.P.nnz),
+        "bytes": path.stat().st_size,
+        "build_seconds": t_build,
+        "seconds": time.perf_counter() - t0,
+    }
+    if args.json:
+        emit_json(payload)
+    else:
+        print(f"wrote {path}: {mdp.n_states:,} states, {mdp.n_pairs:,} pairs, {mdp.P.nnz:,} transitions "
+              f"({payload['bytes'] / 1e6:.1f} MB; format wncs_lp.mdp-npz v1, see wncs_lp.export)")
+    return 0
+
+
+def _configure_export(p: argparse.ArgumentParser) -> None:
+    add_scenario_args(p)
+    p.add_argument("--out", required=True, metavar="FILE.npz", help="output file (.npz; format documented in wncs_lp.export)")
+    p.add_argument("--compress", action="store_true", help="compress the arrays (smaller, slower)")
+
+
+subcommand("export", "build the MDP and write it as .npz (pairs, costs, CSR transitions, decoded state labels)",
+           _configure_export)(cmd_export)
 
 
 def build_parser() -> argparse.ArgumentParser:
