@@ -55,7 +55,7 @@ from .certify import bracket, certificate_closed, greedy_first, q_values
 from .dp import policy_iteration
 from .result import Solution
 
-__all__ = ["LPData", "build_lp", "solve_lp", "extract_policy", "VISIT_TOL"]
+__all__ = ["LPData", "build_lp", "build_reduced_lp", "solve_lp", "extract_policy", "VISIT_TOL", "FORMULATIONS"]
 
 #: A state counts as visited when its scaled frequency n * sum_a x(s, a) exceeds this, i.e.
 #: x(s) > VISIT_TOL / n. Interior-point "zeros" are not tiny: at tol = 1e-9 they were
@@ -151,6 +151,110 @@ def build_lp(mdp: MDP) -> LPData:
     return LPData(A_eq=A, b_eq=b, q=np.asarray(mdp.cost, float) / cs, cost_scale=cs, x_scale=float(n), dropped_state=0)
 
 
+#: ``formulation="auto"`` uses the reduced LP when its constraint matrix has at most this
+#: fraction of the plain LP's nonzeros (wncs: ~0.78; preemption, whose forced states are
+#: few and whose elimination densifies Q 8x: far above).
+REDUCE_NNZ_RATIO = 0.85
+FORMULATIONS = ("auto", "primal", "reduced", "dual")
+
+
+def build_reduced_lp(mdp: MDP, red=None):
+    """The occupation-measure LP of the forced-state reduction (:mod:`~wncs_lp.solvers.reduce`).
+
+    Variables y = nD * x over the decision pairs; rows: balance of the decision states 1..nD-1
+    (state D[0]'s row dropped), ``(E_D - Q^T) y = 0``, and the normalisation ``tau^T y = nD``
+    (time, not visits, sums to one); costs ``C / c_s``. Returns ``(LPData, Reduction)``.
+    """
+    from .reduce import reduce_forced
+
+    red = reduce_forced(mdp) if red is None else red
+    nD, LD = red.n_decision, red.dpairs.size
+    dloc = np.searchsorted(red.D, mdp.s_indices[red.dpairs])
+    E = sp.csr_matrix((np.ones(LD), (dloc, np.arange(LD))), shape=(nD, LD))
+    B = (E - red.Q.T).tocsr()
+    A = sp.vstack([B[1:], sp.csr_matrix(red.tau[None, :])], format="csc")
+    A.eliminate_zeros()
+    A.sort_indices()
+    b = np.zeros(nD)
+    b[-1] = float(nD)
+    cs = float(np.mean(np.abs(red.C))) if LD else 1.0
+    if not np.isfinite(cs) or cs <= 0:
+        cs = 1.0
+    return LPData(A_eq=A, b_eq=b, q=red.C / cs, cost_scale=cs, x_scale=float(nD), dropped_state=0), red
+
+
+def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, settings: dict | None):
+    """The gain-bias LP  max g  s.t.  g + h(s_l) - (P h)_l <= c_l,  h(0) = 0, on Clarabel.
+
+    Variables (u, h_1..h_{n-1}) = (g, h) / c_s; objective -n u, so that the multipliers z of
+    the L inequality rows are the occupation measure scaled to sum n (z = n x).
+    """
+    import clarabel
+
+    n, L = mdp.n_states, mdp.n_pairs
+    cs = float(np.mean(np.abs(mdp.cost))) if L else 1.0
+    if not np.isfinite(cs) or cs <= 0:
+        cs = 1.0
+    E = sp.csr_matrix((np.ones(L), (np.arange(L), mdp.s_indices)), shape=(L, n))
+    B = (E - mdp.P).tocsc()[:, 1:]
+    A = sp.hstack([sp.csc_matrix(np.ones((L, 1))), B], format="csc")
+    A.eliminate_zeros()
+    q = np.zeros(n)
+    q[0] = -float(n)
+    st = clarabel.DefaultSettings()
+    st.verbose = bool(verbose)
+    st.max_iter = int(max_iter)
+    st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = float(tol)
+    for k, v in (settings or {}).items():
+        if not hasattr(st, k):
+            raise SolverError(f"unknown Clarabel setting {k!r}")
+        setattr(st, k, v)
+    solver = clarabel.DefaultSolver(sp.csc_matrix((n, n)), q, A, mdp.cost / cs, [clarabel.NonnegativeConeT(L)], st)
+    sol = solver.solve()
+    info = solver.get_info()
+    status = str(sol.status)
+    u = np.asarray(sol.x, float)
+    z = np.asarray(sol.z, float)
+    g = cs * float(u[0]) if u.size else np.nan
+    h = np.zeros(n)
+    h[1:] = cs * u[1:]
+    stats = {
+        "solver": "clarabel",
+        "solver_status": status,
+        "solver_iterations": int(sol.iterations),
+        "r_prim": float(sol.r_prim),
+        "r_dual": float(sol.r_dual),
+        "duality_gap": float(info.gap_rel),
+        "duality_gap_abs": float(info.gap_abs),
+        "solve_time": float(sol.solve_time),
+        "lp_rows": int(L),
+        "lp_cols": int(n),
+        "lp_nnz": int(A.nnz),
+    }
+    return status, status == "Solved", z / float(n), g, h, stats
+
+
+def _full_residuals(mdp: MDP, x: np.ndarray, g: float, h: np.ndarray) -> dict[str, float]:
+    """Accuracy of (x, g, h) on the *original* LP, whatever formulation produced them.
+
+    ``full_balance_residual`` = n * max_s |sum_{l in s} x_l - (P^T x)_s| (in the y = n x
+    units of the plain LP), ``full_norm_residual`` = |sum x - 1|, ``full_dual_violation`` =
+    max(0, -min_l (c_l + (P h)_l - h(s_l) - g)) / max|c|, ``full_gap_rel`` = |c^T x - g| / |g|.
+    """
+    n = mdp.n_states
+    inflow = np.asarray(mdp.P.T @ x).ravel()
+    out = np.bincount(mdp.s_indices, weights=x, minlength=n)
+    red = mdp.cost + mdp.P @ h - h[mdp.s_indices] - g
+    cmax = max(float(np.max(np.abs(mdp.cost))), 1e-300)
+    cx = float(mdp.cost @ x)
+    return {
+        "full_balance_residual": float(n * np.max(np.abs(out - inflow))),
+        "full_norm_residual": float(abs(x.sum() - 1.0)),
+        "full_dual_violation": float(max(0.0, -float(red.min())) / cmax),
+        "full_gap_rel": float(abs(cx - g) / max(abs(g), 1e-300)),
+    }
+
+
 def extract_policy(mdp: MDP, x: np.ndarray, h: np.ndarray, visit_tol: float = VISIT_TOL) -> tuple[np.ndarray, np.ndarray]:
     """Deterministic policy read off an occupation measure.
 
@@ -239,6 +343,9 @@ def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settin
         "solve_time": float(sol.solve_time),
         "obj_scaled": float(sol.obj_val),
         "obj_dual_scaled": float(sol.obj_val_dual),
+        "lp_rows": int(m),
+        "lp_cols": int(L),
+        "lp_nnz": int(lp.A_eq.nnz),
     }
     return status, status == "Solved", y, z[:m], stats
 
@@ -291,6 +398,7 @@ def solve_lp(
     visit_tol: float = VISIT_TOL,
     polish_max_iter: int = 50,
     settings: dict | None = None,
+    formulation: str = "auto",
 ) -> Solution:
     """Solve the occupation-measure LP and certify the answer.
 
@@ -304,6 +412,10 @@ def solve_lp(
       policy, ``bias`` its exact bias, ``(gain_lower, gain_upper)`` = bracket on that bias.
       If an iterate is multichain (PolicyError) the dual certificate below is used instead
       and the policy becomes the dual-greedy one.
+    * ``polish="vi"``: first :func:`~wncs_lp.solvers.dp.value_iteration` warm-started from
+      the LP's dual bias (certified to 1e-9), then policy iteration from its greedy policy
+      (usually stable at the first exact evaluation). Cheaper than ``"pi"`` when the
+      extracted policy is far from optimal (e.g. a loose LP tolerance, large models).
     * ``polish=False``: ``gain`` = LP objective, ``bias`` = dual h, bracket on the dual h.
       Note that an interior-point dual may keep slack in states that no optimal policy
       visits, which widens ``hi``; polishing removes that.
@@ -314,7 +426,8 @@ def solve_lp(
     backend : {"clarabel", "cvxpy"}
     tol : float
         Clarabel ``tol_gap_abs = tol_gap_rel = tol_feas`` (on the scaled problem).
-    polish : bool
+    polish : bool or {"pi", "vi"}
+        True = "pi".
     max_iter : int
         Clarabel iteration limit.
     verbose : bool
@@ -326,7 +439,15 @@ def solve_lp(
     polish_max_iter : int
         Cap on the polishing policy-iteration evaluations.
     settings : dict, optional
-        Extra Clarabel settings (``DefaultSettings`` attribute names).
+        Extra Clarabel settings (``DefaultSettings`` attribute names), e.g.
+        ``{"direct_solve_method": "qdldl"}`` or ``{"iterative_refinement_enable": False}``.
+    formulation : {"auto", "primal", "reduced", "dual"}
+        ``"primal"``: the plain occupation-measure LP (:func:`build_lp`). ``"reduced"``: the
+        same LP with the forced states substituted out (:func:`build_reduced_lp`; exact, same
+        optimum; x and h are lifted back to every state). ``"dual"``: the gain-bias LP
+        (max g s.t. g + h(s_l) <= c_l + (P h)_l; Clarabel only), whose multipliers are x.
+        ``"auto"``: ``"reduced"`` when that LP has at most :data:`REDUCE_NNZ_RATIO` of the
+        plain LP's nonzeros, else ``"primal"`` (``stats["formulation"]`` says which).
 
     Returns
     -------
@@ -335,8 +456,10 @@ def solve_lp(
         ``solver_iterations``, ``r_prim``, ``r_dual``, ``duality_gap``, ``solve_time``,
         ``lp_objective`` (c^T x from the solver's objective, unscaled, not polished),
         ``lp_dual_gain`` (-c_s z_norm), ``n_visited_states``, ``polish_iterations``,
-        ``kkt_*`` (our own residual check), ``dual_bias`` (array), ``extracted_policy``
-        (array), ``cost_scale``.
+        ``kkt_*`` (our own residual check on the LP actually solved), ``full_*`` (the same
+        (x, g, h) checked against the original LP, :func:`_full_residuals`), ``formulation``,
+        ``lp_rows`` / ``lp_cols`` / ``lp_nnz``, ``reduction_*`` (reduced only), ``dual_bias``
+        (array), ``extracted_policy`` (array), ``cost_scale``.
         ``status``: ``"optimal"``; ``"inaccurate:<solver status>"`` when the solver did not
         report success; ``"inaccurate:certificate"`` when the bracket stays wider than
         cert_rtol; ``"inaccurate:polish_max_iter"``.
@@ -350,27 +473,63 @@ def solve_lp(
     t0 = time.perf_counter()
     if backend not in ("clarabel", "cvxpy"):
         raise SolverError(f"unknown LP backend {backend!r}; expected 'clarabel' or 'cvxpy'")
+    if formulation not in FORMULATIONS:
+        raise SolverError(f"unknown LP formulation {formulation!r}; expected one of {', '.join(FORMULATIONS)}")
+    if polish is True:
+        polish = "pi"
+    if polish not in (False, "pi", "vi"):
+        raise SolverError(f"polish must be True, False, 'pi' or 'vi'; got {polish!r}")
     method = "lp" if backend == "clarabel" else "lp-cvxpy"
-    lp = build_lp(mdp)
-    runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
-    status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings)
-    if status in _FAILED or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (mdp.n_pairs,):
-        raise SolverError(
-            f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
-            f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution"
-        )
-    stats.update(_kkt(lp, y, z_eq))
-    x = lp.unscale_x(y)
-    g_dual, h_dual = lp.unscale_duals(z_eq)
-    lp_obj = lp.objective(stats["obj_scaled"])
+    n = mdp.n_states
+    red = None
+    form = formulation
+    if form == "dual" and backend != "clarabel":
+        raise SolverError("the dual (gain-bias) formulation is solved with backend 'clarabel' only")
+    if form in ("auto", "reduced"):
+        lp_r, red = build_reduced_lp(mdp)
+        if form == "auto":
+            plain_nnz = mdp.P.nnz + 2 * mdp.n_pairs
+            if red.n_eliminated and lp_r.A_eq.nnz <= REDUCE_NNZ_RATIO * plain_nnz:
+                form = "reduced"
+            else:
+                form, red = "primal", None
+    if form == "dual":
+        status, solved, x, g_dual, h_dual, stats = _solve_clarabel_dual(mdp, tol, max_iter, verbose, settings)
+        if status in _FAILED or not (np.all(np.isfinite(x)) and np.isfinite(g_dual) and np.all(np.isfinite(h_dual))):
+            raise SolverError(f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
+                              f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution")
+        lp_obj = g_dual
+        stats["cost_scale"] = float(np.mean(np.abs(mdp.cost))) or 1.0
+    else:
+        lp = lp_r if form == "reduced" else build_lp(mdp)
+        runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
+        status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings)
+        if status in _FAILED or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (lp.n_pairs,):
+            raise SolverError(
+                f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
+                f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution"
+            )
+        stats.update(_kkt(lp, y, z_eq))
+        g_dual, h_dual = lp.unscale_duals(z_eq)
+        lp_obj = lp.objective(stats["obj_scaled"])
+        x = lp.unscale_x(y)
+        stats["cost_scale"] = lp.cost_scale
+        if red is not None:
+            x = red.lift_x(x)
+            h_dual = red.lift_h(h_dual, g_dual)
+            stats.update(reduction_decision_states=red.n_decision, reduction_eliminated=red.n_eliminated,
+                         reduction_levels=int(red.level_ptr.size - 1), reduction_seconds=red.seconds)
+    stats["formulation"] = form
+    stats.update(_full_residuals(mdp, x, g_dual, h_dual))
+    h_dual = h_dual - h_dual[0]
     policy0, visited = extract_policy(mdp, x, h_dual, visit_tol)
     stats.update(
         lp_objective=lp_obj,
         lp_dual_gain=g_dual,
         n_visited_states=int(np.count_nonzero(visited)),
-        cost_scale=lp.cost_scale,
         dual_bias=h_dual,
         extracted_policy=policy0,
+        lp_seconds=time.perf_counter() - t0,
     )
 
     issue = None
@@ -378,7 +537,14 @@ def solve_lp(
     iterations = stats["solver_iterations"]
     if polish:
         try:
-            pi = policy_iteration(mdp, policy0=policy0, max_iter=polish_max_iter, cert_rtol=cert_rtol)
+            start = policy0
+            if polish == "vi":
+                from .dp import value_iteration
+
+                vi = value_iteration(mdp, h0=h_dual)
+                stats["polish_vi_sweeps"] = vi.iterations
+                start = vi.policy
+            pi = policy_iteration(mdp, policy0=start, max_iter=polish_max_iter, cert_rtol=cert_rtol)
         except PolicyError as exc:
             stats["polish_error"] = str(exc)
             use_dual = True
@@ -396,7 +562,7 @@ def solve_lp(
                 issue = "polish_max_iter"
     if use_dual:
         lo, hi = bracket(mdp, h_dual)
-        gain, bias = lp_obj, h_dual - h_dual[0]
+        gain, bias = lp_obj, h_dual
         policy = policy0 if not polish else greedy_first(mdp, q_values(mdp, h_dual))
     closed = certificate_closed(mdp, lo, hi, gain, cert_rtol)
     stats["certificate_closed"] = bool(closed)
