@@ -162,6 +162,7 @@ def bench_dp(cases, repeats: int, bandwidth: float, pymdp_max_states: int) -> No
         if numba_available():
             value_iteration(mdp, max_iter=2)  # compile / load the numba cache outside the timing
             variants += [("vi numba mpi (default)", dict(kernel="numba")),
+                         ("vi numba mpi, tol 1e-6 (Storm's)", dict(kernel="numba", tol=1e-6)),
                          ("vi numba gauss-seidel", dict(kernel="numba", scheme="gs")),
                          ("rvi numba jacobi 1 thread", dict(kernel="numba", scheme="jacobi")),
                          ("rvi numba jacobi 2 threads", dict(kernel="numba", scheme="jacobi", threads=2))]
