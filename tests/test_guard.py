@@ -53,3 +53,13 @@ def test_lp_needs_more_than_value_iteration():
     check_size(sc, limit_bytes=limit)  # DP fits
     with pytest.raises(SizeLimitError, match="value iteration"):
         check_size(sc, limit_bytes=limit, need_lp=True)
+
+
+def test_cli_refuses_a_huge_build_with_one_clear_line():
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "wncs_lp", "solve", str(F / "paper_p1234.toml"),
+                           "--set", "tau_cap=40", "--json"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.startswith("error: ") and "--force" in proc.stderr and "Traceback" not in proc.stderr

@@ -54,6 +54,8 @@ def add_scenario_args(p: argparse.ArgumentParser) -> None:
         help="override a field: p=0.8, tau_cap=15, process.2.weight=2, server.edge.p_up=0.7 (repeatable)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.add_argument("--force", action="store_true",
+                   help="build even when the size guard estimates more memory than the machine has available")
 
 
 def load(args: argparse.Namespace):
@@ -62,14 +64,22 @@ def load(args: argparse.Namespace):
     return load_scenario(args.scenario, args.overrides)
 
 
+def build(scenario, args: argparse.Namespace | None = None, need_lp: bool = False):
+    """Build the MDP after the size guard (refuses huge builds unless ``--force``)."""
+    from .guard import check_size
+    from .models import build as _build
+
+    check_size(scenario, force=bool(getattr(args, "force", False)), need_lp=need_lp)
+    return _build(scenario)
+
+
 # ----------------------------------------------------------------------------- solve
 def cmd_solve(args: argparse.Namespace) -> int:
-    from .models import build
     from .solvers import solve
 
     scenario = load(args)
     t0 = time.perf_counter()
-    mdp = build(scenario)
+    mdp = build(scenario, args)
     t_build = time.perf_counter() - t0
     sol = solve(mdp, method=args.method)
     total = time.perf_counter() - t0
@@ -190,9 +200,7 @@ def _make_cli_policy(args: argparse.Namespace, scenario):
     system = System.from_scenario(scenario)
     mdp = None
     if args.policy in ("optimal", "best_static") or getattr(args, "need_mdp", False):
-        from .models import build
-
-        mdp = build(scenario)
+        mdp = build(scenario, args)
     policy = make_policy(args.policy, system, mdp, method=args.method,
                          assignment=_parse_assignment(args.assignment, scenario))
     return {"system": system, "mdp": mdp, "policy": policy, "seconds": time.perf_counter() - t0}
@@ -391,13 +399,12 @@ subcommand("reproduce", "reproduce every figure and claim of the paper into a re
 
 # ----------------------------------------------------------------------------- verify / map
 def cmd_verify(args: argparse.Namespace) -> int:
-    from .models import build
     from .solvers import solve
     from .structure import Tolerance, verify_all
 
     scenario = load(args)
     t0 = time.perf_counter()
-    mdp = build(scenario)
+    mdp = build(scenario, args)
     sol = solve(mdp, method=args.method)
     reports = verify_all(mdp, sol, tolerance=Tolerance(args.atol, args.rtol), examples=args.examples)
     payload = {
@@ -474,7 +481,6 @@ def cmd_map(args: argparse.Namespace) -> int:
 
     from .errors import ModelError
     from .maps import parse_config_spec, plot_policy_map, plot_policy_slice, region_stats
-    from .models import build
     from .solvers import solve
 
     scenario = load(args)
@@ -483,7 +489,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     except ValueError:
         raise ModelError(f"--axes {args.axes!r}: expected comma-separated process indices, e.g. 1,2") from None
     fixed = _parse_fix(args.fix)
-    mdp = build(scenario)
+    mdp = build(scenario, args)
     config = parse_config_spec(mdp, args.servers)
     sol = solve(mdp, method=args.method)
     if args.slice is not None:
@@ -541,11 +547,10 @@ subcommand("map", "draw the optimal action over two AoIs (or a 3-process slice) 
 # ----------------------------------------------------------------------------- export
 def cmd_export(args: argparse.Namespace) -> int:
     from .export import save_npz
-    from .models import build
 
     scenario = load(args)
     t0 = time.perf_counter()
-    mdp = build(scenario)
+    mdp = build(scenario, args)
     t_build = time.perf_counter() - t0
     path = save_npz(mdp, args.out, scenario=scenario, compress=args.compress)
     payload = {
