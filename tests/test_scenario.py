@@ -211,3 +211,10 @@ def test_missing_channel_ok_when_every_link_has_its_own_p():
     raw["server"][0].pop("p_down")
     with pytest.raises(ScenarioError, match="channel.success_probability"):
         scenario_from_dict(raw)
+
+
+def test_override_with_control_characters_gives_one_line():
+    """Regression (found by the fuzzer): a key with a newline made a two-line message."""
+    with pytest.raises(ScenarioError) as info:
+        parse_overrides(["=\n"])
+    assert "\n" not in str(info.value) and "override" in str(info.value)

@@ -22,7 +22,9 @@ class ScenarioError(WncsError):
         self.source = source
         self.field = field
         self.expected = expected
-        super().__init__(f"{source}: {what} '{field}': {expected}")
+        # one line always: control characters in a field name (e.g. from --set) are escaped
+        shown = field if field.isprintable() else field.encode("unicode_escape").decode("ascii")
+        super().__init__(f"{source}: {what} '{shown}': {expected}")
 
 
 class ModelError(WncsError):
