@@ -26,7 +26,6 @@ import weakref
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..mdp import MDP
 
@@ -248,6 +247,3 @@ def stream_bandwidth(nbytes: int = 400_000_000, repeats: int = 5) -> float:
         best = min(best, time.perf_counter() - t)
     return a.nbytes / best
 
-
-def csr_like(P: sp.csr_matrix) -> bool:  # small helper for tests
-    return sp.isspmatrix_csr(P)
