@@ -235,6 +235,16 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray) -> PolicyEvaluation:
 
 
 # ---------------------------------------------------------------------------- RVI
+def _initial_bias(h0: np.ndarray | None, n: int, ref: int) -> np.ndarray:
+    """A warm-start bias (zeros by default), checked and normalised so that h[ref] = 0."""
+    if h0 is None:
+        return np.zeros(n)
+    h = np.array(h0, dtype=float)
+    if h.shape != (n,) or not np.all(np.isfinite(h)):
+        raise SolverError(f"h0 must be a finite array of shape ({n},)")
+    return h - h[ref]
+
+
 def relative_value_iteration(
     mdp: MDP,
     *,
@@ -308,13 +318,7 @@ def relative_value_iteration(
         raise SolverError(f"ref_state must be in 0..{n - 1}, got {ref_state}")
     if max_iter < 1:
         raise SolverError(f"max_iter must be >= 1, got {max_iter}")
-    if h0 is None:
-        h = np.zeros(n)
-    else:
-        h = np.array(h0, dtype=float)
-        if h.shape != (n,) or not np.all(np.isfinite(h)):
-            raise SolverError(f"h0 must be a finite array of shape ({n},)")
-        h -= h[ref_state]
+    h = _initial_bias(h0, n, ref_state)
     from .kernels import get_kernel
 
     try:
@@ -457,13 +461,7 @@ def value_iteration(
         scheme = "mpi" if K.supports_gauss_seidel else "jacobi"
     if scheme in ("mpi", "gs") and not K.supports_gauss_seidel:
         raise SolverError(f"scheme {scheme!r} needs in-place sweeps, which the {K.name} kernel does not have")
-    if h0 is None:
-        h = np.zeros(n)
-    else:
-        h = np.array(h0, dtype=float)
-        if h.shape != (n,) or not np.all(np.isfinite(h)):
-            raise SolverError(f"h0 must be a finite array of shape ({n},)")
-        h -= h[0]
+    h = _initial_bias(h0, n, 0)
     h_next = np.empty(n)
     pol = mdp.pair_ptr[:-1].astype(np.int64)
     n_eval = eval_sweeps if scheme == "mpi" else 0
@@ -615,7 +613,6 @@ def policy_iteration(
         A malformed ``policy0``; with ``multichain="raise"``, a multichain iterate.
     """
     t0 = time.perf_counter()
-    n = mdp.n_states
     if policy0 is None:
         d = greedy_first(mdp, mdp.cost)
     else:
