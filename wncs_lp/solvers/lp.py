@@ -140,6 +140,20 @@ class LPData:
         return float(obj_scaled) * self.cost_scale / self.x_scale
 
 
+def _clarabel_stats(sol, info) -> dict:
+    """The run statistics of a Clarabel solve (status, iterations, residuals, gaps, time)."""
+    return {
+        "solver": "clarabel",
+        "solver_status": str(sol.status),
+        "solver_iterations": int(sol.iterations),
+        "r_prim": float(sol.r_prim),
+        "r_dual": float(sol.r_dual),
+        "duality_gap": float(info.gap_rel),
+        "duality_gap_abs": float(info.gap_abs),
+        "solve_time": float(sol.solve_time),
+    }
+
+
 def build_lp(mdp: MDP) -> LPData:
     """Assemble the scaled occupation-measure LP (see the module docstring).
 
@@ -235,14 +249,7 @@ def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, set
     h = np.zeros(n)
     h[1:] = cs * u[1:]
     stats = {
-        "solver": "clarabel",
-        "solver_status": status,
-        "solver_iterations": int(sol.iterations),
-        "r_prim": float(sol.r_prim),
-        "r_dual": float(sol.r_dual),
-        "duality_gap": float(info.gap_rel),
-        "duality_gap_abs": float(info.gap_abs),
-        "solve_time": float(sol.solve_time),
+        **_clarabel_stats(sol, info),
         "lp_rows": int(L),
         "lp_cols": int(n),
         "lp_nnz": int(A.nnz),
@@ -349,14 +356,7 @@ def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settin
     y = np.asarray(sol.x, float)
     z = np.asarray(sol.z, float)
     stats = {
-        "solver": "clarabel",
-        "solver_status": status,
-        "solver_iterations": int(sol.iterations),
-        "r_prim": float(sol.r_prim),
-        "r_dual": float(sol.r_dual),
-        "duality_gap": float(info.gap_rel),
-        "duality_gap_abs": float(info.gap_abs),
-        "solve_time": float(sol.solve_time),
+        **_clarabel_stats(sol, info),
         "obj_scaled": float(sol.obj_val),
         "obj_dual_scaled": float(sol.obj_val_dual),
         "lp_rows": int(m),
@@ -496,7 +496,6 @@ def solve_lp(
     if polish not in (False, "pi", "vi"):
         raise SolverError(f"polish must be True, False, 'pi' or 'vi'; got {polish!r}")
     method = "lp" if backend == "clarabel" else "lp-cvxpy"
-    n = mdp.n_states
     red = None
     form = formulation
     if form == "dual" and backend != "clarabel":
