@@ -259,15 +259,14 @@ def claim_c12(ctx: Context) -> ClaimResult:
         # at p = 1 the static policy's chain can split into several cycles: average from the initial
         # state, and the gain of each of its recurrent classes (the best start)
         ev = evaluate(solved.mdp, static, system, multichain="initial")
-        st_pairs_all = static.on_mdp(solved.mdp)
-        P_st = solved.mdp.P[st_pairs_all]
+        st_pairs = static.on_mdp(solved.mdp)
+        P_st = solved.mdp.P[st_pairs]
         class_gains = []
         for cl in recurrent_classes(P_st):
-            x, _ = stationary_law(solved.mdp, st_pairs_all, classes=[cl])
-            class_gains.append(float(x @ solved.mdp.cost[st_pairs_all]))
+            x, _ = stationary_law(solved.mdp, st_pairs, classes=[cl])
+            class_gains.append(float(x @ solved.mdp.cost[st_pairs]))
         per = _aoi_period(solved)
         # does the optimal policy act like the static one on its recurrent states?
-        st_pairs = static.on_mdp(solved.mdp)
         rec = solved.stationary > 1e-12
         same_on_recurrent = bool(np.all(st_pairs[rec] == solved.policy[rec])) if st_pairs.ndim == 1 else None
         rows.append({"scenario": file, "cap": cap, "optimal": solved.gain, "static": ev.gain,
