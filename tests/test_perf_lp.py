@@ -130,3 +130,24 @@ def test_bad_arguments(p12):
 def test_reduced_with_cvxpy_backend(p12, refs):
     s = solve_lp(p12, backend="cvxpy", formulation="reduced")
     assert s.ok and s.gain == pytest.approx(refs[id(p12)].gain, rel=1e-10)
+
+
+@pytest.mark.parametrize("refine", [None, True])
+def test_default_settings_and_their_override(p12, refs, refine):
+    """Iterative refinement is off by default; turning it back on is honoured; both answers
+    agree with certified value iteration (the independent reference)."""
+    extra = None if refine is None else {"iterative_refinement_enable": True}
+    s = solve_lp(p12, settings=extra, polish=False)
+    assert s.stats["clarabel_settings"]["iterative_refinement_enable"] is bool(refine)
+    assert s.stats["lp_objective"] == pytest.approx(refs[id(p12)].gain, rel=1e-7)
+    assert s.stats["full_balance_residual"] < 1e-5
+
+
+def test_polish_true_picks_vi_on_large_models(p12, refs, monkeypatch):
+    import wncs_lp.solvers.lp as lpmod
+
+    assert solve_lp(p12).stats["polish"] == "pi"  # 2,703 states: below the threshold
+    monkeypatch.setattr(lpmod, "POLISH_VI_MIN_STATES", p12.n_states)
+    s = solve_lp(p12)
+    assert s.stats["polish"] == "vi" and s.stats["polish_vi_sweeps"] >= 1
+    assert s.ok and s.gain == pytest.approx(refs[id(p12)].gain, rel=1e-10)

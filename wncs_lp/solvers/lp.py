@@ -51,8 +51,13 @@ Formulations (``solve_lp(formulation=...)``, measured in ``benchmarks/run.py``)
 * ``"auto"`` -- reduced when that shrinks the constraint matrix enough, else primal.
 
 Other levers: Clarabel's default ``direct_solve_method`` ("auto") is faer here; qdldl is
-3x slower. Turning iterative refinement off (``settings``) saves ~30% at unchanged accuracy
-on these models. Without the cost scaling the IPM takes as long and the balance residual is
+3x slower. Turning iterative refinement off saves ~30% at unchanged accuracy on these models,
+so it is off by default (:data:`CLARABEL_DEFAULTS`). Clarabel's ``max_threads`` makes no
+difference (faer's factorisation of these KKT systems ran as fast on 1 thread as on 2), nor
+does the order of rows and columns (its AMD ordering is recomputed; random and reversed
+orders were within 4%). What sets the time is the fill of the KKT factor, ~5.4M nonzeros at
+p12 cap 16 (10k decision states): each AoI grid point carries tens of server/link
+configurations that the transitions couple, so the separators are large. Without the cost scaling the IPM takes as long and the balance residual is
 ~60x worse.
 """
 from __future__ import annotations
@@ -71,7 +76,8 @@ from .certify import bracket, certificate_closed, greedy_first, q_values
 from .dp import policy_iteration
 from .result import Solution
 
-__all__ = ["LPData", "build_lp", "build_reduced_lp", "solve_lp", "extract_policy", "VISIT_TOL", "FORMULATIONS"]
+__all__ = ["LPData", "build_lp", "build_reduced_lp", "solve_lp", "extract_policy", "VISIT_TOL", "FORMULATIONS",
+           "CLARABEL_DEFAULTS", "POLISH_VI_MIN_STATES"]
 
 #: A state counts as visited when its scaled frequency n * sum_a x(s, a) exceeds this, i.e.
 #: x(s) > VISIT_TOL / n. Interior-point "zeros" are not tiny: at tol = 1e-9 they were
@@ -185,6 +191,18 @@ def build_lp(mdp: MDP) -> LPData:
 #: fraction of the plain LP's nonzeros (wncs: ~0.78; preemption, whose forced states are
 #: few and whose elimination densifies Q 8x: far above).
 REDUCE_NNZ_RATIO = 0.85
+
+#: Clarabel settings :func:`solve_lp` uses unless ``settings`` overrides them. Iterative
+#: refinement off: on the paper's models it saved ~30% of the IPM time at the same raw LP
+#: accuracy (``benchmarks/run.py``), and the answer is checked anyway (KKT residuals on the
+#: original LP, certificate, polishing).
+CLARABEL_DEFAULTS: dict[str, Any] = {"iterative_refinement_enable": False}
+
+#: ``polish=True`` means ``"vi"`` from this many states on and ``"pi"`` below: on large
+#: models a few certified value-iteration sweeps from the LP's dual bias reach the optimal
+#: policy more cheaply than repeated exact (sparse LU) evaluations (p12 at cap 20:
+#: 0.7 s vs 3.5 s of polishing).
+POLISH_VI_MIN_STATES = 20_000
 FORMULATIONS = ("auto", "primal", "reduced", "dual")
 
 
@@ -423,7 +441,9 @@ def solve_lp(
     ``method="lp-cvxpy"``); unscale x and the dual (g, h); read a deterministic policy off x
     (:func:`extract_policy`); then
 
-    * ``polish=True``: run :func:`~wncs_lp.solvers.dp.policy_iteration` from that policy
+    * ``polish=True``: ``"vi"`` for models of at least :data:`POLISH_VI_MIN_STATES` states,
+      else ``"pi"``.
+    * ``polish="pi"``: run :func:`~wncs_lp.solvers.dp.policy_iteration` from that policy
       (exact sparse evaluation, usually 0-2 improvements); ``gain`` = exact gain of the final
       policy, ``bias`` its exact bias, ``(gain_lower, gain_upper)`` = bracket on that bias.
       If an iterate is multichain (PolicyError) the dual certificate below is used instead
@@ -443,7 +463,7 @@ def solve_lp(
     tol : float
         Clarabel ``tol_gap_abs = tol_gap_rel = tol_feas`` (on the scaled problem).
     polish : bool or {"pi", "vi"}
-        True = "pi".
+        True = "vi" from :data:`POLISH_VI_MIN_STATES` states on, else "pi".
     max_iter : int
         Clarabel iteration limit.
     verbose : bool
@@ -456,7 +476,9 @@ def solve_lp(
         Cap on the polishing policy-iteration evaluations.
     settings : dict, optional
         Extra Clarabel settings (``DefaultSettings`` attribute names), e.g.
-        ``{"direct_solve_method": "qdldl"}`` or ``{"iterative_refinement_enable": False}``.
+        ``{"direct_solve_method": "qdldl"}``. With the direct backend they override
+        :data:`CLARABEL_DEFAULTS` (iterative refinement off); pass
+        ``{"iterative_refinement_enable": True}`` for Clarabel's own default.
     formulation : {"auto", "primal", "reduced", "dual"}
         ``"primal"``: the plain occupation-measure LP (:func:`build_lp`). ``"reduced"``: the
         same LP with the forced states substituted out (:func:`build_reduced_lp`; exact, same
@@ -492,7 +514,9 @@ def solve_lp(
     if formulation not in FORMULATIONS:
         raise SolverError(f"unknown LP formulation {formulation!r}; expected one of {', '.join(FORMULATIONS)}")
     if polish is True:
-        polish = "pi"
+        polish = "vi" if mdp.n_states >= POLISH_VI_MIN_STATES else "pi"
+    if backend == "clarabel":
+        settings = {**CLARABEL_DEFAULTS, **(settings or {})}
     if polish not in (False, "pi", "vi"):
         raise SolverError(f"polish must be True, False, 'pi' or 'vi'; got {polish!r}")
     method = "lp" if backend == "clarabel" else "lp-cvxpy"
@@ -535,6 +559,9 @@ def solve_lp(
             stats.update(reduction_decision_states=red.n_decision, reduction_eliminated=red.n_eliminated,
                          reduction_levels=int(red.level_ptr.size - 1), reduction_seconds=red.seconds)
     stats["formulation"] = form
+    stats["polish"] = polish or None
+    if backend == "clarabel":
+        stats["clarabel_settings"] = dict(settings)
     stats.update(_full_residuals(mdp, x, g_dual, h_dual))
     h_dual = h_dual - h_dual[0]
     policy0, visited = extract_policy(mdp, x, h_dual, visit_tol)
