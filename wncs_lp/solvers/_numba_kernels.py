@@ -9,6 +9,10 @@ are the first pair reaching the minimum (strict ``<``), as :func:`~wncs_lp.solve
 is the same code on one thread. The serial one is the default: numba's OpenMP threading
 layer (GNU libgomp) is not fork-safe, and the sweeps of ``wncs_lp.sweep`` fork worker
 processes, so threads are opt-in (``threads >= 2``).
+
+The loop bodies are written out in each kernel on purpose: factoring the pair value and the
+Jacobi chunk into shared ``@njit`` helpers (inlined or not) was measured 5x slower for the
+Gauss-Seidel and serial Jacobi sweeps on numba 0.68 (p123 cap 15: 6.2 -> 35 ms per sweep).
 """
 from __future__ import annotations
 
