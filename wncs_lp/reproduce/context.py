@@ -37,7 +37,7 @@ class Profile:
     mc_reps: int
     mc_slots_3p: int
     mc_reps_3p: int
-    slice_total_3p: tuple[int, ...]  # the tau_1 + tau_2 + tau_3 plane, one per cap in caps_3p (1.5 x cap)
+    slice_total_3p: tuple[int, ...]  # the tau_1 + tau_2 + tau_3 plane, one per cap in caps_3p (the paper's 45 at cap 20)
     c13_caps: tuple[int, ...]
     c13_big_cap: int
     seed: int = 20221
@@ -64,7 +64,7 @@ PROFILES: dict[str, Profile] = {
     "default": Profile(
         name="default",
         caps_2p=(12, 20, 30),
-        caps_3p=(12, 16),
+        caps_3p=(12, 16, 20),
         caps_pre=(12, 20, 25),
         p_grid=(0.8, 0.85, 0.9, 0.95, 1.0),
         sweep_cap_2p=12,
@@ -74,7 +74,7 @@ PROFILES: dict[str, Profile] = {
         mc_reps=20,
         mc_slots_3p=10_000,
         mc_reps_3p=10,
-        slice_total_3p=(18, 24),
+        slice_total_3p=(18, 24, 45),
         c13_caps=(6, 8, 10, 12),
         c13_big_cap=30,
     ),

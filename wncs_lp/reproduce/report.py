@@ -44,7 +44,7 @@ DEPARTURES = """\
 | Q_k is a matrix | q_k = trace(Q_k) (weights 1) | the MDP needs a scalar cost |
 | tau_hat "arbitrarily large" | finite caps, every cap-sensitive claim at several caps | truncation, not part of the model |
 | Figs. 5, 10, 13: link of p unspecified | p on every uplink and downlink | spec section 4 |
-| Fig. 7: plane tau_1 + tau_2 + tau_3 = 45 | the plane at 1.5 x cap | 45 would need caps well above 15 to leave more than a corner of the plane inside the truncated box |
+| Fig. 7: plane tau_1 + tau_2 + tau_3 = 45 | the paper's plane 45 at cap 20, plus the planes 18 and 24 at caps 12 and 16 (1.5 x cap) | at caps below 15 the plane 45 lies outside the truncated box; the smaller planes show how the regions form as the cap grows |
 | Figs. 8-9: "C_e = (3, 3)", "C_r = (1, 4)" | edge serving process 3 with 3 slots left; remote serving process 1 with 4 slots left | the paper's tuples read as (job, remaining slots) |
 | Sec. IV | one remote server, arrivals every slot per process, LIFO stack of preempted jobs, cancellation of an obsolete same-process job | spec/model.md section 3 |
 """
