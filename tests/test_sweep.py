@@ -85,6 +85,27 @@ def test_sweep_p_one_and_parallel(tmp_path):
     np.testing.assert_allclose([r.gain for r in seq.rows], [r.gain for r in res.rows], rtol=1e-9)
 
 
+def test_sweep_on_dask_matches_sequential(tmp_path):
+    """The Dask executor (local cluster, 2 worker processes) gives the sequential table."""
+    import dask.distributed  # noqa: F401  (in the test extra: a missing Dask fails, it does not skip)
+
+    sc = load_scenario(P12, ["tau_cap=6"])
+    pols = ["optimal", "suboptimal"]
+    res = run_sweep(sc, "p", [0.85, 0.95], pols, tmp_path / "d", max_workers=2, executor="dask", plot=False)
+    assert res.computed == 4 and all(r.status.startswith("ok") for r in res.rows)
+    seq = run_sweep(sc, "p", [0.85, 0.95], pols, None, plot=False)
+    key = lambda r: (r.value, r.policy)  # noqa: E731
+    np.testing.assert_allclose([r.gain for r in sorted(res.rows, key=key)],
+                               [r.gain for r in sorted(seq.rows, key=key)], rtol=1e-9)
+    assert len(read_rows(tmp_path / "d" / "sweep.csv")) == 4
+
+
+def test_unknown_executor_is_a_clear_error():
+    with pytest.raises(WncsError, match="unknown executor 'threads'"):
+        run_sweep(load_scenario(P12, ["tau_cap=4"]), "p", [0.9], ["optimal"], None, max_workers=2,
+                  executor="threads", plot=False)
+
+
 def test_plot_returns_axes():
     import matplotlib
 

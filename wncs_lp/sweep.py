@@ -322,6 +322,10 @@ def _meta(scenario: Scenario, param: str, opts: dict[str, Any]) -> dict[str, Any
     }
 
 
+#: executors accepted by :func:`run_sweep`
+EXECUTORS = ("process", "dask")
+
+
 def _make_executor(kind: str, max_workers: int) -> Executor:
     if kind == "process":
         return ProcessPoolExecutor(max_workers=max_workers)
@@ -334,7 +338,7 @@ def _make_executor(kind: str, max_workers: int) -> Executor:
         ex = client.get_executor()
         ex._wncs_client = client  # closed with the executor below
         return ex
-    raise WncsError(f"unknown executor {kind!r}; expected 'process' or 'dask'")
+    raise WncsError(f"unknown executor {kind!r}; expected one of {', '.join(map(repr, EXECUTORS))}")
 
 
 def run_sweep(
@@ -404,6 +408,8 @@ def run_sweep(
     names = parse_policy_names(policies)
     if max_workers < 1:
         raise WncsError(f"max_workers must be >= 1, got {max_workers}")
+    if executor not in EXECUTORS:  # up front: a one-point sweep never builds the executor
+        raise WncsError(f"unknown executor {executor!r}; expected one of {', '.join(map(repr, EXECUTORS))}")
     opts = {"method": method, "exact": exact, "simulate_slots": simulate_slots, "reps": reps, "seed": seed,
             "burn_in": burn_in, "progress": progress}
     meta = _meta(scenario, param, opts)
