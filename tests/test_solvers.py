@@ -122,6 +122,37 @@ def test_evaluate_policy_matches_dense(seed):
     np.testing.assert_allclose(ev.stationary, pi_mix, atol=1e-12)
 
 
+@pytest.mark.parametrize("seed", SEEDS[:4])
+def test_iterative_evaluation_matches_dense(seed):
+    """BiCGSTAB evaluation (forced on a small chain) against numpy.linalg on the dense chain."""
+    mdp = random_mdp(seed)
+    P = mdp.P.toarray()
+    rng = np.random.default_rng(200 + seed)
+    det = np.array([rng.choice(list(mdp.pairs_of(s))) for s in range(mdp.n_states)], dtype=np.int64)
+    g_ref, pi_ref = dense_gain(P[det], mdp.cost[det])
+    ev = evaluate_policy(mdp, det, method="iterative")
+    assert ev.solver == "bicgstab"
+    assert ev.gain == pytest.approx(g_ref, rel=1e-11)
+    np.testing.assert_allclose(ev.stationary, pi_ref, atol=1e-11)
+    np.testing.assert_allclose(ev.gain + ev.bias, mdp.cost[det] + P[det] @ ev.bias, atol=1e-8)
+    # a warm start from the exact bias of another policy gives the same answer
+    other = evaluate_policy(mdp, mdp.pair_ptr[:-1].astype(np.int64), method="direct")
+    warm = evaluate_policy(mdp, det, method="iterative", h0=other.bias)
+    assert warm.gain == pytest.approx(g_ref, rel=1e-11)
+
+
+def test_iterative_evaluation_falls_back_to_lu():
+    """An iteration cap too small to converge: the sparse LU answers, and says so."""
+    mdp = random_mdp(SEEDS[0])
+    det = mdp.pair_ptr[:-1].astype(np.int64)
+    ev = evaluate_policy(mdp, det, method="iterative", maxiter=1)
+    assert ev.solver == "bicgstab->splu"
+    ref = evaluate_policy(mdp, det, method="direct")
+    assert ref.solver == "splu" and ev.gain == ref.gain
+    with pytest.raises(SolverError, match="unknown evaluation method 'lu'"):
+        evaluate_policy(mdp, det, method="lu")
+
+
 # ------------------------------------------------------------------------- closed form
 
 
