@@ -94,19 +94,26 @@ def test_all_methods_match_brute_force(seed):
     assert lp.occupation.sum() == pytest.approx(1.0, abs=1e-9)
 
 
+@pytest.mark.parametrize("method", ["auto", "iterative"])
 @pytest.mark.parametrize("seed", SEEDS[:4])
-def test_evaluate_policy_matches_dense(seed):
+def test_evaluate_policy_matches_dense(seed, method):
+    """Sparse LU ("auto" on these small chains) and BiCGSTAB against numpy.linalg on the dense chain."""
+    tol = 1e-12 if method == "auto" else 1e-11
     mdp = random_mdp(seed)
     P = mdp.P.toarray()
     rng = np.random.default_rng(100 + seed)
     det = np.array([rng.choice(list(mdp.pairs_of(s))) for s in range(mdp.n_states)], dtype=np.int64)
     g_ref, pi_ref = dense_gain(P[det], mdp.cost[det])
-    ev = evaluate_policy(mdp, det)
-    assert ev.gain == pytest.approx(g_ref, abs=1e-12, rel=1e-12)
-    np.testing.assert_allclose(ev.stationary, pi_ref, atol=1e-12)
+    ev = evaluate_policy(mdp, det, method=method)
+    assert ev.solver == ("splu" if method == "auto" else "bicgstab")
+    assert ev.gain == pytest.approx(g_ref, abs=tol, rel=tol)
+    np.testing.assert_allclose(ev.stationary, pi_ref, atol=tol)
     assert ev.bias[0] == 0.0
     # Poisson equation g + h = c + P h
-    np.testing.assert_allclose(ev.gain + ev.bias, mdp.cost[det] + P[det] @ ev.bias, atol=1e-10)
+    np.testing.assert_allclose(ev.gain + ev.bias, mdp.cost[det] + P[det] @ ev.bias, atol=100 * tol)
+    if method == "iterative":  # a warm start from another policy's bias gives the same answer
+        other = evaluate_policy(mdp, mdp.pair_ptr[:-1].astype(np.int64), method="direct")
+        assert evaluate_policy(mdp, det, method=method, h0=other.bias).gain == pytest.approx(g_ref, rel=tol)
 
     # randomised: mixture weights per pair
     w = rng.random(mdp.n_pairs)
@@ -117,28 +124,9 @@ def test_evaluate_policy_matches_dense(seed):
         P_mix[mdp.s_indices[l]] += w[l] * P[l]
         c_mix[mdp.s_indices[l]] += w[l] * mdp.cost[l]
     g_mix, pi_mix = dense_gain(P_mix, c_mix)
-    ev = evaluate_policy(mdp, w)
-    assert ev.gain == pytest.approx(g_mix, abs=1e-12, rel=1e-12)
-    np.testing.assert_allclose(ev.stationary, pi_mix, atol=1e-12)
-
-
-@pytest.mark.parametrize("seed", SEEDS[:4])
-def test_iterative_evaluation_matches_dense(seed):
-    """BiCGSTAB evaluation (forced on a small chain) against numpy.linalg on the dense chain."""
-    mdp = random_mdp(seed)
-    P = mdp.P.toarray()
-    rng = np.random.default_rng(200 + seed)
-    det = np.array([rng.choice(list(mdp.pairs_of(s))) for s in range(mdp.n_states)], dtype=np.int64)
-    g_ref, pi_ref = dense_gain(P[det], mdp.cost[det])
-    ev = evaluate_policy(mdp, det, method="iterative")
-    assert ev.solver == "bicgstab"
-    assert ev.gain == pytest.approx(g_ref, rel=1e-11)
-    np.testing.assert_allclose(ev.stationary, pi_ref, atol=1e-11)
-    np.testing.assert_allclose(ev.gain + ev.bias, mdp.cost[det] + P[det] @ ev.bias, atol=1e-8)
-    # a warm start from the exact bias of another policy gives the same answer
-    other = evaluate_policy(mdp, mdp.pair_ptr[:-1].astype(np.int64), method="direct")
-    warm = evaluate_policy(mdp, det, method="iterative", h0=other.bias)
-    assert warm.gain == pytest.approx(g_ref, rel=1e-11)
+    ev = evaluate_policy(mdp, w, method=method)
+    assert ev.gain == pytest.approx(g_mix, abs=tol, rel=tol)
+    np.testing.assert_allclose(ev.stationary, pi_mix, atol=tol)
 
 
 def test_iterative_evaluation_falls_back_to_lu():
