@@ -125,6 +125,9 @@ def test_bad_arguments(p12):
         solve_lp(p12, formulation="dual", backend="cvxpy")
     with pytest.raises(SolverError, match="polish"):
         solve_lp(p12, polish="newton")
+    for form in ("primal", "dual"):
+        with pytest.raises(SolverError, match="unknown Clarabel setting 'tol_magic'"):
+            solve_lp(p12, formulation=form, settings={"tol_magic": 1.0})
 
 
 def test_reduced_with_cvxpy_backend(p12, refs):

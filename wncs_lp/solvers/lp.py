@@ -231,6 +231,21 @@ def build_reduced_lp(mdp: MDP, red=None):
     return LPData(A_eq=A, b_eq=b, q=red.C / cs, cost_scale=cs, x_scale=float(nD), dropped_state=0), red
 
 
+def _clarabel_settings(tol: float, max_iter: int, verbose: bool, settings: dict | None):
+    """Clarabel settings: our tolerance on gap and feasibility, then the caller's overrides."""
+    import clarabel
+
+    st = clarabel.DefaultSettings()
+    st.verbose = bool(verbose)
+    st.max_iter = int(max_iter)
+    st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = float(tol)
+    for k, v in (settings or {}).items():
+        if not hasattr(st, k):
+            raise SolverError(f"unknown Clarabel setting {k!r}")
+        setattr(st, k, v)
+    return st
+
+
 def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, settings: dict | None):
     """The gain-bias LP  max g  s.t.  g + h(s_l) - (P h)_l <= c_l,  h(0) = 0, on Clarabel.
 
@@ -249,14 +264,7 @@ def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, set
     A.eliminate_zeros()
     q = np.zeros(n)
     q[0] = -float(n)
-    st = clarabel.DefaultSettings()
-    st.verbose = bool(verbose)
-    st.max_iter = int(max_iter)
-    st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = float(tol)
-    for k, v in (settings or {}).items():
-        if not hasattr(st, k):
-            raise SolverError(f"unknown Clarabel setting {k!r}")
-        setattr(st, k, v)
+    st = _clarabel_settings(tol, max_iter, verbose, settings)
     solver = clarabel.DefaultSolver(sp.csc_matrix((n, n)), q, A, mdp.cost / cs, [clarabel.NonnegativeConeT(L)], st)
     sol = solver.solve()
     info = solver.get_info()
@@ -359,14 +367,7 @@ def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settin
     A = sp.vstack([lp.A_eq, -sp.identity(L, format="csc")], format="csc")
     b = np.concatenate([lp.b_eq, np.zeros(L)])
     Pz = sp.csc_matrix((L, L))
-    st = clarabel.DefaultSettings()
-    st.verbose = bool(verbose)
-    st.max_iter = int(max_iter)
-    st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = float(tol)
-    for k, v in (settings or {}).items():
-        if not hasattr(st, k):
-            raise SolverError(f"unknown Clarabel setting {k!r}")
-        setattr(st, k, v)
+    st = _clarabel_settings(tol, max_iter, verbose, settings)
     solver = clarabel.DefaultSolver(Pz, lp.q, A, b, [clarabel.ZeroConeT(m), clarabel.NonnegativeConeT(L)], st)
     sol = solver.solve()
     info = solver.get_info()
