@@ -211,7 +211,11 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: n
         If the policy is malformed, if the induced chain has more than one recurrent class
         (the message gives their number and a state of two of them), or if the residual of
         the solves exceeds 1e-6 relative to the size of c_pi and h.
+    SolverError
+        An unknown ``method``, or an ``h0`` of the wrong shape.
     """
+    if method not in EVAL_METHODS:
+        raise SolverError(f"unknown evaluation method {method!r}; expected one of {', '.join(EVAL_METHODS)}")
     P_pi, c_pi = policy_matrices(mdp, policy)
     n = mdp.n_states
     classes = recurrent_classes(P_pi)
@@ -223,8 +227,6 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: n
             f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost "
             "depends on the start state and a single gain/bias is undefined"
         )
-    if method not in EVAL_METHODS:
-        raise SolverError(f"unknown evaluation method {method!r}; expected one of {', '.join(EVAL_METHODS)}")
     r = int(classes[0][0])
     M = (sp.identity(n, format="csc") - P_pi).tocsc()
     M.data[M.indptr[r]:M.indptr[r + 1]] = 0.0

@@ -57,8 +57,8 @@ difference (faer's factorisation of these KKT systems ran as fast on 1 thread as
 does the order of rows and columns (its AMD ordering is recomputed; random and reversed
 orders were within 4%). What sets the time is the fill of the KKT factor, ~5.4M nonzeros at
 p12 cap 16 (10k decision states): each AoI grid point carries tens of server/link
-configurations that the transitions couple, so the separators are large. Without the cost scaling the IPM takes as long and the balance residual is
-~60x worse.
+configurations that the transitions couple, so the separators are large. Without the cost
+scaling the IPM takes as long and the balance residual is ~60x worse.
 """
 from __future__ import annotations
 
@@ -445,7 +445,7 @@ def solve_lp(
     * ``polish=True``: ``"vi"`` for models of at least :data:`POLISH_VI_MIN_STATES` states,
       else ``"pi"``.
     * ``polish="pi"``: run :func:`~wncs_lp.solvers.dp.policy_iteration` from that policy
-      (exact sparse evaluation, usually 0-2 improvements); ``gain`` = exact gain of the final
+      (exact evaluation, usually 0-2 improvements); ``gain`` = exact gain of the final
       policy, ``bias`` its exact bias, ``(gain_lower, gain_upper)`` = bracket on that bias.
       If an iterate is multichain (PolicyError) the dual certificate below is used instead
       and the policy becomes the dual-greedy one.
