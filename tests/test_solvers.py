@@ -324,3 +324,13 @@ def test_policy_iteration_from_bad_start_and_stats():
     assert sol.occupation.sum() == pytest.approx(1.0)
     summary = sol.summary()
     assert summary["method"] == "pi" and "changes" not in summary
+
+
+def test_evaluate_policy_checks_h0_on_every_path():
+    """A bad warm start is an error whichever solver runs, not silently ignored."""
+    mdp = random_mdp(SEEDS[0])
+    det = mdp.pair_ptr[:-1].astype(np.int64)
+    for method in ("auto", "direct", "iterative"):
+        for bad in (np.zeros(mdp.n_states + 1), np.full(mdp.n_states, np.nan), "abc"):
+            with pytest.raises(SolverError, match="h0 must be a finite array"):
+                evaluate_policy(mdp, det, method=method, h0=bad)

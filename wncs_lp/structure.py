@@ -74,7 +74,8 @@ __all__ = [
 
 #: Default number of example violations kept in a report.
 DEFAULT_EXAMPLES = 10
-#: Largest model whose stationary distribution is computed automatically (one sparse LU) for the
+#: Largest model whose stationary distribution is computed automatically (by
+#: :func:`~wncs_lp.solvers.dp.evaluate_policy`: sparse LU, or BiCGSTAB from 50,000 states) for the
 #: probabilities printed with examples; recurrence never needs it (graph criterion).
 STATIONARY_SOLVE_LIMIT = 300_000
 
@@ -371,8 +372,9 @@ def policy_context(
         recurrent = stationary probability > stationary_tol.
     stationary : (n,) array, False or None
         A precomputed stationary distribution of the policy; None (default): taken from a
-        policy-iteration solution's occupation, else computed by one sparse LU when the model
-        has at most ``STATIONARY_SOLVE_LIMIT`` states and by the lazy power method above that;
+        policy-iteration solution's occupation, else computed by
+        :func:`~wncs_lp.solvers.dp.evaluate_policy` when the model has at most
+        ``STATIONARY_SOLVE_LIMIT`` states and by the lazy power method above that;
         False: not computed (examples then carry no probabilities; recurrence uses the graph
         criterion anyway).
 

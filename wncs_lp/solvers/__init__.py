@@ -7,8 +7,8 @@
 * ``"rvi"``      -- relative value iteration with the aperiodicity transform;
 * ``"vi"``       -- certified value iteration on the fused kernels (Gauss-Seidel modified
   policy iteration with numba, Jacobi RVI with scipy; :func:`value_iteration`);
-* ``"pi"``       -- Howard policy iteration with exact sparse evaluation (falls back to
-  value iteration on a multichain iterate);
+* ``"pi"``       -- Howard policy iteration with exact evaluation (sparse LU; BiCGSTAB on large
+  chains; falls back to value iteration on a multichain iterate);
 * ``"auto"``     -- picks LP or value iteration by size and cross-checks them when both are
   cheap (:func:`solve_auto`).
 

@@ -51,8 +51,10 @@ Formulations (``solve_lp(formulation=...)``, measured in ``benchmarks/run.py``)
 * ``"auto"`` -- reduced when that shrinks the constraint matrix enough, else primal.
 
 Other levers: Clarabel's default ``direct_solve_method`` ("auto") is faer here; qdldl is
-3x slower. Turning iterative refinement off saves ~30% at unchanged accuracy on these models,
-so it is off by default (:data:`CLARABEL_DEFAULTS`). Clarabel's ``max_threads`` makes no
+3x slower. Turning iterative refinement off saves ~30% at an unchanged raw LP gain on these
+models, so it is off by default with the direct backend (:data:`CLARABEL_DEFAULTS`; the cvxpy
+backend keeps Clarabel's defaults); the balance residual of the returned occupation measure
+grows 5-50x (e.g. 7e-10 -> 4e-9 on p12), still far inside the checks. Clarabel's ``max_threads`` makes no
 difference (faer's factorisation of these KKT systems ran as fast on 1 thread as on 2), nor
 does the order of rows and columns (its AMD ordering is recomputed; random and reversed
 orders were within 4%). What sets the time is the fill of the KKT factor, ~5.4M nonzeros at
@@ -192,10 +194,11 @@ def build_lp(mdp: MDP) -> LPData:
 #: few and whose elimination densifies Q 8x: far above).
 REDUCE_NNZ_RATIO = 0.85
 
-#: Clarabel settings :func:`solve_lp` uses unless ``settings`` overrides them. Iterative
-#: refinement off: on the paper's models it saved ~30% of the IPM time at the same raw LP
-#: accuracy (``benchmarks/run.py``), and the answer is checked anyway (KKT residuals on the
-#: original LP, certificate, polishing).
+#: Clarabel settings :func:`solve_lp` uses with the direct backend unless ``settings``
+#: overrides them. Iterative refinement off: on the paper's models it saved ~30% of the IPM
+#: time at the same raw LP gain (``benchmarks/run.py``); the occupation measure's balance
+#: residual grows 5-50x, and the answer is checked anyway (KKT residuals on the original LP,
+#: certificate, polishing).
 CLARABEL_DEFAULTS: dict[str, Any] = {"iterative_refinement_enable": False}
 
 #: ``polish=True`` means ``"vi"`` from this many states on and ``"pi"`` below: on large
