@@ -39,8 +39,6 @@ import hashlib
 import io
 import json
 import math
-import os
-import tempfile
 import time
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
@@ -49,6 +47,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ._io import atomic_write_text
 from .errors import WncsError
 from .policies import POLICY_NAMES, System, make_policy, parse_policy_names, solve_optimal
 from .scenario import Scenario
@@ -187,22 +186,6 @@ def _override_value(param: str, value: float) -> Any:
     if param.split(".")[-1] in _INT_PARAMS and float(value).is_integer():
         return int(value)
     return float(value)
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
 
 
 def read_rows(path: str | Path) -> list[SweepRow]:
@@ -430,7 +413,7 @@ def run_sweep(
                     f"{out} holds a sweep with other settings ({', '.join(diff)} differ); "
                     "use another --out folder or delete it"
                 )
-        _atomic_write(meta_path, json.dumps(meta, indent=2) + "\n")
+        atomic_write_text(meta_path, json.dumps(meta, indent=2) + "\n")
         files["meta"] = str(meta_path)
         for row in read_rows(out / "sweep.csv"):
             done[row.key] = row
@@ -448,9 +431,9 @@ def run_sweep(
         w.writerow(COLUMNS)
         for r in rows:
             w.writerow(r.to_csv())
-        _atomic_write(out / "sweep.csv", buf.getvalue())
+        atomic_write_text(out / "sweep.csv", buf.getvalue())
         payload = {"settings": meta, "columns": list(COLUMNS), "rows": [r.to_dict() for r in rows]}
-        _atomic_write(out / "sweep.json", json.dumps(payload, indent=2) + "\n")
+        atomic_write_text(out / "sweep.json", json.dumps(payload, indent=2) + "\n")
         files["csv"] = str(out / "sweep.csv")
         files["json"] = str(out / "sweep.json")
 
