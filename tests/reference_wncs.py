@@ -297,7 +297,6 @@ def policy_iteration(s_indices, cost, P, pair_ptr, max_iter=500):
     n = pair_ptr.size - 1
     P = sp.csr_matrix(P)
     policy = pair_ptr[:-1].copy()
-    state_cost = cost[pair_ptr[:-1]]
     for _ in range(max_iter):
         g, h = _evaluate(P[policy], cost[policy])
         tol = 1e-11 * max(1.0, np.abs(h).max(), np.abs(g).max())

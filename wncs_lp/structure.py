@@ -1062,7 +1062,6 @@ def check_consistency(
     pair0 = mdp.pair_ptr[:-1] + ctx.offsets[cfg, a0]
     q0 = ctx.q[pair0]
     tie_at = (started != 0) & (np.abs(q0 - ctx.q_pi) <= ctx.tol)
-    tol = ctx.tol
 
     # memo over states "our job (the job of process job_k in service) in service at x"
     paths = np.full(n, -1, dtype=np.int64)

@@ -452,7 +452,6 @@ def build_aoi_mdp(
     # 2. numbering: states config-major, C order of the box within a configuration
     cfg_idx, flat_of_state = np.nonzero(masks)
     n = int(cfg_idx.size)
-    counts = np.bincount(cfg_idx, minlength=nC).astype(np.int64)
     lookup = np.full((nC, box), -1, dtype=np.int64)
     lookup[cfg_idx, flat_of_state] = np.arange(n, dtype=np.int64)
     cfg_of_state = cfg_idx.astype(np.int32)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import itertools
 from functools import lru_cache
 
-import numpy as np
 
 from ..cost import cost_tables
 from ..errors import ModelError
