@@ -414,25 +414,30 @@ def relative_value_iteration(
                   file=sys.stderr)
         h_next -= h_next[ref_state]
         h, h_next = h_next, h
+    return _iteration_solution(mdp, "rvi", h, lo, hi, converged, it, t0,
+                               {"tau": tau, "tol": tol, "kernel": K.name, "threads": K.threads})
+
+
+def _iteration_solution(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: float, converged: bool,
+                        iterations: int, t0: float, stats: dict) -> Solution:
+    """The Solution of a value-iteration run: the certificate [lo, hi] computed on ``h``, its
+    midpoint as the gain, ``h - h[0]`` as the bias and h's greedy policy (first minimiser);
+    ``stats`` gains ``span``, ``rel_gap`` and ``converged``."""
     q = q_values(mdp, h)
-    Th = np.minimum.reduceat(q, mdp.pair_ptr[:-1])
-    policy = greedy_first(mdp, q, Th)
+    policy = greedy_first(mdp, q, np.minimum.reduceat(q, mdp.pair_ptr[:-1]))
     gain = 0.5 * (lo + hi)
-    bias = h - h[0]
-    rel = (hi - lo) / max(abs(gain), 1e-300)
     return Solution(
-        method="rvi",
+        method=method,
         status="optimal" if converged else "max_iter",
         gain=gain,
         gain_lower=lo,
         gain_upper=hi,
-        bias=bias,
+        bias=h - h[0],
         policy=policy,
         occupation=None,
-        iterations=it,
+        iterations=iterations,
         seconds=time.perf_counter() - t0,
-        stats={"tau": tau, "span": hi - lo, "rel_gap": rel, "converged": converged, "tol": tol,
-               "kernel": K.name, "threads": K.threads},
+        stats={**stats, "span": hi - lo, "rel_gap": (hi - lo) / max(abs(gain), 1e-300), "converged": converged},
     )
 
 
@@ -581,41 +586,21 @@ def value_iteration(
         shift = mid
         h_next -= h_next[0]
         h, h_next = h_next, h
-    q = q_values(mdp, h)
-    Th = np.minimum.reduceat(q, mdp.pair_ptr[:-1])
-    policy = greedy_first(mdp, q, Th)
-    gain = 0.5 * (lo + hi)
-    rel = (hi - lo) / max(abs(gain), 1e-300)
     from .kernels import prepare
 
-    return Solution(
-        method="vi",
-        status="optimal" if converged else "max_iter",
-        gain=gain,
-        gain_lower=lo,
-        gain_upper=hi,
-        bias=h - h[0],
-        policy=policy,
-        occupation=None,
-        iterations=used,
-        seconds=time.perf_counter() - t0,
-        stats={
-            "scheme": scheme,
-            "kernel": K.name,
-            "threads": K.threads,
-            "sweeps": used,
-            "eval_sweeps": evals,
-            "checks": checks,
-            "relax": relax,
-            "span": hi - lo,
-            "rel_gap": rel,
-            "converged": converged,
-            "tol": tol,
-            "bytes_per_sweep": prepare(mdp).bytes_per_sweep,
-            "fallback": fallback,
-            "final_scheme": cur,
-        },
-    )
+    return _iteration_solution(mdp, "vi", h, lo, hi, converged, used, t0, {
+        "scheme": scheme,
+        "kernel": K.name,
+        "threads": K.threads,
+        "sweeps": used,
+        "eval_sweeps": evals,
+        "checks": checks,
+        "relax": relax,
+        "tol": tol,
+        "bytes_per_sweep": prepare(mdp).bytes_per_sweep,
+        "fallback": fallback,
+        "final_scheme": cur,
+    })
 
 
 # ---------------------------------------------------------------------------- PI
