@@ -174,19 +174,29 @@ def build_lp(mdp: MDP) -> LPData:
     LPData
         Sparse CSC ``A_eq`` with nnz = nnz(P) + 2L (minus cancellations from self-loops).
     """
-    n, L = mdp.n_states, mdp.n_pairs
-    E = sp.csr_matrix((np.ones(L), (mdp.s_indices, np.arange(L))), shape=(n, L))
-    B = (E - mdp.P.T.tocsr()).tocsr()
-    keep = np.delete(np.arange(n), 0)
-    A = sp.vstack([B[keep], sp.csr_matrix(np.ones((1, L)))], format="csc")
+    return _occupation_lp(mdp.s_indices, mdp.P, np.ones(mdp.n_pairs), mdp.cost, mdp.n_states)
+
+
+def _cost_scale(cost: np.ndarray) -> float:
+    """``c_s`` = mean |c|, or 1 when that is 0, not finite, or there are no costs."""
+    cs = float(np.mean(np.abs(cost))) if cost.size else 1.0
+    return cs if np.isfinite(cs) and cs > 0 else 1.0
+
+
+def _occupation_lp(col_state: np.ndarray, T: sp.spmatrix, weights: np.ndarray, cost: np.ndarray, n: int) -> LPData:
+    """The scaled LP ``min (c / c_s)^T y`` s.t. rows 1..n-1 of ``(E - T^T) y = 0``,
+    ``weights^T y = n``, ``y >= 0``, with ``E[s, l] = [col_state[l] = s]``: the plain LP
+    (T = P, weights 1) and the semi-Markov one of the reduction (T = Q, weights tau)."""
+    L = int(col_state.size)
+    E = sp.csr_matrix((np.ones(L), (col_state, np.arange(L))), shape=(n, L))
+    B = (E - T.T.tocsr()).tocsr()
+    A = sp.vstack([B[1:], sp.csr_matrix(np.asarray(weights, float)[None, :])], format="csc")
     A.eliminate_zeros()
     A.sort_indices()
     b = np.zeros(n)
     b[-1] = float(n)
-    cs = float(np.mean(np.abs(mdp.cost))) if L else 1.0
-    if not np.isfinite(cs) or cs <= 0:
-        cs = 1.0
-    return LPData(A_eq=A, b_eq=b, q=np.asarray(mdp.cost, float) / cs, cost_scale=cs, x_scale=float(n), dropped_state=0)
+    cs = _cost_scale(cost)
+    return LPData(A_eq=A, b_eq=b, q=np.asarray(cost, float) / cs, cost_scale=cs, x_scale=float(n), dropped_state=0)
 
 
 #: ``formulation="auto"`` uses the reduced LP when its constraint matrix has at most this
@@ -219,19 +229,8 @@ def build_reduced_lp(mdp: MDP, red=None):
     from .reduce import reduce_forced
 
     red = reduce_forced(mdp) if red is None else red
-    nD, LD = red.n_decision, red.dpairs.size
     dloc = np.searchsorted(red.D, mdp.s_indices[red.dpairs])
-    E = sp.csr_matrix((np.ones(LD), (dloc, np.arange(LD))), shape=(nD, LD))
-    B = (E - red.Q.T).tocsr()
-    A = sp.vstack([B[1:], sp.csr_matrix(red.tau[None, :])], format="csc")
-    A.eliminate_zeros()
-    A.sort_indices()
-    b = np.zeros(nD)
-    b[-1] = float(nD)
-    cs = float(np.mean(np.abs(red.C))) if LD else 1.0
-    if not np.isfinite(cs) or cs <= 0:
-        cs = 1.0
-    return LPData(A_eq=A, b_eq=b, q=red.C / cs, cost_scale=cs, x_scale=float(nD), dropped_state=0), red
+    return _occupation_lp(dloc, red.Q, red.tau, red.C, red.n_decision), red
 
 
 def _clarabel_settings(tol: float, max_iter: int, verbose: bool, settings: dict | None):
@@ -258,9 +257,7 @@ def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, set
     import clarabel
 
     n, L = mdp.n_states, mdp.n_pairs
-    cs = float(np.mean(np.abs(mdp.cost))) if L else 1.0
-    if not np.isfinite(cs) or cs <= 0:
-        cs = 1.0
+    cs = _cost_scale(mdp.cost)
     E = sp.csr_matrix((np.ones(L), (np.arange(L), mdp.s_indices)), shape=(L, n))
     B = (E - mdp.P).tocsc()[:, 1:]
     A = sp.hstack([sp.csc_matrix(np.ones((L, 1))), B], format="csc")
@@ -281,6 +278,7 @@ def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, set
         **_clarabel_stats(sol, info),
         "lp_rows": int(L),
         "lp_cols": int(n),
+        "cost_scale": cs,
         "lp_nnz": int(A.nnz),
     }
     return status, status == "Solved", z / float(n), g, h, stats
@@ -542,7 +540,6 @@ def solve_lp(
             raise SolverError(f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
                               f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution")
         lp_obj = g_dual
-        stats["cost_scale"] = float(np.mean(np.abs(mdp.cost))) or 1.0
     else:
         lp = lp_r if form == "reduced" else build_lp(mdp)
         runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
