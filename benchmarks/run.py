@@ -8,7 +8,7 @@ shared, so absolute seconds drift; ratios less so). DP/builder timings are the b
 ``--repeats`` runs. Peers that are not installed are reported as unavailable (``pip install
 'wncs_lp[bench]'``). Sections:
 
-* builder -- vectorised ``build_aoi_mdp`` vs the original loop ``_build_aoi_mdp_loop`` (same
+* builder -- vectorised ``build_aoi_mdp`` vs the original loop ``build_aoi_mdp_loop`` (same
   automaton), pairs/second, tracemalloc peak of the assembly, and the process peak RSS.
 * dp      -- our certified value iteration (numba MPI, numba Jacobi RVI, scipy Jacobi RVI =
   the baseline) vs stormpy LRA and pymdptoolbox RVI; every gain compared with the reference
@@ -32,13 +32,15 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))  # the independent reference builders (tests/reference/)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import peers  # noqa: E402
-from wncs_lp.cost import cost_tables  # noqa: E402
+from reference.loop_builder import build_aoi_mdp_loop  # noqa: E402
 from wncs_lp.models import build  # noqa: E402
+from wncs_lp.models.assemble import build_aoi_mdp  # noqa: E402
+from wncs_lp.models.cost import cost_tables  # noqa: E402
 from wncs_lp.models.preemption import preemption_automaton  # noqa: E402
-from wncs_lp.models.space import _build_aoi_mdp_loop, build_aoi_mdp  # noqa: E402
 from wncs_lp.models.wncs import wncs_automaton  # noqa: E402
 from wncs_lp.scenario import load_scenario  # noqa: E402
 from wncs_lp.solvers import evaluate_policy, relative_value_iteration, solve, value_iteration  # noqa: E402
@@ -123,7 +125,7 @@ def bench_builder(cases, repeats: int, loop_max_pairs: int) -> None:
         tracemalloc.stop()
         t_old = None
         if L <= loop_max_pairs:
-            t_old, old = best_of(lambda: _build_aoi_mdp_loop(auto, sc.tau_caps, q), 1)
+            t_old, old = best_of(lambda: build_aoi_mdp_loop(auto, sc.tau_caps, q), 1)
             same = (np.array_equal(old.P.indices, mdp.P.indices) and np.array_equal(old.P.data, mdp.P.data)
                     and np.array_equal(old.s_indices, mdp.s_indices))
             add(section="builder", instance=inst, states=n, pairs=L, nnz=mdp.P.nnz, method="loop builder (baseline)",

@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import wncs_lp  # noqa: E402
-from wncs_lp.maps import plot_policy_map  # noqa: E402
+from wncs_lp.viz import plot_policy_map  # noqa: E402
 from wncs_lp.solvers import evaluate_policy  # noqa: E402
 
 out = sys.argv[1] if len(sys.argv) > 1 else "policy_map_p12.png"

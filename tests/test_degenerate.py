@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from wncs_lp import build, load_scenario, scenario_from_dict, solve
-from wncs_lp.cost import mse_table
+from wncs_lp.models.cost import mse_table
 
 F = Path(__file__).resolve().parent.parent / "formulations"
 METHODS = ("lp", "rvi", "pi")

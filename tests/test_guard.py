@@ -7,7 +7,7 @@ import pytest
 
 from wncs_lp import build, load_scenario
 from wncs_lp.errors import WncsError
-from wncs_lp.guard import SizeLimitError, check_size, estimate_size
+from wncs_lp.models.guard import SizeLimitError, check_size, estimate_size
 
 F = Path(__file__).resolve().parent.parent / "formulations"
 CASES = [

@@ -16,12 +16,11 @@ from wncs_lp.errors import ModelError  # noqa: E402
 from wncs_lp.maps import (  # noqa: E402
     action_name,
     parse_config_spec,
-    plot_policy_map,
-    plot_policy_slice,
     policy_grid,
     region_stats,
     slice_grid,
 )
+from wncs_lp.viz import plot_policy_map, plot_policy_slice  # noqa: E402
 from wncs_lp.models import build  # noqa: E402
 from wncs_lp.models.preemption import PreemptionConfig  # noqa: E402
 from wncs_lp.models.wncs import idle_config  # noqa: E402

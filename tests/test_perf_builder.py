@@ -1,7 +1,7 @@
 """The vectorised builder engine returns exactly the MDP of the original loop builder.
 
 ``build_aoi_mdp`` (BFS reachability over (config, tau) + CSR written by index arithmetic) and
-``_build_aoi_mdp_loop`` (the original per-(config, action, outcome) loop, kept as the
+``build_aoi_mdp_loop`` (the original per-(config, action, outcome) loop, kept as the
 benchmark baseline) must agree array for array: state numbering, pair order, action
 labels, costs, and P's data / indices / indptr. No wall-clock assertions here; the speed
 is measured in ``benchmarks/``.
@@ -13,9 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wncs_lp.cost import cost_tables
+from wncs_lp.models.cost import cost_tables
 from wncs_lp.models.preemption import preemption_automaton
-from wncs_lp.models.space import ConfigAutomaton, FlatAutomaton, _build_aoi_mdp_loop, build_aoi_mdp
+from reference.loop_builder import build_aoi_mdp_loop
+from wncs_lp.models.assemble import build_aoi_mdp
+from wncs_lp.models.automaton import ConfigAutomaton, FlatAutomaton
 from wncs_lp.models.wncs import wncs_automaton
 from wncs_lp.scenario import load_scenario
 
@@ -38,7 +40,7 @@ def assert_same_mdp(a, b):
 
 def _both(auto, sc):
     new = build_aoi_mdp(auto, sc.tau_caps, cost_tables(sc))
-    old = _build_aoi_mdp_loop(auto, sc.tau_caps, cost_tables(sc))
+    old = build_aoi_mdp_loop(auto, sc.tau_caps, cost_tables(sc))
     return new, old
 
 
@@ -80,7 +82,7 @@ def test_hand_built_automaton_without_flat_arrays():
 
     sc = SimpleNamespace(tau_caps=(4, 3))
     new = build_aoi_mdp(auto, sc.tau_caps, qs)
-    old = _build_aoi_mdp_loop(auto, sc.tau_caps, qs)
+    old = build_aoi_mdp_loop(auto, sc.tau_caps, qs)
     assert_same_mdp(new, old)
     assert isinstance(auto.flat_arrays, FlatAutomaton)
     new.validate()

@@ -123,9 +123,10 @@ def test_evaluate_agrees_with_solver_evaluation(case):
 
 def test_power_iteration_path_agrees(case, monkeypatch):
     """The power-iteration path for large classes gives the LU path's gain."""
+    import wncs_lp.chain as chain_mod
     import wncs_lp.evaluate as ev_mod
 
-    monkeypatch.setattr(ev_mod, "POWER_MIN_STATES", 2)
+    monkeypatch.setattr(chain_mod, "POWER_MIN_STATES", 2)
     mdp = case["mdp"]
     for name in ("random", "suboptimal", "greedy"):
         g = ev_mod.evaluate(mdp, case["policies"][name]).gain
@@ -147,7 +148,7 @@ def test_lemma2_relative_value(case):
     h = np.zeros(mdp.n_states)
     for k, pp in enumerate(sub.poisson):
         h += pp.h[st.config, st.tau[:, k] - 1]
-    from wncs_lp.solvers.dp import policy_matrices
+    from wncs_lp.chain import policy_matrices
 
     P, c = policy_matrices(mdp, RandomPolicy(system).on_mdp(mdp))
     resid = sub.base_gain + h - c - P @ h

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wncs_lp.cost import mse_table
+from wncs_lp.models.cost import mse_table
 from wncs_lp.errors import ModelError
 from wncs_lp.models import build
 from wncs_lp.models.preemption import (

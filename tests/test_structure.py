@@ -21,7 +21,7 @@ from wncs_lp.models.wncs import idle_config
 from wncs_lp.scenario import load_scenario
 from wncs_lp.solvers import solve
 from wncs_lp.solvers.certify import q_values
-from wncs_lp.structure import (
+from wncs_lp.verify import (
     CheckReport,
     Tolerance,
     check_consistency,

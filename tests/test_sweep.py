@@ -112,7 +112,7 @@ def test_plot_returns_axes():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from wncs_lp.plots import plot_sweep
+    from wncs_lp.viz import plot_sweep
 
     sc = load_scenario(P12, ["tau_cap=5"])
     res = run_sweep(sc, "p", [0.8, 0.9], ["suboptimal", "random"], None, plot=False)

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wncs_lp.cost import mse_table
+from wncs_lp.models.cost import mse_table
 from wncs_lp.models import build
 from wncs_lp.models.wncs import feasible_actions, idle_config
 from wncs_lp.scenario import load_scenario, scenario_from_dict

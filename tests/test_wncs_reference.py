@@ -27,7 +27,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import reference_wncs as ref  # noqa: E402
+import reference.wncs as ref  # noqa: E402
 from wncs_lp.models.wncs import build_wncs  # noqa: E402
 from wncs_lp.scenario import load_scenario, scenario_from_dict  # noqa: E402
 

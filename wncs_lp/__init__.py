@@ -11,6 +11,7 @@ Data flows one way::
 from __future__ import annotations
 
 from .errors import ModelError, PolicyError, ScenarioError, SolverError, WncsError
+from .formulations import scenario_names, scenario_path
 from .mdp import MDP
 from .models import build
 from .scenario import Scenario, load_scenario, scenario_from_dict
@@ -32,6 +33,8 @@ __all__ = [
     "build",
     "load_scenario",
     "scenario_from_dict",
+    "scenario_names",
+    "scenario_path",
     "solve",
     "WncsError",
     "ScenarioError",

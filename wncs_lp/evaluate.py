@@ -11,12 +11,9 @@ pi over the states and action probabilities beta(a | s), this module reports
 Only the stationary distribution is needed, and it lives on the recurrent class R of the
 induced chain (for the AoI models usually a small part of the states: a deterministic policy
 visits few of the tau vectors of the box). So the chain's closed classes are found first
-(:func:`wncs_lp.solvers.dp.recurrent_classes`); a unichain policy's pi is then the solution of
-pi_R (I - P_RR) = 0, sum pi_R = 1, a sparse LU of size |R| (one row replaced by ones,
-minimum-degree ordering on A^T + A, one step of iterative refinement) with the residual
-||pi_R P_RR - pi_R||_inf checked; pi = 0 off R. Classes of 20,000 states or more are first
-tried by power iteration on the lazy chain (P + I)/2 (converged when ||pi P - pi||_1 < 1e-14),
-since a randomised policy's class can be the whole state space, where LU fill-in is costly. This is the same quantity as
+(:class:`wncs_lp.chain.PolicyChain`); a unichain policy's pi is then the stationary law of
+its class R (:func:`wncs_lp.chain.class_stationary`: a sparse LU of size |R|, or power
+iteration on a class of 20,000 states or more, residual checked); pi = 0 off R. This is the same quantity as
 :func:`wncs_lp.solvers.dp.evaluate_policy` computes (tests check the two agree) but avoids
 its factorisation of the whole n x n system, which can take minutes (90 s for the greedy
 policy on the 185,916-state three-process MDP, against 3 s here). A chain with several
@@ -41,9 +38,10 @@ from typing import Any
 
 import numpy as np
 
+from .chain import PolicyChain, stationary_law
 from .errors import PolicyError
 from .mdp import MDP
-from .policies import Policy, System
+from .models.system import System
 
 __all__ = ["Evaluation", "evaluate"]
 
@@ -97,7 +95,7 @@ class Evaluation:
 
 def evaluate(
     mdp: MDP,
-    policy: Policy | np.ndarray,
+    policy: Any,
     system: System | None = None,
     name: str | None = None,
     *,
@@ -110,7 +108,8 @@ def evaluate(
     mdp : MDP
         Built by :func:`wncs_lp.models.build` (its ``states`` decode tau and C).
     policy : Policy or array
-        A :class:`~wncs_lp.policies.Policy` (mapped with ``policy.on_mdp(mdp)``), or directly
+        A :class:`~wncs_lp.policies.Policy` (anything with ``on_mdp``, ``system`` and ``name``:
+        mapped with ``policy.on_mdp(mdp)``), or directly
         an (n,) int array of pair indices or an (L,) float array of pair probabilities.
     system : System, optional
         Needed when ``policy`` is an array (for the cost tables and the busy table);
@@ -131,10 +130,8 @@ def evaluate(
         Malformed policy, an MDP of another scenario, or a multichain induced chain (the
         message names the policy and two recurrent classes).
     """
-    from .solvers.dp import policy_matrices, recurrent_classes
-
     t0 = time.perf_counter()
-    if isinstance(policy, Policy):
+    if hasattr(policy, "on_mdp"):
         system = system or policy.system
         name = name or policy.name
         arr = policy.on_mdp(mdp)
@@ -147,15 +144,14 @@ def evaluate(
     if multichain not in ("error", "initial"):
         raise PolicyError(f"multichain must be 'error' or 'initial', got {multichain!r}")
     try:
-        P, c_pi = policy_matrices(mdp, arr)
+        chain = PolicyChain(mdp, arr)
     except PolicyError as exc:
         raise PolicyError(f"policy {name}: {exc}") from None
-    classes = recurrent_classes(P)
+    P, c_pi = chain.P, chain.cost
+    classes = chain.recurrent_classes
     n_classes = len(classes)
     if n_classes == 1:
-        pi_c, residual = _class_stationary(P, classes[0])
-        pi = np.zeros(mdp.n_states)
-        pi[classes[0]] = pi_c
+        pi, residual = chain.stationary, chain.residual
     elif multichain == "error":
         a, b = classes[0], classes[1]
         raise PolicyError(
@@ -201,67 +197,6 @@ def evaluate(
     )
 
 
-#: Residual above which a stationary distribution is rejected.
-STATIONARY_TOL = 1e-9
-#: Classes at least this large are first tried by power iteration (LU fill-in grows fast).
-POWER_MIN_STATES = 20_000
-#: Power iteration: stop when ||pi P - pi||_1 is below this, give up after POWER_MAX_ITER sweeps.
-POWER_TOL = 1e-14
-POWER_MAX_ITER = 20_000
-
-
-def _power_stationary(Pc) -> np.ndarray | None:
-    """Stationary distribution by power iteration on the lazy chain (P + I) / 2, or None.
-
-    The lazy chain has the same stationary distribution and is aperiodic, so the iteration
-    x <- (x + x P) / 2 converges geometrically from the uniform distribution.
-    """
-    m = Pc.shape[0]
-    PT = Pc.T.tocsr()
-    x = np.full(m, 1.0 / m)
-    for it in range(1, POWER_MAX_ITER + 1):
-        y = PT @ x
-        if it % 25 == 0:
-            if np.abs(y - x).sum() < POWER_TOL:
-                return x / x.sum()
-        x = 0.5 * (x + y)
-    return None
-
-
-def _class_stationary(P, cl: np.ndarray) -> tuple:
-    """Stationary distribution of the closed class ``cl`` of P; returns ``(pi_c, residual)``."""
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
-
-    m = cl.size
-    if m == 1:
-        return np.ones(1), 0.0
-    Pc = P[cl][:, cl].tocsr()
-    if m >= POWER_MIN_STATES:
-        pi = _power_stationary(Pc)
-        if pi is not None:
-            residual = float(np.max(np.abs(Pc.T @ pi - pi)))
-            if residual <= STATIONARY_TOL:
-                return pi, residual
-    A = (sp.identity(m, format="csr") - Pc).T.tocsr().tolil()
-    A[0, :] = np.ones(m)
-    A = A.tocsc()
-    rhs = np.zeros(m)
-    rhs[0] = 1.0
-    try:
-        lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A")
-    except RuntimeError as exc:  # pragma: no cover - a closed communicating class is nonsingular
-        raise PolicyError(f"stationary distribution: singular system ({exc})") from None
-    pi = lu.solve(rhs)
-    pi = pi + lu.solve(rhs - A @ pi)
-    pi = np.maximum(pi, 0.0)
-    pi /= pi.sum()
-    residual = float(np.max(np.abs(Pc.T @ pi - pi)))
-    if residual > STATIONARY_TOL:
-        raise PolicyError(f"stationary distribution is inaccurate (residual {residual:.3g})")
-    return pi, residual
-
-
 def _limit_from_initial(mdp: MDP, P, classes: list, system: System) -> tuple:
     """Limiting state distribution from the initial state of a multichain policy.
 
@@ -291,13 +226,8 @@ def _limit_from_initial(mdp: MDP, P, classes: list, system: System) -> tuple:
         x = PT @ x
     else:  # pragma: no cover - transient mass decays geometrically
         raise PolicyError("multichain evaluation: the initial state's mass does not leave the transient states")
-    mu = np.zeros(n)
-    residual = abs(b.sum() - 1.0)
-    for i, cl in enumerate(classes):
-        if b[i] > 0:
-            pi_c, res = _class_stationary(P, cl)
-            mu[cl] += b[i] * pi_c
-            residual = max(residual, res)
+    mu, res = stationary_law(P, classes, weights=b)
+    residual = max(abs(b.sum() - 1.0), res)
     if residual > 1e-8:
         raise PolicyError(f"multichain evaluation from the initial state is inaccurate (residual {residual:.3g})")
     return mu, residual

@@ -54,7 +54,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import WncsError
+from .files import json_ready
 from .mdp import MDP
+from .models.statespace import StateSpace
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "save_npz", "load_npz", "ExportError"]
 
@@ -67,13 +69,8 @@ class ExportError(WncsError):
 
 
 def _scalar_meta(meta: dict) -> dict:
-    out = {}
-    for k, v in meta.items():
-        if isinstance(v, (bool, int, float, str)) or v is None:
-            out[k] = v
-        elif isinstance(v, (np.integer, np.floating, np.bool_)):
-            out[k] = v.item()
-    return out
+    """The scalar entries of the MDP's metadata, JSON-ready."""
+    return {k: v for k, v in json_ready(meta).items() if isinstance(v, (bool, int, float, str)) or v is None}
 
 
 def save_npz(mdp: MDP, path: str | Path, *, scenario: Any = None, compress: bool = False) -> Path:
@@ -149,7 +146,7 @@ def save_npz(mdp: MDP, path: str | Path, *, scenario: Any = None, compress: bool
 def load_npz(path: str | Path, *, validate: bool = True) -> MDP:
     """Read a ``wncs_lp.mdp-npz`` file back into an :class:`MDP`.
 
-    The returned MDP's ``states`` is a :class:`~wncs_lp.models.space.StateSpace` whose
+    The returned MDP's ``states`` is a :class:`~wncs_lp.models.statespace.StateSpace` whose
     configurations are the stored description strings (so ``label``, ``find(tau, config_id)``
     and ``lookup_grid`` work); ``meta`` holds the stored metadata plus ``fingerprint``,
     ``source`` and ``format_version``.
@@ -159,8 +156,6 @@ def load_npz(path: str | Path, *, validate: bool = True) -> MDP:
     ExportError
         Not an export of this format, or an unsupported version.
     """
-    from .models.space import StateSpace
-
     path = Path(path)
     try:
         z = np.load(path, allow_pickle=False)

@@ -1,13 +1,16 @@
-r"""Policy maps: the optimal action over the AoI box, as in the paper's Figs. 3-4, 6-9 and 11-12.
+r"""Policy maps as data: the chosen action over the AoI box, as in the paper's Figs. 3-4, 6-9, 11-12.
 
-* :func:`plot_policy_map` -- the action over (tau_i, tau_j) for one configuration (server state)
+No drawing here (that is :mod:`wncs_lp.viz`):
+
+* :func:`policy_grid` -- the action over (tau_i, tau_j) for one configuration (server state)
   with the other AoIs fixed;
-* :func:`plot_policy_slice` -- three processes on the plane tau_i + tau_j + tau_k = total, drawn
-  as a triangle in barycentric coordinates (Figs. 6-7);
+* :func:`slice_grid` -- three processes on the plane tau_i + tau_j + tau_k = total (Figs. 6-7);
 * :func:`region_stats` -- number of connected regions of each action and whether each is
   (simply) connected, on the grid (4-neighbour) or on the triangular lattice of a slice
   (6-neighbour);
-* :func:`parse_config_spec` -- a configuration from a short text (used by ``wncs-lp map``).
+* :func:`parse_config_spec` -- a configuration from a short text (used by ``wncs-lp map``);
+* :func:`action_name`, :func:`short_action_name`, :func:`map_names` -- readable names, from the
+  model (:meth:`wncs_lp.models.base.Model.action_name`).
 
 Process indices (``axes``, ``fixed_tau``) are **1-based** like the paper's tau_1, tau_2, ...
 
@@ -34,59 +37,44 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .chain import recurrent_classes
 from .errors import ModelError
 from .mdp import MDP
+from .models import model_type
+from .scenario import load_scenario
 
 __all__ = [
-    "ACTION_STYLES",
+    "NEIGHBOURS",
     "parse_config_spec",
+    "map_names",
     "action_name",
+    "short_action_name",
+    "policy_pairs",
+    "recurrent_mask",
     "policy_grid",
     "slice_grid",
     "region_stats",
-    "plot_policy_map",
-    "plot_policy_slice",
 ]
-
-#: (marker, colour) per action index (row of ``mdp.action_table``), cycled.
-ACTION_STYLES: list[tuple[str, str]] = [
-    ("x", "tab:blue"),
-    ("o", "tab:red"),
-    ("s", "tab:green"),
-    ("^", "tab:orange"),
-    ("D", "tab:purple"),
-    ("v", "tab:brown"),
-    ("P", "tab:pink"),
-    ("*", "tab:olive"),
-    ("h", "tab:cyan"),
-    ("<", "black"),
-]
-_FILLED_ALPHA = 0.85
-_TRANSIENT_BG = "#dcdcdc"
-_UNREACHABLE_BG = "#7f7f7f"
-
 
 # ============================================================================ names
-def _style(a: int) -> tuple[str, str]:
-    return ACTION_STYLES[int(a) % len(ACTION_STYLES)]
-
-
 def _short_process(name: str, k: int) -> str:
     m = re.fullmatch(r"(?i)process[-_ ]?(\w+)", name.strip())
     return m.group(1) if m else name
 
 
-def _context(mdp: MDP, scenario: Any = None) -> dict:
-    """Names and parameters for labels: processes, servers, p, scenario name, kind."""
+def map_names(mdp: MDP, scenario: Any = None) -> dict:
+    """Names and parameters for labels: ``processes``, ``servers``, ``p``, ``name``, ``model``.
+
+    From ``scenario`` when given, else from the scenario file the MDP was built from (``p`` only
+    when that file without overrides is this very model).
+    """
     N = len(mdp.states.caps)
-    kind = mdp.meta.get("kind", "wncs") if isinstance(mdp.meta, dict) else "wncs"
+    model = model_type(mdp)
     info = {"processes": [str(k) for k in range(1, N + 1)], "servers": None, "p": None,
-            "name": Path(str(mdp.meta.get("source", mdp.name))).stem, "kind": kind}
+            "name": Path(str(mdp.meta.get("source", mdp.name))).stem, "model": model}
     sc = scenario
     if sc is None and mdp.meta.get("source"):
         try:  # names only; p only if the file without overrides is this very model
-            from .scenario import load_scenario
-
             sc0 = load_scenario(mdp.meta["source"])
             info["processes"] = [_short_process(p.name, k) for k, p in enumerate(sc0.processes, 1)]
             info["servers"] = [s.name for s in sc0.servers]
@@ -99,9 +87,8 @@ def _context(mdp: MDP, scenario: Any = None) -> dict:
         info["servers"] = [s.name for s in sc.servers]
         info["p"] = sc.p
         info["name"] = Path(str(sc.source)).stem
-    if info["servers"] is None and kind == "wncs" and mdp.states.configs:
-        M = len(mdp.states.configs[0])
-        info["servers"] = [f"server {m}" for m in range(1, M + 1)]
+    if info["servers"] is None:
+        info["servers"] = model.default_servers(mdp.states.configs)
     return info
 
 
@@ -121,38 +108,19 @@ def action_name(mdp: MDP, action: int | Sequence[int], config: Any = None, *, sc
     config : configuration object or id, optional
         Preemption: makes the name specific (which job is preempted).
     """
-    names = names or _context(mdp, scenario)
+    names = names or map_names(mdp, scenario)
     if isinstance(action, (int, np.integer)):
         label = tuple(int(x) for x in np.atleast_1d(mdp.action_table[int(action)]))
     else:
         label = tuple(int(x) for x in action)
-    procs = names["processes"]
-    if names["kind"] == "preemption":
-        a = label[0]
-        job = None
-        if config is not None:
-            conf = mdp.states.configs[int(config)] if isinstance(config, (int, np.integer)) else config
-            job = conf[1]
-        if a == 0:
-            if config is None:
-                return "keep going (no new job)"
-            return "stay idle" if job is None else f"keep going (serve {procs[job[0] - 1]})"
-        if job is None:
-            return f"start {procs[a - 1]}" if config is not None else f"start {procs[a - 1]} (preempting if busy)"
-        if job[0] == a:
-            return f"restart {procs[a - 1]} (cancel)"
-        return f"{procs[a - 1]} preempts {procs[job[0] - 1]}"
-    servers = names["servers"] or [f"server {m}" for m in range(1, len(label) + 1)]
-    parts = [f"{procs[k - 1]} to {servers[m]}" for m, k in enumerate(label) if k]
-    return "(" + ", ".join(parts) + ")" if parts else "(send nothing)"
+    conf = mdp.states.configs[int(config)] if isinstance(config, (int, np.integer)) else config
+    return names["model"].action_name(label, conf, names)
 
 
-def _short_action(mdp: MDP, a: int, names: dict) -> str:
+def short_action_name(mdp: MDP, a: int, names: dict) -> str:
+    """A short legend entry of action index ``a`` (``names`` from :func:`map_names`)."""
     label = tuple(int(x) for x in np.atleast_1d(mdp.action_table[int(a)]))
-    procs = names["processes"]
-    if names["kind"] == "preemption":
-        return "keep" if label[0] == 0 else f"start {procs[label[0] - 1]}"
-    return "(" + ",".join(procs[k - 1] if k else "-" for k in label) + ")"
+    return names["model"].short_action(label, names)
 
 
 # ============================================================================ configurations
@@ -187,9 +155,10 @@ def parse_config_spec(mdp: MDP, spec: Any) -> int:
         if c < 0:
             raise ModelError(f"configuration {spec!r} is not reachable in {mdp.name}")
         return c
+    model = model_type(mdp)
     text = spec.strip()
     if text.lower() == "idle":
-        ids = [i for i, c in enumerate(configs) if _is_idle(c)]
+        ids = [i for i, c in enumerate(configs) if model.is_idle(c)]
         if len(ids) == 1:
             return ids[0]
         if not ids:
@@ -212,36 +181,19 @@ def parse_config_spec(mdp: MDP, spec: Any) -> int:
     normed = [_norm(d) for d in descs]
     if target in normed:
         return normed.index(target)
-    # Section II: servers not named are idle
-    if configs and isinstance(configs[0], tuple) and all(isinstance(x, tuple) and len(x) == 4 for x in configs[0]):
-        idle_desc = next((d for c, d in zip(configs, descs) if _is_idle(c)), None)
-        if idle_desc is not None:
-            server_names = [p.split(":")[0].strip().lower() for p in idle_desc.split(";")]
-            given = {}
-            for part in text.split(";"):
-                if ":" in part:
-                    nm, rest = part.split(":", 1)
-                    given[nm.strip().lower()] = rest
-            if given and set(given) <= set(server_names):
-                full = "; ".join(f"{nm}: {given.get(nm, 'idle')}" for nm in server_names)
-                if _norm(full) in normed:
-                    return normed.index(_norm(full))
+    # a partial description (Section II: servers not named are idle)
+    idle_desc = next((d for c, d in zip(configs, descs) if model.is_idle(c)), None)
+    full = model.complete_partial(text, descs, idle_desc)
+    if full is not None and _norm(full) in normed:
+        return normed.index(_norm(full))
     close = difflib.get_close_matches(target, normed, n=6, cutoff=0.5)
     hint = "; ".join(repr(descs[normed.index(c)]) for c in close) or "none close"
     raise ModelError(f"no reachable configuration matches {text!r} in {mdp.name}; close matches: {hint}")
 
 
-def _is_idle(c: Any) -> bool:
-    if hasattr(c, "_fields"):  # preemption
-        return c[1] is None and not c[2] and all(x is None for x in c[3])
-    try:
-        return all(job == 0 and d == 0 and not any(up) and not any(down) for (up, job, d, down) in c)
-    except (TypeError, ValueError):
-        return False
-
-
 # ============================================================================ grids
-def _policy_pairs(mdp: MDP, policy_or_solution: Any) -> np.ndarray:
+def policy_pairs(mdp: MDP, policy_or_solution: Any) -> np.ndarray:
+    """The (n,) chosen pair per state of a Solution or a pair-index array, checked."""
     pol = getattr(policy_or_solution, "policy", policy_or_solution)
     pol = np.asarray(pol)
     if pol.shape != (mdp.n_states,) or not np.issubdtype(pol.dtype, np.integer):
@@ -251,7 +203,7 @@ def _policy_pairs(mdp: MDP, policy_or_solution: Any) -> np.ndarray:
     return pol.astype(np.int64)
 
 
-def _recurrent_mask(mdp: MDP, policy_or_solution: Any, pol: np.ndarray, stationary: Any) -> np.ndarray | None:
+def recurrent_mask(mdp: MDP, pol: np.ndarray, stationary: Any = None) -> np.ndarray | None:
     """States with positive stationary probability under the policy.
 
     ``stationary`` False: no shading (None); an (n,) array: ``stationary > 0``; None: the
@@ -265,8 +217,6 @@ def _recurrent_mask(mdp: MDP, policy_or_solution: Any, pol: np.ndarray, stationa
         if st.shape != (mdp.n_states,):
             raise ModelError(f"stationary must have shape ({mdp.n_states},), got {st.shape}")
         return st > 0
-    from .solvers.dp import recurrent_classes
-
     rec = np.zeros(mdp.n_states, bool)
     for cl in recurrent_classes(mdp.P[pol]):
         rec[cl] = True
@@ -314,7 +264,7 @@ def _weights(mdp: MDP, pol: np.ndarray, stationary: Any) -> np.ndarray | None:
         return None
     if stationary is not None:
         return np.asarray(stationary, float)
-    return _recurrent_mask(mdp, pol, pol, None).astype(float)
+    return recurrent_mask(mdp, pol, None).astype(float)
 
 
 def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[int] = (1, 2),
@@ -339,7 +289,7 @@ def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[i
     N = len(space.caps)
     axes = _check_axes(N, axes, 2)
     c = parse_config_spec(mdp, config)
-    pol = _policy_pairs(mdp, policy_or_solution)
+    pol = policy_pairs(mdp, policy_or_solution)
     fixed = _fixed(mdp, c, axes, fixed_tau, _weights(mdp, pol, stationary) if len(fixed_tau or {}) < N - 2 else None)
     G = space.lookup_grid(c)
     idx = [slice(None) if k in axes else fixed[k] - 1 for k in range(1, N + 1)]
@@ -372,7 +322,7 @@ def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes:
         raise ModelError(f"a slice tau_i + tau_j + tau_k = total needs 3 processes, this model has {N}")
     axes = _check_axes(N, axes, 3)
     c = parse_config_spec(mdp, config)
-    pol = _policy_pairs(mdp, policy_or_solution)
+    pol = policy_pairs(mdp, policy_or_solution)
     fixed = _fixed(mdp, c, axes, fixed_tau,
                    _weights(mdp, pol, stationary) if len(fixed_tau or {}) < N - 3 else None)
     i, j, k = axes
@@ -398,13 +348,15 @@ def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes:
 
 
 # ============================================================================ regions
-_STRUCT = {
+#: Structuring elements of the region counts: 4- and 8-neighbour grids, the triangular lattice.
+NEIGHBOURS = {
     "grid4": np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]]),
     "grid8": np.ones((3, 3), int),
     # triangular lattice in (tau_i, tau_j) coordinates: (+-1, 0), (0, +-1), (+1, -1), (-1, +1)
     "tri6": np.array([[0, 1, 1], [1, 1, 1], [1, 1, 0]]),
 }
-_DUAL = {"grid4": "grid8", "grid8": "grid4", "tri6": "tri6"}
+#: The dual connectivity of each, for the holes of a region.
+DUAL_NEIGHBOURS = {"grid4": "grid8", "grid8": "grid4", "tri6": "tri6"}
 
 
 def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any = None, *,
@@ -455,7 +407,7 @@ def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any
             lab, _, fixed = slice_grid(mdp, policy_or_solution, config, total, axes or (1, 2, 3), fixed_tau,
                                        stationary)
             connectivity = connectivity or "tri6"
-        info = _context(mdp, scenario)
+        info = map_names(mdp, scenario)
         cid = parse_config_spec(mdp, config)
         names = {int(a): action_name(mdp, int(a), cid, names=info) for a in np.unique(lab[lab >= 0])}
     else:
@@ -463,9 +415,9 @@ def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any
         connectivity = connectivity or "grid4"
     if lab.ndim != 2 or not np.issubdtype(lab.dtype, np.integer):
         raise ModelError(f"labels must be a 2-D integer array, got shape {lab.shape} and dtype {lab.dtype}")
-    if connectivity not in _STRUCT:
-        raise ModelError(f"connectivity must be one of {sorted(_STRUCT)}, got {connectivity!r}")
-    st, dual = _STRUCT[connectivity], _STRUCT[_DUAL[connectivity]]
+    if connectivity not in NEIGHBOURS:
+        raise ModelError(f"connectivity must be one of {sorted(NEIGHBOURS)}, got {connectivity!r}")
+    st, dual = NEIGHBOURS[connectivity], NEIGHBOURS[DUAL_NEIGHBOURS[connectivity]]
     domain = lab != -2
     unreach = lab == -1
     padded_dom = np.pad(domain, 1, constant_values=False)
@@ -482,7 +434,7 @@ def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any
         mask = lab == a
         comp, ncomp = ndimage.label(mask, structure=st)
         sizes = sorted((int(x) for x in np.bincount(comp.ravel())[1:]), reverse=True)
-        _, ndiag = ndimage.label(mask, structure=_STRUCT["grid8"])
+        _, ndiag = ndimage.label(mask, structure=NEIGHBOURS["grid8"])
         br, nbr = ndimage.label(mask | unreach, structure=st)
         bridged = int(np.unique(br[mask]).size)
         filled = np.pad(mask | unreach, 1, constant_values=False)
@@ -505,252 +457,3 @@ def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any
     out["actions_present"] = len(out["per_action"])
     out["regions_total"] = total_regions
     return out
-
-
-# ============================================================================ plots
-def _tau(k: int, info: dict) -> str:
-    """Mathtext tau with the process's short name as subscript when it is short, else its index."""
-    nm = info["processes"][k - 1]
-    sub = nm if re.fullmatch(r"\w{1,3}", nm) else str(k)
-    return rf"$\tau_{{{sub}}}$"
-
-
-def _title(info: dict, mdp: MDP, config: int, extra: str) -> str:
-    desc = mdp.states.describe_config(mdp.states.configs[config])
-    caps = mdp.states.caps
-    par = [f"cap {caps[0]}" if len(set(caps)) == 1 else "caps " + ",".join(map(str, caps))]
-    if info.get("p") is not None:
-        par.insert(0, f"p = {info['p']:g}")
-    return f"{info['name']}: policy in [{desc}]\n{extra}{', '.join(par)}"
-
-
-def _ticks(ax, cap_x: int, cap_y: int) -> None:
-    step = lambda c: 1 if c <= 15 else (2 if c <= 30 else 5)  # noqa: E731
-    ax.set_xticks(range(1, cap_x + 1, step(cap_x)))
-    ax.set_yticks(range(1, cap_y + 1, step(cap_y)))
-
-
-def plot_policy_map(
-    mdp: MDP,
-    policy_or_solution: Any,
-    config: Any,
-    axes: Sequence[int] = (1, 2),
-    fixed_tau: Mapping[int, int] | None = None,
-    ax: Any = None,
-    stationary: Any = None,
-    *,
-    scenario: Any = None,
-    title: str | None = None,
-    legend: bool = True,
-) -> Any:
-    r"""Draw the chosen action over (tau_i, tau_j) for one configuration (paper Figs. 3, 4, 8, 9, 11, 12).
-
-    Each reachable cell carries the action's marker (one marker/colour per action, consistent
-    across maps of one MDP); the background is white for states with positive stationary
-    probability under the policy, light grey for states with zero stationary probability
-    (transient), dark grey for unreachable cells.
-
-    Parameters
-    ----------
-    mdp : MDP
-    policy_or_solution : Solution or (n,) int array of pair indices
-    config : configuration (id, object or spec string, see :func:`parse_config_spec`)
-    axes : (i, j)
-        1-based processes on the x and y axes.
-    fixed_tau : {k: tau_k}, optional
-        The other AoIs (default: the value with the most stationary probability, or the most
-        recurrent states, in this configuration; see :func:`policy_grid`).
-    ax : matplotlib Axes, optional
-    stationary : (n,) array, False or None
-        Stationary distribution for the shading (``> 0`` = recurrent); None (default) uses the
-        exact graph criterion (closed communicating classes of the policy's chain); False
-        disables the shading.
-    scenario : Scenario, optional
-        For process/server names and p in labels (default: read from ``mdp.meta["source"]``).
-    title : str, optional
-    legend : bool
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-    """
-    import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
-
-    cid = parse_config_spec(mdp, config)
-    pol = _policy_pairs(mdp, policy_or_solution)
-    A, S, fixed = policy_grid(mdp, pol, cid, axes, fixed_tau, stationary)
-    rec_mask = _recurrent_mask(mdp, policy_or_solution, pol, stationary)
-    info = _context(mdp, scenario)
-    if ax is None:
-        _, ax = plt.subplots(figsize=(8.6, 6.2))
-    ci, cj = A.shape
-    bg = np.ones((cj, ci, 3))
-    reach = S >= 0
-    if rec_mask is not None:
-        trans = reach & ~rec_mask[np.maximum(S, 0)]
-        bg[trans.T] = np.array([0xDC, 0xDC, 0xDC]) / 255
-    bg[(~reach).T] = np.array([0x7F, 0x7F, 0x7F]) / 255
-    ax.imshow(bg, origin="lower", extent=(0.5, ci + 0.5, 0.5, cj + 0.5), interpolation="nearest", aspect="auto")
-    n_cells = max(ci, cj)
-    ms = max(3.0, min(9.0, 160.0 / n_cells))
-    handles = []
-    for a in np.unique(A[A >= 0]):
-        xs, ys = np.nonzero(A == a)
-        mk, col = _style(a)
-        ax.plot(xs + 1, ys + 1, linestyle="none", marker=mk, color=col, markersize=ms,
-                markerfacecolor=col if mk not in ("x", "+") else None, alpha=_FILLED_ALPHA,
-                markeredgewidth=1.4 if mk in ("x", "+") else 0.6)
-        n = int(xs.size)
-        handles.append(Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
-                              label=f"{action_name(mdp, int(a), cid, names=info)}  [{n} cells]"))
-    if rec_mask is not None:
-        handles.append(Patch(facecolor=_TRANSIENT_BG, edgecolor="0.5", label="zero stationary probability"))
-    if (~reach).any():
-        handles.append(Patch(facecolor=_UNREACHABLE_BG, edgecolor="0.3", label="unreachable state"))
-    i, j = axes
-    pn = info["processes"]
-    ax.set_xlabel(f"{_tau(i, info)}  (AoI of process {pn[i - 1]})")
-    ax.set_ylabel(f"{_tau(j, info)}  (AoI of process {pn[j - 1]})")
-    ax.set_xlim(0.5, ci + 0.5)
-    ax.set_ylim(0.5, cj + 0.5)
-    _ticks(ax, ci, cj)
-    extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(fixed.items()))
-    ax.set_title(title or _title(info, mdp, cid, (extra + ", ") if extra else ""), fontsize=10)
-    if legend:
-        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8.5,
-                  title="action", title_fontsize=9, frameon=True)
-    return ax
-
-
-def _bary(t_i: np.ndarray, t_j: np.ndarray, t_k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Barycentric -> plane: vertex of tau_i at (0, 0), tau_j at (1, 0), tau_k at (1/2, sqrt(3)/2)."""
-    tot = t_i + t_j + t_k
-    return (t_j + 0.5 * t_k) / tot, (np.sqrt(3) / 2) * t_k / tot
-
-
-def plot_policy_slice(
-    mdp: MDP,
-    solution: Any,
-    config: Any,
-    total: int,
-    ax: Any = None,
-    *,
-    axes: Sequence[int] = (1, 2, 3),
-    fixed_tau: Mapping[int, int] | None = None,
-    stationary: Any = None,
-    scenario: Any = None,
-    title: str | None = None,
-    legend: bool = True,
-) -> Any:
-    r"""Draw the policy on the plane tau_i + tau_j + tau_k = total as a triangle (paper Figs. 6-7).
-
-    A lattice point (t_i, t_j, t_k) is drawn at its barycentric position (corner of tau_i = the
-    point where tau_i is largest, etc.); markers as in :func:`plot_policy_map`, faded for
-    states with zero stationary probability, a small grey dot for unreachable points. Each
-    connected region (6-neighbour on the triangular lattice) carries a text label with its
-    action.
-
-    Parameters
-    ----------
-    mdp, solution, config
-        As in :func:`plot_policy_map`.
-    total : int
-        The plane's constant.
-    ax : Axes, optional
-    axes : (i, j, k)
-        The three processes (1-based).
-    fixed_tau : dict, optional
-        Values of the AoIs not in ``axes`` (N > 3).
-
-    Returns
-    -------
-    matplotlib.axes.Axes
-    """
-    import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
-    from scipy import ndimage
-
-    cid = parse_config_spec(mdp, config)
-    pol = _policy_pairs(mdp, solution)
-    A, S, fixed = slice_grid(mdp, pol, cid, total, axes, fixed_tau, stationary)
-    rec_mask = _recurrent_mask(mdp, solution, pol, stationary)
-    info = _context(mdp, scenario)
-    if ax is None:
-        _, ax = plt.subplots(figsize=(9.0, 6.8))
-    i, j, k = axes
-    ci, cj = A.shape
-    TI, TJ = np.meshgrid(np.arange(1, ci + 1), np.arange(1, cj + 1), indexing="ij")
-    TK = total - TI - TJ
-    X, Y = _bary(TI.astype(float), TJ.astype(float), TK.astype(float))
-    on = A != -2
-    npts = int(on.sum())
-    side = max(2.0, np.sqrt(2 * npts))
-    ms = max(2.5, min(9.0, 170.0 / side))
-    # outline of the plane inside the box (the convex hull of its lattice points)
-    px, py = X[on], Y[on]
-    ax.plot(px, py, linestyle="none")  # sets the limits
-    if npts >= 3:
-        try:
-            from scipy.spatial import ConvexHull
-
-            hull = ConvexHull(np.c_[px, py])
-            v = np.r_[hull.vertices, hull.vertices[:1]]
-            ax.plot(px[v], py[v], color="0.6", lw=0.8, zorder=0)
-        except Exception:  # degenerate (collinear) slice
-            pass
-    unr = A == -1
-    if unr.any():
-        ax.plot(X[unr], Y[unr], linestyle="none", marker=".", color="0.55", markersize=ms * 0.5, zorder=1)
-    handles = []
-    for a in np.unique(A[A >= 0]):
-        mk, col = _style(a)
-        m = A == a
-        rec = m.copy()
-        if rec_mask is not None:
-            rec = m & rec_mask[np.maximum(S, 0)]
-        for sel, alpha in ((rec, _FILLED_ALPHA), (m & ~rec, 0.35)):
-            if sel.any():
-                ax.plot(X[sel], Y[sel], linestyle="none", marker=mk, color=col, markersize=ms, alpha=alpha,
-                        markerfacecolor=col if mk not in ("x", "+") else None,
-                        markeredgewidth=1.2 if mk in ("x", "+") else 0.5, zorder=2)
-        handles.append(Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
-                              label=f"{action_name(mdp, int(a), cid, names=info)}  [{int(m.sum())} points]"))
-        comp, ncomp = ndimage.label(m, structure=_STRUCT["tri6"])
-        for r in range(1, ncomp + 1):
-            sel = comp == r
-            if sel.sum() < 3:
-                continue
-            ax.text(X[sel].mean(), Y[sel].mean(), _short_action(mdp, int(a), info), ha="center", va="center",
-                    fontsize=9, fontweight="bold", color=col, zorder=4,
-                    bbox=dict(boxstyle="round,pad=0.2", facecolor="white", edgecolor=col, alpha=0.85))
-    if rec_mask is not None:
-        handles.append(Line2D([], [], linestyle="none", marker="o", color="0.3", alpha=0.35, markersize=7,
-                              label="faded: zero stationary probability"))
-    if unr.any():
-        handles.append(Line2D([], [], linestyle="none", marker=".", color="0.55", markersize=7,
-                              label="unreachable state"))
-    pn = info["processes"]
-    # where each tau is largest: a label just outside the points, away from their centre
-    mx, my = px.mean(), py.mean()
-    span = max(px.max() - px.min(), py.max() - py.min(), 1e-9)
-    for name, T_ in ((i, TI), (j, TJ), (k, TK)):
-        vals = np.where(on, T_, -1)
-        top = vals == vals.max()
-        tx, ty = X[top].mean(), Y[top].mean()
-        dx, dy = tx - mx, ty - my
-        nrm = max(np.hypot(dx, dy), 1e-9)
-        ax.annotate(f"{_tau(name, info)} largest (= {int(vals.max())})\nprocess {pn[name - 1]}",
-                    (tx + 0.17 * span * dx / nrm, ty + 0.17 * span * dy / nrm), ha="center", va="center",
-                    fontsize=8.5, color="0.25", annotation_clip=False)
-    ax.margins(0.2)
-    ax.set_aspect("equal")
-    ax.set_axis_off()
-    extra = ", ".join(f"{_tau(p, info)} = {v}" for p, v in sorted(fixed.items()))
-    head = f"plane {_tau(i, info)} + {_tau(j, info)} + {_tau(k, info)} = {total}, " + (extra + ", " if extra else "")
-    ax.set_title(title or _title(info, mdp, cid, head), fontsize=10, pad=30)
-    if legend:
-        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8.5, title="action",
-                  title_fontsize=9)
-    return ax

@@ -42,7 +42,7 @@ class MDP:
     action_table : (n_actions, ...) array or None
         The decoded label of each action index (for the WNCS model, row = (a_1..a_M)).
     states : object or None
-        A decoded view of the states (e.g. :class:`wncs_lp.models.space.StateSpace`).
+        A decoded view of the states (e.g. :class:`wncs_lp.models.statespace.StateSpace`).
     name : str
     meta : dict
         Free-form provenance (scenario, build time...).

@@ -47,9 +47,10 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ._io import atomic_write_text
+from .files import atomic_write_text
 from .errors import WncsError
-from .policies import POLICY_NAMES, System, make_policy, parse_policy_names, solve_optimal
+from .models.system import System
+from .policies import POLICY_NAMES, make_policy, parse_policy_names
 from .scenario import Scenario
 
 __all__ = ["SweepRow", "SweepResult", "run_sweep", "parse_values", "read_rows", "COLUMNS"]
@@ -218,7 +219,7 @@ def _same_space(mdp: Any, warm: dict | None) -> bool:
 def _space_key(mdp: Any) -> str:
     """A digest of the state numbering (configurations and the (C, tau) -> state lookup)."""
     h = hashlib.sha1(repr(list(mdp.states.configs)).encode())
-    h.update(np.ascontiguousarray(mdp.states._lookup).tobytes())
+    h.update(np.ascontiguousarray(mdp.states.lookup).tobytes())
     return h.hexdigest()
 
 
@@ -239,6 +240,8 @@ def compute_point(
     from .evaluate import evaluate
     from .models import build
     from .simulate import simulate
+    from .solvers import solve
+
     sc = scenario.with_overrides({param: _override_value(param, value)})
     system = System.from_scenario(sc)
     exact = opts.get("exact", True)
@@ -256,18 +259,17 @@ def compute_point(
             solution = None
             if name == "optimal":
                 kw: dict[str, Any] = {}
-                if _same_space(mdp, warm):
-                    kw["h0"] = warm["bias"]
+                if _same_space(mdp, warm):  # pi starts from the previous policy, rvi from its bias
                     if method == "pi":
                         kw["policy0"] = warm["policy"]
+                    elif method == "rvi":
+                        kw["h0"] = warm["bias"]
                     warm_used = method in ("pi", "rvi")
-                solution = solve_optimal(mdp, method=method, **kw)
+                solution = solve(mdp, method=method, **kw)
                 new_warm = {"n_pairs": mdp.n_pairs, "space": _space_key(mdp),
                             "bias": solution.bias, "policy": solution.policy}
                 if not solution.ok:
                     status = f"error: solver status {solution.status}"
-                elif "fallback_from" in solution.stats:
-                    status = "ok (pi met a multichain iterate; solved by rvi)"
             pol = make_policy(name, system, mdp, method=method, solution=solution)
             if exact:
                 ev = evaluate(mdp, pol, multichain="initial")
@@ -472,7 +474,7 @@ def run_sweep(
 
     rows = tuple(done[(_value_key(v), p)] for v in grid for p in names)
     if out is not None and plot:
-        from .plots import save_sweep_figure
+        from .viz import save_sweep_figure
 
         paths = save_sweep_figure(rows, out / "sweep", title=f"{Path(scenario.source).stem}: {param} sweep")
         files.update(paths)

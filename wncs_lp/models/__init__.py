@@ -1,22 +1,60 @@
-"""Model builders: scenario -> :class:`~wncs_lp.mdp.MDP`. One module per model."""
+"""Models: scenario -> :class:`~wncs_lp.models.base.Model` -> :class:`~wncs_lp.mdp.MDP`.
+
+One module per model kind (:mod:`.wncs`, :mod:`.preemption`), each a :class:`Model` subclass
+that owns everything the toolkit knows of that kind; the rest is shared:
+
+* :mod:`.automaton` -- the configuration automaton and its exploration;
+* :mod:`.statespace` -- the decoded (tau, configuration) view of a state space;
+* :mod:`.assemble` -- the vectorised assembly of the MDP over the AoI box;
+* :mod:`.cost` -- the AoI-to-MSE cost tables;
+* :mod:`.system` -- the automaton and costs without the box (policies, simulation);
+* :mod:`.guard` -- size and memory estimates before a build.
+
+Only this package looks at ``scenario.model.kind``: :func:`model_for` is the one dispatch.
+"""
 from __future__ import annotations
 
 from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario
+from .base import Model
+from .preemption import PreemptionModel
+from .wncs import WncsModel
 
-__all__ = ["build"]
+__all__ = ["MODELS", "Model", "build", "model_for", "model_type"]
+
+#: The model classes by ``kind``.
+MODELS: dict[str, type[Model]] = {WncsModel.kind: WncsModel, PreemptionModel.kind: PreemptionModel}
 
 
-def build(scenario: Scenario) -> MDP:
-    """Build the MDP of a scenario, dispatching on ``scenario.model.kind``."""
-    kind = scenario.model.kind
-    if kind == "wncs":
-        from .wncs import build_wncs
+def model_for(scenario: Scenario) -> Model:
+    """The :class:`Model` of a scenario (dispatching on ``scenario.model.kind``)."""
+    cls = MODELS.get(scenario.model.kind)
+    if cls is None:
+        raise ModelError(f"{scenario.source}: no model of kind {scenario.model.kind!r}; expected one of {', '.join(MODELS)}")
+    return cls(scenario)
 
-        return build_wncs(scenario)
-    if kind == "preemption":
-        from .preemption import build_preemption
 
-        return build_preemption(scenario)
-    raise ModelError(f"{scenario.source}: no builder for model kind {kind!r}")
+def model_type(mdp: MDP) -> type[Model]:
+    """The model class of a built MDP.
+
+    The model the state space was built from; for an MDP without one (e.g. read back from a
+    file) the ``kind`` of its metadata, else the shape of its configurations (Section II when
+    nothing tells).
+    """
+    states = getattr(mdp, "states", None)
+    model = getattr(states, "model", None)
+    if model is not None:
+        return type(model)
+    kind = mdp.meta.get("kind") if isinstance(mdp.meta, dict) else None
+    if kind in MODELS:
+        return MODELS[kind]
+    configs = getattr(states, "configs", None) or [None]
+    if getattr(configs[0], "_fields", ()) == ("b", "job", "stack", "down"):
+        return PreemptionModel
+    return WncsModel
+
+
+def build(scenario: Scenario, model: Model | None = None) -> MDP:
+    """Build the MDP of a scenario (``model``: a :class:`Model` of it whose automaton to reuse)."""
+    return (model if model is not None else model_for(scenario)).build()

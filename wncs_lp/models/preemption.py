@@ -81,15 +81,18 @@ never holds more than N - 1 jobs and a waiting job ages exactly while the other 
 from __future__ import annotations
 
 import itertools
-from typing import NamedTuple, Optional
+from typing import Any, NamedTuple, Optional, Sequence
 
-from ..cost import cost_tables
+import numpy as np
+
 from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario
-from .space import ConfigAutomaton, build_aoi_mdp, explore_configs
+from .automaton import ConfigAutomaton, explore_configs
+from .base import Model
 
 __all__ = [
+    "PreemptionModel",
     "PreemptionConfig",
     "build_preemption",
     "preemption_automaton",
@@ -251,21 +254,101 @@ def build_preemption(scenario: Scenario) -> MDP:
     """Build the Section IV MDP of a ``kind = "preemption"`` scenario.
 
     Returns an :class:`~wncs_lp.mdp.MDP` whose ``states`` is a
-    :class:`~wncs_lp.models.space.StateSpace` (tau per process, :class:`PreemptionConfig`) and
-    whose ``action_table`` rows are ``(a,)``: 0 = keep going, k = start process k's update.
+    :class:`~wncs_lp.models.statespace.StateSpace` (tau per process, :class:`PreemptionConfig`)
+    and whose ``action_table`` rows are ``(a,)``: 0 = keep going, k = start process k's update.
     """
-    _check_scenario(scenario)
-    auto = preemption_automaton(scenario)
-    return build_aoi_mdp(
-        auto,
-        scenario.tau_caps,
-        cost_tables(scenario),
-        describe_config=describe_preemption_config,
-        name=f"preemption:{scenario.source}",
-        meta={
-            "kind": "preemption",
-            "preemptive": scenario.model.preemptive,
-            "source": scenario.source,
-            "fingerprint": scenario.fingerprint(),
-        },
-    )
+    return PreemptionModel(scenario).build()
+
+
+class PreemptionModel(Model):
+    """The Section IV model: one server, every sensor on its own channel, preemptive scheduling.
+
+    A configuration is a :class:`PreemptionConfig` ``(b, job, stack, down)``; an action label is
+    ``(a,)``: 0 = keep going, k = start process k's arrived update.
+    """
+
+    kind = "preemption"
+    checks = ("monotonicity", "threshold", "consistency")
+    threshold_form = "intervals"
+    threshold_configs = "all"
+    has_static_policy = False
+
+    def __init__(self, scenario: Scenario):
+        _check_scenario(scenario)
+        super().__init__(scenario)
+
+    def explore(self) -> ConfigAutomaton:
+        return preemption_automaton(self.scenario)
+
+    def initial_config(self) -> PreemptionConfig:
+        return initial_preemption_configs(self.scenario)[0]
+
+    def meta(self) -> dict[str, Any]:
+        return {"kind": self.kind, "preemptive": self.scenario.model.preemptive,
+                "source": self.scenario.source, "fingerprint": self.scenario.fingerprint()}
+
+    def accepts(self, config: tuple) -> tuple[bool, ...]:
+        """The one server accepts a new job when it is idle or preemption is allowed."""
+        return (config[1] is None or self.scenario.model.preemptive,)
+
+    def busy(self, config: tuple, labels: np.ndarray) -> np.ndarray:
+        """The server is busy when a job is in service at the start of the slot, or the action
+        starts one (it is served in this slot)."""
+        if config[1] is not None:
+            return np.ones(labels.shape, dtype=float)
+        return (labels > 0).astype(float)
+
+    def greedy_label(self, config: tuple, order: Sequence[int]) -> tuple[int, ...]:
+        """A greedy work-conserving rule of our own: when the server is idle, start the arrived
+        update of largest cost (first in ``order``); when it is busy, keep going."""
+        b, job = config[0], config[1]
+        if job is None:
+            for k in order:
+                if b[k]:
+                    return (k + 1,)
+        return (0,)
+
+    def describe(self, config: tuple) -> str:
+        return describe_preemption_config(config)
+
+    @classmethod
+    def is_idle(cls, config: Any) -> bool:
+        if not hasattr(config, "_fields"):
+            return False
+        return config[1] is None and not config[2] and all(x is None for x in config[3])
+
+    @classmethod
+    def job_in_service(cls, config: Any) -> tuple[int, int] | None:
+        job = config[1]
+        return None if job is None else (int(job[0]), int(job[1]))
+
+    @classmethod
+    def arrived(cls, config: Any) -> tuple[int, ...]:
+        return tuple(int(x) for x in config[0])
+
+    @classmethod
+    def action_name(cls, label: tuple[int, ...], config: Any, names: dict) -> str:
+        procs = names["processes"]
+        a = label[0]
+        job = None if config is None else config[1]
+        if a == 0:
+            if config is None:
+                return "keep going (no new job)"
+            return "stay idle" if job is None else f"keep going (serve {procs[job[0] - 1]})"
+        if job is None:
+            return f"start {procs[a - 1]}" if config is not None else f"start {procs[a - 1]} (preempting if busy)"
+        if job[0] == a:
+            return f"restart {procs[a - 1]} (cancel)"
+        return f"{procs[a - 1]} preempts {procs[job[0] - 1]}"
+
+    @classmethod
+    def short_action(cls, label: tuple[int, ...], names: dict) -> str:
+        procs = names["processes"]
+        return "keep" if label[0] == 0 else f"start {procs[label[0] - 1]}"
+
+    def serving_config(self, k: int, arrived: Sequence[int]) -> PreemptionConfig:
+        """Process k's job one slot into service on an otherwise empty server (job
+        ``(k, T_k - 1, U + 1)``, empty stack and downlink), with the arrivals ``arrived``."""
+        srv = self.scenario.servers[0]
+        job = (k, srv.processing_time[k - 1] - 1, srv.uplink_delay + 1)
+        return PreemptionConfig(tuple(int(x) for x in arrived), job, (), (None,) * srv.downlink_delay)

@@ -17,15 +17,26 @@ from __future__ import annotations
 
 import itertools
 from functools import lru_cache
+from typing import Any, Sequence
 
+import numpy as np
 
-from ..cost import cost_tables
 from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario, ServerSpec
-from .space import ConfigAutomaton, build_aoi_mdp, explore_configs
+from .automaton import ConfigAutomaton, explore_configs
+from .base import Model
 
-__all__ = ["build_wncs", "wncs_automaton", "server_accepts", "describe_wncs_config", "idle_config"]
+__all__ = [
+    "WncsModel",
+    "build_wncs",
+    "wncs_automaton",
+    "server_accepts",
+    "server_step",
+    "feasible_actions",
+    "describe_wncs_config",
+    "idle_config",
+]
 
 ServerState = tuple  # (up: tuple[int,...], job: int, d: int, down: tuple[int,...])
 
@@ -172,16 +183,108 @@ def build_wncs(scenario: Scenario) -> MDP:
     """Build the Section II MDP of a ``kind = "wncs"`` scenario.
 
     Returns an :class:`~wncs_lp.mdp.MDP` whose ``states`` is a
-    :class:`~wncs_lp.models.space.StateSpace` (tau per process, joint server configuration) and
-    whose ``action_table`` rows are the actions (a_1..a_M), 0 = nothing sent.
+    :class:`~wncs_lp.models.statespace.StateSpace` (tau per process, joint server configuration)
+    and whose ``action_table`` rows are the actions (a_1..a_M), 0 = nothing sent.
     """
-    auto = wncs_automaton(scenario)
-    servers = scenario.servers
-    return build_aoi_mdp(
-        auto,
-        scenario.tau_caps,
-        cost_tables(scenario),
-        describe_config=lambda cfg: describe_wncs_config(servers, cfg),
-        name=f"wncs:{scenario.source}",
-        meta={"kind": "wncs", "source": scenario.source, "fingerprint": scenario.fingerprint()},
-    )
+    return WncsModel(scenario).build()
+
+
+def _is_idle_config(cfg: Any) -> bool:
+    try:
+        return all(job == 0 and d == 0 and not any(up) and not any(down) for (up, job, d, down) in cfg)
+    except (TypeError, ValueError):
+        return False
+
+
+class WncsModel(Model):
+    """The Section II model: N processes, M servers with uplink/downlink pipelines.
+
+    A configuration is a tuple of per-server ``(up, job, d, down)`` (module docstring); an
+    action label is ``(a_1..a_M)``, ``a_m`` the process sent to server m (0 = nothing).
+    """
+
+    kind = "wncs"
+    checks = ("monotonicity", "threshold")
+    threshold_form = "rays"
+    threshold_configs = "idle"
+    has_static_policy = True
+
+    def explore(self) -> ConfigAutomaton:
+        return wncs_automaton(self.scenario)
+
+    def initial_config(self) -> tuple:
+        return idle_config(self.scenario)
+
+    def accepts(self, config: tuple) -> tuple[bool, ...]:
+        return tuple(server_accepts(s, st) for s, st in zip(self.scenario.servers, config))
+
+    def busy(self, config: tuple, labels: np.ndarray) -> np.ndarray:
+        """A server is busy when a job is in service at the start of the slot (d > 0), or when
+        U_m = 0 and an update is sent to it and survives the uplink (it is served in this same
+        slot), which has probability ``pu_m``."""
+        out = np.zeros(labels.shape, dtype=float)
+        for m, (srv, st) in enumerate(zip(self.scenario.servers, config)):
+            base = 1.0 if st[2] > 0 else 0.0
+            out[:, m] = base
+            if srv.uplink_delay == 0 and base == 0.0:
+                out[:, m] = np.where(labels[:, m] > 0, srv.p_up, 0.0)
+        return out
+
+    def greedy_label(self, config: tuple, order: Sequence[int]) -> tuple[int, ...]:
+        """The paper's greedy baseline: walking down the ranking while accepting servers remain,
+        each process takes, among the accepting servers not yet taken this slot, the one with the
+        smallest loop U_m + T_{m,k} + D_m (ties: lower server index)."""
+        sc = self.scenario
+        acc = self.accepts(config)
+        free = [m for m in range(sc.n_servers) if acc[m]]
+        label = [0] * sc.n_servers
+        for k in order:
+            if not free:
+                break
+            m = min(free, key=lambda m: (sc.servers[m].loop[k], m))
+            label[m] = k + 1
+            free.remove(m)
+        return tuple(label)
+
+    def cheaper_routes(self) -> list[str]:
+        return ["the separable suboptimal policy with Monte Carlo simulation (needs no enumeration)"]
+
+    def describe(self, config: tuple) -> str:
+        return describe_wncs_config(self.scenario.servers, config)
+
+    @classmethod
+    def is_idle(cls, config: Any) -> bool:
+        return _is_idle_config(config)
+
+    @classmethod
+    def complete_partial(cls, text: str, descriptions: Sequence[str], idle_description: str | None) -> str | None:
+        """Servers not named in ``"edge: job 3 d=3"`` are idle."""
+        if idle_description is None:
+            return None
+        server_names = [p.split(":")[0].strip().lower() for p in idle_description.split(";")]
+        given = {}
+        for part in text.split(";"):
+            if ":" in part:
+                nm, rest = part.split(":", 1)
+                given[nm.strip().lower()] = rest
+        if given and set(given) <= set(server_names):
+            return "; ".join(f"{nm}: {given.get(nm, 'idle')}" for nm in server_names)
+        return None
+
+    @classmethod
+    def action_name(cls, label: tuple[int, ...], config: Any, names: dict) -> str:
+        procs = names["processes"]
+        servers = names["servers"] or [f"server {m}" for m in range(1, len(label) + 1)]
+        parts = [f"{procs[k - 1]} to {servers[m]}" for m, k in enumerate(label) if k]
+        return "(" + ", ".join(parts) + ")" if parts else "(send nothing)"
+
+    @classmethod
+    def short_action(cls, label: tuple[int, ...], names: dict) -> str:
+        procs = names["processes"]
+        return "(" + ",".join(procs[k - 1] if k else "-" for k in label) + ")"
+
+    @classmethod
+    def default_servers(cls, configs: Sequence[Any]) -> list[str] | None:
+        if not configs:
+            return None
+        return [f"server {m}" for m in range(1, len(configs[0]) + 1)]

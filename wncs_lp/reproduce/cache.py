@@ -15,9 +15,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .._io import atomic_write_bytes, atomic_write_text
+from ..files import atomic_write_bytes, atomic_write_text, json_ready
 
-__all__ = ["StepCache", "atomic_write_text", "atomic_write_bytes", "json_ready"]
+__all__ = ["StepCache", "code_version"]
 
 
 _CODE_VERSION: str | None = None
@@ -34,23 +34,6 @@ def code_version() -> str:
             h.update(f.read_bytes())
         _CODE_VERSION = h.hexdigest()[:16]
     return _CODE_VERSION
-
-
-def json_ready(obj: Any) -> Any:
-    """Convert numpy scalars/arrays and tuples recursively so ``json.dumps`` accepts them."""
-    if isinstance(obj, dict):
-        return {str(k): json_ready(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_ready(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return json_ready(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, float) and (obj != obj or obj in (float("inf"), float("-inf"))):
-        return None
-    return obj
-
-
 
 
 class StepCache:

@@ -5,19 +5,28 @@ import csv
 import io
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ..chain import PolicyChain, recurrent_classes, stationary_law
+from ..files import atomic_write_text
+from ..formulations import scenario_path
 from ..mdp import MDP
 from ..models import build
 from ..scenario import Scenario, load_scenario
-from .cache import StepCache, atomic_write_bytes, atomic_write_text
+from ..solvers import solve
+from ..solvers.result import Solution
+from ..viz import save_figure
+from .cache import StepCache
 
-__all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "FORMULATIONS"]
+__all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "PI_MAX_STATES"]
 
-FORMULATIONS = Path(__file__).resolve().parents[2] / "formulations"
+#: The reproduction solves by policy iteration up to this many states, by relative value
+#: iteration above (policy iteration's own multichain fallback is the only fallback).
+PI_MAX_STATES = 60_000
 
 
 @dataclass(frozen=True)
@@ -126,6 +135,11 @@ class Solved:
     method: str
     seconds: float
 
+    @cached_property
+    def recurrent(self) -> np.ndarray:
+        """(n,) bool: the state lies in a closed class of the policy's chain (:mod:`wncs_lp.chain`)."""
+        return PolicyChain(self.mdp, self.policy).recurrent
+
     @property
     def actions(self) -> np.ndarray:
         """The action label row (into ``mdp.action_table``) of the chosen pair of each state."""
@@ -134,9 +148,7 @@ class Solved:
     def action_tuple(self, s: int) -> tuple[int, ...]:
         return tuple(int(x) for x in self.mdp.action_table[self.mdp.a_indices[self.policy[s]]])
 
-    def as_solution(self):
-        from ..solvers.result import Solution
-
+    def as_solution(self) -> Solution:
         return Solution(
             method=self.method,
             status="optimal",
@@ -167,7 +179,7 @@ class Context:
 
     # ------------------------------------------------------------------ scenarios and solves
     def scenario(self, name: str, overrides: Sequence[str] = ()) -> Scenario:
-        path = FORMULATIONS / name
+        path = scenario_path(name)
         self.scenario_files.add(name)
         return load_scenario(path, list(overrides))
 
@@ -185,17 +197,12 @@ class Context:
         mdp = self.mdp(scenario)
 
         def compute():
-            from ..solvers import solve
-
             t0 = time.perf_counter()
-            method = "pi" if mdp.n_states <= 60_000 else "rvi"
-            try:
-                sol = solve(mdp, method=method)
-            except Exception:  # a multichain PI iterate (e.g. deterministic p = 1): value iteration
-                method = "rvi"
-                sol = solve(mdp, method=method)
-            stationary, n_classes = stationary_law(mdp, sol.policy)
-            unichain = n_classes == 1
+            sol = solve(mdp, method="pi" if mdp.n_states <= PI_MAX_STATES else "rvi")
+            P_pi = mdp.P[sol.policy]
+            classes = recurrent_classes(P_pi)
+            stationary, _ = stationary_law(P_pi, classes)  # equal weights on several classes
+            unichain = len(classes) == 1
             res = {
                 "gain": float(sol.gain),
                 "gain_lower": float(sol.gain_lower),
@@ -233,16 +240,8 @@ class Context:
     # ------------------------------------------------------------------ outputs
     def save_figure(self, fig, stem: str) -> list[str]:
         """Write a matplotlib figure as PNG and SVG (atomically); return the relative paths."""
-        import matplotlib.pyplot as plt
-
-        paths = []
-        for ext in ("png", "svg"):
-            buf = io.BytesIO()
-            fig.savefig(buf, format=ext, dpi=130, bbox_inches="tight")
-            atomic_write_bytes(self.fig_dir / f"{stem}.{ext}", buf.getvalue())
-            paths.append(f"figures/{stem}.{ext}")
-        plt.close(fig)
-        return paths
+        save_figure(fig, self.fig_dir / stem, ("png", "svg"), dpi=130, bbox_inches="tight")
+        return [f"figures/{stem}.{ext}" for ext in ("png", "svg")]
 
     def save_table(self, rows: list[dict[str, Any]], stem: str) -> str:
         """Write rows (dicts with the same keys) as CSV; return the relative path."""
@@ -265,38 +264,3 @@ def _fmt(v: Any) -> Any:
     if isinstance(v, (list, tuple)):
         return " ".join(str(x) for x in v)
     return v
-
-
-def stationary_law(mdp: MDP, policy: np.ndarray, tol: float = 1e-14, max_iter: int = 200_000, classes=None):
-    """Stationary law of a deterministic policy's chain, exact in its support.
-
-    The recurrent classes are found graph-theoretically (closed strongly connected components,
-    :func:`wncs_lp.solvers.dp.recurrent_classes`), so "recurrent" is exact, not a threshold on
-    a numerical solve; on each class the law is the fixed point of the lazy chain
-    (I + P)/2 restricted to it, by power iteration (a sparse LU of the whole chain fills in
-    badly past ~10^5 states). With several classes each gets equal weight.
-
-    ``classes`` restricts the law to given recurrent classes (default: all of them).
-
-    Returns
-    -------
-    stationary : (n,) array (zero exactly on transient states), n_classes : int
-    """
-    from ..solvers.dp import recurrent_classes
-
-    P_pi = mdp.P[policy]
-    if classes is None:
-        classes = recurrent_classes(P_pi)
-    x = np.zeros(mdp.n_states)
-    for cl in classes:
-        sub = P_pi[cl][:, cl].T.tocsr()
-        v = np.full(cl.size, 1.0 / cl.size)
-        for _ in range(max_iter):
-            w = 0.5 * (v + sub @ v)
-            w /= w.sum()
-            done = np.abs(w - v).sum() < tol
-            v = w
-            if done:
-                break
-        x[cl] = v / len(classes)
-    return x, len(classes)

@@ -5,12 +5,14 @@ import time
 
 import numpy as np
 
+from ..chain import PolicyChain, class_stationary
 from ..evaluate import evaluate
-from ..guard import estimate_size
-from ..policies import RandomPolicy, StaticPolicy, SuboptimalPolicy, System, default_assignment
-from ..solvers.dp import recurrent_classes
+from ..models.guard import estimate_size
+from ..models.system import System
+from ..policies import RandomPolicy, StaticPolicy, SuboptimalPolicy, default_assignment
 from ..sweep import run_sweep
-from .context import ClaimResult, Context, stationary_law
+from ..viz import plot_sweep
+from .context import ClaimResult, Context
 
 #: Relative tolerance for "equal" average costs (the exact evaluations are certified far below).
 EQ_RTOL = 1e-7
@@ -49,8 +51,6 @@ def _sweep(ctx: Context, name: str, file: str, cap: int, policies: list[str], sl
 
 def _sweep_figure(ctx: Context, rows, stem: str, title: str) -> list[str]:
     import matplotlib.pyplot as plt
-
-    from ..plots import plot_sweep
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.4))
     plot_sweep(rows, ax=axes[0], metric="gain", title=f"{title}: exact average MSE")
@@ -260,14 +260,11 @@ def claim_c12(ctx: Context) -> ClaimResult:
         # state, and the gain of each of its recurrent classes (the best start)
         ev = evaluate(solved.mdp, static, system, multichain="initial")
         st_pairs = static.on_mdp(solved.mdp)
-        P_st = solved.mdp.P[st_pairs]
-        class_gains = []
-        for cl in recurrent_classes(P_st):
-            x, _ = stationary_law(solved.mdp, st_pairs, classes=[cl])
-            class_gains.append(float(x @ solved.mdp.cost[st_pairs]))
+        chain = PolicyChain(solved.mdp, st_pairs)
+        class_gains = [float(class_stationary(chain.P, cl)[0] @ chain.cost[cl]) for cl in chain.recurrent_classes]
         per = _aoi_period(solved)
         # does the optimal policy act like the static one on its recurrent states?
-        rec = solved.stationary > 1e-12
+        rec = solved.recurrent
         same_on_recurrent = bool(np.all(st_pairs[rec] == solved.policy[rec])) if st_pairs.ndim == 1 else None
         rows.append({"scenario": file, "cap": cap, "optimal": solved.gain, "static": ev.gain,
                      "static_recurrent_classes": ev.recurrent_classes,
@@ -323,7 +320,7 @@ def claim_c13(ctx: Context) -> ClaimResult:
         t0 = time.perf_counter()
         sub = SuboptimalPolicy(system)
         seconds = time.perf_counter() - t0
-        est = estimate_size(big, system.automaton if hasattr(system, "automaton") else None)
+        est = estimate_size(big, system.model)
         return {"table_size": int(sum(sub.table_sizes)), "seconds_suboptimal": seconds,
                 "base_gain_lemma2": sub.base_gain, "configs": system.n_configs,
                 "full_mdp_states_estimate": est.states, "full_mdp_pairs_estimate": est.pairs}, None

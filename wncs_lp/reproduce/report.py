@@ -8,7 +8,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from .cache import atomic_write_text, json_ready
+from ..files import atomic_write_text, json_ready
 from .context import ClaimResult
 
 #: The paper's statement of each claim (shared/spec/claims.md), shown beside the verdict.

@@ -5,25 +5,22 @@ from typing import Any
 
 import numpy as np
 
-from ..maps import plot_policy_map, plot_policy_slice, region_stats
-from ..models.wncs import idle_config
-from ..structure import check_consistency, check_monotonicity, check_threshold, policy_context
+from ..maps import region_stats
+from ..verify import check_consistency, check_monotonicity, check_threshold, policy_context
+from ..viz import plot_policy_map, plot_policy_slice
 from .context import ClaimResult, Context, Solved
-
-#: A state is recurrent under the optimal policy when its stationary probability exceeds this.
-RECURRENT_TOL = 1e-12
 
 
 def _idle_grid(solved: Solved) -> tuple[np.ndarray, np.ndarray]:
     """State ids over the tau box in the idle-server configuration, and the chosen actions."""
     mdp = solved.mdp
-    grid = mdp.states.lookup_grid(idle_config(solved.scenario))
+    grid = mdp.states.lookup_grid(mdp.states.model.initial_config())
     ids = grid[grid >= 0]
     return grid, ids
 
 
 def _split(solved: Solved, states: np.ndarray) -> dict[str, int]:
-    rec = solved.stationary[states] > RECURRENT_TOL
+    rec = solved.recurrent[states]
     caps = np.asarray(solved.mdp.states.caps)
     at_cap = np.any(solved.mdp.states.tau[states] == caps, axis=1)
     return {
@@ -304,20 +301,15 @@ def claim_c9(ctx: Context) -> ClaimResult:
     prof = ctx.profile
     res = _theorem(ctx, "C9", "Figs. 11-12", check_threshold, _preemption(ctx))
     # the maps of Figs. 11 (process 2 in service, process 1 arrived) and 12 (the converse)
-    from ..models.preemption import PreemptionConfig
-
     cap = prof.caps_pre[0]
     solved = ctx.solve(ctx.scenario("paper_preemption_p12.toml", [f"tau_cap={cap}"]))
     sc = solved.scenario
-    U = sc.servers[0].uplink_delay
-    T = sc.servers[0].processing_time
-    D = sc.servers[0].downlink_delay
+    model = solved.mdp.states.model
     panels, regions = [], {}
     for name, b, k in (("fig11: serving process 2, process 1 arrived", (1, 0), 2),
                        ("fig12: serving process 1, process 2 arrived", (0, 1), 1)):
         # the job one slot into service: d = T_k - 1, age U + 1
-        cfg = PreemptionConfig(b, (k, T[k - 1] - 1, U + 1), (), (None,) * D)
-        c = solved.mdp.states.config_id(cfg)
+        c = solved.mdp.states.config_id(model.serving_config(k, b))
         if c < 0:
             regions[name] = "configuration unreachable"
             continue

@@ -28,7 +28,6 @@ from .dp import (
     PolicyEvaluation,
     evaluate_policy,
     policy_iteration,
-    recurrent_classes,
     relative_value_iteration,
     value_iteration,
 )
@@ -46,7 +45,6 @@ __all__ = [
     "certificate_closed",
     "PolicyEvaluation",
     "evaluate_policy",
-    "recurrent_classes",
     "relative_value_iteration",
     "value_iteration",
     "policy_iteration",

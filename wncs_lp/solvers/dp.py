@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from scipy.sparse.csgraph import connected_components
 
+from ..chain import class_stationary, policy_matrices, recurrent_classes
 from ..errors import PolicyError, SolverError
 from ..mdp import MDP
 from .certify import bracket, certificate_closed, greedy_first, q_values
@@ -22,8 +22,6 @@ from .result import Solution
 __all__ = [
     "MultichainPolicyError",
     "PolicyEvaluation",
-    "policy_matrices",
-    "recurrent_classes",
     "evaluate_policy",
     "relative_value_iteration",
     "value_iteration",
@@ -46,8 +44,6 @@ EVAL_ITERATIVE_RTOL = 1e-13
 
 #: ``evaluate_policy`` methods
 EVAL_METHODS = ("auto", "direct", "iterative")
-#: Tolerance on the per-state sums of a randomised policy.
-PROB_SUM_TOL = 1e-9
 
 
 class MultichainPolicyError(PolicyError):
@@ -80,93 +76,6 @@ class PolicyEvaluation:
     solver: str = "splu"
 
 
-# ---------------------------------------------------------------------------- policies
-def policy_matrices(mdp: MDP, policy: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
-    """The chain ``(P_pi, c_pi)`` induced by a deterministic or randomised policy.
-
-    Parameters
-    ----------
-    mdp : MDP
-    policy : array
-        * integer dtype, shape (n,): ``policy[s]`` is the chosen pair index of state s
-          (``mdp.s_indices[policy[s]] == s`` is required);
-        * floating dtype, shape (L,): ``policy[l]`` is the probability of pair l in its
-          state; nonnegative, summing to 1 (within 1e-9) over the pairs of each state.
-
-    Returns
-    -------
-    P_pi : (n, n) CSR matrix
-        ``P_pi[s, :] = sum_l policy[l] P[l, :]`` over the pairs of s.
-    c_pi : (n,) array
-        ``c_pi[s] = sum_l policy[l] c_l``.
-
-    Raises
-    ------
-    PolicyError
-        Wrong shape or dtype, a pair of the wrong state, negative probabilities, bad sums.
-    """
-    pol = np.asarray(policy)
-    n, L = mdp.n_states, mdp.n_pairs
-    if np.issubdtype(pol.dtype, np.integer) and not np.issubdtype(pol.dtype, np.bool_):
-        if pol.shape != (n,):
-            raise PolicyError(f"a deterministic policy must have shape ({n},) (one pair index per state), got {pol.shape}")
-        pol = pol.astype(np.int64)
-        bad = (pol < 0) | (pol >= L)
-        if bad.any():
-            s = int(np.flatnonzero(bad)[0])
-            raise PolicyError(f"policy[{s}] = {int(pol[s])} is not a pair index in 0..{L - 1}")
-        wrong = mdp.s_indices[pol] != np.arange(n)
-        if wrong.any():
-            s = int(np.flatnonzero(wrong)[0])
-            raise PolicyError(
-                f"policy[{s}] = pair {int(pol[s])}, which belongs to state {int(mdp.s_indices[pol[s]])}, not state {s}"
-            )
-        return mdp.P[pol].tocsr(), np.asarray(mdp.cost[pol], dtype=float)
-    if np.issubdtype(pol.dtype, np.floating):
-        if pol.shape != (L,):
-            raise PolicyError(f"a randomised policy must have shape ({L},) (one probability per pair), got {pol.shape}")
-        if not np.all(np.isfinite(pol)) or pol.min() < 0:
-            l = int(np.flatnonzero(~np.isfinite(pol) | (pol < 0))[0])
-            raise PolicyError(f"randomised policy has probability {pol[l]} on pair {l}; expected >= 0")
-        sums = np.add.reduceat(pol, mdp.pair_ptr[:-1])
-        off = np.abs(sums - 1.0) > PROB_SUM_TOL
-        if off.any():
-            s = int(np.flatnonzero(off)[0])
-            raise PolicyError(f"randomised policy probabilities of state {s} sum to {sums[s]:.12g}, expected 1")
-        D = sp.csr_matrix((pol, (mdp.s_indices, np.arange(L))), shape=(n, L))
-        return (D @ mdp.P).tocsr(), np.asarray(D @ mdp.cost, dtype=float)
-    raise PolicyError(
-        f"policy must be an integer array of pair indices (shape ({n},)) or a float array of pair "
-        f"probabilities (shape ({L},)); got dtype {pol.dtype}"
-    )
-
-
-def recurrent_classes(P_pi: sp.spmatrix) -> list[np.ndarray]:
-    """The closed communicating (recurrent) classes of a finite chain.
-
-    The states are the vertices of the directed graph with an edge i -> j whenever
-    ``P_pi[i, j] > 0``. Its strongly connected components are the communicating classes,
-    and a class is recurrent iff it is closed (no edge leaves it).
-
-    Returns
-    -------
-    list of sorted int arrays, one per recurrent class, ordered by their smallest state.
-    """
-    G = sp.csr_matrix(P_pi)
-    G.eliminate_zeros()
-    G.data = (G.data > 0).astype(np.int8)
-    G.eliminate_zeros()
-    n = G.shape[0]
-    ncomp, labels = connected_components(G, directed=True, connection="strong")
-    coo = G.tocoo()
-    leaving = labels[coo.row] != labels[coo.col]
-    closed = np.ones(ncomp, bool)
-    closed[labels[coo.row[leaving]]] = False
-    classes = [np.flatnonzero(labels == k) for k in np.flatnonzero(closed)]
-    classes.sort(key=lambda c: int(c[0]) if c.size else n)
-    return classes
-
-
 def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: np.ndarray | None = None,
                     maxiter: int | None = None) -> PolicyEvaluation:
     """Exact gain, bias and stationary distribution of a unichain stationary policy.
@@ -179,18 +88,18 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: n
         \\qquad h(r) = 0,
 
     i.e. ``M z = c_pi`` with ``M = I - P_pi`` whose column r is replaced by ones
-    (``z[r] = g``, ``z[s] = h(s)`` otherwise). For a unichain P_pi this M is nonsingular,
-    and its transpose is ``(I - P_pi)^T`` with row r replaced by ones, so the same sparse LU
-    (:func:`scipy.sparse.linalg.splu`) also gives the stationary distribution from
-    ``M^T pi = e_r`` (pi (I - P_pi) = 0, sum pi = 1). One step of iterative refinement is
-    applied to both solves. The bias is returned as ``h - h[0]``.
+    (``z[r] = g``, ``z[s] = h(s)`` otherwise). For a unichain P_pi this M is nonsingular; it is
+    solved by a sparse LU (:func:`scipy.sparse.linalg.splu`) with one step of iterative
+    refinement. The bias is returned as ``h - h[0]``. The stationary distribution is that of the
+    recurrent class, by :func:`wncs_lp.chain.class_stationary` (the toolkit's one stationary
+    solver).
 
-    Large chains are solved iteratively instead: BiCGSTAB on ``M z = c_pi`` and on
-    ``M^T pi = e_r``, accepted when the true relative residual is at most 1e-12 (10 x
-    :data:`EVAL_ITERATIVE_RTOL`), which avoids the LU's fill-in; if either solve misses that,
-    the sparse LU is used after all (``solver`` says which). The iterative answer is less
-    exact than the LU's but not by much: on p12 at cap 30 its gain agreed with the LU's to
-    8e-13 relative, with an absolute Poisson residual of 1e-8 against the LU's 2e-10.
+    Large chains are solved iteratively instead: BiCGSTAB on ``M z = c_pi``, accepted when the
+    true relative residual is at most 1e-12 (10 x :data:`EVAL_ITERATIVE_RTOL`), which avoids the
+    LU's fill-in; if the solve misses that, the sparse LU is used after all (``solver`` says
+    which). The iterative answer is less exact than the LU's but not by much: on p12 at cap 30
+    its gain agreed with the LU's to 8e-13 relative, with an absolute Poisson residual of 1e-8
+    against the LU's 2e-10.
 
     Parameters
     ----------
@@ -238,37 +147,28 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: n
     M.data[M.indptr[r]:M.indptr[r + 1]] = 0.0
     M.eliminate_zeros()
     M = (M + sp.csc_matrix((np.ones(n), (np.arange(n), np.full(n, r))), shape=(n, n))).tocsc()
-    er = np.zeros(n)
-    er[r] = 1.0
     solver = "splu"
-    z = pi = None
+    z = None
     z0 = None if h0 is None else _initial_bias(h0, n, r)  # checked whichever path runs
     if method == "iterative" or (method == "auto" and n >= EVAL_ITERATIVE_MIN_STATES):
         if z0 is not None:
             z0[r] = float(np.median(c_pi + P_pi @ z0 - z0))  # a gain estimate for the unknown g
         its = int(maxiter) if maxiter is not None else max(1000, int(2 * np.sqrt(n)))
         z = _bicgstab(M.tocsr(), c_pi, z0, its)
-        pi = _bicgstab(M.T.tocsr(), er, None, its) if z is not None else None
-        solver = "bicgstab" if pi is not None else "bicgstab->splu"
-    if z is None or pi is None:
+        solver = "bicgstab" if z is not None else "bicgstab->splu"
+    if z is None:
         try:
             lu = spla.splu(M)
         except RuntimeError as exc:  # exactly singular: should not happen for a unichain policy
             raise PolicyError(f"policy evaluation system is singular ({exc})") from exc
 
-        def refine(rhs: np.ndarray, trans: str) -> np.ndarray:
-            z = lu.solve(rhs, trans=trans)
-            Mz = (M.T @ z) if trans == "T" else (M @ z)
-            return z + lu.solve(rhs - Mz, trans=trans)
-
-        z = refine(c_pi, "N")
-        pi = refine(er, "T")
+        z = lu.solve(c_pi)
+        z = z + lu.solve(c_pi - M @ z)
     g = float(z[r])
     h = z.copy()
     h[r] = 0.0
-    # round-off may leave -1e-17 on transient states
-    pi = np.where(pi < 0, np.maximum(pi, 0.0), pi)
-    pi = pi / pi.sum()
+    pi = np.zeros(n)
+    pi[classes[0]] = class_stationary(P_pi, classes[0])[0]
 
     res_bias = float(np.max(np.abs(g + h - c_pi - P_pi @ h)))
     res_pi = float(np.max(np.abs(P_pi.T @ pi - pi)) + abs(pi.sum() - 1.0))

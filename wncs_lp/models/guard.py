@@ -2,7 +2,7 @@
 
 The configuration automaton of a model (server pipelines, jobs, arrivals) is small and cheap to
 explore; the state space is that automaton times the AoI box. The estimate runs the reachability
-fixed point of :mod:`wncs_lp.models.space` on *per-axis* masks (for each configuration and each
+fixed point of :mod:`wncs_lp.models.assemble` on *per-axis* masks (for each configuration and each
 process, the set of reachable tau_k values) instead of full boxes. The product of the per-axis
 sets contains the true reachable set, so
 
@@ -20,10 +20,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .errors import WncsError
-from .scenario import Scenario
+from ..errors import WncsError
+from ..scenario import Scenario
 
-__all__ = ["SizeEstimate", "SizeLimitError", "estimate_size", "check_size", "available_memory"]
+__all__ = ["SizeEstimate", "SizeLimitError", "estimate_size", "check_size", "build_checked", "available_memory"]
 
 #: Bytes per stored transition nonzero while building (COO row/col/val, CSR copy, sort scratch).
 BUILD_BYTES_PER_NNZ = 64
@@ -90,19 +90,17 @@ def available_memory() -> int:
         return 8 << 30
 
 
-def _automaton(scenario: Scenario):
-    if scenario.model.kind == "wncs":
-        from .models.wncs import wncs_automaton
+def estimate_size(scenario: Scenario, model=None) -> SizeEstimate:
+    """Estimate (upper bounds) the size of the MDP of a scenario without building it.
 
-        return wncs_automaton(scenario)
-    from .models.preemption import preemption_automaton
+    ``model`` (a :class:`~wncs_lp.models.base.Model` of the scenario) lends its explored
+    automaton, which a following ``model.build()`` then reuses.
+    """
+    if model is None:
+        from . import model_for
 
-    return preemption_automaton(scenario)
-
-
-def estimate_size(scenario: Scenario, automaton=None) -> SizeEstimate:
-    """Estimate (upper bounds) the size of the MDP of a scenario without building it."""
-    auto = automaton if automaton is not None else _automaton(scenario)
+        model = model_for(scenario)
+    auto = model.automaton
     caps = scenario.tau_caps
     N = len(caps)
     nC = len(auto.configs)
@@ -158,7 +156,7 @@ def check_size(
     force: bool = False,
     need_lp: bool = False,
     limit_bytes: int | None = None,
-    automaton=None,
+    model=None,
 ) -> SizeEstimate:
     """Refuse (raise :class:`SizeLimitError`) a build whose estimate exceeds the memory limit.
 
@@ -166,7 +164,11 @@ def check_size(
     With ``need_lp`` the LP's memory counts too. ``force=True`` only returns the estimate.
     The message gives the estimate and the cheaper routes that exist.
     """
-    est = estimate_size(scenario, automaton)
+    if model is None:
+        from . import model_for
+
+        model = model_for(scenario)
+    est = estimate_size(scenario, model)
     if force:
         return est
     limit = int(MEMORY_FRACTION * available_memory()) if limit_bytes is None else int(limit_bytes)
@@ -176,8 +178,7 @@ def check_size(
     routes = []
     if need_lp and est.build_bytes <= limit:
         routes.append("value iteration (--method rvi) instead of the LP, which fits")
-    if scenario.model.kind == "wncs":
-        routes.append("the separable suboptimal policy with Monte Carlo simulation (needs no enumeration)")
+    routes += model.cheaper_routes()
     routes.append(f"a smaller cap (--set tau_cap=...; the box is {est.box:,} AoI vectors per configuration)")
     raise SizeLimitError(
         f"{scenario.source}: the MDP would have up to {est.states:,} states, {est.pairs:,} state-action pairs "
@@ -188,3 +189,20 @@ def check_size(
         + ". Use --force (force=True) to build anyway.",
         est,
     )
+
+
+def build_checked(scenario: Scenario, *, force: bool = False, need_lp: bool = False,
+                  limit_bytes: int | None = None):
+    """Build a scenario's MDP after the size guard (:func:`check_size`), exploring its automaton once.
+
+    Raises
+    ------
+    SizeLimitError
+        The estimate exceeds the limit and ``force`` is False (the message gives the estimate
+        and cheaper routes).
+    """
+    from . import model_for
+
+    model = model_for(scenario)
+    check_size(scenario, force=force, need_lp=need_lp, limit_bytes=limit_bytes, model=model)
+    return model.build()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scenario import ProcessSpec, Scenario
+from ..scenario import ProcessSpec, Scenario
 
 __all__ = ["mse_table", "cost_tables"]
 

@@ -11,6 +11,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .save import save_figure
+
 __all__ = ["plot_sweep", "save_sweep_figure", "POLICY_STYLE"]
 
 #: Marker, line style and label of each policy (the paper uses one marker per curve).
@@ -93,9 +95,5 @@ def save_sweep_figure(rows: Sequence[Any], stem: str | Path, *, title: str | Non
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     plot_sweep(rows, ax=ax, title=title, **kw)
     fig.tight_layout()
-    stem = Path(stem)
-    paths = {"png": str(stem.with_suffix(".png")), "svg": str(stem.with_suffix(".svg"))}
-    fig.savefig(paths["png"], dpi=150)
-    fig.savefig(paths["svg"])
-    plt.close(fig)
-    return paths
+    png, svg = save_figure(fig, Path(stem), ("png", "svg"), dpi=150)
+    return {"png": str(png), "svg": str(svg)}

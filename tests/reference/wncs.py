@@ -32,7 +32,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
 
-from wncs_lp.cost import cost_tables
+from wncs_lp.models.cost import cost_tables
 
 __all__ = [
     "initial_states",

@@ -1,0 +1,51 @@
+"""The ``wncs-lp`` command line. Thin: parse, call the library, print.
+
+Every subcommand takes a scenario file and ``--set KEY=VALUE`` overrides; with ``--json`` it
+prints exactly one JSON object on stdout (messages and progress go to stderr). Errors from bad
+input print one line ``error: ...`` on stderr and exit with status 2.
+
+Each module of this package lists its subcommands in ``COMMANDS``; :func:`build_parser` adds
+the modules' commands in the order of :data:`MODULES` (the one place a new module is named).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Sequence
+
+from ..errors import WncsError
+from . import export, maps, policy, reproduce, solve, verify
+from .common import Command
+
+__all__ = ["main", "build_parser", "COMMANDS"]
+
+#: Command modules, in the order their subcommands appear in ``wncs-lp --help``.
+MODULES = (solve, policy, reproduce, verify, maps, export)
+
+#: Every subcommand of ``wncs-lp``.
+COMMANDS: list[Command] = [cmd for module in MODULES for cmd in module.COMMANDS]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="wncs-lp",
+        description="Exact average-cost scheduling for multi-process WNCS with edge computing.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    for cmd in COMMANDS:
+        p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
+        cmd.configure(p)
+        p.set_defaults(func=cmd.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except WncsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: results already written are kept", file=sys.stderr)
+        return 130

@@ -1,0 +1,99 @@
+"""``wncs-lp map``: draw the optimal action over two AoIs (or a 3-process slice)."""
+from __future__ import annotations
+
+import argparse
+from typing import Sequence
+
+from .common import Command, add_scenario_args, emit_json, load
+
+
+def _parse_axes(text: str) -> tuple[int, ...]:
+    from ..errors import ModelError
+
+    try:
+        return tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise ModelError(f"--axes {text!r}: expected comma-separated process indices, e.g. 1,2") from None
+
+
+def _parse_fix(items: Sequence[str]) -> dict[int, int]:
+    from ..errors import ModelError
+
+    out: dict[int, int] = {}
+    for item in (x.strip() for chunk in items for x in chunk.split(",") if x.strip()):
+        k, sep, v = item.partition("=")
+        if not sep or not k.strip().isdigit() or not v.strip().isdigit():
+            raise ModelError(f"--fix {item!r}: expected PROCESS=TAU with 1-based integers, e.g. 3=5")
+        out[int(k)] = int(v)
+    return out
+
+
+def cmd_map(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..maps import parse_config_spec, region_stats
+    from ..models.guard import build_checked
+    from ..solvers import solve
+    from ..viz import plot_policy_map, plot_policy_slice
+
+    scenario = load(args)
+    axes = _parse_axes(args.axes)
+    fixed = _parse_fix(args.fix)
+    mdp = build_checked(scenario, force=args.force)
+    config = parse_config_spec(mdp, args.servers)
+    sol = solve(mdp, method=args.method)
+    if args.slice is not None:
+        axes = axes if len(axes) == 3 else (1, 2, 3)
+        ax = plot_policy_slice(mdp, sol, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
+        stats = region_stats(mdp, sol, config, axes=axes, fixed_tau=fixed, total=args.slice, scenario=scenario)
+    else:
+        ax = plot_policy_map(mdp, sol, config, axes=axes, fixed_tau=fixed, scenario=scenario)
+        stats = region_stats(mdp, sol, config, axes=axes, fixed_tau=fixed, scenario=scenario)
+    ax.figure.savefig(args.out, dpi=args.dpi, bbox_inches="tight")
+    plt.close(ax.figure)
+    payload = {
+        "scenario": scenario.source,
+        "overrides": args.overrides,
+        "out": args.out,
+        "configuration": mdp.states.describe_config(mdp.states.configs[config]),
+        "configuration_id": config,
+        "axes": list(axes),
+        "slice_total": args.slice,
+        "gain": sol.gain,
+        "regions": stats,
+    }
+    if args.json:
+        emit_json(payload)
+    else:
+        print(f"map of [{payload['configuration']}] written to {args.out}")
+        for name, r in stats["per_action"].items():
+            print(f"  {name}: {r['cells']} cells, {r['components']} region(s), {r['holes']} hole(s)"
+                  f"{'' if r['connected'] else '  -- not connected'}")
+    return 0
+
+
+def _configure_map(p: argparse.ArgumentParser) -> None:
+    add_scenario_args(p)
+    p.add_argument("--servers", required=True, metavar="SPEC",
+                   help="the configuration: 'idle'; '#ID'; its description as in state labels, e.g. "
+                        "'edge: job 3 d=3' (servers not named are idle) or 'b=10 | serving 2(d=2,g=2) | down [-]'; "
+                        "or a Python literal of the configuration tuple")
+    p.add_argument("--out", required=True, help="output image (.png, .svg, .pdf)")
+    p.add_argument("--axes", default="1,2", help="processes on the x,y axes, 1-based (default 1,2); with --slice "
+                                                 "three of them (default 1,2,3)")
+    p.add_argument("--fix", action="append", default=[], metavar="K=TAU",
+                   help="AoI of a process not on the axes, e.g. 3=5 (repeatable; default: the value with the "
+                        "most reachable states)")
+    p.add_argument("--slice", type=int, default=None, metavar="TOTAL",
+                   help="draw the plane tau_i + tau_j + tau_k = TOTAL as a triangle (three processes)")
+    p.add_argument("--method", default="pi", choices=["pi", "rvi", "lp"], help="solver (default: pi)")
+    p.add_argument("--dpi", type=int, default=120, help="resolution of raster output (default 120)")
+
+
+COMMANDS = [
+    Command("map", "draw the optimal action over two AoIs (or a 3-process slice) for one server configuration",
+            _configure_map, cmd_map),
+]

@@ -1,0 +1,196 @@
+"""``wncs-lp evaluate``, ``simulate`` and ``sweep``: policies, exactly, by simulation, over a grid."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .common import Command, add_scenario_args, emit_json, load
+
+
+def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
+    p.add_argument(
+        "--policy",
+        required=required,
+        metavar="NAME",
+        help="optimal, suboptimal, static, best_static, greedy or random",
+    )
+    p.add_argument(
+        "--method",
+        default="pi",
+        choices=["lp", "lp-cvxpy", "rvi", "pi"],
+        help="solver of the optimal policy (default: pi; pi falls back to rvi on a multichain iterate)",
+    )
+    p.add_argument(
+        "--assignment",
+        default=None,
+        metavar="SERVERS",
+        help="static policy: one server per process, by name or 1-based index, e.g. remote,edge "
+        "(default: the paper's assignment, see policies.md)",
+    )
+
+
+def _policy(args: argparse.Namespace, scenario, *, need_mdp: bool):
+    from ..policies import policy_for
+
+    return policy_for(scenario, args.policy, method=args.method, assignment=args.assignment,
+                      need_mdp=need_mdp, force=args.force)
+
+
+# ----------------------------------------------------------------------------- evaluate
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from ..evaluate import evaluate
+
+    scenario = load(args)
+    made = _policy(args, scenario, need_mdp=True)
+    mdp, policy = made.mdp, made.policy
+    ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error")
+    payload = {
+        "scenario": scenario.source,
+        "overrides": args.overrides,
+        "kind": scenario.model.kind,
+        "states": mdp.n_states,
+        "pairs": mdp.n_pairs,
+        **ev.to_dict(),
+        "policy_info": policy.describe(),
+        "setup_seconds": made.seconds,
+    }
+    if args.json:
+        emit_json(payload)
+    else:
+        print(scenario.describe())
+        print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs")
+        print(f"policy {ev.policy}: average cost (gain) {ev.gain:.10g}")
+        for name, v in zip(ev.process_names, ev.mse):
+            print(f"  {name}: average MSE {v:.8g}")
+        for name, v in zip(ev.server_names, ev.utilisation):
+            print(f"  server {name}: utilisation {v:.4f}")
+        if ev.recurrent_classes > 1:
+            print(f"  (multichain: {ev.recurrent_classes} recurrent classes; averages from the initial state)")
+        if "base_gain" in payload["policy_info"]:
+            print(f"  base (random) policy gain sum_k g_k = {payload['policy_info']['base_gain']:.10g}")
+    return 0
+
+
+def _configure_evaluate(p: argparse.ArgumentParser) -> None:
+    add_scenario_args(p)
+    _add_policy_args(p)
+    p.add_argument(
+        "--from-initial",
+        action="store_true",
+        help="for a multichain policy, report the averages from the initial state instead of failing",
+    )
+
+
+# ----------------------------------------------------------------------------- simulate
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from ..simulate import simulate
+
+    scenario = load(args)
+    made = _policy(args, scenario, need_mdp=False)
+    policy = made.policy
+    progress = False if (args.no_progress or args.json and not sys.stderr.isatty()) else None
+    res = simulate(policy, slots=args.slots, reps=args.reps, seed=args.seed, burn_in=args.burn_in, progress=progress)
+    payload = {
+        "scenario": scenario.source,
+        "overrides": args.overrides,
+        "kind": scenario.model.kind,
+        "configs": made.system.n_configs,
+        **res.to_dict(),
+        "policy_info": policy.describe(),
+        "setup_seconds": made.seconds,
+    }
+    if args.json:
+        emit_json(payload)
+    else:
+        print(scenario.describe())
+        print(f"policy {res.policy}: {res.reps} replications x {res.slots} slots (burn-in {res.burn_in}, seed {res.seed})")
+        print(f"average cost {res.mean:.8g} +- {res.stderr:.3g} (standard error), {res.seconds:.2f} s")
+        for name, v in zip([p.name for p in scenario.processes], res.process_means):
+            print(f"  {name}: average MSE {v:.8g}")
+    return 0
+
+
+def _configure_simulate(p: argparse.ArgumentParser) -> None:
+    add_scenario_args(p)
+    _add_policy_args(p)
+    p.add_argument("--slots", type=int, default=40_000, help="slots averaged per replication (default 40000)")
+    p.add_argument("--reps", type=int, default=20, help="independent replications (default 20)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--burn-in", type=int, default=1000, help="slots discarded first (default 1000)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+# ----------------------------------------------------------------------------- sweep
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from ..sweep import run_sweep
+
+    scenario = load(args)
+    log = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
+    res = run_sweep(
+        scenario,
+        args.param,
+        args.values,
+        args.policies,
+        args.out,
+        method=args.method,
+        exact=not args.no_exact,
+        simulate_slots=args.simulate_slots,
+        reps=args.reps,
+        seed=args.seed,
+        burn_in=args.burn_in,
+        max_workers=args.max_workers,
+        executor=args.executor,
+        plot=not args.no_plot,
+        log=log,
+    )
+    payload = {
+        "scenario": scenario.source,
+        "overrides": args.overrides,
+        "param": args.param,
+        "rows": res.table(),
+        "files": res.files,
+        "computed": res.computed,
+        "reused": res.reused,
+        "seconds": res.seconds,
+    }
+    if args.json:
+        emit_json(payload)
+    else:
+        print(f"{'value':>8} {'policy':<12} {'gain':>14} {'sim mean':>14} {'stderr':>9} {'seconds':>8}  status")
+        for r in res.rows:
+            g = "" if r.gain != r.gain else f"{r.gain:.8g}"
+            m = "" if r.sim_mean != r.sim_mean else f"{r.sim_mean:.8g}"
+            e = "" if r.sim_stderr != r.sim_stderr else f"{r.sim_stderr:.3g}"
+            print(f"{r.value:>8g} {r.policy:<12} {g:>14} {m:>14} {e:>9} {r.seconds:>8.2f}  {r.status}")
+        print(f"{res.computed} rows computed, {res.reused} reused; files: {', '.join(res.files.values())}")
+    bad = [r for r in res.rows if r.status.startswith("error")]
+    return 1 if bad else 0
+
+
+def _configure_sweep(p: argparse.ArgumentParser) -> None:
+    add_scenario_args(p)
+    p.add_argument("--param", default="p", help="override key to sweep (default p)")
+    p.add_argument("--values", required=True, help="START:STOP:STEP (stop included) or a comma list")
+    p.add_argument("--policies", default="optimal,suboptimal,static,greedy",
+                   help="comma list from optimal,suboptimal,static,best_static,greedy,random")
+    p.add_argument("--out", required=True, help="output folder (resumed when it holds rows)")
+    p.add_argument("--method", default="pi", choices=["lp", "lp-cvxpy", "rvi", "pi"],
+                   help="solver of the optimal policy (default pi)")
+    p.add_argument("--simulate-slots", type=int, default=0, help="also simulate each policy for this many slots")
+    p.add_argument("--reps", type=int, default=20, help="replications when simulating (default 20)")
+    p.add_argument("--seed", type=int, default=0, help="simulation seed (default 0)")
+    p.add_argument("--burn-in", type=int, default=1000, help="simulation burn-in (default 1000)")
+    p.add_argument("--no-exact", action="store_true", help="no exact evaluation (simulate only; needs --simulate-slots)")
+    p.add_argument("--max-workers", type=int, default=1, help="grid values in parallel (default 1, with warm start)")
+    p.add_argument("--executor", default="process", choices=["process", "dask"], help="parallel backend")
+    p.add_argument("--no-plot", action="store_true", help="do not write sweep.png / sweep.svg")
+
+
+COMMANDS = [
+    Command("evaluate", "evaluate a policy exactly (stationary distribution of the enumerated MDP)",
+            _configure_evaluate, cmd_evaluate),
+    Command("simulate", "Monte Carlo simulation of a policy from the configuration automaton",
+            _configure_simulate, cmd_simulate),
+    Command("sweep", "sweep one parameter for several policies: CSV/JSON table (resumable) and figure",
+            _configure_sweep, cmd_sweep),
+]

@@ -1,0 +1,37 @@
+"""``wncs-lp reproduce``: every figure and claim of the paper into a report."""
+from __future__ import annotations
+
+import argparse
+
+from .common import Command, emit_json
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from ..reproduce import run_reproduction
+
+    result = run_reproduction(args.out, args.profile, force=args.force,
+                              claims=[c.strip().upper() for c in args.claims.split(",")] if args.claims else None,
+                              progress=not args.json)
+    if args.json:
+        emit_json({"files": result["files"], "seconds": result["seconds"],
+                   "claims": [{k: c[k] for k in ("id", "verdict", "summary")} for c in result["claims"]]})
+    else:
+        for c in result["claims"]:
+            print(f"{c['id']:>4} {c['verdict']:<8} {c['summary']}")
+        print(f"report: {result['files']['md']} and {result['files']['html']} ({result['seconds']:.0f} s)")
+    return 0
+
+
+def _configure_reproduce(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", required=True, help="output folder (figures, tables, report.md/.html/.json, cache)")
+    p.add_argument("--profile", default="default", choices=["quick", "default"],
+                   help="quick: small caps, about a minute; default: caps 12/20/30 where the size allows")
+    p.add_argument("--force", action="store_true", help="recompute every step instead of using the cache")
+    p.add_argument("--claims", default="", help="only these claims, e.g. C1,C7 (default: all)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+
+COMMANDS = [
+    Command("reproduce", "reproduce every figure and claim of the paper into a report (cached, resumable)",
+            _configure_reproduce, cmd_reproduce),
+]

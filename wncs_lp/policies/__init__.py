@@ -1,0 +1,71 @@
+"""Scheduling policies as first-class objects, usable with or without an enumerated MDP.
+
+Every model of this toolkit has states s = (tau, C): the AoI vector tau in the box
+1..tau_hat and a configuration C of a small automaton (:mod:`wncs_lp.models.space`). A
+:class:`~wncs_lp.models.system.System` holds that automaton, the cost tables q_k and padded per-(C, action) outcome
+tables, but never the tau box, so it exists for systems far too large to enumerate (all four
+paper processes with caps of 30 or more).
+
+A :class:`Policy` has one interface that serves both uses:
+
+* ``policy.act(tau, config_ids, rng)`` -- vectorised over R replications: ``tau`` is an
+  (R, N) integer array of AoI values (1-based), ``config_ids`` an (R,) array of automaton
+  configuration ids; the result is the (R,) array of *local* action indices j, i.e. positions in
+  ``system.automaton.actions[c]`` (the MDP's action order for that configuration);
+* ``policy.on_mdp(mdp)`` -- the policy on an enumerated MDP built from the same scenario:
+  an (n,) int array of chosen pair indices (deterministic policies) or an (L,) float array of
+  pair probabilities (randomised ones), the two forms accepted by
+  :func:`wncs_lp.solvers.dp.evaluate_policy`.
+
+Policies (``make_policy`` builds them by name):
+
+``optimal``      :class:`OptimalPolicy`, the policy of a :class:`~wncs_lp.solvers.result.Solution`;
+``suboptimal``   :class:`SuboptimalPolicy`, the separable one-step improvement of paper Section III;
+``static``       :class:`StaticPolicy` with :func:`default_assignment`;
+``best_static``  :func:`best_static`, the static assignment of least exact average cost;
+``greedy``       :class:`GreedyPolicy`, the paper's greedy baseline;
+``random``       :class:`RandomPolicy`, uniform over the feasible actions (tau-independent).
+
+The exact rules are in ``docs/policies.md``.
+"""
+from __future__ import annotations
+
+from ..models.system import OutcomeTables, System
+from .base import Policy, as_rng
+from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
+from .optimal import OptimalPolicy
+from .rules import (
+    GreedyPolicy,
+    RandomPolicy,
+    RankRulePolicy,
+    StaticPolicy,
+    TauIndependentPolicy,
+    default_assignment,
+    static_assignments,
+)
+from .search import best_static
+from .suboptimal import ProcessPoisson, SuboptimalPolicy
+
+__all__ = [
+    "POLICY_NAMES",
+    "System",
+    "OutcomeTables",
+    "Policy",
+    "as_rng",
+    "OptimalPolicy",
+    "TauIndependentPolicy",
+    "RandomPolicy",
+    "RankRulePolicy",
+    "StaticPolicy",
+    "GreedyPolicy",
+    "SuboptimalPolicy",
+    "ProcessPoisson",
+    "default_assignment",
+    "static_assignments",
+    "best_static",
+    "make_policy",
+    "parse_policy_names",
+    "parse_assignment",
+    "policy_for",
+    "PolicySetup",
+]

@@ -1,0 +1,166 @@
+"""Policies by name: the factory the command line and the sweeps use."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+from ..errors import PolicyError
+from ..mdp import MDP
+from ..models.system import System
+from ..solvers import solve
+from .base import Policy
+from .optimal import OptimalPolicy
+from .rules import GreedyPolicy, RandomPolicy, StaticPolicy, default_assignment
+from .search import best_static
+from .suboptimal import SuboptimalPolicy
+
+__all__ = ["POLICY_NAMES", "PolicySetup", "make_policy", "parse_assignment", "parse_policy_names", "policy_for"]
+
+#: Policy names understood by :func:`make_policy` and the command line.
+POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random")
+
+
+def make_policy(
+    name: str,
+    system: System,
+    mdp: MDP | None = None,
+    *,
+    method: str = "pi",
+    solution: Any = None,
+    assignment: Sequence[int] | None = None,
+) -> Policy:
+    """Build a policy by name.
+
+    Parameters
+    ----------
+    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random"}
+    system : System
+    mdp : MDP, optional
+        Needed by ``optimal`` (solved with ``method`` unless ``solution`` is given) and
+        ``best_static`` (exact evaluation of every assignment).
+    method : str
+        Solver method for ``optimal`` (default ``"pi"``).
+    solution : Solution, optional
+        A solution of ``mdp`` to wrap instead of solving.
+    assignment : sequence of int, optional
+        For ``static`` (0-based servers); default :func:`default_assignment`.
+
+    Raises
+    ------
+    PolicyError
+        Unknown name (the message lists the allowed ones), or a needed MDP missing.
+    """
+    if name not in POLICY_NAMES:
+        raise PolicyError(f"unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
+    if name in ("optimal", "best_static") and mdp is None:
+        raise PolicyError(f"policy {name!r} needs the enumerated MDP")
+    if name == "optimal":
+        if solution is None:
+            solution = solve(mdp, method=method)
+        return OptimalPolicy(mdp, solution, system)
+    if name == "suboptimal":
+        return SuboptimalPolicy(system)
+    if name == "static":
+        return StaticPolicy(system, default_assignment(system.scenario) if assignment is None else assignment)
+    if name == "best_static":
+        return best_static(system, mdp)
+    if name == "greedy":
+        return GreedyPolicy(system)
+    return RandomPolicy(system)
+
+
+def parse_policy_names(text: str | Sequence[str]) -> list[str]:
+    """``"optimal,greedy"`` -> ``["optimal", "greedy"]``, checked against :data:`POLICY_NAMES`."""
+    items = [s.strip() for s in (text.split(",") if isinstance(text, str) else text) if s.strip()]
+    if not items:
+        raise PolicyError(f"no policy given; expected names from {', '.join(POLICY_NAMES)}")
+    for s in items:
+        if s not in POLICY_NAMES:
+            raise PolicyError(f"unknown policy {s!r}; expected one of {', '.join(POLICY_NAMES)}")
+    return list(dict.fromkeys(items))
+
+
+def parse_assignment(text: str | None, scenario: Any) -> list[int] | None:
+    """``"remote,edge"`` or ``"2,1"`` -> 0-based server indices, one per process (``None`` stays ``None``).
+
+    Each item is a server name of ``scenario`` or its 1-based index.
+
+    Raises
+    ------
+    PolicyError
+        An item that names no server (the message lists the allowed ones).
+    """
+    if text is None:
+        return None
+    names = [s.name for s in scenario.servers]
+    out = []
+    for item in (x.strip() for x in text.split(",")):
+        if item.isdigit() and 1 <= int(item) <= len(names):
+            out.append(int(item) - 1)
+        elif item in names:
+            out.append(names.index(item))
+        else:
+            raise PolicyError(f"--assignment: {item!r} is not a server; expected a name from {names} or 1..{len(names)}")
+    return out
+
+
+@dataclass(frozen=True)
+class PolicySetup:
+    """What :func:`policy_for` made: the system, the MDP (``None`` when not built), the policy and
+    the seconds the whole setup took."""
+
+    system: System
+    mdp: MDP | None
+    policy: Policy
+    seconds: float
+
+
+def policy_for(
+    scenario: Any,
+    name: str,
+    *,
+    method: str = "pi",
+    assignment: str | Sequence[int] | None = None,
+    need_mdp: bool = False,
+    force: bool = False,
+) -> PolicySetup:
+    """Build a scenario's system, its MDP when needed, and the policy ``name`` on them.
+
+    The MDP is built (after the size guard, :func:`wncs_lp.models.guard.build_checked`) when the
+    policy needs it (``optimal``, ``best_static``) or ``need_mdp`` is true.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    name : str
+        One of :data:`POLICY_NAMES`.
+    method : str
+        Solver method of ``optimal`` (default ``"pi"``).
+    assignment : str or sequence of int, optional
+        For ``static``: text for :func:`parse_assignment` or 0-based server indices.
+    need_mdp : bool
+        Build the MDP even when the policy does not need it (for an exact evaluation).
+    force : bool
+        Build even when the size guard refuses.
+
+    Raises
+    ------
+    PolicyError
+        Unknown name or bad assignment.
+    SizeLimitError
+        The MDP is too large and ``force`` is False.
+    """
+    from ..models.guard import build_checked
+
+    if name not in POLICY_NAMES:
+        raise PolicyError(f"unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
+    t0 = time.perf_counter()
+    if isinstance(assignment, str):
+        assignment = parse_assignment(assignment, scenario)
+    system = System.from_scenario(scenario)
+    mdp = None
+    if name in ("optimal", "best_static") or need_mdp:
+        mdp = build_checked(scenario, force=force)
+    policy = make_policy(name, system, mdp, method=method, assignment=assignment)
+    return PolicySetup(system, mdp, policy, time.perf_counter() - t0)

@@ -1,0 +1,79 @@
+"""The deterministic policy of a solved MDP."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import PolicyError
+from ..mdp import MDP
+from ..models import build
+from ..models.system import System
+from ..scenario import Scenario
+from ..solvers import solve
+from .base import Policy
+
+__all__ = ["OptimalPolicy"]
+
+
+class OptimalPolicy(Policy):
+    """The deterministic policy of a solved MDP (``Solution.policy``, one pair per state).
+
+    ``act`` looks the states up in the MDP (``mdp.states.ids``), so it works for every
+    state of the MDP's reachable set, which contains every state a simulation started in an
+    initial configuration can visit.
+
+    Parameters
+    ----------
+    mdp : MDP
+        The enumerated MDP (from :func:`wncs_lp.models.build`).
+    solution : Solution
+        Any solution of ``mdp`` (``policy`` = pair indices).
+    system : System
+        The scenario's system (``mdp`` must have been built from it); :meth:`from_scenario`
+        builds all three.
+    """
+
+    name = "optimal"
+
+    def __init__(self, mdp: MDP, solution: Any, system: System):
+        super().__init__(system)
+        system.check_mdp(mdp)
+        pol = np.asarray(solution.policy, dtype=np.int64)
+        if pol.shape != (mdp.n_states,) or np.any(mdp.s_indices[pol] != np.arange(mdp.n_states)):
+            raise PolicyError("solution.policy is not one pair index per state of this MDP")
+        self.mdp = mdp
+        self.solution = solution
+        self._local = pol - mdp.pair_ptr[:-1]
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario, method: str = "pi", system: System | None = None,
+                      mdp: MDP | None = None, **solve_kw: Any) -> "OptimalPolicy":
+        """Build the MDP (unless given), solve it with ``method`` and wrap the solution."""
+        system = system or System.from_scenario(scenario)
+        mdp = mdp if mdp is not None else build(scenario)
+        return cls(mdp, solve(mdp, method=method, **solve_kw), system)
+
+    @property
+    def gain(self) -> float:
+        return float(self.solution.gain)
+
+    def states_of(self, tau: np.ndarray, config_ids: np.ndarray) -> np.ndarray:
+        """MDP state ids of (tau, C) (raises :class:`PolicyError` for a state not in the MDP)."""
+        tau, c = self._check_inputs(tau, config_ids)
+        s = self.mdp.states.ids(tau, c)
+        if np.any(s < 0):
+            r = int(np.flatnonzero(s < 0)[0])
+            raise PolicyError(f"state tau={tau[r].tolist()}, configuration {int(c[r])} is not in the MDP")
+        return s
+
+    def act(self, tau, config_ids, rng=None):
+        return self._local[self.states_of(tau, config_ids)]
+
+    def on_mdp(self, mdp: MDP) -> np.ndarray:
+        if mdp is self.mdp:
+            return np.asarray(self.solution.policy, dtype=np.int64)
+        return super().on_mdp(mdp)
+
+    def describe(self):
+        return {**super().describe(), "method": self.solution.method, "solver_gain": float(self.solution.gain)}

@@ -1,0 +1,143 @@
+"""Line geometry of the AoI box: the lines of a direction and the interval property along them.
+
+Shared by the threshold check: Theorem 2's rays run along diagonals of the box, and the
+switching-curve (interval) property is read on every axis-parallel and diagonal line.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import ModelError
+from .context import PolicyContext
+from .report import Violation
+
+__all__ = ["box_lines", "direction_name", "line_structure", "gap_violations", "gap_violation", "theorem2_direction"]
+
+
+def box_lines(caps: Sequence[int], d: Sequence[int]) -> np.ndarray:
+    """All maximal lines ``x0, x0 + d, x0 + 2d, ...`` of the box, as flat indices.
+
+    Returns an (n_lines, L) int64 array, padded with -1 (``d`` nonnegative, nonzero).
+    """
+    caps = np.asarray(caps, dtype=np.int64)
+    d = np.asarray(d, dtype=np.int64)
+    if np.any(d < 0) or not np.any(d):
+        raise ModelError(f"line direction must be nonnegative and nonzero, got {tuple(d)}")
+    coords = np.indices(tuple(caps)).reshape(len(caps), -1).T
+    starts = coords[np.any(coords - d < 0, axis=1)]
+    pos = d > 0
+    lengths = np.min((caps[pos][None, :] - 1 - starts[:, pos]) // d[pos][None, :] + 1, axis=1)
+    L = int(lengths.max()) if lengths.size else 0
+    t = np.arange(L)
+    pts = starts[:, None, :] + t[None, :, None] * d[None, None, :]
+    valid = t[None, :] < lengths[:, None]
+    pts = np.where(valid[..., None], pts, 0)
+    flat = np.ravel_multi_index(tuple(np.moveaxis(pts, -1, 0)), tuple(caps))
+    return np.where(valid, flat, -1)
+
+
+def direction_name(d: Sequence[int]) -> str:
+    """``"axis tau_k"`` or ``"diagonal tau_i+tau_j..."`` for a direction of the box."""
+    ks = [k + 1 for k, x in enumerate(d) if x]
+    if len(ks) == 1:
+        return f"axis tau_{ks[0]}"
+    return "diagonal " + "+".join(f"tau_{k}" for k in ks)
+
+
+def line_structure(ctx: PolicyContext, configs: Sequence[int], directions: Sequence[tuple[int, ...]]
+                   ) -> tuple[dict, list[tuple]]:
+    """Whether each action region is an interval on every line of the given directions.
+
+    Tie-robust: a state x is *compatible* with action a when pi(x) = a or
+    ``|Q(x, a) - Q(x, pi(x))| <= tol``. A line has a gap for action a when two states with
+    pi = a enclose a reachable state not compatible with a.
+
+    Returns (summary per direction, list of gaps (direction, config, action, first, gap, last,
+    size)).
+    """
+    mdp = ctx.mdp
+    space = mdp.states
+    caps = tuple(int(c) for c in space.caps)
+    summary: dict[str, dict] = {}
+    gaps: list[tuple] = []
+    for d in directions:
+        lines = box_lines(caps, d)
+        name = direction_name(d)
+        entry = summary.setdefault(name, {"lines": 0, "checked": 0, "gaps": 0, "gap_lines_by_action": {}})
+        if lines.shape[1] < 3:
+            continue
+        for c in configs:
+            G = space.lookup_grid(c).ravel()
+            S = np.where(lines >= 0, G[np.maximum(lines, 0)], -1)
+            keep = np.count_nonzero(S >= 0, axis=1) >= 3
+            S = S[keep]
+            if S.shape[0] == 0:
+                continue
+            entry["lines"] += int(S.shape[0])
+            valid = S >= 0
+            Ssafe = np.maximum(S, 0)
+            A = np.where(valid, ctx.act[Ssafe], -1)
+            feas = np.flatnonzero(ctx.offsets[c] >= 0)
+            if feas.size < 2:
+                continue
+            L = S.shape[1]
+            idx = np.arange(L)[None, :]
+            for a in feas:
+                isA = A == a
+                has = isA.any(axis=1)
+                entry["checked"] += int(np.count_nonzero(has))
+                first = np.argmax(isA, axis=1)
+                last = L - 1 - np.argmax(isA[:, ::-1], axis=1)
+                qa = np.where(valid, ctx.q_of(Ssafe.ravel(), np.full(Ssafe.size, a)).reshape(S.shape), np.nan)
+                qp = np.where(valid, ctx.q_pi[Ssafe], np.nan)
+                incompatible = valid & (A != a) & (np.abs(qa - qp) > ctx.tol)
+                inside = (idx > first[:, None]) & (idx < last[:, None]) & has[:, None]
+                bad = incompatible & inside
+                rows = np.flatnonzero(bad.any(axis=1))
+                if rows.size:
+                    lab = str(ctx.action(a))
+                    entry["gaps"] += int(rows.size)
+                    entry["gap_lines_by_action"][lab] = entry["gap_lines_by_action"].get(lab, 0) + int(rows.size)
+                    for r in rows:
+                        j = int(np.argmax(bad[r]))
+                        gaps.append((name, c, int(a), int(S[r, first[r]]), int(S[r, j]), int(S[r, last[r]]),
+                                     float(qa[r, j] - qp[r, j])))
+    return summary, gaps
+
+
+def gap_violations(ctx: PolicyContext, gaps: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(recurrent, at_cap, size)`` arrays of the gaps of :func:`line_structure` (a gap is
+    recurrent when its three states are, at the cap when one of them is)."""
+    if not gaps:
+        z = np.zeros(0, bool)
+        return z, z, np.zeros(0)
+    trip = np.asarray([[x[3], x[4], x[5]] for x in gaps], dtype=np.int64)
+    rec = ctx.recurrent[trip].all(axis=1)
+    cap = ctx.at_cap[trip].any(axis=1)
+    size = np.asarray([x[6] for x in gaps])
+    return rec, cap, size
+
+
+def gap_violation(ctx: PolicyContext, gap: tuple, rec: bool, cap: bool) -> Violation:
+    """The :class:`~wncs_lp.verify.report.Violation` of one gap of :func:`line_structure`."""
+    name, c, a, s_first, s_gap, s_last, size = gap
+    return ctx.violation(
+        "line-gap", size, (s_first, s_gap, s_last), rec, cap,
+        {"direction": name, "action": list(ctx.action(a)), "action_at_gap": list(ctx.action(ctx.act[s_gap])),
+         "meaning": "states 1 and 3 choose the action; state 2 between them on the line strictly prefers another "
+                    "(size = Q(gap, action) - Q(gap, pi(gap)))"},
+    )
+
+
+def theorem2_direction(label: tuple[int, ...], N: int) -> tuple[int, ...] | None:
+    """The ray direction ``sum_{k in K} e_k`` of Theorem 2 for an action label sending the
+    processes K (None unless it sends at least two distinct processes)."""
+    sent = [k for k in label if k]
+    if len(sent) < 2 or len(set(sent)) != len(sent):
+        return None
+    d = [0] * N
+    for k in sent:
+        d[k - 1] = 1
+    return tuple(d)

@@ -1,0 +1,244 @@
+"""Report types of the structural checks and the helpers that fill them.
+
+:class:`Tolerance` (the tie tolerance), :class:`Violation` (one violation), :class:`CheckReport`
+(the outcome of one check) and the helpers every check uses to build a report:
+:func:`split_counts`, :func:`pick_examples`, :func:`make_report`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Iterable
+
+import numpy as np
+
+from ..errors import ModelError
+from ..files import json_ready
+
+if TYPE_CHECKING:
+    from .context import PolicyContext
+
+__all__ = ["Tolerance", "Violation", "CheckReport", "split_counts", "pick_examples", "make_report"]
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    r"""The tie tolerance ``tol = atol + rtol * scale`` with ``scale = span(V)``.
+
+    Parameters
+    ----------
+    atol : float
+        Absolute part (same unit as the cost).
+    rtol : float
+        Part relative to the value scale ``max V - min V``.
+    """
+
+    atol: float = 1e-9
+    rtol: float = 1e-9
+
+    def __post_init__(self) -> None:
+        if not (self.atol >= 0 and self.rtol >= 0 and np.isfinite(self.atol) and np.isfinite(self.rtol)):
+            raise ModelError(f"tolerance parts must be finite and >= 0, got atol={self.atol}, rtol={self.rtol}")
+
+    def resolve(self, scale: float) -> float:
+        """The absolute tolerance for a value scale."""
+        return float(self.atol + self.rtol * scale)
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One violation (or counterexample) of a structural property.
+
+    Attributes
+    ----------
+    kind : str
+        Which sub-check found it (``"adjacent"``, ``"dominance"``, ``"ray"``, ``"line-gap"``,
+        ``"preempt"``, ``"cancel"``).
+    size : float
+        How large it is, in the unit stated by the check (a value or Q-value difference, or a
+        probability for consistency).
+    states : tuple[int, ...]
+        The state ids involved.
+    labels : tuple[str, ...]
+        Their decoded labels (``tau=(..) | configuration``).
+    recurrent : bool
+    at_cap : bool
+    stationary : tuple[float, ...] or None
+        Stationary probability of each state under the solution's policy, when available.
+    info : dict
+        Check-specific data (axis, actions, z, trajectory...), JSON-ready.
+    """
+
+    kind: str
+    size: float
+    states: tuple[int, ...]
+    labels: tuple[str, ...]
+    recurrent: bool
+    at_cap: bool
+    stationary: tuple[float, ...] | None = None
+    info: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict."""
+        return {
+            "kind": self.kind,
+            "size": float(self.size),
+            "states": [int(s) for s in self.states],
+            "labels": list(self.labels),
+            "recurrent": bool(self.recurrent),
+            "at_cap": bool(self.at_cap),
+            "stationary": None if self.stationary is None else [float(x) for x in self.stationary],
+            "info": json_ready(self.info),
+        }
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """The outcome of one structural check.
+
+    Attributes
+    ----------
+    name : str
+        ``"monotonicity"``, ``"threshold"`` or ``"consistency"``.
+    claim : str
+        The paper's statement checked and the claim id.
+    holds : bool
+        No violation beyond the tolerance (see ``notes`` for what exactly enters the verdict).
+    checked : int
+        Number of cases examined (the unit is in ``unit``).
+    violations : int
+        Number of violating cases (same unit).
+    recurrent_violations, at_cap_violations : int
+        Among the violations: how many are recurrent, how many touch the AoI cap.
+    ties : int
+        Cases that differ from the claim only within the tolerance (not violations).
+    split : dict
+        The violations by (recurrent | transient) x (at cap | below cap).
+    tol, atol, rtol, value_scale : float
+        The resolved tolerance ``tol = atol + rtol * value_scale``.
+    recurrence_rule : str
+    unit : str
+        What one case is.
+    worst : Violation or None
+        The largest violation (by ``|size|``).
+    examples : tuple[Violation, ...]
+        Up to K violations, recurrent and below-cap ones first, then by size.
+    details : dict
+        Sub-counts (JSON-ready).
+    notes : str
+    model : str
+    seconds : float
+    """
+
+    name: str
+    claim: str
+    holds: bool
+    checked: int
+    violations: int
+    recurrent_violations: int
+    at_cap_violations: int
+    ties: int
+    split: dict
+    tol: float
+    atol: float
+    rtol: float
+    value_scale: float
+    recurrence_rule: str
+    unit: str
+    worst: Violation | None
+    examples: tuple[Violation, ...]
+    details: dict
+    notes: str
+    model: str
+    seconds: float
+
+    @property
+    def verdict(self) -> str:
+        return "HOLDS" if self.holds else "FAILS"
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (strict JSON once NaN/inf are mapped to null by the caller)."""
+        return {
+            "name": self.name,
+            "claim": self.claim,
+            "verdict": self.verdict,
+            "holds": bool(self.holds),
+            "checked": int(self.checked),
+            "violations": int(self.violations),
+            "recurrent_violations": int(self.recurrent_violations),
+            "at_cap_violations": int(self.at_cap_violations),
+            "ties": int(self.ties),
+            "split": json_ready(self.split),
+            "unit": self.unit,
+            "tol": float(self.tol),
+            "atol": float(self.atol),
+            "rtol": float(self.rtol),
+            "value_scale": float(self.value_scale),
+            "recurrence_rule": self.recurrence_rule,
+            "worst": None if self.worst is None else self.worst.to_json(),
+            "examples": [v.to_json() for v in self.examples],
+            "details": json_ready(self.details),
+            "notes": self.notes,
+            "model": self.model,
+            "seconds": float(self.seconds),
+        }
+
+    def summary(self) -> str:
+        """One line: verdict and counts."""
+        w = "" if self.worst is None else f", worst {self.worst.size:.4g}"
+        return (
+            f"{self.name}: {self.verdict} -- {self.violations} violation(s) in {self.checked} {self.unit} "
+            f"({self.recurrent_violations} recurrent, {self.at_cap_violations} at cap, {self.ties} ties{w}; "
+            f"tol {self.tol:.3g})"
+        )
+
+
+
+def split_counts(rec: np.ndarray, cap: np.ndarray) -> dict[str, int]:
+    """The violations by (recurrent | transient) x (at cap | below cap)."""
+    rec = np.asarray(rec, bool)
+    cap = np.asarray(cap, bool)
+    return {
+        "recurrent_below_cap": int(np.count_nonzero(rec & ~cap)),
+        "recurrent_at_cap": int(np.count_nonzero(rec & cap)),
+        "transient_below_cap": int(np.count_nonzero(~rec & ~cap)),
+        "transient_at_cap": int(np.count_nonzero(~rec & cap)),
+    }
+
+
+def pick_examples(rec: np.ndarray, cap: np.ndarray, size: np.ndarray, k: int) -> np.ndarray:
+    """Indices of up to k violations: recurrent first, then below the cap, then by |size|."""
+    if size.size == 0 or k <= 0:
+        return np.zeros(0, np.int64)
+    order = np.lexsort((-np.abs(size), cap.astype(int), (~rec).astype(int)))
+    return order[:k]
+
+
+def make_report(name: str, claim: str, ctx: PolicyContext, *, holds: bool, checked: int, violations: int,
+                rec: np.ndarray, cap: np.ndarray, ties: int, unit: str, worst: Violation | None,
+                examples: Iterable[Violation], details: dict, notes: str, t0: float) -> CheckReport:
+    """A :class:`CheckReport` with the tolerance, recurrence rule and model of ``ctx`` (``rec``,
+    ``cap``: per violation; ``t0``: the check's start, from :func:`time.perf_counter`)."""
+    return CheckReport(
+        name=name,
+        claim=claim,
+        holds=bool(holds),
+        checked=int(checked),
+        violations=int(violations),
+        recurrent_violations=int(np.count_nonzero(rec)),
+        at_cap_violations=int(np.count_nonzero(cap)),
+        ties=int(ties),
+        split=split_counts(rec, cap),
+        tol=ctx.tol,
+        atol=ctx.tolerance.atol,
+        rtol=ctx.tolerance.rtol,
+        value_scale=ctx.value_scale,
+        recurrence_rule=ctx.recurrence_rule,
+        unit=unit,
+        worst=worst,
+        examples=tuple(examples),
+        details=details,
+        notes=notes,
+        model=ctx.mdp.name,
+        seconds=time.perf_counter() - t0,
+    )

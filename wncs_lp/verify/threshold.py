@@ -1,0 +1,202 @@
+"""Theorem 2 (claim C8) and the switching-curve form of claim C9: the threshold check."""
+from __future__ import annotations
+
+import time
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import ModelError
+from ..mdp import MDP
+from ..models import model_type
+from ..solvers.result import Solution
+from .context import DEFAULT_EXAMPLES, PolicyContext, idle_configs, use_context
+from .lines import box_lines, gap_violation, gap_violations, line_structure, theorem2_direction
+from .report import CheckReport, Tolerance, Violation, make_report, pick_examples, split_counts
+
+__all__ = ["check_threshold"]
+
+
+def check_threshold(
+    mdp: MDP,
+    solution: Solution,
+    *,
+    tolerance: Tolerance | None = None,
+    examples: int = DEFAULT_EXAMPLES,
+    stationary_tol: float = 0.0,
+    configs: str | Sequence[int] | None = None,
+    ctx: PolicyContext | None = None,
+) -> CheckReport:
+    r"""Theorem 2 (claim C8) for the Section II model; the switching-curve form for preemption.
+
+    The model's :attr:`~wncs_lp.models.base.Model.threshold_form` says which reading applies.
+
+    **Theorem 2's rays** (``threshold_form = "rays"``: the Section II model), in the idle-server
+    configuration(s): for every
+    reachable idle state s with ``pi(s) = a`` sending distinct processes ``k1 != k2`` (in general
+    the set K of the processes a sends, |K| >= 2), and every ``z >= 1`` with
+    ``s' = s + z * sum_{k in K} e_k`` reachable in the box, the claim is ``pi(s') = a``.
+    If ``pi(s') != a`` the case is a *tie* when ``|Q(s', a) - Q(s', pi(s'))| <= tol`` (``a`` is
+    optimal at s' within tol) and a *violation* otherwise; its size is
+    ``Q(s', a) - Q(s', pi(s'))``. One case = one (s, z). A violation is recurrent when s and s'
+    both are (``details["target_recurrent"]`` counts those with s' recurrent), at the cap when s
+    or s' has some tau at its cap; ``details["violating_target_stationary_mass"]`` is the
+    stationary probability of the distinct states s' where the claim fails.
+
+    Sub-counts (``details["lines"]``, not part of the verdict for this model): whether each
+    action's region is an *interval* on every line parallel to a tau axis and to every
+    diagonal ``e_i + e_j`` -- a line has a gap for action a when two states choosing a enclose a
+    reachable state that strictly prefers another action (beyond tol).
+
+    **Intervals** (``threshold_form = "intervals"``: the preemption model): Theorem 2 does not
+    apply; claim C9 ("the preemption policy is of
+    threshold type", Figs. 11-12) is checked as the interval property above, in every
+    configuration with at least two feasible actions, along every axis and diagonal; one case
+    = one (line, action) pair where the action occurs; a violation = a gap.
+
+    Parameters
+    ----------
+    mdp, solution, tolerance, examples, stationary_tol, ctx
+        As in :func:`check_monotonicity`.
+    configs : "idle", "all" or sequence of configuration ids, optional
+        Where to look ("all": every configuration with >= 2 feasible actions). Default: the
+        model's :attr:`~wncs_lp.models.base.Model.threshold_configs` -- the idle configuration
+        (Section II), "all" (preemption).
+
+    Returns
+    -------
+    CheckReport
+    """
+    t0 = time.perf_counter()
+    ctx = use_context(mdp, solution, tolerance, stationary_tol, ctx)
+    space = mdp.states
+    model = model_type(mdp)
+    form = model.threshold_form
+    if form not in ("rays", "intervals"):
+        raise ModelError(f"{mdp.name}: unknown threshold form {form!r} of {model.__name__}")
+    caps = tuple(int(c) for c in space.caps)
+    N = len(caps)
+    nfeas = np.count_nonzero(ctx.offsets >= 0, axis=1)
+    if configs is None:
+        configs = model.threshold_configs
+    if isinstance(configs, str):
+        if configs == "idle":
+            cfg_ids = idle_configs(mdp)
+            if not cfg_ids:
+                raise ModelError(f"{mdp.name}: no idle-server configuration (is this a Section II model?)")
+        elif configs == "all":
+            cfg_ids = [c for c in range(len(space.configs)) if nfeas[c] >= 2]
+        else:
+            raise ModelError(f"configs must be 'idle', 'all' or a list of configuration ids, got {configs!r}")
+    else:
+        cfg_ids = [int(c) for c in configs]
+        for c in cfg_ids:
+            if not 0 <= c < len(space.configs):
+                raise ModelError(f"configuration id {c} out of range 0..{len(space.configs) - 1}")
+    directions: list[tuple[int, ...]] = [tuple(int(i == k) for i in range(N)) for k in range(N)]
+    directions += [tuple(int(i in (a, b)) for i in range(N)) for a in range(N) for b in range(a + 1, N)]
+    line_summary, gaps = line_structure(ctx, cfg_ids, directions)
+    grec, gcap, gsize = gap_violations(ctx, gaps)
+
+    if form == "intervals":
+        order = pick_examples(grec, gcap, gsize, examples)
+        ex = [gap_violation(ctx, gaps[int(i)], grec[i], gcap[i]) for i in order]
+        worst = None
+        if gaps:
+            i = int(np.argmax(np.abs(gsize)))
+            worst = gap_violation(ctx, gaps[i], grec[i], gcap[i])
+        checked = sum(v["checked"] for v in line_summary.values())
+        serving = [c for c in cfg_ids if model.job_in_service(space.configs[c]) is not None]
+        details = {"lines": line_summary, "configurations": len(cfg_ids), "configurations_serving": len(serving)}
+        notes = ("Preemption model: Theorem 2 is stated for the Section II model; here the C9 reading is checked -- "
+                 "each action's region is an interval on every axis-parallel and diagonal line of every configuration "
+                 "with >= 2 feasible actions (tie-robust).")
+        return make_report("threshold", "C9 (Figs. 11-12): preemption policy of threshold (switching-curve) type", ctx,
+                           holds=not gaps, checked=checked, violations=len(gaps), rec=grec, cap=gcap, ties=0,
+                           unit="(line, action) pairs", worst=worst, examples=ex, details=details, notes=notes, t0=t0)
+
+    # ---- Theorem 2 rays
+    n_checked = 0
+    n_ties = 0
+    per_action: dict[str, dict[str, int]] = {}
+    recs: list[np.ndarray] = []
+    rows: list[np.ndarray] = []  # columns: s, s', z, a, size
+    table = mdp.action_table
+    dir_of = {a: theorem2_direction(tuple(int(x) for x in np.atleast_1d(table[a])), N) for a in range(table.shape[0])}
+    dirs = sorted({d for d in dir_of.values() if d is not None})
+    n_sources = 0
+    for d in dirs:
+        lines = box_lines(caps, d)
+        L = lines.shape[1]
+        if L < 2:
+            continue
+        iu, ju = np.triu_indices(L, 1)
+        acts_d = np.array([a for a, dd in dir_of.items() if dd == d], dtype=np.int64)
+        for c in cfg_ids:
+            G = space.lookup_grid(c).ravel()
+            S = np.where(lines >= 0, G[np.maximum(lines, 0)], -1)
+            src, tgt = S[:, iu], S[:, ju]
+            zz = np.broadcast_to(ju - iu, src.shape)
+            ok = (src >= 0) & (tgt >= 0)
+            ok[ok] &= np.isin(ctx.act[src[ok]], acts_d)
+            s, t, z = src[ok], tgt[ok], zz[ok]
+            a = ctx.act[s]
+            n_checked += s.size
+            srcs = S[(S >= 0)]
+            n_sources += int(np.count_nonzero(np.isin(ctx.act[srcs], acts_d)))
+            diff_act = ctx.act[t] != a
+            qa = ctx.q_of(t, a)
+            gap = qa - ctx.q_pi[t]
+            tie = diff_act & (np.abs(gap) <= ctx.tol)
+            bad = diff_act & ~tie
+            n_ties += int(np.count_nonzero(tie))
+            for aa in np.unique(a):
+                lab = str(ctx.action(aa))
+                e = per_action.setdefault(lab, {"checked": 0, "violations": 0, "ties": 0})
+                m = a == aa
+                e["checked"] += int(np.count_nonzero(m))
+                e["violations"] += int(np.count_nonzero(bad & m))
+                e["ties"] += int(np.count_nonzero(tie & m))
+            rows.append(np.stack([s[bad], t[bad], z[bad], a[bad]], axis=1))
+            recs.append(gap[bad])
+    R = np.concatenate(rows) if rows else np.zeros((0, 4), np.int64)
+    size = np.concatenate(recs) if recs else np.zeros(0)
+    rec = (ctx.recurrent[R[:, 0]] & ctx.recurrent[R[:, 1]]) if R.size else np.zeros(0, bool)
+    cap = (ctx.at_cap[R[:, 0]] | ctx.at_cap[R[:, 1]]) if R.size else np.zeros(0, bool)
+
+    def make(i: int) -> Violation:
+        s, t, z, a = (int(x) for x in R[i])
+        return ctx.violation(
+            "ray", size[i], (s, t), rec[i], cap[i],
+            {"z": z, "action_at_s": list(ctx.action(a)), "action_at_s_prime": list(ctx.action(ctx.act[t])),
+             "Q_claimed": float(ctx.q_of(np.array([t]), np.array([a]))[0]), "Q_chosen": float(ctx.q_pi[t]),
+             "recurrent_each": [bool(ctx.recurrent[s]), bool(ctx.recurrent[t])],
+             "meaning": "pi(s) = action_at_s but at s' = s + z(e_k1 + e_k2) the claimed action is worse by size"},
+        )
+
+    ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples)]
+    worst = make(int(np.argmax(np.abs(size)))) if size.size else None
+    violating_sources = int(np.unique(R[:, 0]).size) if R.size else 0
+    targets = np.unique(R[:, 1]) if R.size else np.zeros(0, np.int64)
+    details = {
+        "configurations": [space.describe_config(space.configs[c]) for c in cfg_ids],
+        "source_states": n_sources,
+        "violating_source_states": violating_sources,
+        "violating_target_states": int(targets.size),
+        "target_recurrent": int(np.count_nonzero(ctx.recurrent[R[:, 1]])) if R.size else 0,
+        "violating_target_stationary_mass": (None if ctx.stationary is None
+                                             else float(ctx.stationary[targets].sum())),
+        "per_action": per_action,
+        "lines": line_summary,
+        "line_gaps": {"count": len(gaps), "split": split_counts(grec, gcap),
+                      "examples": [gap_violation(ctx, gaps[int(i)], grec[i], gcap[i]).to_json()
+                                   for i in pick_examples(grec, gcap, gsize, examples)]},
+    }
+    notes = ("Theorem 2 in the idle-server configuration: one case per (s, z); ties (claimed action optimal at s' "
+             "within tol) are not violations. 'details.lines' reports, separately and outside the verdict, whether "
+             "every action region is an interval along each tau axis and each diagonal e_i + e_j.")
+    return make_report(
+        "threshold", "Theorem 2 (C8): pi(s) = (k1, k2) => pi(s + z(e_k1 + e_k2)) = (k1, k2) in idle states",
+        ctx, holds=(R.shape[0] == 0), checked=n_checked, violations=R.shape[0], rec=rec, cap=cap,
+        ties=n_ties, unit="(state, z) pairs", worst=worst, examples=ex, details=details, notes=notes, t0=t0,
+    )

@@ -1,0 +1,20 @@
+"""Every matplotlib call of the toolkit: policy maps, performance curves, saving figures.
+
+Plot functions take ``ax=None`` (a new figure is made) and return the Axes; matplotlib is
+imported lazily inside them, so importing this package does not import matplotlib.
+"""
+from __future__ import annotations
+
+from .maps import ACTION_STYLES, plot_policy_map, plot_policy_slice
+from .save import save_figure
+from .sweeps import POLICY_STYLE, plot_sweep, save_sweep_figure
+
+__all__ = [
+    "ACTION_STYLES",
+    "POLICY_STYLE",
+    "plot_policy_map",
+    "plot_policy_slice",
+    "plot_sweep",
+    "save_sweep_figure",
+    "save_figure",
+]

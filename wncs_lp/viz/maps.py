@@ -1,0 +1,302 @@
+r"""Policy maps drawn: the paper's Figs. 3-4, 6-9 and 11-12 (the data is :mod:`wncs_lp.maps`).
+
+* :func:`plot_policy_map` -- the action over (tau_i, tau_j) for one configuration (server state)
+  with the other AoIs fixed;
+* :func:`plot_policy_slice` -- three processes on the plane tau_i + tau_j + tau_k = total, drawn
+  as a triangle in barycentric coordinates (Figs. 6-7).
+
+Both take ``ax=None`` (a new figure is made) and return the Axes. Process indices (``axes``,
+``fixed_tau``) are **1-based** like the paper's tau_1, tau_2, ...
+"""
+from __future__ import annotations
+
+import re
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from ..maps import (
+    NEIGHBOURS,
+    action_name,
+    map_names,
+    parse_config_spec,
+    policy_grid,
+    policy_pairs,
+    recurrent_mask,
+    short_action_name,
+    slice_grid,
+)
+from ..mdp import MDP
+
+__all__ = ["ACTION_STYLES", "plot_policy_map", "plot_policy_slice"]
+
+#: (marker, colour) per action index (row of ``mdp.action_table``), cycled.
+ACTION_STYLES: list[tuple[str, str]] = [
+    ("x", "tab:blue"),
+    ("o", "tab:red"),
+    ("s", "tab:green"),
+    ("^", "tab:orange"),
+    ("D", "tab:purple"),
+    ("v", "tab:brown"),
+    ("P", "tab:pink"),
+    ("*", "tab:olive"),
+    ("h", "tab:cyan"),
+    ("<", "black"),
+]
+_FILLED_ALPHA = 0.85
+_TRANSIENT_BG = "#dcdcdc"
+_UNREACHABLE_BG = "#7f7f7f"
+
+
+
+
+def _style(a: int) -> tuple[str, str]:
+    return ACTION_STYLES[int(a) % len(ACTION_STYLES)]
+
+
+def _tau(k: int, info: dict) -> str:
+    """Mathtext tau with the process's short name as subscript when it is short, else its index."""
+    nm = info["processes"][k - 1]
+    sub = nm if re.fullmatch(r"\w{1,3}", nm) else str(k)
+    return rf"$\tau_{{{sub}}}$"
+
+
+def _title(info: dict, mdp: MDP, config: int, extra: str) -> str:
+    desc = mdp.states.describe_config(mdp.states.configs[config])
+    caps = mdp.states.caps
+    par = [f"cap {caps[0]}" if len(set(caps)) == 1 else "caps " + ",".join(map(str, caps))]
+    if info.get("p") is not None:
+        par.insert(0, f"p = {info['p']:g}")
+    return f"{info['name']}: policy in [{desc}]\n{extra}{', '.join(par)}"
+
+
+def _ticks(ax, cap_x: int, cap_y: int) -> None:
+    step = lambda c: 1 if c <= 15 else (2 if c <= 30 else 5)  # noqa: E731
+    ax.set_xticks(range(1, cap_x + 1, step(cap_x)))
+    ax.set_yticks(range(1, cap_y + 1, step(cap_y)))
+
+
+def plot_policy_map(
+    mdp: MDP,
+    policy_or_solution: Any,
+    config: Any,
+    axes: Sequence[int] = (1, 2),
+    fixed_tau: Mapping[int, int] | None = None,
+    ax: Any = None,
+    stationary: Any = None,
+    *,
+    scenario: Any = None,
+    title: str | None = None,
+    legend: bool = True,
+) -> Any:
+    r"""Draw the chosen action over (tau_i, tau_j) for one configuration (paper Figs. 3, 4, 8, 9, 11, 12).
+
+    Each reachable cell carries the action's marker (one marker/colour per action, consistent
+    across maps of one MDP); the background is white for states with positive stationary
+    probability under the policy, light grey for states with zero stationary probability
+    (transient), dark grey for unreachable cells.
+
+    Parameters
+    ----------
+    mdp : MDP
+    policy_or_solution : Solution or (n,) int array of pair indices
+    config : configuration (id, object or spec string, see :func:`parse_config_spec`)
+    axes : (i, j)
+        1-based processes on the x and y axes.
+    fixed_tau : {k: tau_k}, optional
+        The other AoIs (default: the value with the most stationary probability, or the most
+        recurrent states, in this configuration; see :func:`policy_grid`).
+    ax : matplotlib Axes, optional
+    stationary : (n,) array, False or None
+        Stationary distribution for the shading (``> 0`` = recurrent); None (default) uses the
+        exact graph criterion (closed communicating classes of the policy's chain); False
+        disables the shading.
+    scenario : Scenario, optional
+        For process/server names and p in labels (default: read from ``mdp.meta["source"]``).
+    title : str, optional
+    legend : bool
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    cid = parse_config_spec(mdp, config)
+    pol = policy_pairs(mdp, policy_or_solution)
+    A, S, fixed = policy_grid(mdp, pol, cid, axes, fixed_tau, stationary)
+    rec_mask = recurrent_mask(mdp, pol, stationary)
+    info = map_names(mdp, scenario)
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8.6, 6.2))
+    ci, cj = A.shape
+    bg = np.ones((cj, ci, 3))
+    reach = S >= 0
+    if rec_mask is not None:
+        trans = reach & ~rec_mask[np.maximum(S, 0)]
+        bg[trans.T] = np.array([0xDC, 0xDC, 0xDC]) / 255
+    bg[(~reach).T] = np.array([0x7F, 0x7F, 0x7F]) / 255
+    ax.imshow(bg, origin="lower", extent=(0.5, ci + 0.5, 0.5, cj + 0.5), interpolation="nearest", aspect="auto")
+    n_cells = max(ci, cj)
+    ms = max(3.0, min(9.0, 160.0 / n_cells))
+    handles = []
+    for a in np.unique(A[A >= 0]):
+        xs, ys = np.nonzero(A == a)
+        mk, col = _style(a)
+        ax.plot(xs + 1, ys + 1, linestyle="none", marker=mk, color=col, markersize=ms,
+                markerfacecolor=col if mk not in ("x", "+") else None, alpha=_FILLED_ALPHA,
+                markeredgewidth=1.4 if mk in ("x", "+") else 0.6)
+        n = int(xs.size)
+        handles.append(Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
+                              label=f"{action_name(mdp, int(a), cid, names=info)}  [{n} cells]"))
+    if rec_mask is not None:
+        handles.append(Patch(facecolor=_TRANSIENT_BG, edgecolor="0.5", label="zero stationary probability"))
+    if (~reach).any():
+        handles.append(Patch(facecolor=_UNREACHABLE_BG, edgecolor="0.3", label="unreachable state"))
+    i, j = axes
+    pn = info["processes"]
+    ax.set_xlabel(f"{_tau(i, info)}  (AoI of process {pn[i - 1]})")
+    ax.set_ylabel(f"{_tau(j, info)}  (AoI of process {pn[j - 1]})")
+    ax.set_xlim(0.5, ci + 0.5)
+    ax.set_ylim(0.5, cj + 0.5)
+    _ticks(ax, ci, cj)
+    extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(fixed.items()))
+    ax.set_title(title or _title(info, mdp, cid, (extra + ", ") if extra else ""), fontsize=10)
+    if legend:
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8.5,
+                  title="action", title_fontsize=9, frameon=True)
+    return ax
+
+
+def _bary(t_i: np.ndarray, t_j: np.ndarray, t_k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Barycentric -> plane: vertex of tau_i at (0, 0), tau_j at (1, 0), tau_k at (1/2, sqrt(3)/2)."""
+    tot = t_i + t_j + t_k
+    return (t_j + 0.5 * t_k) / tot, (np.sqrt(3) / 2) * t_k / tot
+
+
+def plot_policy_slice(
+    mdp: MDP,
+    solution: Any,
+    config: Any,
+    total: int,
+    ax: Any = None,
+    *,
+    axes: Sequence[int] = (1, 2, 3),
+    fixed_tau: Mapping[int, int] | None = None,
+    stationary: Any = None,
+    scenario: Any = None,
+    title: str | None = None,
+    legend: bool = True,
+) -> Any:
+    r"""Draw the policy on the plane tau_i + tau_j + tau_k = total as a triangle (paper Figs. 6-7).
+
+    A lattice point (t_i, t_j, t_k) is drawn at its barycentric position (corner of tau_i = the
+    point where tau_i is largest, etc.); markers as in :func:`plot_policy_map`, faded for
+    states with zero stationary probability, a small grey dot for unreachable points. Each
+    connected region (6-neighbour on the triangular lattice) carries a text label with its
+    action.
+
+    Parameters
+    ----------
+    mdp, solution, config
+        As in :func:`plot_policy_map`.
+    total : int
+        The plane's constant.
+    ax : Axes, optional
+    axes : (i, j, k)
+        The three processes (1-based).
+    fixed_tau : dict, optional
+        Values of the AoIs not in ``axes`` (N > 3).
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from scipy import ndimage
+
+    cid = parse_config_spec(mdp, config)
+    pol = policy_pairs(mdp, solution)
+    A, S, fixed = slice_grid(mdp, pol, cid, total, axes, fixed_tau, stationary)
+    rec_mask = recurrent_mask(mdp, pol, stationary)
+    info = map_names(mdp, scenario)
+    if ax is None:
+        _, ax = plt.subplots(figsize=(9.0, 6.8))
+    i, j, k = axes
+    ci, cj = A.shape
+    TI, TJ = np.meshgrid(np.arange(1, ci + 1), np.arange(1, cj + 1), indexing="ij")
+    TK = total - TI - TJ
+    X, Y = _bary(TI.astype(float), TJ.astype(float), TK.astype(float))
+    on = A != -2
+    npts = int(on.sum())
+    side = max(2.0, np.sqrt(2 * npts))
+    ms = max(2.5, min(9.0, 170.0 / side))
+    # outline of the plane inside the box (the convex hull of its lattice points)
+    px, py = X[on], Y[on]
+    ax.plot(px, py, linestyle="none")  # sets the limits
+    if npts >= 3:
+        try:
+            from scipy.spatial import ConvexHull
+
+            hull = ConvexHull(np.c_[px, py])
+            v = np.r_[hull.vertices, hull.vertices[:1]]
+            ax.plot(px[v], py[v], color="0.6", lw=0.8, zorder=0)
+        except Exception:  # degenerate (collinear) slice
+            pass
+    unr = A == -1
+    if unr.any():
+        ax.plot(X[unr], Y[unr], linestyle="none", marker=".", color="0.55", markersize=ms * 0.5, zorder=1)
+    handles = []
+    for a in np.unique(A[A >= 0]):
+        mk, col = _style(a)
+        m = A == a
+        rec = m.copy()
+        if rec_mask is not None:
+            rec = m & rec_mask[np.maximum(S, 0)]
+        for sel, alpha in ((rec, _FILLED_ALPHA), (m & ~rec, 0.35)):
+            if sel.any():
+                ax.plot(X[sel], Y[sel], linestyle="none", marker=mk, color=col, markersize=ms, alpha=alpha,
+                        markerfacecolor=col if mk not in ("x", "+") else None,
+                        markeredgewidth=1.2 if mk in ("x", "+") else 0.5, zorder=2)
+        handles.append(Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
+                              label=f"{action_name(mdp, int(a), cid, names=info)}  [{int(m.sum())} points]"))
+        comp, ncomp = ndimage.label(m, structure=NEIGHBOURS["tri6"])
+        for r in range(1, ncomp + 1):
+            sel = comp == r
+            if sel.sum() < 3:
+                continue
+            ax.text(X[sel].mean(), Y[sel].mean(), short_action_name(mdp, int(a), info), ha="center", va="center",
+                    fontsize=9, fontweight="bold", color=col, zorder=4,
+                    bbox=dict(boxstyle="round,pad=0.2", facecolor="white", edgecolor=col, alpha=0.85))
+    if rec_mask is not None:
+        handles.append(Line2D([], [], linestyle="none", marker="o", color="0.3", alpha=0.35, markersize=7,
+                              label="faded: zero stationary probability"))
+    if unr.any():
+        handles.append(Line2D([], [], linestyle="none", marker=".", color="0.55", markersize=7,
+                              label="unreachable state"))
+    pn = info["processes"]
+    # where each tau is largest: a label just outside the points, away from their centre
+    mx, my = px.mean(), py.mean()
+    span = max(px.max() - px.min(), py.max() - py.min(), 1e-9)
+    for name, T_ in ((i, TI), (j, TJ), (k, TK)):
+        vals = np.where(on, T_, -1)
+        top = vals == vals.max()
+        tx, ty = X[top].mean(), Y[top].mean()
+        dx, dy = tx - mx, ty - my
+        nrm = max(np.hypot(dx, dy), 1e-9)
+        ax.annotate(f"{_tau(name, info)} largest (= {int(vals.max())})\nprocess {pn[name - 1]}",
+                    (tx + 0.17 * span * dx / nrm, ty + 0.17 * span * dy / nrm), ha="center", va="center",
+                    fontsize=8.5, color="0.25", annotation_clip=False)
+    ax.margins(0.2)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    extra = ", ".join(f"{_tau(p, info)} = {v}" for p, v in sorted(fixed.items()))
+    head = f"plane {_tau(i, info)} + {_tau(j, info)} + {_tau(k, info)} = {total}, " + (extra + ", " if extra else "")
+    ax.set_title(title or _title(info, mdp, cid, head), fontsize=10, pad=30)
+    if legend:
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8.5, title="action",
+                  title_fontsize=9)
+    return ax
