@@ -10,26 +10,38 @@ from pathlib import Path
 
 MODULES = [
     ("wncs_lp", "Top level"),
+    ("wncs_lp.errors", "Errors"),
     ("wncs_lp.scenario", "Scenarios"),
-    ("wncs_lp.cost", "Cost tables"),
     ("wncs_lp.mdp", "The MDP container"),
-    ("wncs_lp.models", "Model builders"),
+    ("wncs_lp.chain", "Induced Markov chains"),
+    ("wncs_lp.models", "Models"),
+    ("wncs_lp.models.base", "The model protocol"),
     ("wncs_lp.models.wncs", "Section II model"),
     ("wncs_lp.models.preemption", "Section IV preemption model"),
-    ("wncs_lp.models.space", "Builder engine"),
+    ("wncs_lp.models.automaton", "Configuration automaton"),
+    ("wncs_lp.models.statespace", "Decoded state space"),
+    ("wncs_lp.models.assemble", "MDP assembly"),
+    ("wncs_lp.models.cost", "Cost tables"),
+    ("wncs_lp.models.system", "System (automaton without the box)"),
+    ("wncs_lp.models.guard", "Size guard"),
     ("wncs_lp.solvers", "Solvers"),
     ("wncs_lp.solvers.result", "Solution"),
-    ("wncs_lp.policies", "Policies"),
     ("wncs_lp.evaluate", "Exact evaluation"),
+    ("wncs_lp.policies", "Policies"),
+    ("wncs_lp.policies.base", "Policy interface"),
+    ("wncs_lp.policies.optimal", "Optimal policy"),
+    ("wncs_lp.policies.rules", "Rule policies"),
+    ("wncs_lp.policies.search", "Policy searches"),
+    ("wncs_lp.policies.suboptimal", "Separable suboptimal policy"),
+    ("wncs_lp.policies.factory", "Policies by name"),
     ("wncs_lp.simulate", "Monte Carlo"),
     ("wncs_lp.sweep", "Sweeps"),
-    ("wncs_lp.structure", "Structural verifiers"),
-    ("wncs_lp.maps", "Policy maps"),
-    ("wncs_lp.plots", "Performance plots"),
-    ("wncs_lp.guard", "Size guard"),
+    ("wncs_lp.verify", "Structural verifiers"),
+    ("wncs_lp.maps", "Policy maps (data)"),
+    ("wncs_lp.viz", "Figures"),
     ("wncs_lp.export", "Export"),
+    ("wncs_lp.files", "Files and JSON"),
     ("wncs_lp.reproduce", "Reproduction"),
-    ("wncs_lp.errors", "Errors"),
 ]
 
 
@@ -54,7 +66,8 @@ def main() -> None:
                 continue
             if getattr(obj, "__module__", "").split(".")[0] != "wncs_lp":
                 continue
-            if name != "wncs_lp" and obj.__module__ != name and not name.endswith("solvers"):
+            if name not in ("wncs_lp", "wncs_lp.solvers", "wncs_lp.verify", "wncs_lp.viz", "wncs_lp.models") \
+                    and obj.__module__ != name:
                 continue
             try:
                 sig = str(inspect.signature(obj))

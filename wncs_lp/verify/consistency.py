@@ -9,8 +9,8 @@ from ..errors import ModelError
 from ..mdp import MDP
 from ..models import model_type
 from ..solvers.result import Solution
-from .context import DEFAULT_EXAMPLES, PolicyContext, require_space, use_context
-from .report import CheckReport, Tolerance, Violation, make_report, pick_examples
+from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, require_space, use_context
+from .report import CheckReport, Tolerance, Violation, pick_examples
 
 __all__ = ["check_consistency"]
 

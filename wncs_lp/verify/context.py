@@ -1,8 +1,9 @@
 """The data every structural check shares, computed once per solved model (:class:`PolicyContext`)."""
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 
@@ -13,7 +14,7 @@ from ..models import model_type
 from ..solvers.certify import q_values
 from ..solvers.dp import evaluate_policy
 from ..solvers.result import Solution
-from .report import Tolerance, Violation
+from .report import CheckReport, Tolerance, Violation, split_counts
 
 __all__ = [
     "DEFAULT_EXAMPLES",
@@ -23,6 +24,7 @@ __all__ = [
     "use_context",
     "require_space",
     "idle_configs",
+    "make_report",
 ]
 
 #: Default number of example violations kept in a report.
@@ -249,3 +251,33 @@ def use_context(mdp: MDP, solution: Solution, tolerance: Tolerance | None, stati
             raise ModelError("the given PolicyContext was computed for another MDP")
         return ctx
     return policy_context(mdp, solution, tolerance, stationary_tol=stationary_tol)
+
+
+def make_report(name: str, claim: str, ctx: PolicyContext, *, holds: bool, checked: int, violations: int,
+                rec: np.ndarray, cap: np.ndarray, ties: int, unit: str, worst: Violation | None,
+                examples: Iterable[Violation], details: dict, notes: str, t0: float) -> CheckReport:
+    """A :class:`CheckReport` with the tolerance, recurrence rule and model of ``ctx`` (``rec``,
+    ``cap``: per violation; ``t0``: the check's start, from :func:`time.perf_counter`)."""
+    return CheckReport(
+        name=name,
+        claim=claim,
+        holds=bool(holds),
+        checked=int(checked),
+        violations=int(violations),
+        recurrent_violations=int(np.count_nonzero(rec)),
+        at_cap_violations=int(np.count_nonzero(cap)),
+        ties=int(ties),
+        split=split_counts(rec, cap),
+        tol=ctx.tol,
+        atol=ctx.tolerance.atol,
+        rtol=ctx.tolerance.rtol,
+        value_scale=ctx.value_scale,
+        recurrence_rule=ctx.recurrence_rule,
+        unit=unit,
+        worst=worst,
+        examples=tuple(examples),
+        details=details,
+        notes=notes,
+        model=ctx.mdp.name,
+        seconds=time.perf_counter() - t0,
+    )

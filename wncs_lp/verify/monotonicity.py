@@ -8,8 +8,8 @@ import numpy as np
 
 from ..mdp import MDP
 from ..solvers.result import Solution
-from .context import DEFAULT_EXAMPLES, PolicyContext, use_context
-from .report import CheckReport, Tolerance, Violation, make_report, pick_examples
+from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, use_context
+from .report import CheckReport, Tolerance, Violation, pick_examples
 
 __all__ = ["check_monotonicity"]
 

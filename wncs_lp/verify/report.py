@@ -6,19 +6,16 @@
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Iterable
+from typing import Any
 
 import numpy as np
 
 from ..errors import ModelError
 from ..files import json_ready
 
-if TYPE_CHECKING:
-    from .context import PolicyContext
 
-__all__ = ["Tolerance", "Violation", "CheckReport", "split_counts", "pick_examples", "make_report"]
+__all__ = ["Tolerance", "Violation", "CheckReport", "split_counts", "pick_examples"]
 
 
 @dataclass(frozen=True)
@@ -212,33 +209,3 @@ def pick_examples(rec: np.ndarray, cap: np.ndarray, size: np.ndarray, k: int) ->
         return np.zeros(0, np.int64)
     order = np.lexsort((-np.abs(size), cap.astype(int), (~rec).astype(int)))
     return order[:k]
-
-
-def make_report(name: str, claim: str, ctx: PolicyContext, *, holds: bool, checked: int, violations: int,
-                rec: np.ndarray, cap: np.ndarray, ties: int, unit: str, worst: Violation | None,
-                examples: Iterable[Violation], details: dict, notes: str, t0: float) -> CheckReport:
-    """A :class:`CheckReport` with the tolerance, recurrence rule and model of ``ctx`` (``rec``,
-    ``cap``: per violation; ``t0``: the check's start, from :func:`time.perf_counter`)."""
-    return CheckReport(
-        name=name,
-        claim=claim,
-        holds=bool(holds),
-        checked=int(checked),
-        violations=int(violations),
-        recurrent_violations=int(np.count_nonzero(rec)),
-        at_cap_violations=int(np.count_nonzero(cap)),
-        ties=int(ties),
-        split=split_counts(rec, cap),
-        tol=ctx.tol,
-        atol=ctx.tolerance.atol,
-        rtol=ctx.tolerance.rtol,
-        value_scale=ctx.value_scale,
-        recurrence_rule=ctx.recurrence_rule,
-        unit=unit,
-        worst=worst,
-        examples=tuple(examples),
-        details=details,
-        notes=notes,
-        model=ctx.mdp.name,
-        seconds=time.perf_counter() - t0,
-    )

@@ -10,9 +10,9 @@ from ..errors import ModelError
 from ..mdp import MDP
 from ..models import model_type
 from ..solvers.result import Solution
-from .context import DEFAULT_EXAMPLES, PolicyContext, idle_configs, use_context
+from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, idle_configs, use_context
 from .lines import box_lines, gap_violation, gap_violations, line_structure, theorem2_direction
-from .report import CheckReport, Tolerance, Violation, make_report, pick_examples, split_counts
+from .report import CheckReport, Tolerance, Violation, pick_examples, split_counts
 
 __all__ = ["check_threshold"]
 
