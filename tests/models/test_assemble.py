@@ -8,11 +8,10 @@ is measured in ``benchmarks/``.
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from wncs_lp import scenario_path
 from wncs_lp.models.cost import cost_tables
 from wncs_lp.models.preemption import preemption_automaton
 from reference.loop_builder import build_aoi_mdp_loop
@@ -20,8 +19,6 @@ from wncs_lp.models.assemble import build_aoi_mdp
 from wncs_lp.models.automaton import ConfigAutomaton, FlatAutomaton
 from wncs_lp.models.wncs import wncs_automaton
 from wncs_lp.scenario import load_scenario
-
-FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
 
 
 def assert_same_mdp(a, b):
@@ -58,7 +55,7 @@ def _both(auto, sc):
     ],
 )
 def test_vectorised_builder_equals_loop_builder(name, sets):
-    sc = load_scenario(FORMULATIONS / name, sets)
+    sc = load_scenario(scenario_path(name), sets)
     auto = (preemption_automaton if sc.model.kind == "preemption" else wncs_automaton)(sc)
     new, old = _both(auto, sc)
     assert_same_mdp(new, old)
@@ -92,7 +89,7 @@ def test_hand_built_automaton_without_flat_arrays():
 
 
 def test_flat_arrays_match_outcomes():
-    sc = load_scenario(FORMULATIONS / "paper_preemption_p12.toml", ["tau_cap=6"])
+    sc = load_scenario(scenario_path("paper_preemption_p12.toml"), ["tau_cap=6"])
     auto = preemption_automaton(sc)
     ref = FlatAutomaton.from_outcomes(auto.outcomes, sc.n_processes)
     got = auto.flat()

@@ -1,18 +1,15 @@
 """The Section II builder against the spec: reference sizes, closed forms, hand-traced rows."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from wncs_lp import scenario_path
 from wncs_lp.models.cost import mse_table
 from wncs_lp.models import build
 from wncs_lp.models.wncs import feasible_actions, idle_config
 from wncs_lp.scenario import load_scenario, scenario_from_dict
 from wncs_lp.solvers import solve
-
-FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
 
 
 def one_process(a: float, r: float, p: float, cap: int, U: int, D: int, T: int, pd: float | None = None):
@@ -46,7 +43,7 @@ def test_cost_table_example_of_spec():
 )
 def test_reference_sizes(name, states, pairs):
     """spec section 5 reference table (independent implementation)."""
-    mdp = build(load_scenario(FORMULATIONS / name))
+    mdp = build(load_scenario(scenario_path(name)))
     assert (mdp.n_states, mdp.n_pairs) == (states, pairs)
     mdp.validate()
 
@@ -112,7 +109,7 @@ def test_hand_traced_start_of_two_jobs():
     edge (U=D=0, T_2=6): a surviving update starts at once and gets one slot: d = 5.
     No delivery: tau -> (4, 6). p = 0.9 on each uplink.
     """
-    sc = load_scenario(FORMULATIONS / "paper_p12.toml")
+    sc = load_scenario(scenario_path("paper_p12.toml"))
     mdp = build(sc)
     idle = idle_config(sc)
     s = mdp.states.find((3, 5), idle)
@@ -137,7 +134,7 @@ def test_hand_traced_remote_delivery_and_acceptance():
     tau_1 -> min(tau_1 + 1, U + T_1 + D = 6); the idle remote server accepts, and so does the
     edge; sending 2 to remote and 1 to edge: edge job 1 (T = 8) starts at once, d = 7.
     """
-    sc = load_scenario(FORMULATIONS / "paper_p12.toml")
+    sc = load_scenario(scenario_path("paper_p12.toml"))
     mdp = build(sc)
     cfg = (((), 0, 0, (1,)), ((), 0, 0, ()))
     # (10, 3) would be unreachable: a command of process 1 in the downlink means >= 5 slots
@@ -160,7 +157,7 @@ def test_hand_traced_remote_delivery_and_acceptance():
 
 def test_remote_accepts_only_when_one_slot_left():
     """U = 1: accept iff d <= 1, so with d = 2 only the edge can be used."""
-    sc = load_scenario(FORMULATIONS / "paper_p12.toml")
+    sc = load_scenario(scenario_path("paper_p12.toml"))
     busy2 = (((), 1, 2, (0,)), ((), 0, 0, ()))
     busy1 = (((), 1, 1, (0,)), ((), 0, 0, ()))
     assert feasible_actions(sc, busy2) == [(0, 1), (0, 2)]
@@ -168,7 +165,7 @@ def test_remote_accepts_only_when_one_slot_left():
 
 
 def test_action_sets_follow_options():
-    sc = load_scenario(FORMULATIONS / "paper_p12.toml")
+    sc = load_scenario(scenario_path("paper_p12.toml"))
     idle = idle_config(sc)
     assert feasible_actions(sc, idle) == [(1, 2), (2, 1)]
     idle_sc = sc.with_overrides({"model.allow_idle": True})
@@ -185,7 +182,7 @@ def test_action_sets_follow_options():
 
 
 def test_states_decode_consistently():
-    sc = load_scenario(FORMULATIONS / "paper_p14.toml")
+    sc = load_scenario(scenario_path("paper_p14.toml"))
     mdp = build(sc)
     st = mdp.states
     assert st.tau.shape == (mdp.n_states, 2)

@@ -2,11 +2,10 @@
 iterate, and ``method="auto"``. No wall-clock assertions: speed lives in ``benchmarks/``."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from wncs_lp import scenario_path
 from wncs_lp.mdp import MDP
 from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
@@ -14,7 +13,6 @@ from wncs_lp.solvers import bracket, policy_iteration, relative_value_iteration,
 from wncs_lp.solvers import kernels
 from wncs_lp.solvers.kernels import ScipyKernel, get_kernel, numba_available, prepare
 
-FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
 needs_numba = pytest.mark.skipif(not numba_available(), reason="numba not installed (the 'fast'/'test' extra)")
 
 #: spec section 5 reference gain, processes 1, 2 on remote + edge, cap 12
@@ -39,7 +37,7 @@ def random_mdp(seed: int, n: int = 40, max_actions: int = 3, per_pair_cost: bool
 
 @pytest.fixture(scope="module")
 def p12():
-    return build(load_scenario(FORMULATIONS / "paper_p12.toml"))
+    return build(load_scenario(scenario_path("paper_p12.toml")))
 
 
 # ------------------------------------------------------------------------ kernels
@@ -185,7 +183,7 @@ def test_bad_value_iteration_arguments(p12):
 
 def test_policy_iteration_survives_a_multichain_iterate():
     """The preemption paper instance at p = 1: greedy-cost PI meets a multichain iterate."""
-    mdp = build(load_scenario(FORMULATIONS / "paper_preemption_p12.toml", ["p=1"]))
+    mdp = build(load_scenario(scenario_path("paper_preemption_p12.toml"), ["p=1"]))
     from wncs_lp.errors import PolicyError
 
     with pytest.raises(PolicyError, match="multichain"):
@@ -230,7 +228,7 @@ def test_iterative_evaluation_matches_lu_on_the_models(name, sets):
     value-iteration optimal policy; the gain also lies in value iteration's certificate."""
     from wncs_lp.solvers import evaluate_policy
 
-    mdp = build(load_scenario(FORMULATIONS / name, sets))
+    mdp = build(load_scenario(scenario_path(name), sets))
     vi = value_iteration(mdp, tol=1e-11)
     it = evaluate_policy(mdp, vi.policy, method="iterative")
     lu = evaluate_policy(mdp, vi.policy, method="direct")

@@ -1,11 +1,10 @@
 """Policies and exact evaluation: ordering of the policies, Lemma 2, interface consistency."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from wncs_lp import scenario_path
 from wncs_lp.errors import PolicyError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
@@ -26,7 +25,6 @@ from wncs_lp.scenario import load_scenario, scenario_from_dict
 from wncs_lp.solvers import solve
 from wncs_lp.solvers.dp import evaluate_policy
 
-FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
 A1 = [[1.02, 1, 0, 1], [0, 1, 0.2, 0], [0, 0, 1, 0], [0, 0, 0, 1.01]]
 A2 = [[1, 1, 0], [0, 1.02, 0], [0, 0, 1]]
 
@@ -74,8 +72,8 @@ def own_scenarios():
 
 
 SCENARIOS = [
-    ("paper_p12", lambda: load_scenario(FORMULATIONS / "paper_p12.toml", ["tau_cap=8"])),
-    ("paper_p123", lambda: load_scenario(FORMULATIONS / "paper_p123.toml", ["tau_cap=6"])),
+    ("paper_p12", lambda: load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=8"])),
+    ("paper_p123", lambda: load_scenario(scenario_path("paper_p123.toml"), ["tau_cap=6"])),
     ("own-a", lambda: own_scenarios()[0]),
     ("own-b", lambda: own_scenarios()[1]),
     ("own-c", lambda: own_scenarios()[2]),
@@ -190,7 +188,7 @@ def test_act_matches_on_mdp(case):
 
 
 def test_best_static_is_best():
-    sc = load_scenario(FORMULATIONS / "paper_p123.toml", ["tau_cap=5"])
+    sc = load_scenario(scenario_path("paper_p123.toml"), ["tau_cap=5"])
     system, mdp = System.from_scenario(sc), build(sc)
     best = best_static(system, mdp)
     assert len(best.gain_search) == len(static_assignments(sc)) == 6
@@ -201,14 +199,14 @@ def test_best_static_is_best():
 
 
 def test_default_assignment_paper():
-    sc = load_scenario(FORMULATIONS / "paper_p12.toml", ["tau_cap=4"])
+    sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=4"])
     assert default_assignment(sc) == (0, 1)  # process 1 -> remote (loop 6 < 8), process 2 -> edge
-    sc3 = load_scenario(FORMULATIONS / "paper_p123.toml", ["tau_cap=4"])
+    sc3 = load_scenario(scenario_path("paper_p123.toml"), ["tau_cap=4"])
     assert default_assignment(sc3) == (0, 1, 0)
 
 
 def test_static_and_greedy_rules_by_hand():
-    sc = load_scenario(FORMULATIONS / "paper_p12.toml", ["tau_cap=8"])
+    sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=8"])
     system = System.from_scenario(sc)
     c0 = system.initial_config  # both servers idle and accepting
     greedy = GreedyPolicy(system)
@@ -223,7 +221,7 @@ def test_static_and_greedy_rules_by_hand():
 
 
 def test_tau_independent_base_and_errors():
-    sc = load_scenario(FORMULATIONS / "paper_p12.toml", ["tau_cap=6"])
+    sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=6"])
     system, mdp = System.from_scenario(sc), build(sc)
     # a non-uniform tau-independent base: always the first action
     first = TauIndependentPolicy(system, [np.eye(n)[0] for n in system.n_actions], name="first")
@@ -237,14 +235,14 @@ def test_tau_independent_base_and_errors():
         make_policy("optimal", system)
     with pytest.raises(PolicyError, match="server index"):
         StaticPolicy(system, (0, 5))
-    other = build(load_scenario(FORMULATIONS / "paper_p12.toml", ["tau_cap=5"]))
+    other = build(load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=5"]))
     with pytest.raises(PolicyError, match="caps"):
         GreedyPolicy(system).on_mdp(other)
 
 
 def test_multichain_policy_error():
     """At p = 1 a static policy is multichain: a clear PolicyError, or averages from the start."""
-    sc = load_scenario(FORMULATIONS / "paper_p12.toml", ["tau_cap=6", "p=1.0"])
+    sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=6", "p=1.0"])
     system, mdp = System.from_scenario(sc), build(sc)
     pol = StaticPolicy(system, (0, 1))
     with pytest.raises(PolicyError, match="multichain"):
@@ -261,7 +259,7 @@ def test_multichain_policy_error():
 
 def test_preemption_policies():
     """The same interface on the Section IV automaton: ordering and Lemma 2."""
-    sc = load_scenario(FORMULATIONS / "paper_preemption_p12.toml", ["tau_cap=6"])
+    sc = load_scenario(scenario_path("paper_preemption_p12.toml"), ["tau_cap=6"])
     system, mdp = System.from_scenario(sc), build(sc)
     g_opt = solve(mdp, "pi").gain
     sub = SuboptimalPolicy(system)
@@ -277,7 +275,7 @@ def test_preemption_policies():
 
 def test_suboptimal_without_enumeration():
     """Four processes, caps 30: tables of tau_hat_k * |C| only; the product space is never built."""
-    sc = load_scenario(FORMULATIONS / "paper_p1234.toml", ["tau_cap=30"])
+    sc = load_scenario(scenario_path("paper_p1234.toml"), ["tau_cap=30"])
     system = System.from_scenario(sc)
     sub = SuboptimalPolicy(system)
     assert sub.table_sizes == tuple(30 * system.n_configs for _ in range(4))

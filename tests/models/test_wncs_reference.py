@@ -17,19 +17,16 @@ processing times 1..4 given as lists (and once via slots_per_dimension).
 """
 from __future__ import annotations
 
-import sys
 from collections import Counter
 from itertools import product
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import reference.wncs as ref  # noqa: E402
-from wncs_lp.models.wncs import build_wncs  # noqa: E402
-from wncs_lp.scenario import load_scenario, scenario_from_dict  # noqa: E402
+import reference.wncs as ref
+from wncs_lp import scenario_path
+from wncs_lp.models.wncs import build_wncs
+from wncs_lp.scenario import load_scenario, scenario_from_dict
 
 
 def srv(U, D, T, **kw):
@@ -115,7 +112,6 @@ SCENARIOS = {
 }
 
 
-FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
 #: the spec's table (model.md section 5): processes 1, 4 on remote + edge, tau_hat = 12, p = 0.9
 PAPER_P14 = ("paper_p14.toml", 7340, 12181, 432.180362984)
 
@@ -127,7 +123,7 @@ _CACHE: dict = {}
 def built(name):
     if name not in _CACHE:
         if name == "paper-p14":
-            sc = load_scenario(FORMULATIONS / PAPER_P14[0])
+            sc = load_scenario(scenario_path(PAPER_P14[0]))
         else:
             sc = scenario_from_dict(SCENARIOS[name])
         m = build_wncs(sc)

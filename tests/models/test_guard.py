@@ -1,15 +1,12 @@
 """The size guard: its estimate bounds the true size from above, tightly; refusals are clear."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
-from wncs_lp import build, load_scenario
+from wncs_lp import build, load_scenario, scenario_path
 from wncs_lp.errors import WncsError
 from wncs_lp.models.guard import SizeLimitError, check_size, estimate_size
 
-F = Path(__file__).resolve().parent.parent / "formulations"
 CASES = [
     ("paper_p12.toml", []),
     ("paper_p14.toml", ["tau_cap=15"]),
@@ -22,7 +19,7 @@ CASES = [
 
 @pytest.mark.parametrize("name, overrides", CASES)
 def test_estimate_is_a_tight_upper_bound(name, overrides):
-    sc = load_scenario(F / name, overrides)
+    sc = load_scenario(scenario_path(name), overrides)
     est = estimate_size(sc)
     mdp = build(sc)
     assert est.states >= mdp.n_states and est.pairs >= mdp.n_pairs and est.nnz >= mdp.P.nnz
@@ -33,7 +30,7 @@ def test_estimate_is_a_tight_upper_bound(name, overrides):
 
 
 def test_refusal_names_the_estimate_and_cheaper_routes():
-    sc = load_scenario(F / "paper_p1234.toml", ["tau_cap=40"])
+    sc = load_scenario(scenario_path("paper_p1234.toml"), ["tau_cap=40"])
     with pytest.raises(SizeLimitError) as info:
         check_size(sc, limit_bytes=1 << 30)
     msg = str(info.value)
@@ -47,7 +44,7 @@ def test_refusal_names_the_estimate_and_cheaper_routes():
 
 
 def test_lp_needs_more_than_value_iteration():
-    sc = load_scenario(F / "paper_p12.toml", ["tau_cap=30"])
+    sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=30"])
     est = estimate_size(sc)
     limit = est.build_bytes + est.lp_bytes // 2
     check_size(sc, limit_bytes=limit)  # DP fits
@@ -59,7 +56,7 @@ def test_cli_refuses_a_huge_build_with_one_clear_line():
     import subprocess
     import sys
 
-    proc = subprocess.run([sys.executable, "-m", "wncs_lp", "solve", str(F / "paper_p1234.toml"),
+    proc = subprocess.run([sys.executable, "-m", "wncs_lp", "solve", str(scenario_path("paper_p1234.toml")),
                            "--set", "tau_cap=40", "--json"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr.startswith("error: ") and "--force" in proc.stderr and "Traceback" not in proc.stderr

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from wncs_lp import scenario_path
 from wncs_lp.cli import main
 from wncs_lp.errors import ModelError
 from wncs_lp.mdp import MDP
@@ -31,9 +31,8 @@ from wncs_lp.verify import (
     verify_all,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
-P12 = ROOT / "formulations" / "paper_p12.toml"
-PRE = ROOT / "formulations" / "paper_preemption_p12.toml"
+P12 = scenario_path("paper_p12.toml")
+PRE = scenario_path("paper_preemption_p12.toml")
 
 
 @pytest.fixture(scope="module")

@@ -12,11 +12,10 @@ from __future__ import annotations
 import copy
 import itertools
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from wncs_lp import scenario_path
 from wncs_lp.models.cost import mse_table
 from wncs_lp.errors import ModelError
 from wncs_lp.models import build
@@ -31,9 +30,8 @@ from wncs_lp.models.preemption import (
 )
 from wncs_lp.scenario import load_scenario, scenario_from_dict
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "formulations" / "paper_preemption_p12.toml"
-THREE = ROOT / "formulations" / "preemption_p123_u0d0.toml"
+PAPER = scenario_path("paper_preemption_p12.toml")
+THREE = scenario_path("preemption_p123_u0d0.toml")
 slow = [pytest.mark.slow]
 REF_STATES, REF_PAIRS, REF_GAIN = 23_268, 46_536, 1078.548921698
 
@@ -139,7 +137,7 @@ def test_more_than_one_server_is_rejected():
 
 
 def test_builder_refuses_a_wncs_scenario():
-    sc = load_scenario(ROOT / "formulations" / "paper_p12.toml")
+    sc = load_scenario(scenario_path("paper_p12.toml"))
     with pytest.raises(ModelError, match="preemption"):
         build_preemption(sc)
 

@@ -2,11 +2,10 @@
 certified optimum with honest accuracy numbers. No wall-clock assertions (see benchmarks/)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from wncs_lp import scenario_path
 from wncs_lp.errors import SolverError
 from wncs_lp.mdp import MDP
 from wncs_lp.models import build
@@ -15,17 +14,15 @@ from wncs_lp.solvers import value_iteration
 from wncs_lp.solvers.lp import build_lp, build_reduced_lp, solve_lp
 from wncs_lp.solvers.reduce import reduce_forced
 
-FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
-
 
 @pytest.fixture(scope="module")
 def p12():
-    return build(load_scenario(FORMULATIONS / "paper_p12.toml", ["tau_cap=8"]))
+    return build(load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=8"]))
 
 
 @pytest.fixture(scope="module")
 def pre():
-    return build(load_scenario(FORMULATIONS / "paper_preemption_p12.toml", ["tau_cap=6"]))
+    return build(load_scenario(scenario_path("paper_preemption_p12.toml"), ["tau_cap=6"]))
 
 
 @pytest.fixture(scope="module")
