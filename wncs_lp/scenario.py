@@ -1,6 +1,6 @@
 """Scenario files (TOML) -> validated, frozen :class:`Scenario` objects.
 
-The format is the one of ``shared/spec/model.md`` section 4::
+The format (the model it describes: ``docs/model.md``)::
 
     [model]     kind, allow_idle, distinct, preemptive, tau_cap
     [channel]   success_probability

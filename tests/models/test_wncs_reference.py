@@ -1,4 +1,4 @@
-"""Cross-check of ``build_wncs`` against an independent, plain reference (tests/reference_wncs.py).
+"""Cross-check of ``build_wncs`` against an independent, plain reference (tests/reference/wncs.py).
 
 The reference was written from ``shared/spec/model.md`` sections 1, 2 and 4 alone, without
 reading the package's builder.  For every scenario below we compare

@@ -58,7 +58,7 @@ def build_aoi_mdp_loop(
 ) -> MDP:
     """The original per-(config, action, outcome) loop builder, kept as the reference.
 
-    :func:`build_aoi_mdp` must return the identical MDP (``tests/test_perf_builder.py``);
+    :func:`build_aoi_mdp` must return the identical MDP (``tests/models/test_assemble.py``);
     ``benchmarks/`` times both in one run. Not used on any hot path.
 
     Parameters

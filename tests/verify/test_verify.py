@@ -1,4 +1,4 @@
-"""Tests of the structural verifiers (wncs_lp/structure.py): Theorems 1-3.
+"""Tests of the structural verifiers (wncs_lp/verify/): Theorems 1-3.
 
 Each verifier passes a case that satisfies its property by construction and catches a
 violation planted on purpose (a perturbed value function or policy, built with

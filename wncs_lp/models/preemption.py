@@ -74,7 +74,7 @@ pu in {0, 1} some of those initial ``b`` are never reached again but remain stat
 With this reading the spec's reference row (processes 1, 2, remote server U = D = 1,
 T_k = n_k, p = 0.9, tau_hat = 12; ``formulations/paper_preemption_p12.toml``) has 692
 configurations, 23,268 states, 46,536 state-action pairs and optimal gain 1078.548921698
-(``tests/test_preemption.py``). The paper's own recursion (its T_1/T_2/E_t equations) keeps one
+(``tests/models/test_preemption.py``). The paper's own recursion (its T_1/T_2/E_t equations) keeps one
 preempted job and adds T_k to its "extra age"; with N = 2 this is the same model, since the stack
 never holds more than N - 1 jobs and a waiting job ages exactly while the other is served.
 """

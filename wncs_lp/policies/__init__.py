@@ -1,7 +1,7 @@
 """Scheduling policies as first-class objects, usable with or without an enumerated MDP.
 
 Every model of this toolkit has states s = (tau, C): the AoI vector tau in the box
-1..tau_hat and a configuration C of a small automaton (:mod:`wncs_lp.models.space`). A
+1..tau_hat and a configuration C of a small automaton (:mod:`wncs_lp.models.automaton`). A
 :class:`~wncs_lp.models.system.System` holds that automaton, the cost tables q_k and padded per-(C, action) outcome
 tables, but never the tau box, so it exists for systems far too large to enumerate (all four
 paper processes with caps of 30 or more).

@@ -1,4 +1,4 @@
-"""Reproduce every figure and claim of the paper (``shared/spec/claims.md``, C1-C13).
+"""Reproduce every figure and claim of the paper (claims C1-C13, ``docs/reproduction.md``).
 
 :func:`run_reproduction` computes each claim step by step, caching every step on disk (keyed by
 scenario fingerprint and parameters) so an interrupted run resumes and a second run is fast, and

@@ -11,7 +11,7 @@ from typing import Any
 from ..files import atomic_write_text, json_ready
 from .context import ClaimResult
 
-#: The paper's statement of each claim (shared/spec/claims.md), shown beside the verdict.
+#: The paper's statement of each claim (the specification's claims C1-C13), shown beside the verdict.
 STATEMENTS = {
     "C1": "Processes 1 and 4: the optimal action in idle-server states is always (1 to remote, 4 to edge).",
     "C2": "Processes 1 and 2: mostly (1, 2), with (2, 1) in the upper-left corner (small tau_1, large tau_2).",

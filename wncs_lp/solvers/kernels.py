@@ -15,7 +15,7 @@ the action, and the pointers as int32 when they fit.
 
 numba is optional (the ``fast`` extra): :func:`get_kernel` returns the numba kernel when it
 imports and the scipy kernel otherwise; both give the same sweeps up to summation order
-(``tests/test_perf_dp.py``). The numba kernels also offer in-place (Gauss-Seidel) sweeps and
+(``tests/solvers/test_perf_dp.py``). The numba kernels also offer in-place (Gauss-Seidel) sweeps and
 fixed-policy sweeps for modified policy iteration, which the scipy kernel emulates with
 Jacobi sweeps.
 """

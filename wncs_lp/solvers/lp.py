@@ -36,7 +36,7 @@ i.e. ``g + h(s_l) <= c_l + (P h)_l`` with
 
     ``h = -c_s * z_bal`` (h(0) = 0),   ``g = -c_s * z_norm``.
 
-(These signs are checked numerically in ``tests/test_solvers.py``. cvxpy reports the same
+(These signs are checked numerically in ``tests/solvers/test_solvers.py``. cvxpy reports the same
 sign for the ``A y == b`` constraint's ``dual_value``.)
 
 Formulations (``solve_lp(formulation=...)``, measured in ``benchmarks/run.py``)
