@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from typing import Callable, NamedTuple
 
-__all__ = ["Command", "add_scenario_args", "load", "emit_json"]
+__all__ = ["Command", "add_scenario_args", "load", "emit_json", "head"]
 
 
 class Command(NamedTuple):
@@ -43,3 +43,11 @@ def load(args: argparse.Namespace):
     from ..scenario import load_scenario
 
     return load_scenario(args.scenario, args.overrides)
+
+
+def head(args: argparse.Namespace, scenario, mdp=None) -> dict:
+    """The keys every JSON payload starts with: scenario, overrides, kind (and the MDP's size)."""
+    out = {"scenario": scenario.source, "overrides": args.overrides, "kind": scenario.model.kind}
+    if mdp is not None:
+        out.update(states=mdp.n_states, pairs=mdp.n_pairs)
+    return out

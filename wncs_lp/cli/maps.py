@@ -29,15 +29,12 @@ def _parse_fix(items: Sequence[str]) -> dict[int, int]:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from ..maps import parse_config_spec, region_stats
     from ..models.guard import build_checked
     from ..solvers import solve
-    from ..viz import plot_policy_map, plot_policy_slice
+    from ..viz import file_backend, plot_policy_map, plot_policy_slice, save_figure
+
+    file_backend()
 
     scenario = load(args)
     axes = _parse_axes(args.axes)
@@ -52,8 +49,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     else:
         ax = plot_policy_map(mdp, sol, config, axes=axes, fixed_tau=fixed, scenario=scenario)
         stats = region_stats(mdp, sol, config, axes=axes, fixed_tau=fixed, scenario=scenario)
-    ax.figure.savefig(args.out, dpi=args.dpi, bbox_inches="tight")
-    plt.close(ax.figure)
+    save_figure(ax.figure, args.out, dpi=args.dpi, bbox_inches="tight")
     payload = {
         "scenario": scenario.source,
         "overrides": args.overrides,

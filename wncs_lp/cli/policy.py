@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import Command, add_scenario_args, emit_json, load
+from .common import Command, add_scenario_args, emit_json, head, load
 
 
 def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
@@ -45,11 +45,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     mdp, policy = made.mdp, made.policy
     ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error")
     payload = {
-        "scenario": scenario.source,
-        "overrides": args.overrides,
-        "kind": scenario.model.kind,
-        "states": mdp.n_states,
-        "pairs": mdp.n_pairs,
+        **head(args, scenario, mdp),
         **ev.to_dict(),
         "policy_info": policy.describe(),
         "setup_seconds": made.seconds,
@@ -91,9 +87,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     progress = False if (args.no_progress or args.json and not sys.stderr.isatty()) else None
     res = simulate(policy, slots=args.slots, reps=args.reps, seed=args.seed, burn_in=args.burn_in, progress=progress)
     payload = {
-        "scenario": scenario.source,
-        "overrides": args.overrides,
-        "kind": scenario.model.kind,
+        **head(args, scenario),
         "configs": made.system.n_configs,
         **res.to_dict(),
         "policy_info": policy.describe(),

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from .common import Command, add_scenario_args, emit_json, load
+from .common import Command, add_scenario_args, emit_json, head, load
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
@@ -19,11 +19,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     total = time.perf_counter() - t0
     summary = sol.summary()
     payload = {
-        "scenario": scenario.source,
-        "overrides": args.overrides,
-        "kind": scenario.model.kind,
-        "states": mdp.n_states,
-        "pairs": mdp.n_pairs,
+        **head(args, scenario, mdp),
         "nnz": int(mdp.P.nnz),
         **summary,
         "build_seconds": t_build,

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from .common import Command, add_scenario_args, emit_json, load
+from .common import Command, add_scenario_args, emit_json, head, load
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
@@ -18,11 +18,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     sol = solve(mdp, method=args.method)
     reports = verify_all(mdp, sol, tolerance=Tolerance(args.atol, args.rtol), examples=args.examples)
     payload = {
-        "scenario": scenario.source,
-        "overrides": args.overrides,
-        "kind": scenario.model.kind,
-        "states": mdp.n_states,
-        "pairs": mdp.n_pairs,
+        **head(args, scenario, mdp),
         "method": sol.method,
         "solve_status": sol.status,
         "gain": sol.gain,

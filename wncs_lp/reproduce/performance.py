@@ -11,7 +11,7 @@ from ..models.guard import estimate_size
 from ..models.system import System
 from ..policies import RandomPolicy, StaticPolicy, SuboptimalPolicy, default_assignment
 from ..sweep import run_sweep
-from ..viz import plot_sweep
+from ..viz import plot_sweep, subplots
 from .context import ClaimResult, Context
 
 #: Relative tolerance for "equal" average costs (the exact evaluations are certified far below).
@@ -50,9 +50,7 @@ def _sweep(ctx: Context, name: str, file: str, cap: int, policies: list[str], sl
 
 
 def _sweep_figure(ctx: Context, rows, stem: str, title: str) -> list[str]:
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.4))
+    fig, axes = subplots(1, 2, figsize=(12, 4.4))
     plot_sweep(rows, ax=axes[0], metric="gain", title=f"{title}: exact average MSE")
     plot_sweep(rows, ax=axes[1], metric="sim", title=f"Monte Carlo ({ctx.profile.name} profile)")
     fig.tight_layout()
@@ -182,8 +180,6 @@ def claim_c6(ctx: Context) -> ClaimResult:
 
 
 def claim_c11(ctx: Context) -> ClaimResult:
-    import matplotlib.pyplot as plt
-
     prof = ctx.profile
     ps = list(prof.p_grid)
     rows = []
@@ -202,7 +198,7 @@ def claim_c11(ctx: Context) -> ClaimResult:
     }
     failed = [k for k, v in checks.items() if not v]
     verdict = "HOLDS" if not failed else ("DEPENDS" if checks["preemption never hurts"] else "FAILS")
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axes = subplots(1, 2, figsize=(11, 4))
     axes[0].plot(ps, [r["non_preemptive"] for r in rows], "s-", label="optimal, no preemption")
     axes[0].plot(ps, [r["preemptive"] for r in rows], "o--", label="optimal, preemption")
     axes[0].set(xlabel="success probability p", ylabel="average MSE",
@@ -285,8 +281,6 @@ def claim_c12(ctx: Context) -> ClaimResult:
 
 
 def claim_c13(ctx: Context) -> ClaimResult:
-    import matplotlib.pyplot as plt
-
     prof = ctx.profile
     rows = []
     cases = [("paper_p12.toml", c) for c in prof.c13_caps] + [("paper_p123.toml", c) for c in prof.c13_caps[:2]]
@@ -337,7 +331,7 @@ def claim_c13(ctx: Context) -> ClaimResult:
     cheaper = all(r["table_size"] < r["states"] for r in largest.values()) and (
         big_res["table_size"] < big_res["full_mdp_states_estimate"] / 10)
     verdict = "HOLDS" if ok and cheaper and lemma2 < 1e-8 else "FAILS"
-    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    fig, ax = subplots(figsize=(6.4, 4.4))
     for file in dict.fromkeys(r["scenario"] for r in rows):
         rs = [r for r in rows if r["scenario"] == file]
         ax.loglog([r["states"] for r in rs], [r["seconds_optimal"] for r in rs], "o-", label=f"optimal, {file}")

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..maps import region_stats
 from ..verify import check_consistency, check_monotonicity, check_threshold, policy_context
-from ..viz import plot_policy_map, plot_policy_slice
+from ..viz import plot_policy_map, plot_policy_slice, subplots
 from .context import ClaimResult, Context, Solved
 
 
@@ -33,10 +33,8 @@ def _split(solved: Solved, states: np.ndarray) -> dict[str, int]:
 
 
 def _maps_figure(ctx: Context, panels: list[tuple[Solved, Any, dict]], stem: str, suptitle: str) -> list[str]:
-    import matplotlib.pyplot as plt
-
     n = len(panels)
-    fig, axes = plt.subplots(1, n, figsize=(6.2 * n, 5.6), squeeze=False)
+    fig, axes = subplots(1, n, figsize=(6.2 * n, 5.6), squeeze=False)
     for ax, (solved, config, kw) in zip(axes[0], panels):
         plot_policy_map(solved.mdp, solved.as_solution(), config, ax=ax, stationary=solved.stationary,
                         scenario=solved.scenario, **kw)
@@ -126,8 +124,6 @@ def claim_c2(ctx: Context) -> ClaimResult:
 
 # ============================================================================ C4, C5: three processes
 def claim_c4(ctx: Context) -> ClaimResult:
-    import matplotlib.pyplot as plt
-
     prof = ctx.profile
     per_cap, figs = [], []
     for cap, total in zip(prof.caps_3p, prof.slice_total_3p):
@@ -145,7 +141,7 @@ def claim_c4(ctx: Context) -> ClaimResult:
             "regions": {name: {k: v[k] for k in ("cells", "components", "holes", "simply_connected")}
                         for name, v in per.items()},
         })
-        fig, ax = plt.subplots(figsize=(7.5, 6.8))
+        fig, ax = subplots(figsize=(7.5, 6.8))
         plot_policy_slice(solved.mdp, sol, "idle", total, ax=ax, stationary=solved.stationary,
                           scenario=solved.scenario)
         figs += ctx.save_figure(fig, f"c4_fig7_slice_p123_cap{cap}_sum{total}")

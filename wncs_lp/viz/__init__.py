@@ -10,6 +10,8 @@ from .save import save_figure
 from .sweeps import POLICY_STYLE, plot_sweep, save_sweep_figure
 
 __all__ = [
+    "file_backend",
+    "subplots",
     "ACTION_STYLES",
     "POLICY_STYLE",
     "plot_policy_map",
@@ -18,3 +20,17 @@ __all__ = [
     "save_sweep_figure",
     "save_figure",
 ]
+
+
+def file_backend() -> None:
+    """Draw to files only (matplotlib's Agg backend): for command-line runs, which open no window."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+
+def subplots(*args, **kw):
+    """``matplotlib.pyplot.subplots``: a new figure and its Axes, for layouts of the plot functions."""
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(*args, **kw)

@@ -18,9 +18,10 @@ def save_figure(fig, path: str | Path, formats: Sequence[str] | None = None, *, 
     ----------
     fig : matplotlib.figure.Figure
     path : str or Path
-        The file, or with ``formats`` the stem (its suffix is replaced by each format's).
+        The file (written as given, in the format of its suffix, PNG without one), or with
+        ``formats`` the stem (its suffix is replaced by each format's).
     formats : sequence of str, optional
-        E.g. ``("png", "svg")``; default the suffix of ``path``.
+        E.g. ``("png", "svg")``.
     dpi : int
     close : bool
         Close the figure afterwards (frees its memory in long runs).
@@ -28,10 +29,12 @@ def save_figure(fig, path: str | Path, formats: Sequence[str] | None = None, *, 
         Passed to ``fig.savefig`` (e.g. ``bbox_inches="tight"``).
     """
     path = Path(path)
-    fmts = list(formats) if formats else [path.suffix.lstrip(".") or "png"]
+    if formats:
+        targets = [(path.with_suffix("." + ext), ext) for ext in formats]
+    else:
+        targets = [(path, path.suffix.lstrip(".").lower() or "png")]
     out = []
-    for ext in fmts:
-        target = path.with_suffix("." + ext)
+    for target, ext in targets:
         buf = io.BytesIO()
         fig.savefig(buf, format=ext, dpi=dpi, **savefig_kw)
         atomic_write_bytes(target, buf.getvalue())
