@@ -30,11 +30,7 @@ from .assemble import build_aoi_mdp
 from .automaton import ConfigAutomaton
 from .cost import cost_tables
 
-__all__ = ["Model", "Names"]
-
-
-class Names(dict):
-    """Display names of a model's processes and servers (``processes``, ``servers``, ``kind``...)."""
+__all__ = ["Model"]
 
 
 class Model(ABC):
