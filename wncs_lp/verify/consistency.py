@@ -104,6 +104,21 @@ def check_consistency(
         lo, hi = P.indptr[pair], P.indptr[pair + 1]
         return P.indices[lo:hi], P.data[lo:hi]
 
+    def subtree(pair: int) -> tuple[int, int, int, float]:
+        """(paths, violating paths, violating paths below the cap, violation probability) summed
+        over the successors of ``pair``, each explored first."""
+        cols, probs = succ(pair)
+        tp = tb = tbf = 0
+        pv = 0.0
+        for y, p in zip(cols, probs):
+            y = int(y)
+            node(y)
+            tp += paths[y]
+            tb += bad[y]
+            tbf += bad_free[y]
+            pv += p * pviol[y]
+        return tp, tb, tbf, pv
+
     def node(x: int) -> None:
         if paths[x] >= 0:
             return
@@ -123,15 +138,7 @@ def check_consistency(
         if job_d[c] <= 1:  # completes in this slot
             paths[x], bad[x], bad_free[x], pviol[x] = 1, 0, 0, 0.0
             return
-        cols, probs = succ(pair)
-        tp = tb = tbf = 0
-        pv = 0.0
-        for y, p in zip(cols, probs):
-            node(int(y))
-            tp += paths[y]
-            tb += bad[y]
-            tbf += bad_free[y]
-            pv += p * pviol[y]
+        tp, tb, tbf, pv = subtree(pair)
         paths[x], bad[x], pviol[x] = tp, tb, pv
         bad_free[x] = 0 if ctx.at_cap[x] else tbf
 
@@ -146,19 +153,11 @@ def check_consistency(
         k = int(started[s])
         cur = job_k[cfg[s]]
         start_type[i] = 0 if cur == 0 else (2 if cur == k else 1)
-        cols, probs = succ(int(pol[s]))
-        tp = tb = tbf = 0
-        pv = 0.0
+        cols, _ = succ(int(pol[s]))
         if cols.size and job_k[cfg[int(cols[0])]] != k:
-            tp = 1  # T_k = 1: the job completes within the start slot (every successor agrees)
+            tp, tb, tbf, pv = 1, 0, 0, 0.0  # T_k = 1: the job completes within the start slot
         else:
-            for y, p in zip(cols, probs):
-                y = int(y)
-                node(y)
-                tp += paths[y]
-                tb += bad[y]
-                tbf += bad_free[y]
-                pv += p * pviol[y]
+            tp, tb, tbf, pv = subtree(int(pol[s]))
         s_paths[i], s_bad[i], s_pv[i] = tp, tb, pv
         s_bad_free[i] = 0 if ctx.at_cap[s] else tbf
     viol = s_bad > 0
