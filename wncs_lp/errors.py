@@ -5,7 +5,7 @@ caller can catch one class and always get a message naming what was wrong.
 """
 from __future__ import annotations
 
-__all__ = ["WncsError", "ScenarioError", "ModelError", "SolverError", "PolicyError"]
+__all__ = ["WncsError", "ScenarioError", "ModelError", "SolverError", "PolicyError", "InfeasibleConstraintsError"]
 
 
 class WncsError(ValueError):
@@ -37,3 +37,31 @@ class SolverError(WncsError):
 
 class PolicyError(WncsError):
     """A policy is infeasible for the MDP, or its induced chain cannot be evaluated."""
+
+
+class InfeasibleConstraintsError(SolverError):
+    """No stationary policy meets the bounds of a constrained problem.
+
+    Attributes
+    ----------
+    constraints : tuple of str
+        The labels of the constraints at fault: those whose bound no policy can reach on its
+        own, or all of them when each is reachable alone but not together.
+    bounds : tuple of float
+        The bound each of them asks for (the ``max`` or the ``min``).
+    reachable : tuple of float
+        For each of them the least (for a ``max`` bound) or largest (for a ``min`` bound)
+        long-run average any stationary policy reaches for that quantity alone.
+    sides : tuple of str
+        ``"max"`` or ``"min"``: which bound of each constraint fails.
+    jointly : bool
+        True when every bound is reachable alone and only their combination is infeasible.
+    """
+
+    def __init__(self, message: str, constraints=(), bounds=(), reachable=(), sides=(), jointly=False):
+        super().__init__(message)
+        self.constraints = tuple(constraints)
+        self.bounds = tuple(float(b) for b in bounds)
+        self.reachable = tuple(float(r) for r in reachable)
+        self.sides = tuple(sides)
+        self.jointly = bool(jointly)

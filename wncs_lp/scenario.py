@@ -7,6 +7,8 @@ The format (the model it describes: ``docs/model.md``)::
     [[process]] name, A, R, weight, tau_cap
     [[server]]  name, uplink_delay, downlink_delay,
                 slots_per_dimension | processing_time, p_up, p_down
+    [[constraint]] quantity, server, process, max, min   (constrained scheduling;
+                docs/constraints.md)
 
 Loading goes raw TOML -> plain dict -> overrides -> validation -> frozen dataclasses, so an
 override is validated exactly like a field written in the file, and every error is one
@@ -36,6 +38,8 @@ __all__ = [
     "ModelOptions",
     "ProcessSpec",
     "ServerSpec",
+    "ConstraintSpec",
+    "QUANTITIES",
     "Scenario",
     "load_scenario",
     "scenario_from_dict",
@@ -56,7 +60,13 @@ _SERVER_FIELDS = {
     "p_up",
     "p_down",
 }
-_TOP_FIELDS = {"model", "channel", "process", "server"}
+_CONSTRAINT_FIELDS = {"quantity", "server", "process", "max", "min"}
+_TOP_FIELDS = {"model", "channel", "process", "server", "constraint"}
+#: The long-run averages a ``[[constraint]]`` can bound, and what each needs:
+#: ``cost`` the total MSE; ``process_cost`` / ``aoi`` one process's weighted MSE / capped AoI
+#: (need ``process``); ``send_rate`` the fraction of slots in which a server is sent an update
+#: (needs ``server``; ``process`` optionally restricts it to that process's updates).
+QUANTITIES = ("cost", "process_cost", "aoi", "send_rate")
 #: Largest AoI cap accepted on load; far beyond anything enumerable, it only stops absurd input.
 MAX_TAU_CAP = 100_000
 
@@ -125,6 +135,35 @@ class ServerSpec:
 
 
 @dataclass(frozen=True)
+class ConstraintSpec:
+    """One ``[[constraint]]`` table: a bound on a long-run average per slot.
+
+    Attributes
+    ----------
+    quantity : str
+        One of :data:`QUANTITIES`.
+    server : int or None
+        0-based server index (``send_rate``), else None.
+    process : int or None
+        0-based process index (``process_cost``, ``aoi``; an optional filter of ``send_rate``).
+    max, min : float or None
+        The bounds; at least one is set, and ``min <= max``.
+    label : str
+        A readable name, e.g. ``"send_rate[remote] <= 0.2"``.
+    """
+
+    quantity: str
+    server: int | None = None
+    process: int | None = None
+    max: float | None = None
+    min: float | None = None
+    label: str = ""
+
+    def __str__(self) -> str:
+        return self.label or self.quantity
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A validated scenario. Build it with :func:`load_scenario` or :func:`scenario_from_dict`.
 
@@ -135,6 +174,10 @@ class Scenario:
         The channel's success probability (default for every link).
     processes, servers : tuple
         The processes and servers, in file order (process k of the paper is ``processes[k-1]``).
+    constraints : tuple of ConstraintSpec
+        The ``[[constraint]]`` tables in file order (empty for an unconstrained scenario).
+        They do not change the MDP, only what a constrained solve asks of it, so they are
+        not part of :meth:`fingerprint`.
     source : str
         Where it came from (file path or ``<dict>``), for messages.
     """
@@ -143,6 +186,7 @@ class Scenario:
     p: float
     processes: tuple[ProcessSpec, ...]
     servers: tuple[ServerSpec, ...]
+    constraints: tuple[ConstraintSpec, ...] = ()
     source: str = field(default="<dict>", compare=False)
     raw: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
 
@@ -190,7 +234,10 @@ class Scenario:
             f"pu={s.p_up:g}, pd={s.p_down:g})"
             for s in self.servers
         )
-        return f"kind={self.model.kind}; processes: {procs}; servers: {servs}"
+        text = f"kind={self.model.kind}; processes: {procs}; servers: {servs}"
+        if self.constraints:
+            text += "; constraints: " + ", ".join(c.label for c in self.constraints)
+        return text
 
 
 def _canonical(obj: Any) -> Any:
@@ -288,7 +335,9 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any], source
 
     Keys: ``p`` (alias ``success_probability``), ``tau_cap`` (the model default *and* every
     process), ``model.FIELD``, ``channel.FIELD``, ``process.K.FIELD``, ``server.M.FIELD``
-    (K, M a 1-based index or a name). Unknown keys raise :class:`ScenarioError`.
+    (K, M a 1-based index or a name), ``constraint.J.FIELD`` (J a 1-based index; setting
+    ``max`` or ``min`` to ``"none"`` removes that bound). Unknown keys raise
+    :class:`ScenarioError`.
     """
     out = copy.deepcopy(dict(raw))
     for key, value in overrides.items():
@@ -314,6 +363,22 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any], source
                 )
             out.setdefault(parts[0], {})
             out[parts[0]][parts[1]] = value
+        elif len(parts) == 3 and parts[0] == "constraint":
+            if parts[2] not in _CONSTRAINT_FIELDS:
+                raise ScenarioError(
+                    source, key, f"unknown key: expected one of {sorted(_CONSTRAINT_FIELDS)}", what="override"
+                )
+            entries = out.get("constraint")
+            if not isinstance(entries, list) or not entries:
+                raise ScenarioError(source, key, "the scenario has no [[constraint]] tables", what="override")
+            if not parts[1].isdigit():
+                raise ScenarioError(source, key, f"expected a 1-based constraint index, found {parts[1]!r}",
+                                    what="override")
+            entry = _find_entry(entries, parts[1], "constraint", source, key)
+            if parts[2] in ("max", "min") and isinstance(value, str) and value.lower() == "none":
+                entry.pop(parts[2], None)
+            else:
+                entry[parts[2]] = value
         elif len(parts) == 3 and parts[0] in ("process", "server"):
             allowed = _PROCESS_FIELDS if parts[0] == "process" else _SERVER_FIELDS
             if parts[2] not in allowed:
@@ -333,7 +398,8 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any], source
             raise ScenarioError(
                 source,
                 key,
-                "unknown key: expected p, tau_cap, model.FIELD, channel.FIELD, process.K.FIELD or server.M.FIELD",
+                "unknown key: expected p, tau_cap, model.FIELD, channel.FIELD, process.K.FIELD, server.M.FIELD "
+                "or constraint.J.FIELD",
                 what="override",
             )
     return out
@@ -512,11 +578,13 @@ def scenario_from_dict(raw: Mapping[str, Any], source: str = "<dict>") -> Scenar
     _unique([s.name for s in servers], "server", v)
     if model.kind == "preemption" and len(servers) != 1:
         raise v.err("server", f"a preemption scenario has exactly one server, found {len(servers)}")
+    constraints = _constraints(raw.get("constraint", []), processes, servers, v)
     return Scenario(
         model=model,
         p=p if p is not None else float("nan"),
         processes=tuple(processes),
         servers=tuple(servers),
+        constraints=constraints,
         source=source,
         raw=copy.deepcopy(dict(raw)),
     )
@@ -528,3 +596,63 @@ def _unique(names: list[str], kind: str, v: _V) -> None:
         if name in seen:
             raise v.err(f"{kind}[{i}].name", f"expected a unique name, '{name}' is used twice")
         seen.add(name)
+
+
+def _pick(obj: Any, names: list[str], kind: str, fld: str, v: _V) -> int:
+    """A 0-based index from a 1-based index or a name."""
+    if isinstance(obj, bool):
+        raise v.err(fld, f"expected a {kind} name or 1-based index, found {obj!r}")
+    if isinstance(obj, (int, np.integer)) or (isinstance(obj, float) and obj.is_integer()):
+        i = int(obj)
+        if not 1 <= i <= len(names):
+            raise v.err(fld, f"{kind} index {i} out of range: expected 1..{len(names)} or one of {names}")
+        return i - 1
+    if isinstance(obj, str):
+        if obj in names:
+            return names.index(obj)
+        raise v.err(fld, f"no {kind} named {obj!r}: expected a 1-based index or one of {names}")
+    raise v.err(fld, f"expected a {kind} name or 1-based index, found {obj!r}")
+
+
+def _constraints(clist: Any, processes: list, servers: list, v: _V) -> tuple[ConstraintSpec, ...]:
+    """Validate the ``[[constraint]]`` tables (see :data:`QUANTITIES`)."""
+    if not isinstance(clist, list):
+        raise v.err("constraint", f"expected [[constraint]] tables, found {type(clist).__name__}")
+    pnames, snames = [p.name for p in processes], [s.name for s in servers]
+    out = []
+    for j, entry in enumerate(clist, start=1):
+        f = f"constraint[{j}]"
+        entry = v.table(entry, f, _CONSTRAINT_FIELDS)
+        if "quantity" not in entry:
+            raise v.err(f"{f}.quantity", f"missing: expected one of {list(QUANTITIES)}")
+        qty = entry["quantity"]
+        if qty not in QUANTITIES:
+            raise v.err(f"{f}.quantity", f"unknown quantity {qty!r}: expected one of {list(QUANTITIES)}")
+        server = process = None
+        if qty == "send_rate":
+            if "server" not in entry:
+                raise v.err(f"{f}.server", f"missing: send_rate needs a server (one of {snames} or 1..{len(snames)})")
+            server = _pick(entry["server"], snames, "server", f"{f}.server", v)
+        elif "server" in entry:
+            raise v.err(f"{f}.server", f"not used by quantity {qty!r}: only send_rate takes a server")
+        if qty in ("process_cost", "aoi"):
+            if "process" not in entry:
+                raise v.err(f"{f}.process", f"missing: {qty} needs a process (one of {pnames} or 1..{len(pnames)})")
+        elif qty == "cost" and "process" in entry:
+            raise v.err(f"{f}.process", "not used by quantity 'cost' (use process_cost for one process)")
+        if "process" in entry:
+            process = _pick(entry["process"], pnames, "process", f"{f}.process", v)
+        hi = v.real(entry["max"], f"{f}.max") if "max" in entry else None
+        lo = v.real(entry["min"], f"{f}.min") if "min" in entry else None
+        if hi is None and lo is None:
+            raise v.err(f"{f}.max", "missing: expected a bound max = ... and/or min = ...")
+        if hi is not None and lo is not None and lo > hi:
+            raise v.err(f"{f}.min", f"expected min <= max, found min = {lo:g} > max = {hi:g}")
+        what = qty
+        if server is not None:
+            what += f"[{snames[server]}" + (f", {pnames[process]}]" if process is not None else "]")
+        elif process is not None:
+            what += f"[{pnames[process]}]"
+        bounds = [f"{lo:g} <= " if lo is not None else "", what, f" <= {hi:g}" if hi is not None else ""]
+        out.append(ConstraintSpec(qty, server, process, hi, lo, "".join(bounds)))
+    return tuple(out)

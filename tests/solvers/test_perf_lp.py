@@ -139,14 +139,14 @@ def test_default_settings_and_their_override(p12, refs, refine, monkeypatch):
     import wncs_lp.solvers.lp as lpmod
 
     seen = []
-    orig = lpmod._clarabel_settings
+    orig = lpmod.clarabel_settings
 
     def spy(*args):
         st = orig(*args)
         seen.append(st.iterative_refinement_enable)
         return st
 
-    monkeypatch.setattr(lpmod, "_clarabel_settings", spy)
+    monkeypatch.setattr(lpmod, "clarabel_settings", spy)
     extra = None if refine is None else {"iterative_refinement_enable": True}
     s = solve_lp(p12, settings=extra, polish=False)
     assert seen == [bool(refine)]

@@ -79,7 +79,8 @@ from .dp import policy_iteration
 from .result import Solution
 
 __all__ = ["LPData", "build_lp", "build_reduced_lp", "solve_lp", "extract_policy", "VISIT_TOL", "FORMULATIONS",
-           "CLARABEL_DEFAULTS", "POLISH_VI_MIN_STATES"]
+           "CLARABEL_DEFAULTS", "POLISH_VI_MIN_STATES", "FAILED_STATUSES", "clarabel_settings", "clarabel_stats",
+           "cost_scale_of"]
 
 #: A state counts as visited when its scaled frequency n * sum_a x(s, a) exceeds this, i.e.
 #: x(s) > VISIT_TOL / n. Interior-point "zeros" are not tiny: at tol = 1e-9 they were
@@ -90,7 +91,8 @@ __all__ = ["LPData", "build_lp", "build_reduced_lp", "solve_lp", "extract_policy
 #: iteration) then corrects whatever is wrong, so the threshold affects speed, not answers.
 VISIT_TOL = 1e-5
 
-_FAILED = {"PrimalInfeasible", "DualInfeasible", "AlmostPrimalInfeasible", "AlmostDualInfeasible", "Unsolved"}
+#: Clarabel statuses after which no usable solution exists.
+FAILED_STATUSES = {"PrimalInfeasible", "DualInfeasible", "AlmostPrimalInfeasible", "AlmostDualInfeasible", "Unsolved"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,7 +150,7 @@ class LPData:
         return float(obj_scaled) * self.cost_scale / self.x_scale
 
 
-def _clarabel_stats(sol, info) -> dict:
+def clarabel_stats(sol, info) -> dict:
     """The run statistics of a Clarabel solve (status, iterations, residuals, gaps, time)."""
     return {
         "solver": "clarabel",
@@ -177,7 +179,7 @@ def build_lp(mdp: MDP) -> LPData:
     return _occupation_lp(mdp.s_indices, mdp.P, np.ones(mdp.n_pairs), mdp.cost, mdp.n_states)
 
 
-def _cost_scale(cost: np.ndarray) -> float:
+def cost_scale_of(cost: np.ndarray) -> float:
     """``c_s`` = mean |c|, or 1 when that is 0, not finite, or there are no costs."""
     cs = float(np.mean(np.abs(cost))) if cost.size else 1.0
     return cs if np.isfinite(cs) and cs > 0 else 1.0
@@ -195,7 +197,7 @@ def _occupation_lp(col_state: np.ndarray, T: sp.spmatrix, weights: np.ndarray, c
     A.sort_indices()
     b = np.zeros(n)
     b[-1] = float(n)
-    cs = _cost_scale(cost)
+    cs = cost_scale_of(cost)
     return LPData(A_eq=A, b_eq=b, q=np.asarray(cost, float) / cs, cost_scale=cs, x_scale=float(n), dropped_state=0)
 
 
@@ -233,7 +235,7 @@ def build_reduced_lp(mdp: MDP, red=None):
     return _occupation_lp(dloc, red.Q, red.tau, red.C, red.n_decision), red
 
 
-def _clarabel_settings(tol: float, max_iter: int, verbose: bool, settings: dict | None):
+def clarabel_settings(tol: float, max_iter: int, verbose: bool, settings: dict | None):
     """Clarabel settings: our tolerance on gap and feasibility, then the caller's overrides."""
     import clarabel
 
@@ -257,14 +259,14 @@ def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, set
     import clarabel
 
     n, L = mdp.n_states, mdp.n_pairs
-    cs = _cost_scale(mdp.cost)
+    cs = cost_scale_of(mdp.cost)
     E = sp.csr_matrix((np.ones(L), (np.arange(L), mdp.s_indices)), shape=(L, n))
     B = (E - mdp.P).tocsc()[:, 1:]
     A = sp.hstack([sp.csc_matrix(np.ones((L, 1))), B], format="csc")
     A.eliminate_zeros()
     q = np.zeros(n)
     q[0] = -float(n)
-    st = _clarabel_settings(tol, max_iter, verbose, settings)
+    st = clarabel_settings(tol, max_iter, verbose, settings)
     solver = clarabel.DefaultSolver(sp.csc_matrix((n, n)), q, A, mdp.cost / cs, [clarabel.NonnegativeConeT(L)], st)
     sol = solver.solve()
     info = solver.get_info()
@@ -275,7 +277,7 @@ def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, set
     h = np.zeros(n)
     h[1:] = cs * u[1:]
     stats = {
-        **_clarabel_stats(sol, info),
+        **clarabel_stats(sol, info),
         "lp_rows": int(L),
         "lp_cols": int(n),
         "cost_scale": cs,
@@ -368,7 +370,7 @@ def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settin
     A = sp.vstack([lp.A_eq, -sp.identity(L, format="csc")], format="csc")
     b = np.concatenate([lp.b_eq, np.zeros(L)])
     Pz = sp.csc_matrix((L, L))
-    st = _clarabel_settings(tol, max_iter, verbose, settings)
+    st = clarabel_settings(tol, max_iter, verbose, settings)
     solver = clarabel.DefaultSolver(Pz, lp.q, A, b, [clarabel.ZeroConeT(m), clarabel.NonnegativeConeT(L)], st)
     sol = solver.solve()
     info = solver.get_info()
@@ -376,7 +378,7 @@ def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settin
     y = np.asarray(sol.x, float)
     z = np.asarray(sol.z, float)
     stats = {
-        **_clarabel_stats(sol, info),
+        **clarabel_stats(sol, info),
         "obj_scaled": float(sol.obj_val),
         "obj_dual_scaled": float(sol.obj_val_dual),
         "lp_rows": int(m),
@@ -536,7 +538,7 @@ def solve_lp(
                 form, red = "primal", None
     if form == "dual":
         status, solved, x, g_dual, h_dual, stats = _solve_clarabel_dual(mdp, tol, max_iter, verbose, settings)
-        if status in _FAILED or not (np.all(np.isfinite(x)) and np.isfinite(g_dual) and np.all(np.isfinite(h_dual))):
+        if status in FAILED_STATUSES or not (np.all(np.isfinite(x)) and np.isfinite(g_dual) and np.all(np.isfinite(h_dual))):
             raise SolverError(f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
                               f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution")
         lp_obj = g_dual
@@ -544,7 +546,7 @@ def solve_lp(
         lp = lp_r if form == "reduced" else build_lp(mdp)
         runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
         status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings)
-        if status in _FAILED or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (lp.n_pairs,):
+        if status in FAILED_STATUSES or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (lp.n_pairs,):
             raise SolverError(
                 f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
                 f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution"

@@ -1,0 +1,80 @@
+"""Constrained and convex scheduling over the occupation measure (``docs/constraints.md``).
+
+Minimise the average cost while bounding other long-run averages (a server's send rate, one
+process's AoI or MSE, ...). The optimum is a *randomised* stationary policy, certified by
+``[L(lambda), exact cost of the returned policy]``.
+
+* :func:`solve_constrained` -- the entry point: ``method="lp"`` (Clarabel), ``"lp-cvxpy"``,
+  ``"lagrangian"`` (one constraint, beyond the LP's size) or ``"auto"``;
+* :func:`constraints_for` -- a scenario's ``[[constraint]]`` tables as :class:`LinearConstraint`;
+* :class:`ConstrainedSolution` -- what every route returns.
+"""
+from __future__ import annotations
+
+from typing import Any, Iterable
+
+from ..mdp import MDP
+from .certify import certify, evaluate_rows, lagrangian_bound, policy_from_occupation
+from .lp import check_reachable, reachable_range, solve_constrained_lp
+from .problem import LinearConstraint, Rows, constraints_for, max_form, with_cost
+from .result import ConstrainedSolution, ConstraintReport
+
+__all__ = [
+    "solve_constrained",
+    "solve_constrained_lp",
+    "constraints_for",
+    "LinearConstraint",
+    "ConstrainedSolution",
+    "ConstraintReport",
+    "Rows",
+    "max_form",
+    "with_cost",
+    "certify",
+    "evaluate_rows",
+    "lagrangian_bound",
+    "policy_from_occupation",
+    "reachable_range",
+    "check_reachable",
+    "CONSTRAINED_METHODS",
+]
+
+CONSTRAINED_METHODS = ("auto", "lp", "lp-cvxpy", "lagrangian")
+
+
+def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = "auto", **kw: Any) -> ConstrainedSolution:
+    """Solve ``min g`` subject to the constraints' bounds.
+
+    Parameters
+    ----------
+    mdp : MDP
+    constraints : iterable of ConstraintSpec or LinearConstraint
+        ``scenario.constraints`` or your own :class:`LinearConstraint` objects.
+    method : {"auto", "lp", "lp-cvxpy", "lagrangian"}
+        ``"lp"``: the occupation-measure LP on Clarabel; ``"lp-cvxpy"``: the same through
+        cvxpy; ``"lagrangian"``: search on the multiplier with certified value iteration and a
+        one-state mix (one constraint); ``"auto"``: the LP up to ``LP_MAX_PAIRS`` pairs, the
+        Lagrangian route beyond (one constraint only).
+    **kw
+        Passed to :func:`solve_constrained_lp` or :func:`~wncs_lp.constrained.lagrangian.solve_lagrangian`.
+    """
+    from ..errors import SolverError
+
+    cons = constraints_for(mdp, constraints)
+    if not cons:
+        raise SolverError("solve_constrained needs at least one constraint (use wncs_lp.solve for the unconstrained problem)")
+    if method == "auto":
+        from .lagrangian import LP_MAX_PAIRS
+
+        method = "lp" if (mdp.n_pairs <= LP_MAX_PAIRS or len(cons) > 1) else "lagrangian"
+        sol = solve_constrained(mdp, cons, method, **kw)
+        sol.stats["method_requested"] = "auto"
+        return sol
+    if method == "lp":
+        return solve_constrained_lp(mdp, cons, backend="clarabel", **kw)
+    if method == "lp-cvxpy":
+        return solve_constrained_lp(mdp, cons, backend="cvxpy", **kw)
+    if method == "lagrangian":
+        from .lagrangian import solve_lagrangian
+
+        return solve_lagrangian(mdp, cons, **kw)
+    raise SolverError(f"unknown constrained method {method!r}; expected one of {', '.join(map(repr, CONSTRAINED_METHODS))}")

@@ -1,0 +1,168 @@
+"""What a constrained solve returns: the randomised policy, its exact averages, the certificate."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ConstraintReport", "ConstrainedSolution"]
+
+
+@dataclass(frozen=True)
+class ConstraintReport:
+    """One constraint of a constrained solve, judged on the returned policy's own chain.
+
+    Attributes
+    ----------
+    label, quantity : str
+    max, min : float or None
+        The bounds asked for.
+    value : float
+        The long-run average under the returned policy, by exact evaluation of its chain.
+    lp_value : float
+        The same average under the solver's occupation measure (before the policy was read
+        off it); NaN for routes without one.
+    active : bool
+        A bound holds with equality at the optimum (its multiplier is positive, or the
+        value sits on the bound within the feasibility tolerance).
+    side : str or None
+        ``"max"`` or ``"min"``: the bound that binds (None when neither does).
+    multiplier : float
+        lambda >= 0, the shadow price: the optimal gain moves by ``multiplier`` per unit of
+        the binding bound (down as a ``max`` loosens, up as a ``min`` tightens).
+    violation : float
+        How far ``value`` lies outside the bounds (0 when it meets them).
+    """
+
+    label: str
+    quantity: str
+    max: float | None
+    min: float | None
+    value: float
+    lp_value: float
+    active: bool
+    side: str | None
+    multiplier: float
+    violation: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "label": self.label,
+            "quantity": self.quantity,
+            "max": self.max,
+            "min": self.min,
+            "value": float(self.value),
+            "lp_value": float(self.lp_value),
+            "active": bool(self.active),
+            "side": self.side,
+            "multiplier": float(self.multiplier),
+            "violation": float(self.violation),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class ConstrainedSolution:
+    r"""The optimum of ``min g`` subject to linear bounds on other long-run averages.
+
+    Attributes
+    ----------
+    method : str
+        ``"lp"`` (Clarabel direct), ``"lp-cvxpy"``, ``"lagrangian"`` (certified value
+        iteration and a one-state mix) or ``"convex"`` (:class:`OccupationProgram`).
+    status : str
+        ``"optimal"`` when the certificate closes to the requested tolerance and the returned
+        policy meets every bound within the feasibility tolerance; otherwise
+        ``"inaccurate:<why>"`` (``certificate``, ``infeasible_policy``, ``multichain``, the
+        solver's own status...).
+    gain : float
+        The exact average cost of the returned policy (= ``gain_upper`` when it is feasible).
+    gain_lower, gain_upper : float
+        The certificate ``gain_lower <= g*_C <= gain_upper``: the Lagrangian bound
+        :math:`L(\lambda) = \underline g_\lambda - \lambda^T b` (weak duality, with
+        :math:`\underline g_\lambda` the lower end of a certified Bellman bracket for the cost
+        :math:`c + \lambda^T D`) and the exact cost of the returned feasible policy.
+    solver_gain : float
+        The solver's own objective (the LP value); NaN for routes without one.
+    policy : (L,) float array
+        Pair probabilities :math:`\pi(a \mid s)` (sum 1 over each state's pairs): usable by
+        :func:`wncs_lp.evaluate`, :class:`wncs_lp.policies.MixedPolicy`, the chain tools.
+    occupation : (L,) float array
+        The occupation measure of the returned policy on its own chain (exact evaluation).
+    multipliers : (K,) float array
+        lambda per constraint (of its binding side; 0 for a slack constraint).
+    constraints : tuple of ConstraintReport
+        In the order given.
+    randomized_states : (r,) int array
+        The states where the policy mixes two or more actions.
+    iterations : int
+    seconds : float
+    stats : dict
+        Route-specific numbers: solver status, residuals, crossover, Lagrangian search...
+    """
+
+    method: str
+    status: str
+    gain: float
+    gain_lower: float
+    gain_upper: float
+    solver_gain: float
+    policy: np.ndarray
+    occupation: np.ndarray
+    multipliers: np.ndarray
+    constraints: tuple[ConstraintReport, ...]
+    randomized_states: np.ndarray
+    iterations: int = 0
+    seconds: float = 0.0
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "optimal"
+
+    @property
+    def gap(self) -> float:
+        """Relative width of the certificate, (hi - lo) / max(|gain|, 1e-300)."""
+        return (self.gain_upper - self.gain_lower) / max(abs(self.gain), 1e-300)
+
+    @property
+    def n_randomized(self) -> int:
+        return int(self.randomized_states.size)
+
+    def mixes(self, mdp, limit: int | None = 20) -> list[dict[str, Any]]:
+        """The randomised states with their mix: ``[{state, label, pairs: {action: prob}}]``."""
+        out = []
+        for s in self.randomized_states[:limit]:
+            s = int(s)
+            pairs = {}
+            for l in mdp.pairs_of(s):
+                if self.policy[l] > 0:
+                    pairs[str(mdp.action_label(l))] = float(self.policy[l])
+            out.append({"state": s, "label": mdp.state_label(s), "mix": pairs})
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready scalars and the per-constraint reports (no arrays)."""
+        out = {
+            "method": self.method,
+            "status": self.status,
+            "gain": float(self.gain),
+            "gain_lower": float(self.gain_lower),
+            "gain_upper": float(self.gain_upper),
+            "certificate_gap": float(self.gap),
+            "solver_gain": float(self.solver_gain),
+            "randomized_states": self.n_randomized,
+            "iterations": int(self.iterations),
+            "seconds": float(self.seconds),
+            "constraints": [c.to_dict() for c in self.constraints],
+        }
+        for k, v in self.stats.items():
+            if k not in out and (isinstance(v, (int, float, str, bool, np.integer, np.floating)) or v is None):
+                out[k] = v.item() if isinstance(v, np.generic) else v
+        return out
+
+    def __repr__(self) -> str:
+        cons = "; ".join(f"{c.label}: {c.value:.6g}{' (active)' if c.active else ''}" for c in self.constraints)
+        return (f"ConstrainedSolution(method={self.method!r}, status={self.status!r}, gain={self.gain:.10g}, "
+                f"bracket=[{self.gain_lower:.10g}, {self.gain_upper:.10g}], randomized_states={self.n_randomized}, "
+                f"constraints=[{cons}])")
