@@ -130,15 +130,26 @@ class ConstrainedSolution:
         return int(self.randomized_states.size)
 
     def mixes(self, mdp, limit: int | None = 20) -> list[dict[str, Any]]:
-        """The randomised states with their mix: ``[{state, label, pairs: {action: prob}}]``."""
+        """The randomised states with their mix: ``[{state, label, mix: {action name: prob}}]``.
+
+        Actions are named as on policy maps (:func:`wncs_lp.maps.action_name`) when the MDP
+        has decoded states, else by their label.
+        """
+        named = getattr(mdp, "states", None) is not None and getattr(mdp.states, "configs", None) is not None
+        if named:
+            from ..maps import action_name, map_names
+
+            names = map_names(mdp)
         out = []
         for s in self.randomized_states[:limit]:
             s = int(s)
-            pairs = {}
+            mix = {}
             for l in mdp.pairs_of(s):
                 if self.policy[l] > 0:
-                    pairs[str(mdp.action_label(l))] = float(self.policy[l])
-            out.append({"state": s, "label": mdp.state_label(s), "mix": pairs})
+                    key = (action_name(mdp, int(mdp.a_indices[l]), int(mdp.states.config[s]), names=names)
+                           if named else str(mdp.action_label(l)))
+                    mix[key] = float(self.policy[l])
+            out.append({"state": s, "label": mdp.state_label(s), "mix": mix})
         return out
 
     def summary(self) -> dict[str, Any]:
