@@ -17,13 +17,15 @@ def scenario_names() -> list[str]:
 
 
 def scenario_path(name: str) -> Path:
-    """The path of a shipped scenario file, e.g. ``scenario_path("paper_p12.toml")``.
+    """The path of a shipped scenario file, e.g. ``scenario_path("paper_p12.toml")`` (or ``"paper_p12"``).
 
     Raises
     ------
     FileNotFoundError
         No shipped scenario has that name (the message lists those that exist).
     """
+    if not name.endswith(".toml"):
+        name += ".toml"
     path = Path(str(resources.files(__name__) / name))
     if not path.is_file():
         raise FileNotFoundError(f"no shipped scenario {name!r}; the scenarios are {', '.join(scenario_names())}")
