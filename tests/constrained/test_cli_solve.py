@@ -55,6 +55,7 @@ def test_json_carries_the_constrained_result(scenario_file):
     mdp = wncs_lp.build(sc)
     opt = wncs_lp.solve(mdp, "vi")
     assert out["gain"] > opt.gain_upper and cons[0]["active"] and cons[0]["multiplier"] > 0
+    assert 0 <= out["cap_mass"]["total"] <= 1 and len(out["cap_mass"]["per_process"]) == 2
     # --ignore-constraints solves the plain problem
     plain = json.loads(run(str(scenario_file), "--set", "model.allow_idle=true", "--set", "tau_cap=6",
                            "--ignore-constraints", "--json").stdout)

@@ -28,12 +28,16 @@ def cmd_solve(args: argparse.Namespace) -> int:
         return _constrained(args, scenario, mdp, t0, t_build)
     from ..solvers import solve
 
+    from ..truncation import policy_cap_mass
+
     sol = solve(mdp, method=args.method)
+    cap = policy_cap_mass(mdp, sol.policy)
     total = time.perf_counter() - t0
     payload = {
         **head(args, scenario, mdp),
         "nnz": int(mdp.P.nnz),
         **sol.summary(),
+        "cap_mass": cap.to_dict(),
         "build_seconds": t_build,
         "solve_seconds": sol.seconds,
         "seconds": total,
@@ -54,19 +58,23 @@ def cmd_solve(args: argparse.Namespace) -> int:
                 verdict = {True: "agrees", False: "DISAGREES", None: "failed"}[st.get("cross_check_agree")]
                 extra = f", relative difference {st['cross_check_rel_diff']:.2e}" if "cross_check_rel_diff" in st else ""
                 print(f"cross-check with {st['cross_check_method']}: {verdict}{extra}")
+        print(f"truncation: under the optimal policy {cap.message()}")
     return 0 if sol.ok else 1
 
 
 def _constrained(args: argparse.Namespace, scenario, mdp, t0: float, t_build: float) -> int:
     from ..constrained import solve_constrained
+    from ..truncation import cap_mass
 
     sol = solve_constrained(mdp, scenario.constraints, args.method)
+    cap = cap_mass(mdp, sol.occupation)
     total = time.perf_counter() - t0
     payload = {
         **head(args, scenario, mdp),
         "nnz": int(mdp.P.nnz),
         **sol.summary(),
         "mixes": sol.mixes(mdp),
+        "cap_mass": cap.to_dict(),
         "build_seconds": t_build,
         "solve_seconds": sol.seconds,
         "seconds": total,
@@ -90,6 +98,7 @@ def _constrained(args: argparse.Namespace, scenario, mdp, t0: float, t_build: fl
             print(f"  {m['label']}: {mix}")
     else:
         print("the policy is deterministic (no bound forces a mix)")
+    print(f"truncation: under the returned policy {cap.message()}")
     return 0 if sol.ok else 1
 
 
