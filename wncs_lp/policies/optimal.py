@@ -13,7 +13,7 @@ from ..scenario import Scenario
 from ..solvers import solve
 from .base import Policy
 
-__all__ = ["OptimalPolicy"]
+__all__ = ["OptimalPolicy", "CappedPolicy"]
 
 
 class OptimalPolicy(Policy):
@@ -77,3 +77,52 @@ class OptimalPolicy(Policy):
 
     def describe(self):
         return {**super().describe(), "method": self.solution.method, "solver_gain": float(self.solution.gain)}
+
+
+class CappedPolicy(Policy):
+    """The policy of an MDP solved at a smaller AoI cap, applied at a larger one.
+
+    A state (tau, C) of the larger model acts as the state (min(tau, cap), C) of the solved
+    model: the AoI values the smaller model lumps at its cap get the cap's action. Used by the
+    cap study (:func:`wncs_lp.capstudy.cap_study`) to say what a small model's answer is worth.
+
+    Parameters
+    ----------
+    mdp : MDP
+        The solved (smaller-cap) MDP.
+    solution : Solution
+        Its solution (one pair per state).
+    system : System
+        The system of the larger-cap scenario (same configurations, larger caps).
+
+    Raises
+    ------
+    PolicyError
+        The two models' configurations differ, or the solved caps exceed the larger ones.
+    """
+
+    name = "capped"
+
+    def __init__(self, mdp: MDP, solution: Any, system: System):
+        super().__init__(system)
+        st = mdp.states
+        if st is None or list(st.configs) != list(system.automaton.configs):
+            raise PolicyError("the solved MDP's configurations differ from the scenario's: not the same model")
+        self.caps = np.asarray(st.caps, dtype=np.int64)
+        if np.any(self.caps > system.caps):
+            raise PolicyError(f"the solved caps {self.caps.tolist()} exceed the scenario's {system.caps.tolist()}")
+        pol = np.asarray(solution.policy, dtype=np.int64)
+        if pol.shape != (mdp.n_states,):
+            raise PolicyError("solution.policy is not one pair index per state of the solved MDP")
+        self.mdp = mdp
+        self._local = pol - mdp.pair_ptr[:-1]
+        self.name = f"capped[{','.join(str(int(c)) for c in self.caps)}]"
+
+    def act(self, tau, config_ids, rng=None):
+        tau, c = self._check_inputs(tau, config_ids)
+        s = self.mdp.states.ids(np.minimum(tau, self.caps[None, :]), c)
+        if np.any(s < 0):
+            r = int(np.flatnonzero(s < 0)[0])
+            raise PolicyError(f"state tau={tau[r].tolist()}, configuration {int(c[r])} has no counterpart "
+                              f"at caps {self.caps.tolist()}")
+        return self._local[s]

@@ -1,0 +1,157 @@
+r"""The cap study: solve at increasing AoI caps until the truncation no longer matters.
+
+Why it is meaningful. The cap :math:`C` stops the AoI (and its cost) from growing. While every
+loop length :math:`U_m + T_{m,k} + D_m` fits under :math:`C`, the cap-:math:`C` model is a
+lumping of the cap-:math:`C'` model (:math:`C < C'`: merge the AoI values :math:`\ge C`) whose
+costs are lower (:math:`q_k` is increasing and :math:`q_k(\min(\tau, C)) \le q_k(\tau)`), so
+
+.. math:: g^*(C) \le g^*(C') \qquad (C < C'),
+
+a non-decreasing sequence of lower bounds on the untruncated optimum (tested in
+``tests/test_truncation.py``). Each row reports the gain with its certificate, the mass the
+optimal policy spends at the cap (:mod:`wncs_lp.truncation`) and the change from the previous
+cap; the study stops at the first cap where both the mass and the relative change fall below
+the tolerances (or at the last cap given). Beside each gain, the policy optimal at the first cap
+is evaluated at that cap (:class:`~wncs_lp.policies.CappedPolicy`): what the small model's
+answer is worth in the larger one.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from typing import Any, Callable, Sequence
+
+from .errors import WncsError
+from .scenario import Scenario
+
+__all__ = ["CapRow", "CapStudy", "cap_study"]
+
+
+@dataclass(frozen=True)
+class CapRow:
+    """One cap of a study.
+
+    Attributes
+    ----------
+    cap : int
+    states, pairs : int
+    gain, gain_lower, gain_upper : float
+        The optimal gain at this cap and its certificate.
+    cap_mass : float
+        Share of the optimal policy's long-run time with some AoI at the cap.
+    rel_change : float
+        (gain - previous gain) / gain (NaN on the first row).
+    first_policy_gain : float
+        The exact gain, at this cap, of the policy optimal at the study's first cap (NaN when a
+        state of this cap has no counterpart there).
+    seconds : float
+    """
+
+    cap: int
+    states: int
+    pairs: int
+    gain: float
+    gain_lower: float
+    gain_upper: float
+    cap_mass: float
+    rel_change: float
+    first_policy_gain: float
+    seconds: float
+
+
+@dataclass(frozen=True)
+class CapStudy:
+    """The rows of a cap study and whether it converged.
+
+    Attributes
+    ----------
+    rows : tuple of CapRow
+    converged : bool
+        The last row meets both tolerances.
+    mass_tol, gain_rtol : float
+    """
+
+    rows: tuple[CapRow, ...]
+    converged: bool
+    mass_tol: float
+    gain_rtol: float
+
+    def table(self) -> list[dict[str, Any]]:
+        return [asdict(r) for r in self.rows]
+
+    def __repr__(self) -> str:
+        last = self.rows[-1] if self.rows else None
+        tail = f", last cap {last.cap}: gain {last.gain:.10g}, mass at cap {last.cap_mass:.2%}" if last else ""
+        return f"CapStudy({len(self.rows)} caps, converged={self.converged}{tail})"
+
+
+def cap_study(
+    scenario: Scenario,
+    caps: Sequence[int],
+    *,
+    mass_tol: float = 0.01,
+    gain_rtol: float = 1e-3,
+    method: str = "auto",
+    force: bool = False,
+    on_row: Callable[[CapRow], None] | None = None,
+) -> CapStudy:
+    """Solve the scenario at each cap in ``caps`` (increasing) until the truncation stops mattering.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Every process's cap is overridden by each value of ``caps``.
+    caps : sequence of int
+        Increasing caps; each must be at least the longest loop length of the scenario (below
+        it the lower-bound property does not hold and the study refuses).
+    mass_tol, gain_rtol : float
+        Stop at the first cap whose mass at the cap is at most ``mass_tol`` and whose relative
+        change from the previous cap is at most ``gain_rtol``.
+    method : str
+        Solver method (:func:`wncs_lp.solvers.solve`).
+    force : bool
+        Build past the size guard.
+    on_row : callable, optional
+        Called with each row as soon as it is computed (progress, incremental output).
+    """
+    from .evaluate import evaluate
+    from .models.guard import build_checked
+    from .models.system import System
+    from .policies import CappedPolicy
+    from .solvers import solve
+    from .truncation import policy_cap_mass
+
+    caps = [int(c) for c in caps]
+    if not caps or any(b <= a for a, b in zip(caps, caps[1:])):
+        raise WncsError(f"cap study: expected increasing caps, got {caps}")
+    longest = max(max(s.loop) for s in scenario.servers)
+    if caps[0] < longest:
+        raise WncsError(f"cap study: the first cap {caps[0]} is below the longest loop length {longest} "
+                        "(U + T + D); g*(C) is a lower bound on larger caps only from there on")
+    rows: list[CapRow] = []
+    first = None
+    for cap in caps:
+        t0 = time.perf_counter()
+        sc = scenario.with_overrides({"tau_cap": cap})
+        mdp = build_checked(sc, force=force)
+        sol = solve(mdp, method=method)
+        mass = policy_cap_mass(mdp, sol.policy).total
+        system = System.from_scenario(sc)
+        if first is None:
+            first = (mdp, sol)
+            fp = float(sol.gain)
+        else:
+            try:
+                fp = evaluate(mdp, CappedPolicy(first[0], first[1], system)).gain
+            except WncsError:
+                fp = float("nan")
+        prev = rows[-1].gain if rows else None
+        change = float("nan") if prev is None else (sol.gain - prev) / abs(sol.gain)
+        row = CapRow(cap, mdp.n_states, mdp.n_pairs, float(sol.gain), float(sol.gain_lower), float(sol.gain_upper),
+                     float(mass), float(change), float(fp), time.perf_counter() - t0)
+        rows.append(row)
+        if on_row is not None:
+            on_row(row)
+        if prev is not None and mass <= mass_tol and abs(change) <= gain_rtol:
+            return CapStudy(tuple(rows), True, mass_tol, gain_rtol)
+    return CapStudy(tuple(rows), False, mass_tol, gain_rtol)

@@ -1,0 +1,59 @@
+"""``wncs-lp capstudy``: solve at increasing AoI caps until the truncation stops mattering."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .common import Command, add_scenario_args, emit_json, head, load
+
+
+def cmd_capstudy(args: argparse.Namespace) -> int:
+    from ..capstudy import cap_study
+    from ..sweep import parse_values
+
+    scenario = load(args)
+    caps = [int(v) for v in parse_values(args.caps)]
+
+    def show(row) -> None:
+        if not args.json:
+            change = "" if row.rel_change != row.rel_change else f"{row.rel_change:+.3%}"
+            print(f"{row.cap:>5} {row.states:>10,} {row.gain:>16.10g} {row.gain_upper - row.gain_lower:>10.2e} "
+                  f"{row.cap_mass:>10.3%} {change:>10} {row.first_policy_gain:>16.10g} {row.seconds:>7.1f}", flush=True)
+        elif sys.stderr.isatty():
+            print(f"cap {row.cap}: gain {row.gain:.10g}, mass at cap {row.cap_mass:.3%}", file=sys.stderr)
+
+    if not args.json:
+        print(scenario.describe())
+        print(f"{'cap':>5} {'states':>10} {'optimal gain':>16} {'bracket':>10} {'at cap':>10} {'change':>10} "
+              f"{'cap-' + str(caps[0]) + ' policy':>16} {'seconds':>7}")
+    study = cap_study(scenario, caps, mass_tol=args.mass_tol, gain_rtol=args.gain_rtol, method=args.method,
+                      force=args.force, on_row=show)
+    if args.json:
+        emit_json({**head(args, scenario), "converged": study.converged, "mass_tol": study.mass_tol,
+                   "gain_rtol": study.gain_rtol, "rows": study.table()})
+    else:
+        last = study.rows[-1]
+        if study.converged:
+            print(f"converged at cap {last.cap}: mass at the cap {last.cap_mass:.3%} <= {args.mass_tol:.2%} and "
+                  f"change {abs(last.rel_change):.3%} <= {args.gain_rtol:.2%}; every gain above is a lower bound on the "
+                  "untruncated optimum (g*(C) <= g*(C') while the loops fit under C)")
+        else:
+            print(f"not converged by cap {last.cap}: give larger caps (--caps)")
+    return 0 if study.converged else 1
+
+
+def _configure(p: argparse.ArgumentParser) -> None:
+    add_scenario_args(p)
+    p.add_argument("--caps", default="12:40:4", help="caps to try, START:STOP:STEP or a comma list (default 12:40:4)")
+    p.add_argument("--mass-tol", type=float, default=0.01,
+                   help="stop when the optimal policy's mass at the cap is at most this (default 0.01)")
+    p.add_argument("--gain-rtol", type=float, default=1e-3,
+                   help="... and the relative change of the gain from the previous cap at most this (default 1e-3)")
+    p.add_argument("--method", default="auto", choices=["auto", "lp", "lp-cvxpy", "rvi", "vi", "pi"],
+                   help="solver of each cap (default auto)")
+
+
+COMMANDS = [
+    Command("capstudy", "solve at increasing AoI caps until the mass at the cap and the change in gain are small",
+            _configure, cmd_capstudy),
+]
