@@ -35,6 +35,9 @@ key                         shape, dtype       meaning
 ``scenario_source``         (), str            scenario file (or "<dict>")
 ``name``                    (), str            the MDP's name
 ``meta_json``               (), str            JSON of the MDP's scalar metadata
+``policy`` (optional)       (L,), float64      pair probabilities pi(a_l | s_l) of a stationary
+                                               policy (``save_npz(..., policy=...)``; absent
+                                               otherwise; read by :func:`load_policy_npz`)
 ==========================  =================  ==================================================
 
 The state numbering is the builder's: configuration by configuration, within one in C order
@@ -43,9 +46,39 @@ state space (``mdp.states is None``) gets ``tau`` of shape (n, 0) and ``config``
 
 To build P with scipy: ``scipy.sparse.csr_matrix((P_data, P_indices, P_indptr), shape=(L, n))``.
 The optimal gain g* solves ``g + h(s) = min_{l: s_l = s} [cost_l + (P h)_l]``.
+
+Format ``wncs_lp.policy-npz``, version 1
+----------------------------------------
+A stationary policy, deterministic or randomised (e.g. a constrained solve's), on an MDP exported
+as above or rebuilt from its scenario; :func:`save_policy_npz` writes it and
+:func:`load_policy_npz` reads it (and also the optional ``policy`` entry of an MDP file). The
+pair layout is stored so a reader can check the policy belongs to its MDP:
+
+==========================  =================  ==================================================
+key                         shape, dtype       meaning
+==========================  =================  ==================================================
+``format``                  (), str            ``"wncs_lp.policy-npz"``
+``format_version``          (), int64          ``1``
+``n_states``                (), int64          n
+``pair_ptr``                (n+1,), int64      as in the MDP file
+``a_indices``               (L,), int64        as in the MDP file
+``policy``                  (L,), float64      pair probabilities pi(a_l | s_l): >= 0, sum 1 over
+                                               ``pair_ptr[s]:pair_ptr[s+1]``; a deterministic
+                                               policy is one-hot
+``randomized_states``       (r,), int64        states with two or more pairs of positive
+                                               probability
+``scenario_fingerprint``    (), str            :meth:`Scenario.fingerprint` of the source
+``name``                    (), str            the policy's name
+``meta_json``               (), str            JSON of scalar metadata (``mdp_name``, ``source``,
+                                               and what the caller passes in ``meta``)
+==========================  =================  ==================================================
+
+Every file is written atomically (:func:`wncs_lp.files.atomic_write_bytes`): a reader sees the old
+complete file or the new one, never a partial one.
 """
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 from typing import Any
@@ -53,15 +86,28 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import WncsError
-from .files import json_ready
+from .errors import PolicyError, WncsError
+from .files import atomic_write_bytes, json_ready
 from .mdp import MDP
 from .models.statespace import StateSpace
+from .policies.mixed import pair_probabilities, randomised_states
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "save_npz", "load_npz", "ExportError"]
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "POLICY_FORMAT",
+    "POLICY_FORMAT_VERSION",
+    "save_npz",
+    "load_npz",
+    "save_policy_npz",
+    "load_policy_npz",
+    "ExportError",
+]
 
 FORMAT = "wncs_lp.mdp-npz"
 FORMAT_VERSION = 1
+POLICY_FORMAT = "wncs_lp.policy-npz"
+POLICY_FORMAT_VERSION = 1
 
 
 class ExportError(WncsError):
@@ -73,25 +119,54 @@ def _scalar_meta(meta: dict) -> dict:
     return {k: v for k, v in json_ready(meta).items() if isinstance(v, (bool, int, float, str)) or v is None}
 
 
-def save_npz(mdp: MDP, path: str | Path, *, scenario: Any = None, compress: bool = False) -> Path:
+def _npz_path(path: str | Path) -> Path:
+    path = Path(path)
+    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+
+def _write_npz(path: Path, arrays: dict[str, np.ndarray], compress: bool) -> Path:
+    """``np.savez[_compressed]`` into memory, then one atomic write."""
+    buf = io.BytesIO()
+    (np.savez_compressed if compress else np.savez)(buf, **arrays)
+    atomic_write_bytes(path, buf.getvalue())
+    return path
+
+
+def _probs_for(mdp: MDP, policy: Any) -> np.ndarray:
+    try:
+        return pair_probabilities(mdp, policy)
+    except PolicyError as exc:
+        raise ExportError(f"cannot export the policy: {exc}") from None
+
+
+def save_npz(mdp: MDP, path: str | Path, *, scenario: Any = None, compress: bool = False,
+             policy: Any = None) -> Path:
     """Write ``mdp`` in the ``wncs_lp.mdp-npz`` format (see the module docstring).
 
     Parameters
     ----------
     mdp : MDP
-    path : file name (``.npz`` is appended by numpy when missing)
+    path : file name (``.npz`` is appended when missing)
     scenario : Scenario, optional
         Source of the fingerprint and process names (else taken from ``mdp.meta``).
     compress : bool
         ``np.savez_compressed`` (smaller, slower) instead of ``np.savez``.
+    policy : optional
+        A stationary policy to store with the MDP as the ``policy`` entry (pair
+        probabilities): (L,) float probabilities, (n,) int pair indices, a Solution or
+        ConstrainedSolution, or a Policy (mapped with ``on_mdp``).
 
     Returns
     -------
-    Path of the written file.
+    Path of the written file (written atomically).
+
+    Raises
+    ------
+    ExportError
+        ``policy`` is not a valid policy on ``mdp``.
     """
-    path = Path(path)
-    if path.suffix != ".npz":
-        path = path.with_name(path.name + ".npz")
+    path = _npz_path(path)
+    probs = None if policy is None else _probs_for(mdp, policy)
     n = mdp.n_states
     st = mdp.states
     if st is not None and hasattr(st, "tau") and hasattr(st, "config"):
@@ -138,9 +213,9 @@ def save_npz(mdp: MDP, path: str | Path, *, scenario: Any = None, compress: bool
         name=np.array(str(mdp.name)),
         meta_json=np.array(json.dumps(_scalar_meta(mdp.meta), sort_keys=True)),
     )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    (np.savez_compressed if compress else np.savez)(path, **arrays)
-    return path
+    if probs is not None:
+        arrays["policy"] = probs
+    return _write_npz(path, arrays, compress)
 
 
 def load_npz(path: str | Path, *, validate: bool = True) -> MDP:
@@ -191,3 +266,108 @@ def load_npz(path: str | Path, *, validate: bool = True) -> MDP:
         states = StateSpace(tau, config, configs, caps, str, lookup)
     return MDP.from_arrays(d["s_indices"], d["a_indices"], d["cost"], P, n, action_table=action_table,
                            states=states, name=str(d["name"]), meta=meta, check=validate)
+
+
+def save_policy_npz(path: str | Path, mdp: MDP, policy: Any, *, name: str | None = None, scenario: Any = None,
+                    meta: dict | None = None, compress: bool = False) -> Path:
+    """Write a stationary policy on ``mdp`` in the ``wncs_lp.policy-npz`` format (module docstring).
+
+    Parameters
+    ----------
+    path : file name (``.npz`` is appended when missing)
+    mdp : MDP
+        The MDP the policy lives on.
+    policy
+        (L,) float pair probabilities, (n,) int pair indices (stored one-hot), a Solution or
+        ConstrainedSolution (its ``.policy``), or a Policy such as
+        :class:`~wncs_lp.policies.MixedPolicy` (mapped with ``on_mdp``).
+    name : str, optional
+        Default: the policy's ``name``, else its ``method``, else ``"policy"``.
+    scenario : Scenario, optional
+        Source of the fingerprint (else ``mdp.meta["fingerprint"]``).
+    meta : dict, optional
+        Extra scalar metadata (stored as JSON).
+
+    Returns
+    -------
+    Path of the written file (written atomically).
+
+    Raises
+    ------
+    ExportError
+        ``policy`` is not a valid policy on ``mdp`` (the message names the bad state).
+    """
+    path = _npz_path(path)
+    probs = _probs_for(mdp, policy)
+    if name is None:
+        name = getattr(policy, "name", None) or getattr(policy, "method", None) or "policy"
+    fingerprint = scenario.fingerprint() if scenario is not None else str(mdp.meta.get("fingerprint", ""))
+    info = {"mdp_name": str(mdp.name), "source": str(scenario.source if scenario is not None
+                                                      else mdp.meta.get("source", ""))}
+    info.update(_scalar_meta(meta or {}))
+    arrays = dict(
+        format=np.array(POLICY_FORMAT),
+        format_version=np.array(POLICY_FORMAT_VERSION, dtype=np.int64),
+        n_states=np.array(mdp.n_states, dtype=np.int64),
+        pair_ptr=np.asarray(mdp.pair_ptr, dtype=np.int64),
+        a_indices=np.asarray(mdp.a_indices, dtype=np.int64),
+        policy=probs,
+        randomized_states=randomised_states(mdp, probs).astype(np.int64),
+        scenario_fingerprint=np.array(fingerprint),
+        name=np.array(str(name)),
+        meta_json=np.array(json.dumps(info, sort_keys=True)),
+    )
+    return _write_npz(path, arrays, compress)
+
+
+def load_policy_npz(path: str | Path, mdp: MDP | None = None) -> np.ndarray:
+    """Read the (L,) pair probabilities of a ``wncs_lp.policy-npz`` file, or the optional
+    ``policy`` entry of a ``wncs_lp.mdp-npz`` file.
+
+    Parameters
+    ----------
+    path : file name
+    mdp : MDP, optional
+        When given, the stored pair layout (``pair_ptr``, ``a_indices``) and, when both are
+        known, the scenario fingerprint must match it, and the probabilities are validated on it.
+
+    Returns
+    -------
+    (L,) float64 array
+        Usable by :class:`~wncs_lp.policies.MixedPolicy`, :func:`wncs_lp.evaluate.evaluate`
+        and the maps.
+
+    Raises
+    ------
+    ExportError
+        Not such a file, an unsupported version, an MDP file without a policy, or a policy
+        that does not belong to ``mdp``.
+    """
+    path = Path(path)
+    try:
+        z = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise ExportError(f"{path}: not a readable .npz file ({exc})") from exc
+    with z:
+        fmt = str(z["format"]) if "format" in z.files else None
+        if fmt not in (POLICY_FORMAT, FORMAT):
+            raise ExportError(f"{path}: not a {POLICY_FORMAT} (or {FORMAT}) file "
+                              f"(keys: {', '.join(sorted(z.files)[:8])} ...)")
+        version = int(z["format_version"])
+        known = POLICY_FORMAT_VERSION if fmt == POLICY_FORMAT else FORMAT_VERSION
+        if version != known:
+            raise ExportError(f"{path}: {fmt} version {version} is not supported (this reader knows {known})")
+        if "policy" not in z.files:
+            raise ExportError(f"{path}: this {fmt} file holds no policy (write one with save_npz(..., policy=...))")
+        d = {k: z[k] for k in ("policy", "pair_ptr", "a_indices", "scenario_fingerprint", "n_states")}
+    probs = np.asarray(d["policy"], dtype=np.float64)
+    if mdp is not None:
+        if not (np.array_equal(d["pair_ptr"], mdp.pair_ptr) and np.array_equal(d["a_indices"], mdp.a_indices)):
+            raise ExportError(f"{path}: the policy's pairs ({int(d['n_states'])} states, {probs.size} pairs) "
+                              f"are not those of {mdp.name} ({mdp.n_states} states, {mdp.n_pairs} pairs)")
+        fp, mine = str(d["scenario_fingerprint"]), str(mdp.meta.get("fingerprint", ""))
+        if fp and mine and fp != mine:
+            raise ExportError(f"{path}: the policy was saved for scenario {fp[:12]}..., not {mine[:12]}... "
+                              f"({mdp.name})")
+        probs = _probs_for(mdp, probs)
+    return probs

@@ -4,6 +4,8 @@ No drawing here (that is :mod:`wncs_lp.viz`):
 
 * :func:`policy_grid` -- the action over (tau_i, tau_j) for one configuration (server state)
   with the other AoIs fixed;
+* :func:`policy_probabilities`, :func:`mixed_states`, :func:`state_mix` -- randomised policies
+  (see below);
 * :func:`slice_grid` -- three processes on the plane tau_i + tau_j + tau_k = total (Figs. 6-7);
 * :func:`region_stats` -- number of connected regions of each action and whether each is
   (simply) connected, on the grid (4-neighbour) or on the triangular lattice of a slice
@@ -13,6 +15,16 @@ No drawing here (that is :mod:`wncs_lp.viz`):
   model (:meth:`wncs_lp.models.base.Model.action_name`).
 
 Process indices (``axes``, ``fixed_tau``) are **1-based** like the paper's tau_1, tau_2, ...
+
+Policies
+--------
+Every function taking ``policy_or_solution`` accepts a ``Solution`` or an (n,) int array of pair
+indices (deterministic), a ``ConstrainedSolution``, a
+:class:`~wncs_lp.policies.MixedPolicy` or an (L,) float array of pair probabilities
+(randomised), or any :class:`~wncs_lp.policies.Policy` (mapped with ``on_mdp``). A randomised
+policy's map shows its *most likely* action in each state (ties: the first pair, i.e. the
+action listed first); :func:`mixed_states` gives the states where it mixes and
+:func:`state_mix` the mix of one. Its recurrent states are those of its own (randomised) chain.
 
 Configuration specs (``config`` arguments and ``wncs-lp map --servers``)
 ------------------------------------------------------------------------
@@ -37,8 +49,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .chain import recurrent_classes
-from .errors import ModelError
+from .chain import PROB_SUM_TOL, policy_matrices, recurrent_classes
+from .errors import ModelError, PolicyError
 from .mdp import MDP
 from .models import model_type
 from .scenario import load_scenario
@@ -50,6 +62,9 @@ __all__ = [
     "action_name",
     "short_action_name",
     "policy_pairs",
+    "policy_probabilities",
+    "mixed_states",
+    "state_mix",
     "recurrent_mask",
     "policy_grid",
     "slice_grid",
@@ -192,12 +207,86 @@ def parse_config_spec(mdp: MDP, spec: Any) -> int:
 
 
 # ============================================================================ grids
+def _policy_array(mdp: MDP, policy_or_solution: Any) -> np.ndarray:
+    if callable(getattr(policy_or_solution, "on_mdp", None)):  # a Policy
+        try:
+            return np.asarray(policy_or_solution.on_mdp(mdp))
+        except PolicyError as exc:
+            raise ModelError(str(exc)) from None
+    return np.asarray(getattr(policy_or_solution, "policy", policy_or_solution))
+
+
+def _is_probs(pol: np.ndarray) -> bool:
+    return np.issubdtype(pol.dtype, np.floating)
+
+
+def policy_probabilities(mdp: MDP, policy_or_solution: Any) -> np.ndarray | None:
+    """The (L,) pair probabilities of a randomised policy, checked; None for a deterministic one.
+
+    Randomised: an (L,) float array, or an object with such a ``.policy`` (ConstrainedSolution,
+    MixedPolicy), or a Policy whose ``on_mdp`` gives one. Deterministic: a Solution, an (n,) int
+    array, a deterministic Policy.
+
+    Raises
+    ------
+    ModelError
+        Malformed probabilities (the message names the first bad state or pair).
+    """
+    pol = _policy_array(mdp, policy_or_solution)
+    if not _is_probs(pol):
+        return None
+    pol = pol.astype(np.float64)
+    ok = pol.shape == (mdp.n_pairs,) and bool(np.all(np.isfinite(pol))) and bool(np.all(pol >= 0)) \
+        and bool(np.all(np.abs(np.add.reduceat(pol, mdp.pair_ptr[:-1]) - 1.0) <= PROB_SUM_TOL))
+    if not ok:
+        try:
+            policy_matrices(mdp, pol)  # the one validation of pair probabilities: its message
+        except PolicyError as exc:
+            raise ModelError(str(exc)) from None
+    return pol
+
+
+def mixed_states(mdp: MDP, policy_or_solution: Any) -> np.ndarray:
+    """The states where the policy puts positive probability on two or more actions (sorted;
+    empty for a deterministic policy)."""
+    probs = policy_probabilities(mdp, policy_or_solution)
+    if probs is None:
+        return np.zeros(0, np.int64)
+    return np.flatnonzero(np.add.reduceat((probs > 0).astype(np.int64), mdp.pair_ptr[:-1]) > 1)
+
+
+def state_mix(mdp: MDP, probs: np.ndarray, s: int) -> list[tuple[int, float]]:
+    """``[(action index, probability), ...]`` of state s, positive probabilities only, most likely
+    first (ties: the action listed first). ``probs`` from :func:`policy_probabilities`."""
+    out = [(int(mdp.a_indices[l]), float(probs[l])) for l in mdp.pairs_of(int(s)) if probs[l] > 0]
+    return sorted(out, key=lambda t: -t[1])
+
+
+def _most_likely_pairs(mdp: MDP, probs: np.ndarray) -> np.ndarray:
+    starts = mdp.pair_ptr[:-1]
+    best = np.maximum.reduceat(probs, starts)
+    cand = np.where(probs == best[mdp.s_indices], np.arange(mdp.n_pairs), mdp.n_pairs)
+    return np.minimum.reduceat(cand, starts).astype(np.int64)
+
+
+def _chain_policy(mdp: MDP, policy_or_solution: Any) -> np.ndarray:
+    """What the policy's chain is built from: the probabilities (randomised) or the pairs."""
+    probs = policy_probabilities(mdp, policy_or_solution)
+    return probs if probs is not None else policy_pairs(mdp, policy_or_solution)
+
+
 def policy_pairs(mdp: MDP, policy_or_solution: Any) -> np.ndarray:
-    """The (n,) chosen pair per state of a Solution or a pair-index array, checked."""
-    pol = getattr(policy_or_solution, "policy", policy_or_solution)
-    pol = np.asarray(pol)
+    """The (n,) chosen pair per state, checked.
+
+    Deterministic policies (a Solution, a pair-index array): the chosen pair. Randomised ones
+    (see the module docstring): the most likely pair of each state (ties: the first).
+    """
+    pol = _policy_array(mdp, policy_or_solution)
+    if _is_probs(pol):
+        return _most_likely_pairs(mdp, policy_probabilities(mdp, pol))
     if pol.shape != (mdp.n_states,) or not np.issubdtype(pol.dtype, np.integer):
-        raise ModelError(f"policy must be a Solution or an integer array of pair indices of shape ({mdp.n_states},)")
+        raise ModelError(f"policy must be a Solution or an integer array of pair indices of shape ({mdp.n_states},), "
+                         f"or a float array of pair probabilities of shape ({mdp.n_pairs},)")
     if pol.min() < 0 or pol.max() >= mdp.n_pairs or np.any(mdp.s_indices[pol] != np.arange(mdp.n_states)):
         raise ModelError("policy holds a pair index that does not belong to its state")
     return pol.astype(np.int64)
@@ -205,6 +294,8 @@ def policy_pairs(mdp: MDP, policy_or_solution: Any) -> np.ndarray:
 
 def recurrent_mask(mdp: MDP, pol: np.ndarray, stationary: Any = None) -> np.ndarray | None:
     """States with positive stationary probability under the policy.
+
+    ``pol``: (n,) chosen pairs, or (L,) pair probabilities of a randomised policy.
 
     ``stationary`` False: no shading (None); an (n,) array: ``stationary > 0``; None: the
     exact graph criterion (the states of the closed communicating classes of the policy's chain,
@@ -218,7 +309,9 @@ def recurrent_mask(mdp: MDP, pol: np.ndarray, stationary: Any = None) -> np.ndar
             raise ModelError(f"stationary must have shape ({mdp.n_states},), got {st.shape}")
         return st > 0
     rec = np.zeros(mdp.n_states, bool)
-    for cl in recurrent_classes(mdp.P[pol]):
+    pol = np.asarray(pol)
+    P = policy_matrices(mdp, pol)[0] if _is_probs(pol) else mdp.P[pol]
+    for cl in recurrent_classes(P):
         rec[cl] = True
     return rec
 
@@ -270,7 +363,8 @@ def _weights(mdp: MDP, pol: np.ndarray, stationary: Any) -> np.ndarray | None:
 def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[int] = (1, 2),
                 fixed_tau: Mapping[int, int] | None = None, stationary: Any = None
                 ) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
-    """The chosen action over (tau_i, tau_j) for one configuration.
+    """The chosen action over (tau_i, tau_j) for one configuration (the most likely one for a
+    randomised policy).
 
     The AoIs not on the axes take ``fixed_tau`` or, by default, the value with the most
     stationary probability (``stationary`` given) or the most recurrent states of the policy's
@@ -289,8 +383,10 @@ def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[i
     N = len(space.caps)
     axes = _check_axes(N, axes, 2)
     c = parse_config_spec(mdp, config)
-    pol = policy_pairs(mdp, policy_or_solution)
-    fixed = _fixed(mdp, c, axes, fixed_tau, _weights(mdp, pol, stationary) if len(fixed_tau or {}) < N - 2 else None)
+    chain_pol = _chain_policy(mdp, policy_or_solution)
+    pol = policy_pairs(mdp, chain_pol)
+    fixed = _fixed(mdp, c, axes, fixed_tau,
+                   _weights(mdp, chain_pol, stationary) if len(fixed_tau or {}) < N - 2 else None)
     G = space.lookup_grid(c)
     idx = [slice(None) if k in axes else fixed[k] - 1 for k in range(1, N + 1)]
     S = G[tuple(idx)]
@@ -308,7 +404,8 @@ def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes:
     Returns
     -------
     actions : (cap_i, cap_j) int array
-        Indexed by ``[tau_i - 1, tau_j - 1]`` (tau_k = total - tau_i - tau_j): the action index,
+        Indexed by ``[tau_i - 1, tau_j - 1]`` (tau_k = total - tau_i - tau_j): the action index
+        (most likely one for a randomised policy),
         -1 = in the plane but unreachable, -2 = not in the plane (tau_k outside 1..cap_k).
     states : (cap_i, cap_j) int array
         State ids (-1 unreachable or off the plane).
@@ -322,9 +419,10 @@ def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes:
         raise ModelError(f"a slice tau_i + tau_j + tau_k = total needs 3 processes, this model has {N}")
     axes = _check_axes(N, axes, 3)
     c = parse_config_spec(mdp, config)
-    pol = policy_pairs(mdp, policy_or_solution)
+    chain_pol = _chain_policy(mdp, policy_or_solution)
+    pol = policy_pairs(mdp, chain_pol)
     fixed = _fixed(mdp, c, axes, fixed_tau,
-                   _weights(mdp, pol, stationary) if len(fixed_tau or {}) < N - 3 else None)
+                   _weights(mdp, chain_pol, stationary) if len(fixed_tau or {}) < N - 3 else None)
     i, j, k = axes
     ci, cj, ck = caps[i - 1], caps[j - 1], caps[k - 1]
     if not 3 <= total <= ci + cj + ck:

@@ -33,7 +33,8 @@ from __future__ import annotations
 from ..models.system import OutcomeTables, System
 from .base import Policy, as_rng
 from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
-from .optimal import OptimalPolicy
+from .mixed import MixedPolicy
+from .optimal import CappedPolicy, OptimalPolicy
 from .rules import (
     GreedyPolicy,
     RandomPolicy,
@@ -53,6 +54,8 @@ __all__ = [
     "Policy",
     "as_rng",
     "OptimalPolicy",
+    "CappedPolicy",
+    "MixedPolicy",
     "TauIndependentPolicy",
     "RandomPolicy",
     "RankRulePolicy",

@@ -7,6 +7,14 @@ r"""Policy maps drawn: the paper's Figs. 3-4, 6-9 and 11-12 (the data is :mod:`w
 
 Both take ``ax=None`` (a new figure is made) and return the Axes. Process indices (``axes``,
 ``fixed_tau``) are **1-based** like the paper's tau_1, tau_2, ...
+
+Randomised policies (a ``ConstrainedSolution``, a ``MixedPolicy``, (L,) pair probabilities) are
+drawn with their most likely action in each cell, and a small black star (:data:`MIX_MARKER`;
+the Line2D has gid :data:`MIX_GID`) on the cells of the states where they mix (grid maps: in the
+cell's upper-right corner, slices: just up and right of the point, :data:`MIX_OFFSET`); the legend
+(titled "most likely action") spells out each mix, e.g. ``mixes at (6, 6): 0.71 (2 to edge) /
+0.29 (2 to remote, 1 to edge)`` (most likely first; cells with the same mix share one entry), for the first
+:data:`MIX_LEGEND_MAX` distinct mixes.
 """
 from __future__ import annotations
 
@@ -19,16 +27,20 @@ from ..maps import (
     NEIGHBOURS,
     action_name,
     map_names,
+    mixed_states,
     parse_config_spec,
     policy_grid,
     policy_pairs,
+    policy_probabilities,
     recurrent_mask,
     short_action_name,
     slice_grid,
+    state_mix,
 )
 from ..mdp import MDP
 
-__all__ = ["ACTION_STYLES", "plot_policy_map", "plot_policy_slice"]
+__all__ = ["ACTION_STYLES", "MIX_GID", "MIX_MARKER", "MIX_OFFSET", "MIX_LEGEND_MAX", "plot_policy_map",
+           "plot_policy_slice"]
 
 #: (marker, colour) per action index (row of ``mdp.action_table``), cycled.
 ACTION_STYLES: list[tuple[str, str]] = [
@@ -46,6 +58,14 @@ ACTION_STYLES: list[tuple[str, str]] = [
 _FILLED_ALPHA = 0.85
 _TRANSIENT_BG = "#dcdcdc"
 _UNREACHABLE_BG = "#7f7f7f"
+#: Marker of the randomised states (a small black star on the cell) and the gid of its Line2D.
+MIX_MARKER = "*"
+MIX_GID = "randomised-states"
+#: The star sits up and to the right of its cell's marker: at (tau_i + MIX_OFFSET, tau_j + MIX_OFFSET)
+#: on a grid map, 0.5 * MIX_OFFSET / total in both plot coordinates on a slice (spacing 1 / total).
+MIX_OFFSET = 0.3
+#: At most this many mixes are written out in the legend (then "... and k more").
+MIX_LEGEND_MAX = 6
 
 
 
@@ -68,6 +88,47 @@ def _title(info: dict, mdp: MDP, config: int, extra: str) -> str:
     if info.get("p") is not None:
         par.insert(0, f"p = {info['p']:g}")
     return f"{info['name']}: policy in [{desc}]\n{extra}{', '.join(par)}"
+
+
+def _policy_forms(mdp: MDP, policy_or_solution: Any) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
+    """``(probs or None, chosen/most likely pairs, what the chain is built from)``."""
+    probs = policy_probabilities(mdp, policy_or_solution)
+    if probs is None:
+        pol = policy_pairs(mdp, policy_or_solution)
+        return None, pol, pol
+    return probs, policy_pairs(mdp, probs), probs
+
+
+def _mix_text(mdp: MDP, probs: np.ndarray, s: int, cid: int, info: dict) -> str:
+    return " / ".join(f"{p:.2f} {action_name(mdp, a, cid, names=info)}" for a, p in state_mix(mdp, probs, s))
+
+
+def _draw_mixes(ax, mdp: MDP, probs: np.ndarray, cid: int, info: dict, cells: list, ms: float,
+                where: str) -> list:
+    """Overlay the star on ``cells`` = [(x, y, state, (t_i, t_j, ...)), ...]; return legend handles."""
+    from matplotlib.lines import Line2D
+
+    handles = []
+    n_mixed = int(mixed_states(mdp, probs).size)
+    if cells:
+        xs = np.array([c[0] for c in cells], float)
+        ys = np.array([c[1] for c in cells], float)
+        ax.plot(xs, ys, linestyle="none", marker=MIX_MARKER, color="black", markeredgecolor="black",
+                markeredgewidth=0.4, markersize=max(5.0, 0.9 * ms), zorder=3, gid=MIX_GID)
+    star = dict(linestyle="none", marker=MIX_MARKER, color="black", markersize=8)
+    groups: dict[str, list] = {}  # cells with the same mix (as written) share one legend entry
+    for _, _, s, coords in cells:
+        groups.setdefault(_mix_text(mdp, probs, s, cid, info), []).append(coords)
+    for text, where_ in list(groups.items())[:MIX_LEGEND_MAX]:
+        at = f"({', '.join(map(str, where_[0]))})"
+        at = at if len(where_) == 1 else f"{len(where_)} {where}, e.g. {at}"
+        handles.append(Line2D([], [], **star, label=f"mixes at {at}: {text}"))
+    rest = sum(len(v) for v in list(groups.values())[MIX_LEGEND_MAX:])
+    if rest:
+        handles.append(Line2D([], [], **star, label=f"... and {rest} more randomised {where}"))
+    if not cells and n_mixed:
+        handles.append(Line2D([], [], **star, label=f"randomised in {n_mixed} state(s), none on this map"))
+    return handles
 
 
 def _ticks(ax, cap_x: int, cap_y: int) -> None:
@@ -94,12 +155,14 @@ def plot_policy_map(
     Each reachable cell carries the action's marker (one marker/colour per action, consistent
     across maps of one MDP); the background is white for states with positive stationary
     probability under the policy, light grey for states with zero stationary probability
-    (transient), dark grey for unreachable cells.
+    (transient), dark grey for unreachable cells. A randomised policy shows its most likely
+    action, with a small black star on the states where it mixes (the mix is in the legend).
 
     Parameters
     ----------
     mdp : MDP
-    policy_or_solution : Solution or (n,) int array of pair indices
+    policy_or_solution : Solution or (n,) int array of pair indices; or a randomised policy:
+        ConstrainedSolution, MixedPolicy or (L,) float array of pair probabilities
     config : configuration (id, object or spec string, see :func:`parse_config_spec`)
     axes : (i, j)
         1-based processes on the x and y axes.
@@ -125,9 +188,9 @@ def plot_policy_map(
     from matplotlib.patches import Patch
 
     cid = parse_config_spec(mdp, config)
-    pol = policy_pairs(mdp, policy_or_solution)
-    A, S, fixed = policy_grid(mdp, pol, cid, axes, fixed_tau, stationary)
-    rec_mask = recurrent_mask(mdp, pol, stationary)
+    probs, pol, chain_pol = _policy_forms(mdp, policy_or_solution)
+    A, S, fixed = policy_grid(mdp, chain_pol, cid, axes, fixed_tau, stationary)
+    rec_mask = recurrent_mask(mdp, chain_pol, stationary)
     info = map_names(mdp, scenario)
     if ax is None:
         _, ax = plt.subplots(figsize=(8.6, 6.2))
@@ -151,11 +214,17 @@ def plot_policy_map(
         n = int(xs.size)
         handles.append(Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
                               label=f"{action_name(mdp, int(a), cid, names=info)}  [{n} cells]"))
+    i, j = axes
+    if probs is not None:
+        mixed = np.isin(S, mixed_states(mdp, probs)) & (S >= 0)
+        cells = []
+        for x, y in zip(*np.nonzero(mixed)):
+            cells.append((int(x) + 1 + MIX_OFFSET, int(y) + 1 + MIX_OFFSET, int(S[x, y]), (int(x) + 1, int(y) + 1)))
+        handles += _draw_mixes(ax, mdp, probs, cid, info, cells, ms, "cells")
     if rec_mask is not None:
         handles.append(Patch(facecolor=_TRANSIENT_BG, edgecolor="0.5", label="zero stationary probability"))
     if (~reach).any():
         handles.append(Patch(facecolor=_UNREACHABLE_BG, edgecolor="0.3", label="unreachable state"))
-    i, j = axes
     pn = info["processes"]
     ax.set_xlabel(f"{_tau(i, info)}  (AoI of process {pn[i - 1]})")
     ax.set_ylabel(f"{_tau(j, info)}  (AoI of process {pn[j - 1]})")
@@ -166,7 +235,7 @@ def plot_policy_map(
     ax.set_title(title or _title(info, mdp, cid, (extra + ", ") if extra else ""), fontsize=10)
     if legend:
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8.5,
-                  title="action", title_fontsize=9, frameon=True)
+                  title="action" if probs is None else "most likely action", title_fontsize=9, frameon=True)
     return ax
 
 
@@ -201,7 +270,8 @@ def plot_policy_slice(
     Parameters
     ----------
     mdp, solution, config
-        As in :func:`plot_policy_map`.
+        As in :func:`plot_policy_map` (randomised policies included: the star marks the points
+        of the states where they mix).
     total : int
         The plane's constant.
     ax : Axes, optional
@@ -219,9 +289,9 @@ def plot_policy_slice(
     from scipy import ndimage
 
     cid = parse_config_spec(mdp, config)
-    pol = policy_pairs(mdp, solution)
-    A, S, fixed = slice_grid(mdp, pol, cid, total, axes, fixed_tau, stationary)
-    rec_mask = recurrent_mask(mdp, pol, stationary)
+    probs, pol, chain_pol = _policy_forms(mdp, solution)
+    A, S, fixed = slice_grid(mdp, chain_pol, cid, total, axes, fixed_tau, stationary)
+    rec_mask = recurrent_mask(mdp, chain_pol, stationary)
     info = map_names(mdp, scenario)
     if ax is None:
         _, ax = plt.subplots(figsize=(9.0, 6.8))
@@ -271,6 +341,12 @@ def plot_policy_slice(
             ax.text(X[sel].mean(), Y[sel].mean(), short_action_name(mdp, int(a), info), ha="center", va="center",
                     fontsize=9, fontweight="bold", color=col, zorder=4,
                     bbox=dict(boxstyle="round,pad=0.2", facecolor="white", edgecolor=col, alpha=0.85))
+    if probs is not None:
+        mixed = np.isin(S, mixed_states(mdp, probs)) & (A >= 0)
+        off = 0.5 * MIX_OFFSET / total  # the lattice spacing is 1 / total
+        cells = [(float(X[a, b]) + off, float(Y[a, b]) + off, int(S[a, b]), (a + 1, b + 1, int(total - a - b - 2)))
+                 for a, b in zip(*np.nonzero(mixed))]
+        handles += _draw_mixes(ax, mdp, probs, cid, info, cells, ms, "points")
     if rec_mask is not None:
         handles.append(Line2D([], [], linestyle="none", marker="o", color="0.3", alpha=0.35, markersize=7,
                               label="faded: zero stationary probability"))
@@ -297,6 +373,6 @@ def plot_policy_slice(
     head = f"plane {_tau(i, info)} + {_tau(j, info)} + {_tau(k, info)} = {total}, " + (extra + ", " if extra else "")
     ax.set_title(title or _title(info, mdp, cid, head), fontsize=10, pad=30)
     if legend:
-        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8.5, title="action",
-                  title_fontsize=9)
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8.5,
+                  title="action" if probs is None else "most likely action", title_fontsize=9)
     return ax
