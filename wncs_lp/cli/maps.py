@@ -41,7 +41,13 @@ def cmd_map(args: argparse.Namespace) -> int:
     fixed = _parse_fix(args.fix)
     mdp = build_checked(scenario, force=args.force)
     config = parse_config_spec(mdp, args.servers)
-    sol = solve(mdp, method=args.method)
+    if scenario.constraints and not args.ignore_constraints:
+        from ..constrained import solve_constrained
+
+        # the constrained optimum (randomised states are starred on the map)
+        sol = solve_constrained(mdp, scenario.constraints, "lp" if args.method == "lp" else "auto")
+    else:
+        sol = solve(mdp, method=args.method)
     if args.slice is not None:
         axes = axes if len(axes) == 3 else (1, 2, 3)
         ax = plot_policy_slice(mdp, sol, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
@@ -59,6 +65,7 @@ def cmd_map(args: argparse.Namespace) -> int:
         "axes": list(axes),
         "slice_total": args.slice,
         "gain": sol.gain,
+        "constrained": bool(scenario.constraints) and not args.ignore_constraints,
         "regions": stats,
     }
     if args.json:
@@ -86,6 +93,9 @@ def _configure_map(p: argparse.ArgumentParser) -> None:
     p.add_argument("--slice", type=int, default=None, metavar="TOTAL",
                    help="draw the plane tau_i + tau_j + tau_k = TOTAL as a triangle (three processes)")
     p.add_argument("--method", default="pi", choices=["pi", "rvi", "lp"], help="solver (default: pi)")
+    p.add_argument("--ignore-constraints", action="store_true",
+                   help="map the unconstrained optimum even if the scenario has [[constraint]] tables (by default "
+                        "the constrained optimum is drawn, with its randomised states starred)")
     p.add_argument("--dpi", type=int, default=120, help="resolution of raster output (default 120)")
 
 
