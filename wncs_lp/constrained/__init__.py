@@ -6,6 +6,8 @@ process's AoI or MSE, ...). The optimum is a *randomised* stationary policy, cer
 
 * :func:`solve_constrained` -- the entry point: ``method="lp"`` (Clarabel), ``"lp-cvxpy"``,
   ``"lagrangian"`` (one constraint, beyond the LP's size) or ``"auto"``;
+* :class:`OccupationProgram` -- convex programs over the occupation measure (cvxpy + Clarabel):
+  the variable, the balance constraints and the quantities as expressions;
 * :func:`constraints_for` -- a scenario's ``[[constraint]]`` tables as :class:`LinearConstraint`;
 * :class:`ConstrainedSolution` -- what every route returns.
 """
@@ -14,6 +16,7 @@ from __future__ import annotations
 from typing import Any, Iterable
 
 from ..mdp import MDP
+from .convex import OccupationProgram
 from .certify import certify, evaluate_rows, lagrangian_bound, policy_from_occupation
 from .lp import check_reachable, reachable_range, solve_constrained_lp
 from .problem import LinearConstraint, Rows, constraints_for, max_form, with_cost
@@ -22,6 +25,7 @@ from .result import ConstrainedSolution, ConstraintReport
 __all__ = [
     "solve_constrained",
     "solve_constrained_lp",
+    "OccupationProgram",
     "constraints_for",
     "LinearConstraint",
     "ConstrainedSolution",
