@@ -42,8 +42,14 @@ MDP's cost, unless f is the cost; the policy's exact average cost is ``stats["co
   ``stats["certificate"] = "lagrangian"``. A basic optimal solution is looked for first
   (``crossover``, HiGHS dual simplex on the pairs the interior point leaves in play), so the
   policy randomises in at most as many states as there are active bounds.
-* Nonlinear programs: the certificate is the exact evaluation of the returned policy, with the
-  solver's duality gap beside it: for ``Minimize``, ``gain_upper`` = exact f of the policy
+* Nonlinear programs, first choice: a rigorous bound from a subgradient s of f at the returned
+  policy's exact measure :math:`\hat x` (f convex, constraints affine):
+  :math:`f^* \ge f(\hat x) - s^T \hat x + L_s(\lambda)`, with :math:`L_s` the Lagrangian bound
+  of the linear cost s (certified value iteration). It is used when it closes to ``cert_rtol``
+  (``stats["certificate"] = "subgradient"``; always in ``stats["subgradient_bound"]``). It can be
+  loose where f is not differentiable at :math:`\hat x` (a max with tied arguments).
+* Nonlinear programs otherwise: the certificate is the exact evaluation of the returned policy,
+  with the solver's duality gap beside it: for ``Minimize``, ``gain_upper`` = exact f of the policy
   (an upper bound on f* when the policy meets the constraints) and ``gain_lower`` = Clarabel's
   dual objective mapped to f's units (``stats["solver_dual_objective"]``). That lower end is
   *the solver's claim*: it bounds f* from below only up to the solver's dual residual
@@ -83,7 +89,7 @@ from ..chain import PolicyChain
 from ..errors import InfeasibleConstraintsError, ModelError, SolverError
 from ..mdp import MDP
 from ..scenario import ConstraintSpec
-from .certify import CERT_RTOL, FEAS_RTOL, certify, evaluate_rows, policy_from_occupation
+from .certify import CERT_RTOL, FEAS_RTOL, certify, evaluate_rows, lagrangian_bound, policy_from_occupation
 from .problem import LinearConstraint, max_form, with_cost
 from .result import ConstrainedSolution, ConstraintReport
 
@@ -582,7 +588,14 @@ class OccupationProgram:
                 if dv is not None:
                     c.save_dual_value(dv)
         dual_obj = stats["solver_dual_objective"]
-        lo, hi = (dual_obj, f_exact) if sense > 0 else (f_exact, dual_obj)
+        sub = _subgradient_bound(self, objective, sense, labels, cons, occ, f_exact) if aux_ok else None
+        stats["subgradient_bound"] = float("nan") if sub is None else float(sub)
+        # the subgradient bound is rigorous but may be loose (a max with tied arguments: the one
+        # subgradient cvxpy gives is not the KKT one); it replaces the solver's claim when it closes
+        if sub is not None and abs(f_exact - sub) > cert_rtol * max(abs(f_exact), 1e-300):
+            sub = None
+        other = dual_obj if sub is None else sub
+        lo, hi = (other, f_exact) if sense > 0 else (f_exact, other)
         width = hi - lo
         closed = math.isfinite(width) and width <= cert_rtol * max(abs(f_exact), 1e-300)
         feasible = viol_max <= feas_rtol
@@ -596,7 +609,7 @@ class OccupationProgram:
             st_out = "inaccurate:certificate"
         else:
             st_out = "optimal"
-        stats.update(certificate="solver_dual", objective_exact=f_exact, objective_exact_method=how,
+        stats.update(certificate="solver_dual" if sub is None else "subgradient", objective_exact=f_exact, objective_exact_method=how,
                      cost_exact=float(ev["gain"]), evaluation_residual=ev["residual"], max_violation=float(viol_max))
         mult = np.array([r.multiplier for r in reports], dtype=float)
         randomized = np.asarray(randomized, dtype=np.int64)
@@ -660,15 +673,25 @@ def _affine(expr, y, L: int, n: float) -> tuple[np.ndarray, np.ndarray] | None:
 def _linear_program(prog: OccupationProgram, obj_expr, labels: Sequence[str], cons: Sequence[Any]):
     """The program as ``min/max d^T x + c0`` s.t. rows ``D x <= b`` (LinearConstraints) with the
     solver's row multipliers, or None when it is not linear in x alone."""
+    L, n, y = prog.n_pairs, prog._n, prog.y
+    fo = _affine(obj_expr, y, L, n)
+    if fo is None or fo[1].size != 1:
+        return None
+    lin = _linear_constraints(prog, labels, cons)
+    if lin is None:
+        return None
+    return fo[0][0], float(fo[1][0]), lin[0], lin[1]
+
+
+def _linear_constraints(prog: OccupationProgram, labels: Sequence[str], cons: Sequence[Any]):
+    """The user constraints as LinearConstraints ``D x <= b`` with the solver's row multipliers
+    (one per row of :func:`~wncs_lp.constrained.problem.max_form`), or None when one of them is
+    not affine in x alone."""
     import cvxpy as cp
 
     L, n, y = prog.n_pairs, prog._n, prog.y
     if sum(int(c.size) for c in cons) > MAX_LINEAR_ROWS:
         return None
-    fo = _affine(obj_expr, y, L, n)
-    if fo is None or fo[1].size != 1:
-        return None
-    d, c0 = fo[0][0], float(fo[1][0])
     lcons, lam = [], []
     for lab, c in zip(labels, cons):
         if not isinstance(c, (cp.constraints.Inequality, cp.constraints.Equality)):
@@ -703,7 +726,46 @@ def _linear_program(prog: OccupationProgram, obj_expr, labels: Sequence[str], co
                 lc = LinearConstraint(D[i], max=bi, min=bi, label=name, quantity="linear")
                 lam += [max(nu, 0.0), max(-nu, 0.0)]
             lcons.append(lc)
-    return d, c0, tuple(lcons), np.array(lam, dtype=float)
+    return tuple(lcons), np.array(lam, dtype=float)
+
+
+def _subgradient_bound(prog: OccupationProgram, objective, sense: float, labels, cons, occ: np.ndarray,
+                       f_exact: float) -> float | None:
+    r"""A rigorous bound on f* from a subgradient at the returned policy (None when unavailable).
+
+    For convex f (``Minimize``) and any :math:`s \in \partial f(\hat x)`,
+    :math:`f(x) \ge f(\hat x) + s^T (x - \hat x)` for every x, so over the constrained polytope
+
+    .. math:: f^* \ge f(\hat x) - s^T \hat x + \min_{x:\ D x \le b} s^T x
+              \ge f(\hat x) - s^T \hat x + L_s(\lambda),
+
+    with :math:`L_s(\lambda)` the Lagrangian bound of the linear cost s (certified value
+    iteration, :func:`~wncs_lp.constrained.certify.lagrangian_bound`). ``Maximize`` (concave f)
+    is the same for -f, giving an upper bound. It is tight when s is the subgradient of the KKT
+    conditions (e.g. a differentiable f, or a max whose largest argument is unique). Needs
+    the user's constraints affine in x and f a function of x alone.
+    """
+    lin = _linear_constraints(prog, labels, cons)
+    if lin is None or any(v is not prog.y for v in objective.variables()):
+        return None
+    lcons, lam = lin
+    saved = prog.y.value
+    try:
+        prog.y.value = prog._n * np.maximum(occ, 0.0)
+        grads = objective.expr.grad
+        G = grads.get(prog.y) if grads else None
+    except Exception:  # cvxpy cannot differentiate this atom here: no bound
+        G = None
+    finally:
+        prog.y.value = saved
+    if G is None:
+        return None
+    s = sense * prog._n * np.asarray(sp.csc_matrix(G).toarray(), dtype=float).ravel()
+    if s.shape != (prog.n_pairs,) or not np.all(np.isfinite(s)):
+        return None
+    rows = max_form(lcons, prog.n_pairs)
+    bound, _ = lagrangian_bound(with_cost(prog.mdp, s), rows, lam)
+    return sense * (sense * f_exact - float(s @ occ) + bound)
 
 
 def _crossover(mdp: MDP, lp, cost: np.ndarray, rows, x: np.ndarray, z_eq: np.ndarray, lam_rows: np.ndarray):
