@@ -202,7 +202,10 @@ def test_default_assignment_paper():
     sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=4"])
     assert default_assignment(sc) == (0, 1)  # process 1 -> remote (loop 6 < 8), process 2 -> edge
     sc3 = load_scenario(scenario_path("paper_p123.toml"), ["tau_cap=4"])
-    assert default_assignment(sc3) == (0, 1, 0)
+    # the specification's rule: every process but the first goes to the other server
+    assert default_assignment(sc3) == (0, 1, 1)
+    sc4 = load_scenario(scenario_path("paper_p1234.toml"), ["tau_cap=4"])
+    assert default_assignment(sc4) == (0, 1, 1, 1)
 
 
 def test_static_and_greedy_rules_by_hand():

@@ -218,21 +218,21 @@ class GreedyPolicy(RankRulePolicy):
 def default_assignment(scenario: Scenario) -> tuple[int, ...]:
     """The paper's default static assignment (``docs/policies.md``), 0-based server indices.
 
-    Processes are taken in decreasing dimension n_k (ties: lower index); each takes, among the
-    servers that have no process yet (all servers, once every server has one), the server with
-    the shortest loop U_m + T_{m,k} + D_m for it (ties: lower server index). For the paper's
-    processes 1, 2 this sends process 1 to the remote server (loop 6 < 8) and process 2 to the
-    edge server.
+    The process of largest dimension n_k (ties: lower index) goes to the server with the
+    shortest loop U_m + T_{m,k} + D_m for it (ties: lower server index); every other process,
+    in decreasing n_k, goes to the shortest-loop server for it *among the other servers* (never
+    the first process's server, unless there is only one server). With two servers every other
+    process goes to the other server: for the paper's processes 1, 2, 3 that is (remote, edge,
+    edge), and for processes 1, 2 (remote, edge).
     """
     M, N = scenario.n_servers, scenario.n_processes
     order = sorted(range(N), key=lambda k: (-scenario.processes[k].dim, k))
     out = [0] * N
-    used: set[int] = set()
-    for k in order:
-        pool = [m for m in range(M) if m not in used] or list(range(M))
-        m = min(pool, key=lambda m: (scenario.servers[m].loop[k], m))
-        out[k] = m
-        used.add(m)
+    first = order[0]
+    out[first] = min(range(M), key=lambda m: (scenario.servers[m].loop[first], m))
+    others = [m for m in range(M) if m != out[first]] or [out[first]]
+    for k in order[1:]:
+        out[k] = min(others, key=lambda m: (scenario.servers[m].loop[k], m))
     return tuple(out)
 
 
