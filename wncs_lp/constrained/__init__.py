@@ -8,6 +8,7 @@ process's AoI or MSE, ...). The optimum is a *randomised* stationary policy, cer
   ``"lagrangian"`` (one constraint, beyond the LP's size) or ``"auto"``;
 * :class:`OccupationProgram` -- convex programs over the occupation measure (cvxpy + Clarabel):
   the variable, the balance constraints and the quantities as expressions;
+* :func:`tradeoff` -- the optimal cost against one bound (a trade-off curve), resumable;
 * :func:`constraints_for` -- a scenario's ``[[constraint]]`` tables as :class:`LinearConstraint`;
 * :class:`ConstrainedSolution` -- what every route returns.
 """
@@ -21,11 +22,15 @@ from .certify import certify, evaluate_rows, lagrangian_bound, policy_from_occup
 from .lp import check_reachable, reachable_range, solve_constrained_lp
 from .problem import LinearConstraint, Rows, constraints_for, max_form, with_cost
 from .result import ConstrainedSolution, ConstraintReport
+from .tradeoff import TradeoffPoint, TradeoffResult, tradeoff
 
 __all__ = [
     "solve_constrained",
     "solve_constrained_lp",
     "OccupationProgram",
+    "tradeoff",
+    "TradeoffResult",
+    "TradeoffPoint",
     "constraints_for",
     "LinearConstraint",
     "ConstrainedSolution",

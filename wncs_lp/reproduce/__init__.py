@@ -76,6 +76,18 @@ def _merge_previous(path: Path, results: list[ClaimResult]) -> list[ClaimResult]
     return [merged[i] for i in CLAIMS if i in merged]
 
 
+def _merge_previous_extras(path: Path, extras: list[dict], ids: Sequence[str]) -> list[dict]:
+    import json
+
+    fresh = {e["id"]: e for e in extras}
+    try:
+        old = {e["id"]: e for e in json.loads(path.read_text()).get("beyond", []) if e.get("id") in ids}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        old = {}
+    merged = {**old, **fresh}
+    return [merged[i] for i in ids if i in merged]
+
+
 def run_reproduction(
     out: str | Path,
     profile: str | Profile = "default",
@@ -98,21 +110,26 @@ def run_reproduction(
     force : bool
         Recompute every step, ignoring the cache.
     claims : sequence of str, optional
-        Only these claims (default all, C1-C13).
+        Only these claims (default all, C1-C13, and the "beyond the paper" sections, B1;
+        name B1 here to compute it in a partial run).
     progress : bool
         A progress bar over the claims on stderr.
 
     Returns
     -------
     dict
-        ``{"files": {...}, "claims": [ClaimResult.to_dict(), ...], "seconds": float}``.
+        ``{"files": {...}, "claims": [ClaimResult.to_dict(), ...], "beyond": [...], "seconds": float}``
+        (``beyond``: the extra results of :mod:`~wncs_lp.reproduce.beyond`, without verdicts).
     """
     prof = PROFILES[profile] if isinstance(profile, str) else profile
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = log or (lambda m: print(m, file=sys.stderr))
     ctx = Context(out, prof, force=force, log=(lambda m: say(f"  {m}")) if progress else (lambda m: None))
-    todo = list(claims or CLAIMS)
+    from .beyond import BEYOND, run_beyond
+
+    todo = [c for c in (claims or CLAIMS) if c not in BEYOND]
+    extra_ids = list(BEYOND) if claims is None else [c for c in claims if c in BEYOND]
     table = _claims()
     results: list[ClaimResult] = []
     t_all = time.perf_counter()
@@ -146,6 +163,7 @@ def run_reproduction(
             say(f"{cid}: {res.verdict} ({res.seconds:.1f} s)")
     if bar is not None:
         bar.close()
+    extras = run_beyond(ctx, extra_ids, say if progress else None)  # extra results, no verdict
     provenance = {
         "profile": prof.name,
         "caps": {"two processes": list(prof.caps_2p), "three processes": list(prof.caps_3p),
@@ -165,5 +183,7 @@ def run_reproduction(
     }
     if claims is not None:  # a partial run keeps the other claims of an earlier report in this folder
         results = _merge_previous(out / "report.json", results)
-    files = write_report(out, results, provenance)
-    return {"files": files, "claims": [r.to_dict() for r in results], "seconds": provenance["total_seconds"]}
+        extras = _merge_previous_extras(out / "report.json", extras, BEYOND)
+    files = write_report(out, results, provenance, extras)
+    return {"files": files, "claims": [r.to_dict() for r in results], "beyond": extras,
+            "seconds": provenance["total_seconds"]}

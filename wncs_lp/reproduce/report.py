@@ -56,12 +56,14 @@ def _md_table(rows: list[list[Any]], header: list[str]) -> str:
     return "\n".join(out)
 
 
-def write_report(out: Path, claims: list[ClaimResult], provenance: dict[str, Any]) -> dict[str, str]:
+def write_report(out: Path, claims: list[ClaimResult], provenance: dict[str, Any],
+                 extras: list[dict[str, Any]] = ()) -> dict[str, str]:
+    """Write the report; ``extras`` are the "beyond the paper" sections (no verdict, after the claims)."""
     out = Path(out)
     for c in claims:
         c.statement = c.statement or STATEMENTS.get(c.id, "")
     # ---------------------------------------------------------------- JSON
-    doc = {"claims": [c.to_dict() for c in claims], "provenance": provenance}
+    doc = {"claims": [c.to_dict() for c in claims], "beyond": list(extras), "provenance": provenance}
     atomic_write_text(out / "report.json", json.dumps(json_ready(doc), indent=1))
     # ---------------------------------------------------------------- Markdown
     md = [
@@ -90,6 +92,7 @@ def write_report(out: Path, claims: list[ClaimResult], provenance: dict[str, Any
         if c.tables:
             md += ["Tables: " + ", ".join(f"[{t}]({t})" for t in c.tables), ""]
         md += [f"<details><summary>numbers</summary>\n\n```json\n{json.dumps(json_ready(c.numbers), indent=1)[:6000]}\n```\n</details>", ""]
+    md += _extras_md(extras)
     md += ["## Where the exact model departs from the paper's text", "", DEPARTURES, "",
            "## Provenance", "", "```json", json.dumps(json_ready(provenance), indent=1), "```", ""]
     text = "\n".join(md)
@@ -97,6 +100,24 @@ def write_report(out: Path, claims: list[ClaimResult], provenance: dict[str, Any
     # ---------------------------------------------------------------- HTML (self-contained)
     atomic_write_text(out / "report.html", _html(text, out))
     return {"md": str(out / "report.md"), "html": str(out / "report.html"), "json": str(out / "report.json")}
+
+
+def _extras_md(extras: list[dict[str, Any]]) -> list[str]:
+    """The "beyond the paper" sections: extra results computed like the claims, without a verdict."""
+    if not extras:
+        return []
+    md = ["## Beyond the paper", "", "Results the paper does not state, computed with the same certificates. "
+          "They are not claims: no verdict.", ""]
+    for e in extras:
+        md += [f"### {e['id']}: {e['title']}", "", e["summary"], ""]
+        if e.get("details"):
+            md += [e["details"], ""]
+        md += [f"![{e['id']}]({f})" for f in e.get("figures", []) if f.endswith(".png")] + [""]
+        if e.get("tables"):
+            md += ["Tables: " + ", ".join(f"[{t}]({t})" for t in e["tables"]), ""]
+        md += [f"<details><summary>numbers</summary>\n\n```json\n"
+               f"{json.dumps(json_ready(e.get('numbers', {})), indent=1)[:6000]}\n```\n</details>", ""]
+    return md
 
 
 def _inline(text: str) -> str:

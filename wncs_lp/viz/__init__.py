@@ -8,6 +8,7 @@ from __future__ import annotations
 from .maps import ACTION_STYLES, plot_policy_map, plot_policy_slice
 from .save import save_figure
 from .sweeps import POLICY_STYLE, plot_sweep, save_sweep_figure
+from .tradeoff import plot_tradeoff, save_tradeoff_figure
 
 __all__ = [
     "file_backend",
@@ -18,6 +19,8 @@ __all__ = [
     "plot_policy_slice",
     "plot_sweep",
     "save_sweep_figure",
+    "plot_tradeoff",
+    "save_tradeoff_figure",
     "save_figure",
 ]
 

@@ -1,0 +1,654 @@
+r"""Trade-off curves: the constrained optimum as one constraint's bound is swept (spec section 6).
+
+For every bound b of the grid, ``solve_constrained(mdp, constraints', method)`` where
+constraints' is the list with constraint ``index`` given the bound b on ``side`` (its other
+bound, if any, and every other constraint unchanged). The curve b -> g*_C(b) is piecewise
+linear and convex in a ``max`` bound (non-increasing), its slope is -lambda(b) (the multiplier
+of the point), and it reaches the optimum *without* the constraint at the bound where the
+constraint stops binding: the constraint's value under that optimum's policy (the
+"threshold").
+
+Every point keeps its certificate ``[gain_lower, gain_upper]``. A bound no policy meets is a
+point with status ``"infeasible"`` and ``reachable`` = the least (``max``) / largest (``min``)
+value any policy reaches, not an exception; a solver failure is a point with status
+``"error: ..."``.
+
+Files (with ``out``, a folder, created):
+
+=========================== ===================================================================
+``tradeoff.csv``            one row per point (:data:`COLUMNS`), rewritten atomically after each
+``tradeoff.json``           settings, the reference optimum, threshold and every point
+``tradeoff_meta.json``      the settings a resumed run must match
+``tradeoff.png``            the figure (``plot=True``)
+=========================== ===================================================================
+
+Resume. A rerun into the same folder keeps the points already in ``tradeoff.csv`` (complete,
+parseable rows whose status is not ``error``) and solves only the missing bounds; the grid may
+grow or shrink freely. The settings must match: the MDP (a digest of its arrays, and the
+scenario fingerprint when it has one), the swept constraint (quantity, per-pair values, side,
+its other bound), every other constraint (values and bounds) and the method. A folder holding
+another curve is *refused* with a :class:`~wncs_lp.errors.WncsError` naming the settings that
+differ (points of two different problems are never mixed on one curve; use another folder or
+delete it).
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from ..errors import InfeasibleConstraintsError, PolicyError, WncsError
+from ..files import atomic_write_text, dumps
+from ..mdp import MDP
+from .problem import LinearConstraint
+
+__all__ = ["tradeoff", "TradeoffPoint", "TradeoffResult", "read_points", "COLUMNS", "quantity_unit"]
+
+#: Columns of ``tradeoff.csv``.
+COLUMNS = ("bound", "gain", "gain_lower", "gain_upper", "multiplier", "randomized_states", "value", "reachable",
+           "status", "method", "seconds")
+
+#: Unit of each quantity's long-run average (axis labels).
+_UNITS = {"send_rate": "updates per slot", "aoi": "slots", "cost": "MSE, sum of traces",
+          "process_cost": "MSE, trace"}
+
+_SIDES = ("max", "min")
+
+
+def quantity_unit(quantity: str) -> str:
+    """The unit of a constrained quantity's average (``"updates per slot"`` for ``send_rate``...)."""
+    return _UNITS.get(quantity, "")
+
+
+def _key(b: float) -> str:
+    return format(round(float(b), 12), ".12g")
+
+
+def _num(x: Any) -> float:
+    return math.nan if x is None or x == "" else float(x)
+
+
+# ----------------------------------------------------------------------------- one point
+@dataclass(frozen=True)
+class TradeoffPoint:
+    """One bound of a trade-off curve.
+
+    Attributes
+    ----------
+    bound : float
+        The swept bound.
+    gain : float
+        The constrained optimal gain (exact cost of the returned policy); NaN when infeasible.
+    gain_lower, gain_upper : float
+        The certificate ``gain_lower <= g*_C(bound) <= gain_upper``.
+    multiplier : float
+        lambda >= 0 of the swept side: the curve's slope is ``-multiplier`` for a ``max``
+        bound (``+multiplier`` for a ``min`` bound).
+    randomized_states : int
+        States where the returned policy randomises.
+    value : float
+        The swept quantity's average under the returned policy (``<= bound`` for ``max``).
+    reachable : float
+        For an infeasible bound: the least (``max``) / largest (``min``) value of the quantity
+        any stationary policy reaches (NaN when only the combination with the other
+        constraints is infeasible). NaN for a feasible bound.
+    status : str
+        ``"optimal"``, ``"inaccurate:<why>"`` (see :class:`ConstrainedSolution`),
+        ``"infeasible"`` or ``"error: <message>"``.
+    method : str
+        The route that solved it (``"lp"``, ``"lagrangian"``, ...).
+    seconds : float
+    """
+
+    bound: float
+    gain: float = math.nan
+    gain_lower: float = math.nan
+    gain_upper: float = math.nan
+    multiplier: float = math.nan
+    randomized_states: int = 0
+    value: float = math.nan
+    reachable: float = math.nan
+    status: str = "optimal"
+    method: str = ""
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "optimal"
+
+    @property
+    def feasible(self) -> bool:
+        """A policy was found (status ``optimal`` or ``inaccurate:...``)."""
+        return self.status != "infeasible" and not self.status.startswith("error")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {c: (None if isinstance(getattr(self, c), float) and not math.isfinite(getattr(self, c))
+                    else getattr(self, c)) for c in COLUMNS}
+
+    def to_csv(self) -> list[str]:
+        def f(x: float) -> str:
+            return repr(float(x)) if math.isfinite(x) else ""
+
+        return [repr(float(self.bound)), f(self.gain), f(self.gain_lower), f(self.gain_upper), f(self.multiplier),
+                str(int(self.randomized_states)), f(self.value), f(self.reachable), self.status, self.method,
+                repr(float(self.seconds))]
+
+    @classmethod
+    def from_record(cls, rec: dict[str, Any]) -> "TradeoffPoint":
+        """From a CSV record or a :meth:`to_dict` dictionary."""
+        return cls(bound=float(rec["bound"]), gain=_num(rec["gain"]), gain_lower=_num(rec["gain_lower"]),
+                   gain_upper=_num(rec["gain_upper"]), multiplier=_num(rec["multiplier"]),
+                   randomized_states=int(rec["randomized_states"]), value=_num(rec["value"]),
+                   reachable=_num(rec["reachable"]), status=str(rec["status"]), method=str(rec["method"] or ""),
+                   seconds=float(rec["seconds"] or 0.0))
+
+    def __repr__(self) -> str:
+        if not self.feasible:
+            extra = f", reachable={self.reachable:.6g}" if math.isfinite(self.reachable) else ""
+            return f"TradeoffPoint(bound={self.bound:g}, status={self.status!r}{extra})"
+        return (f"TradeoffPoint(bound={self.bound:g}, gain={self.gain:.10g}, bracket=[{self.gain_lower:.10g}, "
+                f"{self.gain_upper:.10g}], multiplier={self.multiplier:.6g}, randomized_states="
+                f"{self.randomized_states}, status={self.status!r})")
+
+
+def read_points(path: str | Path) -> list[TradeoffPoint]:
+    """Complete rows of a ``tradeoff.csv`` (a truncated or malformed line is skipped)."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    out = []
+    with open(path, encoding="utf-8", newline="") as fh:
+        reader = csv.DictReader(fh)
+        if reader.fieldnames is None or tuple(reader.fieldnames) != COLUMNS:
+            return []
+        for rec in reader:
+            if None in rec or any(rec.get(c) is None for c in COLUMNS) or not rec["status"]:
+                continue
+            try:
+                out.append(TradeoffPoint.from_record(rec))
+            except (ValueError, KeyError):
+                continue
+    return out
+
+
+# ----------------------------------------------------------------------------- the curve
+@dataclass(frozen=True)
+class TradeoffResult:
+    """A trade-off curve: the constrained optimum against one constraint's bound.
+
+    Attributes
+    ----------
+    constraint : str
+        What is bounded, e.g. ``"send_rate[remote]"``.
+    quantity : str
+    index : int
+        0-based position of the swept constraint in the list given.
+    side : str
+        ``"max"`` or ``"min"``.
+    points : tuple of TradeoffPoint
+        In increasing bound order.
+    unconstrained_gain, unconstrained_lower, unconstrained_upper : float
+        The optimum without the swept bound (the other constraints, and the swept constraint's
+        other bound if it has one, kept) and its certificate: certified value iteration
+        (``wncs_lp.solve(mdp, "vi")``) when nothing else is bounded, else a constrained solve.
+    threshold : float
+        The swept quantity's value under that optimum's policy: a ``max`` bound at or above it
+        (a ``min`` bound at or below it) does not bind, and the curve is flat at
+        ``unconstrained_gain`` there. NaN when that policy's chain is multichain.
+    reachable : float
+        The least (``max``) / largest (``min``) value of the quantity any policy reaches on its
+        own; bounds beyond it are infeasible.
+    others : tuple of str
+        Labels of the constraints kept fixed.
+    method : str
+        The method requested.
+    out_dir : Path or None
+    files : dict
+        Paths written (``csv``, ``json``, ``meta``, ``png``).
+    computed, reused : int
+        Points solved in this run / taken from ``tradeoff.csv``.
+    seconds : float
+    """
+
+    constraint: str
+    quantity: str
+    index: int
+    side: str
+    points: tuple[TradeoffPoint, ...]
+    unconstrained_gain: float
+    unconstrained_lower: float
+    unconstrained_upper: float
+    threshold: float
+    reachable: float
+    others: tuple[str, ...] = ()
+    method: str = "auto"
+    out_dir: Path | None = None
+    files: dict[str, str] = field(default_factory=dict)
+    computed: int = 0
+    reused: int = 0
+    seconds: float = 0.0
+
+    # ------------------------------------------------------------------ columns
+    def _col(self, name: str, only_feasible: bool = False) -> np.ndarray:
+        return np.array([getattr(p, name) for p in self.points if p.feasible or not only_feasible], dtype=float)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return self._col("bound")
+
+    @property
+    def gains(self) -> np.ndarray:
+        """Optimal gain per point (NaN where infeasible)."""
+        return self._col("gain")
+
+    @property
+    def multipliers(self) -> np.ndarray:
+        return self._col("multiplier")
+
+    @property
+    def feasible_points(self) -> tuple[TradeoffPoint, ...]:
+        return tuple(p for p in self.points if p.feasible)
+
+    @property
+    def ok(self) -> bool:
+        """Every point is optimal or infeasible (no inaccurate solve, no error)."""
+        return all(p.ok or p.status == "infeasible" for p in self.points)
+
+    @property
+    def unit(self) -> str:
+        return quantity_unit(self.quantity)
+
+    def point(self, bound: float) -> TradeoffPoint:
+        """The point at ``bound`` (KeyError when it is not on the grid)."""
+        for p in self.points:
+            if _key(p.bound) == _key(bound):
+                return p
+        raise KeyError(f"no point at bound {bound:g}")
+
+    def slopes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Finite-difference slopes of the curve between consecutive feasible points.
+
+        Returns ``(midpoints, slopes)``; for a ``max`` bound the slope is ``-lambda`` between
+        two kinks.
+        """
+        pts = self.feasible_points
+        b = np.array([p.bound for p in pts])
+        g = np.array([p.gain for p in pts])
+        if b.size < 2:
+            return np.zeros(0), np.zeros(0)
+        return (b[1:] + b[:-1]) / 2, np.diff(g) / np.diff(b)
+
+    # ------------------------------------------------------------------ export
+    def table(self) -> list[dict[str, Any]]:
+        """The points as JSON-ready dictionaries (the CSV's columns)."""
+        return [p.to_dict() for p in self.points]
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: the curve's settings, reference optimum, threshold and points."""
+        return json.loads(dumps({
+            "constraint": self.constraint, "quantity": self.quantity, "index": self.index, "side": self.side,
+            "unit": self.unit, "method": self.method, "others": list(self.others),
+            "unconstrained_gain": self.unconstrained_gain, "unconstrained_lower": self.unconstrained_lower,
+            "unconstrained_upper": self.unconstrained_upper, "threshold": self.threshold,
+            "reachable": self.reachable, "points": self.table(), "files": self.files, "computed": self.computed,
+            "reused": self.reused, "seconds": self.seconds,
+        }))
+
+    @classmethod
+    def from_summary(cls, d: dict[str, Any]) -> "TradeoffResult":
+        """Rebuild a result from :meth:`summary` (e.g. a cached or saved ``tradeoff.json``)."""
+        return cls(constraint=d["constraint"], quantity=d["quantity"], index=int(d["index"]), side=d["side"],
+                   points=tuple(TradeoffPoint.from_record(p) for p in d["points"]),
+                   unconstrained_gain=_num(d["unconstrained_gain"]), unconstrained_lower=_num(d["unconstrained_lower"]),
+                   unconstrained_upper=_num(d["unconstrained_upper"]), threshold=_num(d["threshold"]),
+                   reachable=_num(d["reachable"]), others=tuple(d.get("others", ())), method=d.get("method", ""),
+                   out_dir=None, files=dict(d.get("files", {})), computed=int(d.get("computed", 0)),
+                   reused=int(d.get("reused", 0)), seconds=float(d.get("seconds", 0.0)))
+
+    def __repr__(self) -> str:
+        op = "<=" if self.side == "max" else ">="
+        bad = sum(not p.feasible for p in self.points)
+        return (f"TradeoffResult({self.constraint} {op} b for {len(self.points)} bounds in "
+                f"[{min(self.bounds, default=math.nan):g}, {max(self.bounds, default=math.nan):g}]"
+                f"{f' ({bad} infeasible or failed)' if bad else ''}, unconstrained gain "
+                f"{self.unconstrained_gain:.10g}, no longer binds at {self.threshold:.6g}, method={self.method!r})")
+
+
+# ----------------------------------------------------------------------------- helpers
+def _what(label: str) -> str:
+    """The quantity part of a label made by ``constraints_for`` (``0.1 <= aoi[p1] <= 4`` -> ``aoi[p1]``)."""
+    parts = label.split(" <= ")
+
+    def number(t: str) -> bool:
+        try:
+            float(t)
+        except ValueError:
+            return False
+        return True
+
+    rest = [p for p in parts if not number(p)]
+    return rest[0] if len(rest) == 1 else label
+
+
+def _digest(*arrays: np.ndarray) -> str:
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str((a.dtype.str, a.shape)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+def _mdp_digest(mdp: MDP) -> str:
+    P = mdp.P.tocsr()
+    return _digest(mdp.s_indices, mdp.a_indices, mdp.cost, P.indptr, P.indices, P.data)
+
+
+def _meta(mdp: MDP, cons: Sequence[LinearConstraint], index: int, side: str, method: str) -> dict[str, Any]:
+    c = cons[index]
+    other_side = "min" if side == "max" else "max"
+    ob = getattr(c, other_side)
+    return {
+        "kind": "wncs_lp tradeoff",
+        "mdp": _mdp_digest(mdp),
+        "scenario_fingerprint": (mdp.meta or {}).get("fingerprint"),
+        "states": int(mdp.n_states),
+        "pairs": int(mdp.n_pairs),
+        "constraint": _what(c.label),
+        "quantity": c.quantity,
+        "constraint_values": _digest(c.values),
+        "side": side,
+        f"constraint_{other_side}": None if ob is None else float(ob),
+        "others": [{"label": o.label, "values": _digest(o.values), "max": o.max, "min": o.min}
+                   for j, o in enumerate(cons) if j != index],
+        "method": method,
+    }
+
+
+def _solve_point(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: str, bound: float,
+                 method: str, fallback: str | None = None) -> TradeoffPoint:
+    """One constrained solve at one bound (module level: a picklable task for worker processes).
+
+    With ``fallback``, a point that ``method`` does not certify as optimal (status
+    ``inaccurate:...`` or a solver error) is solved again with ``fallback``; the optimal (else
+    the better-certified) of the two is kept and its ``method`` reads ``"lagrangian->lp"``.
+    """
+    t0 = time.perf_counter()
+    c = cons[index].with_bounds(**{side: float(bound)})
+    trial = cons[:index] + (c,) + cons[index + 1:]
+    first = _one_solve(mdp, trial, index, side, bound, c.label, method)
+    best = first
+    if fallback and fallback != method and not first.ok and first.status != "infeasible":
+        second = _one_solve(mdp, trial, index, side, bound, c.label, fallback)
+        if second.ok or (second.feasible and (not first.feasible or _width(second) < _width(first))):
+            best = second
+        best = replace(best, method=f"{first.method or method}->{second.method or fallback}"
+                       if best is second else f"{first.method or method} (->{fallback}: {second.status})")
+    return replace(best, seconds=time.perf_counter() - t0)
+
+
+def _width(p: TradeoffPoint) -> float:
+    w = p.gain_upper - p.gain_lower
+    return w if math.isfinite(w) else math.inf
+
+
+def _one_solve(mdp: MDP, trial: tuple[LinearConstraint, ...], index: int, side: str, bound: float, label: str,
+               method: str) -> TradeoffPoint:
+    from . import solve_constrained  # looked up at call time (tests count the solves)
+
+    try:
+        sol = solve_constrained(mdp, trial, method)
+    except InfeasibleConstraintsError as exc:
+        reach = math.nan
+        for lab, r, s in zip(exc.constraints, exc.reachable, exc.sides):
+            if lab == label and s == side:
+                reach = float(r)
+        return TradeoffPoint(bound=float(bound), reachable=reach, status="infeasible", method=method)
+    except WncsError as exc:
+        msg = str(exc).replace("\n", " ")
+        return TradeoffPoint(bound=float(bound), status=f"error: {msg}", method=method)
+    rep = sol.constraints[index]
+    lam = 0.0 if (rep.side is not None and rep.side != side) else float(rep.multiplier)
+    return TradeoffPoint(bound=float(bound), gain=float(sol.gain), gain_lower=float(sol.gain_lower),
+                         gain_upper=float(sol.gain_upper), multiplier=lam, randomized_states=sol.n_randomized,
+                         value=float(rep.value), status=sol.status, method=sol.method)
+
+
+def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: str, method: str,
+               unconstrained: str) -> dict[str, Any]:
+    """The optimum without the swept constraint, the quantity's value under it, and its reachable end."""
+    from ..solvers import solve
+    from . import solve_constrained
+    from .certify import evaluate_rows
+    from .lp import reachable_range
+
+    c = cons[index]
+    others = cons[:index] + cons[index + 1:]
+    if getattr(c, "min" if side == "max" else "max") is not None:  # the constraint's other bound stays
+        others = cons[:index] + (c.with_bounds(**{side: None}),) + cons[index + 1:]
+    t0 = time.perf_counter()
+    if others:
+        sol = solve_constrained(mdp, others, method)
+        probs = np.asarray(sol.policy, dtype=float)
+        g, lo, hi, how = sol.gain, sol.gain_lower, sol.gain_upper, f"constrained ({sol.method}) without the swept one"
+    else:
+        sol = solve(mdp, method=unconstrained)
+        probs = np.zeros(mdp.n_pairs)
+        probs[np.asarray(sol.policy, dtype=np.int64)] = 1.0
+        g, lo, hi, how = sol.gain, sol.gain_lower, sol.gain_upper, f"unconstrained ({sol.method})"
+    try:
+        threshold = float(evaluate_rows(mdp, probs, [c])["values"][0])
+    except PolicyError:
+        threshold = math.nan
+    return {"gain": float(g), "gain_lower": float(lo), "gain_upper": float(hi), "threshold": threshold,
+            "reachable": float(reachable_range(mdp, c, side)), "how": how, "seconds": time.perf_counter() - t0}
+
+
+# ----------------------------------------------------------------------------- the sweep
+def tradeoff(
+    mdp: MDP,
+    constraints: Sequence[Any],
+    index: int,
+    values: Sequence[float] | str,
+    *,
+    side: str = "max",
+    method: str = "auto",
+    out: str | Path | None = None,
+    progress: Callable[[str], None] | bool | None = None,
+    plot: bool = True,
+    max_workers: int = 1,
+    unconstrained: str = "vi",
+    fallback: str | None = None,
+) -> TradeoffResult:
+    """Sweep the bound of one constraint and solve the constrained problem at each bound.
+
+    Parameters
+    ----------
+    mdp : MDP
+    constraints : sequence of ConstraintSpec or LinearConstraint
+        E.g. ``scenario.constraints``. The one at ``index`` is swept; the others keep their bounds.
+    index : int
+        0-based position of the constraint to sweep.
+    values : sequence of float or str
+        The bounds: a list or ``"A:B:STEP"`` / ``"a,b,c"`` (:func:`wncs_lp.sweep.parse_values`).
+        Duplicates are dropped; the points come out in increasing order.
+    side : {"max", "min"}
+        Which bound of the constraint is swept (its other bound, if any, is kept).
+    method : {"auto", "lp", "lp-cvxpy", "lagrangian"}
+        Passed to :func:`~wncs_lp.constrained.solve_constrained` at every point.
+    out : path, optional
+        Output folder (see the module docstring): written after every point and resumed.
+    progress : callable or bool, optional
+        A callable receives one line per finished point; ``True`` prints them on stderr.
+    plot : bool
+        With ``out``, also save ``tradeoff.png`` (:func:`wncs_lp.viz.save_tradeoff_figure`).
+    max_workers : int
+        Bounds solved in parallel worker processes (default 1: in order, in this process).
+    unconstrained : str
+        Method of :func:`wncs_lp.solve` for the reference optimum when the swept constraint is
+        the only one (default ``"vi"``, certified value iteration).
+    fallback : str, optional
+        A second method for the points ``method`` does not certify as optimal (e.g.
+        ``method="lagrangian", fallback="lp"``): such a point is solved again and the optimal
+        one is kept (its ``method`` column reads ``"lagrangian->lp"``). Not part of the
+        settings a resumed run must match.
+
+    Returns
+    -------
+    TradeoffResult
+
+    Raises
+    ------
+    WncsError
+        No constraint at ``index``, a bad side or grid, a bound crossing the constraint's other
+        bound, an output folder holding another curve, or a reference optimum that cannot be
+        computed (e.g. the other constraints are infeasible).
+    """
+    from ..sweep import parse_values
+    from . import CONSTRAINED_METHODS, constraints_for
+
+    t_start = time.perf_counter()
+    if side not in _SIDES:
+        raise WncsError(f"side must be 'max' or 'min', got {side!r}")
+    if method not in CONSTRAINED_METHODS:
+        raise WncsError(f"unknown constrained method {method!r}; expected one of "
+                        f"{', '.join(map(repr, CONSTRAINED_METHODS))}")
+    if fallback is not None and fallback not in CONSTRAINED_METHODS:
+        raise WncsError(f"unknown fallback method {fallback!r}; expected one of "
+                        f"{', '.join(map(repr, CONSTRAINED_METHODS))}")
+    if max_workers < 1:
+        raise WncsError(f"max_workers must be >= 1, got {max_workers}")
+    cons = constraints_for(mdp, constraints)
+    if not isinstance(index, (int, np.integer)) or not 0 <= int(index) < len(cons):
+        raise WncsError(f"no constraint at index {index} (0-based): there {'is' if len(cons) == 1 else 'are'} "
+                        f"{len(cons)} constraint{'' if len(cons) == 1 else 's'}")
+    index = int(index)
+    grid: dict[str, float] = {}
+    for v in parse_values(values):
+        if not math.isfinite(v):
+            raise WncsError(f"bounds must be finite numbers, got {v!r}")
+        grid.setdefault(_key(v), float(v))
+    c = cons[index]
+    what = _what(c.label)
+    other = getattr(c, "min" if side == "max" else "max")
+    if other is not None:
+        bad = [b for b in grid.values() if (b < other if side == "max" else b > other)]
+        if bad:
+            raise WncsError(f"{what}: bound(s) {', '.join(f'{b:g}' for b in bad)} cross the constraint's "
+                            f"{'min' if side == 'max' else 'max'} = {other:g}")
+    say: Callable[[str], None] | None
+    if progress is True:
+        import sys
+
+        def say(line: str) -> None:
+            print(line, file=sys.stderr, flush=True)
+    else:
+        say = progress if callable(progress) else None
+
+    meta = _meta(mdp, cons, index, side, method)
+    files: dict[str, str] = {}
+    done: dict[str, TradeoffPoint] = {}
+    reference: dict[str, Any] | None = None
+    folder = Path(out) if out is not None else None
+    if folder is not None:
+        folder.mkdir(parents=True, exist_ok=True)
+        meta_path = folder / "tradeoff_meta.json"
+        fresh = json.loads(json.dumps(meta))
+        if meta_path.exists():
+            try:
+                old = json.loads(meta_path.read_text())
+            except (OSError, ValueError):
+                old = None
+            if old is not None and old != fresh:
+                diff = sorted(k for k in set(old) | set(fresh) if old.get(k) != fresh.get(k))
+                raise WncsError(f"{folder} holds a trade-off curve with other settings ({', '.join(diff)} differ); "
+                                "use another --out folder or delete it")
+        atomic_write_text(meta_path, json.dumps(meta, indent=2) + "\n")
+        files["meta"] = str(meta_path)
+        for p in read_points(folder / "tradeoff.csv"):
+            if not p.status.startswith("error"):
+                done[_key(p.bound)] = p
+        try:
+            saved = json.loads((folder / "tradeoff.json").read_text())
+            if saved.get("settings") == fresh and isinstance(saved.get("reference"), dict):
+                reference = saved["reference"]
+        except (OSError, ValueError):
+            pass
+    reused = sum(1 for k in grid if k in done)
+    if reference is None:
+        try:
+            reference = _reference(mdp, cons, index, side, method, unconstrained)
+        except InfeasibleConstraintsError as exc:
+            raise WncsError(f"the other constraints are infeasible without {what}: {exc}") from None
+
+    def result(seconds: float) -> TradeoffResult:
+        pts = tuple(sorted((done[k] for k in grid if k in done), key=lambda p: p.bound))
+        return TradeoffResult(
+            constraint=what, quantity=c.quantity, index=index, side=side, points=pts,
+            unconstrained_gain=reference["gain"], unconstrained_lower=reference["gain_lower"],
+            unconstrained_upper=reference["gain_upper"], threshold=reference["threshold"],
+            reachable=reference["reachable"], others=tuple(o.label for j, o in enumerate(cons) if j != index),
+            method=method, out_dir=folder, files=dict(files), computed=computed, reused=reused, seconds=seconds)
+
+    def save() -> None:
+        if folder is None:
+            return
+        pts = sorted(done.values(), key=lambda p: p.bound)  # every point of the folder, on the grid or not
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(COLUMNS)
+        for p in pts:
+            w.writerow(p.to_csv())
+        atomic_write_text(folder / "tradeoff.csv", buf.getvalue())
+        files["csv"] = str(folder / "tradeoff.csv")
+        files["json"] = str(folder / "tradeoff.json")
+        doc = {"settings": meta, "reference": reference, **result(time.perf_counter() - t_start).summary()}
+        atomic_write_text(folder / "tradeoff.json", dumps(doc, indent=2) + "\n")
+
+    computed = 0
+
+    def record(p: TradeoffPoint) -> None:
+        nonlocal computed
+        done[_key(p.bound)] = p
+        computed += 1
+        save()
+        if say is not None:
+            op = "<=" if side == "max" else ">="
+            if p.feasible:
+                say(f"{what} {op} {p.bound:g}: gain {p.gain:.10g} [{p.gain_lower:.10g}, {p.gain_upper:.10g}], "
+                    f"multiplier {p.multiplier:.6g}, {p.randomized_states} randomised state(s) "
+                    f"({p.seconds:.2f} s) {p.status}")
+            else:
+                r = f" (reachable: {p.reachable:.10g})" if math.isfinite(p.reachable) else ""
+                say(f"{what} {op} {p.bound:g}: {p.status}{r} ({p.seconds:.2f} s)")
+
+    todo = sorted((b for k, b in grid.items() if k not in done))
+    if max_workers == 1 or len(todo) <= 1:
+        for b in todo:
+            record(_solve_point(mdp, cons, index, side, b, method, fallback))
+    else:
+        ex = ProcessPoolExecutor(max_workers=max_workers)
+        try:
+            futs = [ex.submit(_solve_point, mdp, cons, index, side, b, method, fallback) for b in todo]
+            for fut in as_completed(futs):
+                record(fut.result())
+        finally:
+            ex.shutdown(wait=True, cancel_futures=True)
+    save()
+    res = result(time.perf_counter() - t_start)
+    if folder is not None and plot:
+        from ..viz import save_tradeoff_figure
+
+        files.update(save_tradeoff_figure(res, folder / "tradeoff.png"))
+        res = result(time.perf_counter() - t_start)
+        save()  # the JSON lists the figure too
+    return res
