@@ -88,12 +88,20 @@ def plot_tradeoff(result: Any, ax=None, *, label: str | None = None, color: str 
     hi = np.array([_num(p["gain_upper"]) for p in ok])
     lbl = label or "constrained optimum g*(b)"
     line = ax.errorbar(b, g, yerr=[np.nan_to_num(np.maximum(g - lo, 0)), np.nan_to_num(np.maximum(hi - g, 0))],
-                       marker="o", markersize=5, linestyle="-", capsize=3, label=lbl, color=color)
+                       marker="o", markersize=5, linestyle="none", capsize=3, label=lbl, color=color)
     col = line[0].get_color()
     if b.size:
         ax.fill_between(b, lo, hi, color=col, alpha=0.2, linewidth=0)
     g0 = _num(_get(result, "unconstrained_gain"))
     thr = _num(_get(result, "threshold"))
+    # the curve between the markers: (threshold, g0) is a point of it too (the unconstrained
+    # optimum meets the bound b = threshold exactly), so the line bends there, not at a marker
+    bx, gx = b, g
+    if b.size and math.isfinite(thr) and math.isfinite(g0) and b.min() < thr < b.max():
+        bx, gx = np.append(b, thr), np.append(g, g0)
+        order = np.argsort(bx, kind="stable")
+        bx, gx = bx[order], gx[order]
+    ax.plot(bx, gx, "-", color=col, linewidth=1.5)
     if reference and math.isfinite(g0):
         ax.axhline(g0, color=col, linestyle="--", linewidth=1, alpha=0.8,
                    label=f"without the constraint: {g0:.6g}")
