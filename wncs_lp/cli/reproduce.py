@@ -9,7 +9,7 @@ from .common import Command, emit_json
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from ..reproduce import run_reproduction
 
-    result = run_reproduction(args.out, args.profile, force=args.force,
+    result = run_reproduction(args.out, args.profile, force=args.recompute,
                               claims=[c.strip().upper() for c in args.claims.split(",")] if args.claims else None,
                               progress=not args.json)
     if args.json:
@@ -19,6 +19,12 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         for c in result["claims"]:
             print(f"{c['id']:>4} {c['verdict']:<8} {c['summary']}")
         print(f"report: {result['files']['md']} and {result['files']['html']} ({result['seconds']:.0f} s)")
+    errors = [c["id"] for c in result["claims"] if c["verdict"] == "ERROR"]
+    if errors:
+        import sys
+
+        print(f"error: {len(errors)} claim(s) could not be computed ({', '.join(errors)}); see the report", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -26,7 +32,9 @@ def _configure_reproduce(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="output folder (figures, tables, report.md/.html/.json, cache)")
     p.add_argument("--profile", default="default", choices=["quick", "default"],
                    help="quick: small caps, about a minute; default: caps 12/20/30 where the size allows")
-    p.add_argument("--force", action="store_true", help="recompute every step instead of using the cache")
+    p.add_argument("--recompute", action="store_true", help="recompute every step instead of using the cache")
+    # the old name, kept working: --force means "build past the size guard" on every other command
+    p.add_argument("--force", dest="recompute", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--claims", default="", help="only these claims, e.g. C1,C7 (default: all)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 

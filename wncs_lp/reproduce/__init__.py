@@ -121,12 +121,19 @@ def run_reproduction(
         ``{"files": {...}, "claims": [ClaimResult.to_dict(), ...], "beyond": [...], "seconds": float}``
         (``beyond``: the extra results of :mod:`~wncs_lp.reproduce.beyond`, without verdicts).
     """
+    from .beyond import BEYOND, run_beyond
+
+    # arguments are checked before anything is computed or created
+    unknown = [c for c in (claims or ()) if c not in CLAIMS and c not in BEYOND]
+    if unknown:
+        from ..errors import WncsError
+
+        raise WncsError(f"unknown claim(s) {', '.join(unknown)}: expected some of {', '.join(CLAIMS + tuple(BEYOND))}")
     prof = PROFILES[profile] if isinstance(profile, str) else profile
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = log or (lambda m: print(m, file=sys.stderr))
     ctx = Context(out, prof, force=force, log=(lambda m: say(f"  {m}")) if progress else (lambda m: None))
-    from .beyond import BEYOND, run_beyond
 
     todo = [c for c in (claims or CLAIMS) if c not in BEYOND]
     extra_ids = list(BEYOND) if claims is None else [c for c in claims if c in BEYOND]
@@ -148,8 +155,8 @@ def run_reproduction(
             res = table[cid](ctx)
         except KeyboardInterrupt:
             raise
-        except Exception as exc:  # a claim that cannot be computed is reported, never dropped
-            res = ClaimResult(cid, PAPER[cid], "", "FAILS",
+        except Exception as exc:  # a claim that cannot be computed is reported as an ERROR, never as a finding
+            res = ClaimResult(cid, PAPER[cid], "", "ERROR",
                               f"could not be computed: {type(exc).__name__}: {exc}",
                               {"error": traceback.format_exc()})
             say(f"{cid}: error: {exc}")
