@@ -6,7 +6,7 @@ Data flows one way::
 
 >>> import wncs_lp
 >>> sc = wncs_lp.load_scenario("formulations/paper_p12.toml", ["tau_cap=6"])  # doctest: +SKIP
->>> sol = wncs_lp.solve(wncs_lp.build(sc), method="lp")                        # doctest: +SKIP
+>>> sol = wncs_lp.solve(wncs_lp.build(sc))                                     # doctest: +SKIP
 """
 from __future__ import annotations
 
@@ -18,8 +18,12 @@ from .scenario import Scenario, load_scenario, scenario_from_dict
 from .solvers.result import Solution
 
 
-def solve(mdp: MDP, method: str = "lp", **kwargs) -> Solution:
-    """Solve an MDP to average-cost optimality (see :func:`wncs_lp.solvers.solve`)."""
+def solve(mdp: MDP, method: str = "auto", **kwargs) -> Solution:
+    """Solve an MDP to average-cost optimality (see :func:`wncs_lp.solvers.solve`).
+
+    The default ``"auto"`` is the command line's: the LP on small models, certified value
+    iteration above, cross-checked when both are cheap (``stats["auto_choice"]`` says which).
+    """
     from .solvers import solve as _solve
 
     return _solve(mdp, method=method, **kwargs)

@@ -2,7 +2,8 @@
 
 Every subcommand takes a scenario file and ``--set KEY=VALUE`` overrides; with ``--json`` it
 prints exactly one JSON object on stdout (messages and progress go to stderr). Errors from bad
-input print one line ``error: ...`` on stderr and exit with status 2.
+input print one line ``error: ...`` on stderr and exit with status 2 (with ``--json`` also one
+object ``{"error", "type", "source", "field"}`` on stdout).
 
 Each module of this package lists its subcommands in ``COMMANDS``; :func:`build_parser` adds
 the modules' commands in the order of :data:`MODULES` (the one place a new module is named).
@@ -27,10 +28,13 @@ COMMANDS: list[Command] = [cmd for module in MODULES for cmd in module.COMMANDS]
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .. import __version__
+
     parser = argparse.ArgumentParser(
         prog="wncs-lp",
         description="Exact average-cost scheduling for multi-process WNCS with edge computing.",
     )
+    parser.add_argument("--version", action="version", version=f"wncs-lp {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     for cmd in COMMANDS:
         p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
@@ -45,6 +49,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except WncsError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        if getattr(args, "json", False):  # --json promises one JSON object on stdout, errors included
+            from .common import emit_json
+
+            emit_json({"error": str(exc), "type": type(exc).__name__,
+                       **{k: getattr(exc, k) for k in ("source", "field") if hasattr(exc, k)}})
         return 2
     except KeyboardInterrupt:
         print("interrupted: results already written are kept", file=sys.stderr)
