@@ -168,7 +168,8 @@ def test_cli_bad_policy_exit_2(cmd, capsys, tmp_path):
     rc = main(cmd + ["--json"])
     err = capsys.readouterr()
     assert rc == 2
-    assert err.out == ""
+    # under --json the error is also one JSON object on stdout (issue 16), and one line on stderr
+    assert json.loads(err.out)["type"] == "PolicyError"
     assert "unknown policy 'bogus'" in err.err and "optimal" in err.err
 
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "json_ready", "dumps"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "json_ready", "dumps", "csv_records", "scalars"]
 
 
 def _umask() -> int:
@@ -76,3 +76,35 @@ def json_ready(obj: Any) -> Any:
 def dumps(obj: Any, **kw: Any) -> str:
     """Strict JSON text of :func:`json_ready` ``(obj)``; anything still unknown is written as ``str``."""
     return json.dumps(json_ready(obj), default=str, allow_nan=False, **kw)
+
+
+def csv_records(path: str | Path, columns: tuple[str, ...]) -> list[dict[str, str]]:
+    """The complete records of a CSV file written with exactly ``columns`` (resumable tables).
+
+    A missing file, another header, or a truncated line (a run interrupted mid-write: missing
+    fields, extra fields, or an empty ``status``) gives no record for it, so a rerun recomputes
+    what is not there.
+    """
+    import csv
+
+    path = Path(path)
+    if not path.exists():
+        return []
+    with open(path, encoding="utf-8", newline="") as fh:
+        reader = csv.DictReader(fh)
+        if reader.fieldnames is None or tuple(reader.fieldnames) != tuple(columns):
+            return []
+        return [rec for rec in reader
+                if None not in rec and all(rec.get(c) is not None for c in columns) and rec.get("status", "x") != ""]
+
+
+def scalars(mapping: dict[str, Any]) -> dict[str, Any]:
+    """The entries of ``mapping`` that are JSON scalars (numpy scalars unwrapped), in order."""
+    import numpy as np
+
+    out: dict[str, Any] = {}
+    for k, v in mapping.items():
+        if isinstance(v, (int, float, str, bool, np.integer, np.floating, np.bool_)) or v is None:
+            out[k] = v.item() if isinstance(v, np.generic) else v
+    return out
+

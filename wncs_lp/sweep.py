@@ -47,7 +47,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .files import atomic_write_text
+from .files import atomic_write_text, csv_records
 from .errors import WncsError
 from .models.system import System
 from .policies import POLICY_NAMES, make_policy, parse_policy_names
@@ -191,23 +191,14 @@ def _override_value(param: str, value: float) -> Any:
 
 def read_rows(path: str | Path) -> list[SweepRow]:
     """Complete rows of a sweep CSV (a truncated or malformed line is skipped)."""
-    path = Path(path)
-    if not path.exists():
-        return []
     rows = []
-    with open(path, encoding="utf-8", newline="") as fh:
-        reader = csv.DictReader(fh)
-        if reader.fieldnames is None or tuple(reader.fieldnames) != COLUMNS:
-            return []
-        for rec in reader:
-            if None in rec or any(rec.get(c) is None for c in COLUMNS) or rec["status"] == "":
-                continue
-            try:
-                row = SweepRow.from_csv(rec)
-            except (ValueError, KeyError):
-                continue
-            if row.policy in POLICY_NAMES:
-                rows.append(row)
+    for rec in csv_records(path, COLUMNS):
+        try:
+            row = SweepRow.from_csv(rec)
+        except (ValueError, KeyError):
+            continue
+        if row.policy in POLICY_NAMES:
+            rows.append(row)
     return rows
 
 

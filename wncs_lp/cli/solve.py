@@ -32,21 +32,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
     sol = solve(mdp, method=args.method)
     cap = policy_cap_mass(mdp, sol.policy)
-    total = time.perf_counter() - t0
-    payload = {
-        **head(args, scenario, mdp),
-        "nnz": int(mdp.P.nnz),
-        **sol.summary(),
-        "cap_mass": cap.to_dict(),
-        "build_seconds": t_build,
-        "solve_seconds": sol.seconds,
-        "seconds": total,
-    }
     if args.json:
-        emit_json(payload)
+        emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build))
     else:
-        print(scenario.describe())
-        print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs, built in {t_build:.2f} s")
+        _header(scenario, mdp, t_build)
         used = f"{sol.method} -> {sol.stats['auto_choice']}" if "auto_choice" in sol.stats else sol.method
         print(f"method {used}: status {sol.status}, {sol.iterations} iterations, {sol.seconds:.2f} s")
         print(f"optimal average cost (gain): {sol.gain:.10g}")
@@ -62,28 +51,27 @@ def cmd_solve(args: argparse.Namespace) -> int:
     return 0 if sol.ok else 1
 
 
+def _payload(args: argparse.Namespace, scenario, mdp, sol, cap, t0: float, t_build: float, **extra) -> dict:
+    """The JSON of a solve: the head, the solution's summary, the mass at the cap, the timings."""
+    return {**head(args, scenario, mdp), "nnz": int(mdp.P.nnz), **sol.summary(), **extra, "cap_mass": cap.to_dict(),
+            "build_seconds": t_build, "solve_seconds": sol.seconds, "seconds": time.perf_counter() - t0}
+
+
+def _header(scenario, mdp, t_build: float) -> None:
+    print(scenario.describe())
+    print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs, built in {t_build:.2f} s")
+
+
 def _constrained(args: argparse.Namespace, scenario, mdp, t0: float, t_build: float) -> int:
     from ..constrained import solve_constrained
     from ..truncation import cap_mass
 
     sol = solve_constrained(mdp, scenario.constraints, args.method)
     cap = cap_mass(mdp, sol.occupation)
-    total = time.perf_counter() - t0
-    payload = {
-        **head(args, scenario, mdp),
-        "nnz": int(mdp.P.nnz),
-        **sol.summary(),
-        "mixes": sol.mixes(mdp),
-        "cap_mass": cap.to_dict(),
-        "build_seconds": t_build,
-        "solve_seconds": sol.seconds,
-        "seconds": total,
-    }
     if args.json:
-        emit_json(payload)
+        emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, mixes=sol.mixes(mdp)))
         return 0 if sol.ok else 1
-    print(scenario.describe())
-    print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs, built in {t_build:.2f} s")
+    _header(scenario, mdp, t_build)
     print(f"constrained solve ({sol.method}): status {sol.status}, {sol.seconds:.2f} s")
     print(f"optimal average cost under the constraints: {sol.gain:.10g}")
     print(f"certificate: {sol.gain_lower:.12g} <= g*_C <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e}; "

@@ -31,6 +31,7 @@ import numpy as np
 from ..chain import PolicyChain
 from ..errors import PolicyError
 from ..mdp import MDP
+from ..solvers.certify import certificate_closed
 from .problem import LinearConstraint, Rows, max_form, with_cost
 from .result import ConstrainedSolution, ConstraintReport
 
@@ -217,8 +218,7 @@ def certify(
         reports.append(ConstraintReport(c.label, c.quantity, c.max, c.min, v, lpv, side is not None, side, lam_j, viol))
     gain = ev["gain"]
     hi = gain
-    width = hi - lo
-    closed = np.isfinite(width) and (width <= cert_rtol * abs(gain) or width <= 1e-13 * float(np.max(np.abs(mdp.cost))))
+    closed = certificate_closed(mdp, lo, hi, gain, cert_rtol)
     feasible = viol_max <= feas_rtol
     if solver_status != "optimal":
         status = f"inaccurate:{solver_status}"

@@ -90,13 +90,12 @@ from ..errors import InfeasibleConstraintsError, ModelError, SolverError
 from ..mdp import MDP
 from ..scenario import ConstraintSpec
 from .certify import CERT_RTOL, FEAS_RTOL, certify, evaluate_rows, lagrangian_bound, policy_from_occupation
+from .lp import basic_solution
 from .problem import LinearConstraint, max_form, with_cost
 from .result import ConstrainedSolution, ConstraintReport
 
-__all__ = ["OccupationProgram", "RC_TOL", "MAX_LINEAR_ROWS"]
+__all__ = ["OccupationProgram", "MAX_LINEAR_ROWS"]
 
-#: Crossover: a pair stays in play when its reduced cost is at most RC_TOL * (1 + max|q|).
-RC_TOL = 1e-6
 #: A program whose user constraints have more scalar rows than this is certified as nonlinear.
 MAX_LINEAR_ROWS = 1000
 
@@ -769,33 +768,12 @@ def _subgradient_bound(prog: OccupationProgram, objective, sense: float, labels,
 
 
 def _crossover(mdp: MDP, lp, cost: np.ndarray, rows, x: np.ndarray, z_eq: np.ndarray, lam_rows: np.ndarray):
-    """A basic optimal solution of ``min cost^T x`` s.t. balance and ``D x <= b`` on the pairs
-    the interior point leaves in play (HiGHS dual simplex), in the solver's y = n x units."""
-    from scipy.optimize import linprog
-
-    from ..solvers.certify import greedy_first
-
-    t0 = time.perf_counter()
+    """:func:`~wncs_lp.constrained.lp.basic_solution` for ``min cost^T x`` s.t. balance and ``D x <= b``,
+    in the solver's y = n x units; returns the basic x (sum 1) or None, and the crossover's info."""
     n = float(mdp.n_states)
-    y = n * x
-    q = cost / n
+    y, q = n * x, cost / n
     G = rows.D / n if rows.n_rows else None
     # reduced costs of the solver's duals (cvxpy: Lagrangian f + z^T (A y - b) + lam^T (G y - h))
     mu = q + lp.A_eq.T @ z_eq + (G.T @ lam_rows if G is not None else 0.0)
-    qmax = float(np.max(np.abs(q))) if q.size else 1.0
-    keep = (mu <= RC_TOL * (1.0 + qmax)) | (y > mu)
-    keep[greedy_first(mdp, mu)] = True
-    cols = np.flatnonzero(keep)
-    res = linprog(q[cols], A_ub=G[:, cols] if G is not None else None, b_ub=rows.b if G is not None else None,
-                  A_eq=lp.A_eq.tocsc()[:, cols], b_eq=lp.b_eq, bounds=(0, None), method="highs-ds")
-    info = {"crossover_pairs": int(cols.size), "crossover_seconds": time.perf_counter() - t0,
-            "crossover_status": str(res.message)}
-    if res.status != 0 or res.x is None:
-        return None, info
-    ref = float(q @ y)
-    info["crossover_objective_rel_diff"] = abs(float(res.fun) - ref) / max(1.0, abs(ref))
-    if info["crossover_objective_rel_diff"] > 1e-6:
-        return None, info
-    out = np.zeros(mdp.n_pairs)
-    out[cols] = np.maximum(res.x, 0.0)
-    return out / out.sum(), info
+    yb, info = basic_solution(mdp, lp.A_eq, lp.b_eq, q, G, rows.b, y, mu, float(q @ y))
+    return (None if yb is None else yb / yb.sum()), info

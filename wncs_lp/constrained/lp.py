@@ -43,7 +43,7 @@ from .certify import CERT_RTOL, certify, policy_from_occupation
 from .problem import LinearConstraint, Rows, max_form, with_cost
 from .result import ConstrainedSolution
 
-__all__ = ["solve_constrained_lp", "reachable_range", "check_reachable", "RC_TOL"]
+__all__ = ["solve_constrained_lp", "reachable_range", "check_reachable", "basic_solution", "RC_TOL"]
 
 #: Crossover: a pair stays in play when its scaled reduced cost is at most RC_TOL * (1 + max|q|).
 RC_TOL = 1e-6
@@ -114,31 +114,42 @@ def _run_cvxpy(lp: LPData, G, h, tol, max_iter, verbose, settings):
     return status, status == "optimal", yv, z_eq, z_in, mu, stats
 
 
-def _crossover(mdp: MDP, lp: LPData, G, h, y, mu, obj_scaled: float) -> tuple[np.ndarray | None, dict]:
-    """A basic optimal solution on the pairs the interior point leaves in play (HiGHS dual simplex)."""
+def basic_solution(mdp: MDP, A_eq, b_eq: np.ndarray, q: np.ndarray, G, h: np.ndarray, y: np.ndarray, mu: np.ndarray,
+              ref_obj: float) -> tuple[np.ndarray | None, dict]:
+    """A basic optimal solution of ``min q^T y  s.t.  A_eq y = b_eq, G y <= h, y >= 0`` on the
+    pairs an interior point ``(y, mu)`` leaves in play (HiGHS dual simplex).
+
+    In play: the interior point treats the pair as basic (``y > mu``) or its reduced cost is
+    ~0 (``mu <= RC_TOL (1 + max|q|)``); and every state keeps its pair of least reduced cost,
+    so that mass reaching a state can leave it. The vertex is kept when its objective agrees
+    with ``ref_obj`` (the interior point's) to 1e-6 relative; else None.
+
+    Returns
+    -------
+    y : (L,) array or None
+    info : dict
+        ``crossover_pairs``, ``crossover_seconds``, ``crossover_status`` and, when solved,
+        ``crossover_objective_rel_diff``.
+    """
     from scipy.optimize import linprog
 
     t0 = time.perf_counter()
-    qmax = float(np.max(np.abs(lp.q))) if lp.q.size else 1.0
-    # in play: the interior point treats the pair as basic (y > mu) or its reduced cost is ~0
+    qmax = float(np.max(np.abs(q))) if q.size else 1.0
     keep = (mu <= RC_TOL * (1.0 + qmax)) | (y > mu)
-    # and every state keeps its pair of least reduced cost, so that mass reaching a state can leave it
     keep[greedy_first(mdp, mu)] = True
     cols = np.flatnonzero(keep)
-    A = lp.A_eq.tocsc()[:, cols]
-    Gk = sp.csr_matrix(G)[:, cols] if G.shape[0] else None
-    res = linprog(lp.q[cols], A_ub=Gk, b_ub=h if Gk is not None else None, A_eq=A, b_eq=lp.b_eq,
-                  bounds=(0, None), method="highs-ds")
+    Gk = sp.csr_matrix(G)[:, cols] if G is not None and G.shape[0] else None
+    res = linprog(q[cols], A_ub=Gk, b_ub=h if Gk is not None else None, A_eq=sp.csc_matrix(A_eq)[:, cols],
+                  b_eq=b_eq, bounds=(0, None), method="highs-ds")
     info = {"crossover_pairs": int(cols.size), "crossover_seconds": time.perf_counter() - t0,
             "crossover_status": str(res.message)}
     if res.status != 0 or res.x is None:
         return None, info
-    obj = float(res.fun)
-    info["crossover_objective_rel_diff"] = abs(obj - obj_scaled) / max(1.0, abs(obj_scaled))
+    info["crossover_objective_rel_diff"] = abs(float(res.fun) - ref_obj) / max(1.0, abs(ref_obj))
     if info["crossover_objective_rel_diff"] > 1e-6:
         return None, info
-    out = np.zeros(lp.n_pairs)
-    out[cols] = res.x
+    out = np.zeros(mdp.n_pairs)
+    out[cols] = np.maximum(res.x, 0.0)
     return out, info
 
 
@@ -249,7 +260,7 @@ def solve_constrained_lp(
                  row_multipliers=[float(v) for v in lam_rows])
     yb = y
     if crossover:
-        yv, info = _crossover(mdp, lp, G, h, y, mu, stats["obj_scaled"])
+        yv, info = basic_solution(mdp, lp.A_eq, lp.b_eq, lp.q, G, h, y, mu, stats["obj_scaled"])
         stats.update(info)
         stats["crossover"] = "basic" if yv is not None else "failed: interior point kept"
         if yv is not None:

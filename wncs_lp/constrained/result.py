@@ -6,6 +6,8 @@ from typing import Any
 
 import numpy as np
 
+from ..files import scalars
+
 __all__ = ["ConstraintReport", "ConstrainedSolution"]
 
 
@@ -167,9 +169,7 @@ class ConstrainedSolution:
             "seconds": float(self.seconds),
             "constraints": [c.to_dict() for c in self.constraints],
         }
-        for k, v in self.stats.items():
-            if k not in out and (isinstance(v, (int, float, str, bool, np.integer, np.floating)) or v is None):
-                out[k] = v.item() if isinstance(v, np.generic) else v
+        out.update({k: v for k, v in scalars(self.stats).items() if k not in out})
         return out
 
     def __repr__(self) -> str:

@@ -47,7 +47,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..errors import InfeasibleConstraintsError, PolicyError, WncsError
-from ..files import atomic_write_text, dumps
+from ..files import atomic_write_text, csv_records, dumps
 from ..mdp import MDP
 from .problem import LinearConstraint
 
@@ -162,21 +162,12 @@ class TradeoffPoint:
 
 def read_points(path: str | Path) -> list[TradeoffPoint]:
     """Complete rows of a ``tradeoff.csv`` (a truncated or malformed line is skipped)."""
-    path = Path(path)
-    if not path.exists():
-        return []
     out = []
-    with open(path, encoding="utf-8", newline="") as fh:
-        reader = csv.DictReader(fh)
-        if reader.fieldnames is None or tuple(reader.fieldnames) != COLUMNS:
-            return []
-        for rec in reader:
-            if None in rec or any(rec.get(c) is None for c in COLUMNS) or not rec["status"]:
-                continue
-            try:
-                out.append(TradeoffPoint.from_record(rec))
-            except (ValueError, KeyError):
-                continue
+    for rec in csv_records(path, COLUMNS):
+        try:
+            out.append(TradeoffPoint.from_record(rec))
+        except (ValueError, KeyError):
+            continue
     return out
 
 

@@ -6,6 +6,8 @@ from typing import Any
 
 import numpy as np
 
+from ..files import scalars
+
 __all__ = ["Solution"]
 
 
@@ -77,7 +79,5 @@ class Solution:
             "iterations": int(self.iterations),
             "seconds": float(self.seconds),
         }
-        for k, v in self.stats.items():
-            if isinstance(v, (int, float, str, bool, np.integer, np.floating)) or v is None:
-                out[k] = v.item() if isinstance(v, np.generic) else v
+        out.update(scalars(self.stats))
         return out
