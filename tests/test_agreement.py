@@ -10,7 +10,7 @@ from wncs_lp import build, load_scenario, scenario_from_dict, solve
 
 FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
 
-# spec/model.md section 5: an independent implementation, certified to 1e-11 relative
+# reference gains of an independent implementation, certified to 1e-11 relative
 REFERENCE = [
     ("paper_p12.toml", 10_419, 14_934, 749.834326444),
     ("paper_p14.toml", 7_340, 12_181, 432.180362984),

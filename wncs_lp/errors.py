@@ -5,7 +5,8 @@ caller can catch one class and always get a message naming what was wrong.
 """
 from __future__ import annotations
 
-__all__ = ["WncsError", "ScenarioError", "ModelError", "SolverError", "PolicyError", "InfeasibleConstraintsError"]
+__all__ = ["WncsError", "ScenarioError", "ModelError", "SolverError", "PolicyError", "InfeasibleConstraintsError",
+           "ScenarioWarning"]
 
 
 class WncsError(ValueError):
@@ -25,6 +26,11 @@ class ScenarioError(WncsError):
         # one line always: control characters in a field name (e.g. from --set) are escaped
         shown = field if field.isprintable() else field.encode("unicode_escape").decode("ascii")
         super().__init__(f"{source}: {what} '{shown}': {expected}")
+
+
+class ScenarioWarning(UserWarning):
+    """A valid scenario that describes a degenerate problem (a server that never delivers, a cap at
+    or below every loop length): see :meth:`wncs_lp.scenario.Scenario.degenerate_warnings`."""
 
 
 class ModelError(WncsError):

@@ -43,7 +43,20 @@ from .errors import PolicyError
 from .mdp import MDP
 from .models.system import System
 
-__all__ = ["Evaluation", "evaluate"]
+__all__ = ["Evaluation", "evaluate", "MultichainEvaluationError"]
+
+
+class MultichainEvaluationError(PolicyError):
+    """The evaluated policy's chain has several recurrent classes (a :class:`PolicyError`).
+
+    ``detail`` is the message without the remedy, so a caller (the command line) can name its
+    own way out (``--from-initial``) instead of the library's (``multichain="initial"``).
+    """
+
+    def __init__(self, detail: str, remedy: str = "evaluate with multichain=\"initial\" for the averages from "
+                                                 "the initial state"):
+        self.detail = detail
+        super().__init__(f"{detail} ({remedy})")
 
 
 @dataclass(frozen=True)
@@ -127,8 +140,8 @@ def evaluate(
     Raises
     ------
     PolicyError
-        Malformed policy, an MDP of another scenario, or a multichain induced chain (the
-        message names the policy and two recurrent classes).
+        Malformed policy, an MDP of another scenario, or (:class:`MultichainEvaluationError`) a
+        multichain induced chain (the message names the policy and two recurrent classes).
     """
     t0 = time.perf_counter()
     if hasattr(policy, "on_mdp"):
@@ -154,11 +167,11 @@ def evaluate(
         pi, residual = chain.stationary, chain.residual
     elif multichain == "error":
         a, b = classes[0], classes[1]
-        raise PolicyError(
+        raise MultichainEvaluationError(
             f"policy {name} induces a multichain Markov chain with {n_classes} recurrent classes "
             f"(e.g. state {mdp.state_label(int(a[0]))} in a class of {a.size} state(s) and "
             f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost depends on "
-            "the start state (evaluate with multichain='initial' for the averages from the initial state)"
+            "the start state"
         )
     else:
         pi, residual = _limit_from_initial(mdp, P, classes, system)

@@ -73,9 +73,63 @@ key                         shape, dtype       meaning
                                                and what the caller passes in ``meta``)
 ==========================  =================  ==================================================
 
+Solutions (``wncs-lp solve --out FILE.npz``)
+--------------------------------------------
+:func:`save_solution_npz` writes a solve's optimal policy *and* its bias as a
+``wncs_lp.policy-npz`` file (so :func:`load_policy_npz` reads its policy) with these entries
+added:
+
+==========================  =================  ==================================================
+key                         shape, dtype       meaning
+==========================  =================  ==================================================
+``bias``                    (n,), float64      the relative value function h (h[0] = 0) of the
+                                               certificate; absent for a constrained solve
+``sigma``                   (n,), int64        the action of every state (a row of
+                                               ``action_table``; QuantEcon's ``sigma``); -1 in a
+                                               state where a randomised policy mixes
+``action_table``            (A, M), int64      as in the MDP file
+``tau``, ``config``         (n, N), (n,)       as in the MDP file: state s is (tau[s], config[s])
+``config_descriptions``     (C,), unicode      as in the MDP file
+``gain``                    (), float64        the optimal average cost
+``gain_lower``,             (), float64        the certificate gain_lower <= g* <= gain_upper
+``gain_upper``
+``status``, ``method``      (), str            the solve's status and method
+==========================  =================  ==================================================
+
+Read it with ``numpy.load(FILE)``: e.g. ``z["bias"][s]`` and ``z["action_table"][z["sigma"][s]]``
+for state s.
+
+Storm's explicit format (``wncs-lp export --format drn``)
+---------------------------------------------------------
+:func:`save_drn` writes the MDP in Storm's DiRect eNcoding (DRN), which ``storm --explicit-drn
+FILE`` and ``stormpy.build_model_from_drn(FILE)`` load. The file holds
+
+* a header: ``@type: MDP``, an empty ``@parameters`` line, ``@reward_models`` with the one reward
+  model ``cost``, ``@nr_states`` n and ``@nr_choices`` L; before it, comment lines (``//``) naming
+  the scenario and saying what each action name means;
+* ``@model``: every state as ``state <s> <labels>`` in the toolkit's numbering (the same as the
+  ``.npz`` export's, so ``tau[s]``, ``config[s]`` of that file decode it), then each of its pairs
+  as ``action a<k> [<cost>]`` (``k`` the row of the action table; the one-slot cost as the
+  choice reward) followed by one line ``<target> : <probability>`` per successor, in
+  increasing target order.
+
+Labels: ``init`` on the initial state (every AoI at its cap in the first initial configuration,
+where the paper's chain starts; state 0 for an MDP without decoded states) and ``at_cap`` on the
+states where some AoI is at its cap. The optimal average cost is the minimal long-run average
+reward ``R{"cost"}min=? [LRA]``: ``storm --explicit-drn model.drn --prop 'R{"cost"}min=? [LRA]'``,
+or in Python::
+
+    model = stormpy.build_model_from_drn("model.drn")
+    prop = stormpy.parse_properties('R{"cost"}min=? [LRA]')[0]
+    g = stormpy.model_checking(model, prop).get_value(model.initial_states[0])
+
+Storm's long-run-average solver stops at its own precision (1e-6 relative by default) and gives
+no certificate. Numbers are written as Python's shortest round-trip decimals (the exact doubles).
+
 Every file is written atomically (:func:`wncs_lp.files.atomic_write_bytes`): a reader sees the old
 complete file or the new one, never a partial one.
 """
+
 from __future__ import annotations
 
 import io
@@ -101,6 +155,9 @@ __all__ = [
     "load_npz",
     "save_policy_npz",
     "load_policy_npz",
+    "save_solution_npz",
+    "save_drn",
+    "initial_state",
     "ExportError",
 ]
 
@@ -269,7 +326,7 @@ def load_npz(path: str | Path, *, validate: bool = True) -> MDP:
 
 
 def save_policy_npz(path: str | Path, mdp: MDP, policy: Any, *, name: str | None = None, scenario: Any = None,
-                    meta: dict | None = None, compress: bool = False) -> Path:
+                    meta: dict | None = None, compress: bool = False, _extra: dict | None = None) -> Path:
     """Write a stationary policy on ``mdp`` in the ``wncs_lp.policy-npz`` format (module docstring).
 
     Parameters
@@ -317,7 +374,160 @@ def save_policy_npz(path: str | Path, mdp: MDP, policy: Any, *, name: str | None
         name=np.array(str(name)),
         meta_json=np.array(json.dumps(info, sort_keys=True)),
     )
+    arrays.update(_extra or {})
     return _write_npz(path, arrays, compress)
+
+
+def _state_arrays(mdp: MDP) -> dict[str, np.ndarray]:
+    """``tau``, ``config``, ``config_descriptions`` and ``action_table`` as in the MDP file."""
+    st = mdp.states
+    if st is not None and hasattr(st, "tau") and hasattr(st, "config"):
+        describe = getattr(st, "describe_config", repr)
+        out = dict(tau=np.asarray(st.tau, dtype=np.int32), config=np.asarray(st.config, dtype=np.int32),
+                   config_descriptions=np.array([str(describe(c)) for c in st.configs], dtype=np.str_))
+    else:
+        out = dict(tau=np.zeros((mdp.n_states, 0), np.int32), config=np.zeros(mdp.n_states, np.int32),
+                   config_descriptions=np.array([""], dtype=np.str_))
+    at = mdp.action_table
+    out["action_table"] = (np.zeros((0, 0), np.int64) if at is None
+                           else np.asarray(at, dtype=np.int64).reshape(len(at), -1))
+    return out
+
+
+def save_solution_npz(path: str | Path, mdp: MDP, solution: Any, *, scenario: Any = None,
+                      compress: bool = False) -> Path:
+    """Write a solve's policy and bias (``wncs-lp solve --out``): a ``wncs_lp.policy-npz`` file with
+    ``bias``, ``sigma``, the state decoding and the certificate added (module docstring).
+
+    Parameters
+    ----------
+    path : file name (``.npz`` is appended when missing)
+    mdp : MDP
+    solution : Solution or ConstrainedSolution
+    scenario : Scenario, optional
+        Source of the fingerprint.
+
+    Returns
+    -------
+    Path of the written file (written atomically).
+    """
+    path = _npz_path(path)
+    probs = _probs_for(mdp, solution)
+    n = mdp.n_states
+    # the action of each state: its most probable pair (the only one of a deterministic policy); -1 where it mixes
+    best = np.maximum.reduceat(probs, mdp.pair_ptr[:-1])
+    first = np.where(probs >= best[mdp.s_indices], np.arange(mdp.n_pairs), mdp.n_pairs)
+    pair = np.minimum.reduceat(first, mdp.pair_ptr[:-1])
+    sigma = np.asarray(mdp.a_indices, dtype=np.int64)[pair]
+    sigma[randomised_states(mdp, probs)] = -1
+    extra = dict(_state_arrays(mdp), sigma=sigma,
+                 gain=np.array(float(solution.gain)), gain_lower=np.array(float(solution.gain_lower)),
+                 gain_upper=np.array(float(solution.gain_upper)), status=np.array(str(solution.status)),
+                 method=np.array(str(solution.method)))
+    bias = getattr(solution, "bias", None)
+    if bias is not None and np.shape(bias) == (n,):
+        extra["bias"] = np.asarray(bias, dtype=np.float64)
+    return save_policy_npz(path, mdp, probs, name=str(solution.method), scenario=scenario,
+                           meta={"status": str(solution.status), "gain": float(solution.gain)},
+                           compress=compress, _extra=extra)
+
+
+def initial_state(mdp: MDP) -> int:
+    """The state a run of the system starts in: every AoI at its cap in the first initial
+    configuration (0 for an MDP without a decoded state space or model)."""
+    st = mdp.states
+    model = getattr(st, "model", None)
+    if st is not None and model is not None and hasattr(st, "find"):
+        try:
+            s = st.find(tuple(int(c) for c in st.caps), int(model.automaton.initial[0]))
+        except (AttributeError, IndexError, TypeError, ValueError):
+            s = -1
+        if s >= 0:
+            return int(s)
+    return 0
+
+
+def _action_comments(mdp: MDP, scenario: Any) -> list[str]:
+    """Comment lines saying what each action name ``a<k>`` means (the names of the policy maps)."""
+    at = mdp.action_table
+    if at is None:
+        return ["// action a<k>: action index k of the MDP"]
+    rows = np.asarray(at, dtype=np.int64).reshape(len(at), -1)
+    out = []
+    for k, row in enumerate(rows):
+        what = str(tuple(int(v) for v in row))
+        if mdp.states is not None and getattr(mdp.states, "configs", None) is not None:
+            try:
+                from .maps import action_name
+
+                what = f"{action_name(mdp, k, scenario=scenario)} {what}"
+            except Exception:  # a name is a courtesy: the decoded tuple always stands
+                pass
+        out.append(f"// action a{k}: {what}")
+    return out
+
+
+def save_drn(mdp: MDP, path: str | Path, *, scenario: Any = None) -> Path:
+    """Write ``mdp`` in Storm's explicit DRN format (module docstring), atomically.
+
+    Parameters
+    ----------
+    mdp : MDP
+    path : file name (written as given)
+    scenario : Scenario, optional
+        Named in the header comments (with its fingerprint); also used to describe the actions.
+
+    Returns
+    -------
+    Path of the written file.
+    """
+    path = Path(path)
+    P = mdp.P.tocsr()
+    if not P.has_sorted_indices:
+        P = P.copy()
+        P.sort_indices()
+    n, L = mdp.n_states, mdp.n_pairs
+    st = mdp.states
+    if st is not None and hasattr(st, "tau") and len(getattr(st, "caps", ())) > 0:
+        at_cap = np.any(np.asarray(st.tau) >= np.asarray(st.caps)[None, :], axis=1)
+    else:
+        at_cap = np.zeros(n, bool)
+    labels = np.where(at_cap, " at_cap", "").astype(object)
+    init = initial_state(mdp)
+    labels[init] = " init" + labels[init]
+    source = str(scenario.source) if scenario is not None else str(mdp.meta.get("source", ""))
+    fingerprint = scenario.fingerprint() if scenario is not None else str(mdp.meta.get("fingerprint", ""))
+    head = [
+        "// Exported by wncs_lp (wncs-lp export --format drn): an average-cost MDP; its optimal average",
+        '// cost is the minimal long-run average of the reward model "cost": R{"cost"}min=? [LRA]',
+        f"// scenario {source} (fingerprint {fingerprint}): {n} states, {L} choices, {int(P.nnz)} transitions",
+        "// states are numbered as in the .npz export (wncs-lp export --format npz): tau[s], config[s]",
+        *_action_comments(mdp, scenario),
+        "@type: MDP",
+        "@parameters",
+        "",
+        "@reward_models",
+        "cost",
+        "@nr_states",
+        str(n),
+        "@nr_choices",
+        str(L),
+        "@model",
+        "",
+    ]
+    pair_ptr = mdp.pair_ptr.tolist()
+    action = [f"\taction a{a} [{c!r}]\n" for a, c in zip(mdp.a_indices.tolist(), mdp.cost.tolist())]
+    rows = [f"\t\t{j} : {x!r}\n" for j, x in zip(P.indices.tolist(), P.data.tolist())]
+    indptr = P.indptr.tolist()
+    out = ["\n".join(head)]
+    push = out.append
+    for s in range(n):
+        push(f"state {s}{labels[s]}\n")
+        for l in range(pair_ptr[s], pair_ptr[s + 1]):
+            push(action[l])
+            push("".join(rows[indptr[l]:indptr[l + 1]]))
+    atomic_write_bytes(path, "".join(out).encode("ascii"))
+    return path
 
 
 def load_policy_npz(path: str | Path, mdp: MDP | None = None) -> np.ndarray:

@@ -226,6 +226,41 @@ class Scenario:
         payload = json.dumps(_canonical(content), sort_keys=True)
         return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
+    def degenerate_warnings(self) -> list[str]:
+        """Warnings, in words, about a valid scenario that describes a degenerate problem.
+
+        * a server whose uplink or downlink never succeeds (``p_up = 0`` or ``p_down = 0``, e.g.
+          from ``channel.success_probability = 0``) never delivers: it is useless, and when every
+          server is so, every AoI climbs to its cap and stays there (every policy costs the same);
+        * a process whose ``tau_cap`` is at most the shortest loop ``U + T + D`` of every server:
+          a delivered update is never fresher than the cap, so its AoI stays at the cap and
+          scheduling it changes nothing.
+
+        The command line prints them on stderr (``warning: ...``); :func:`wncs_lp.build` issues
+        them as :class:`~wncs_lp.errors.ScenarioWarning`. They are not errors: such scenarios
+        solve, with a result that says little.
+        """
+        out = []
+        dead = [sv for sv in self.servers if sv.p_up == 0 or sv.p_down == 0]
+        why = " (the channel's success_probability is 0)" if self.p == 0 else ""
+        if dead and len(dead) == len(self.servers):
+            out.append(f"{self.source}: no update is ever delivered: every server has p_up = 0 or p_down = 0{why}; "
+                       "every AoI climbs to its cap and stays there, so every policy costs the same")
+        else:
+            for sv in dead:
+                link = "uplink (p_up = 0)" if sv.p_up == 0 else "downlink (p_down = 0)"
+                out.append(f"{self.source}: server '{sv.name}' never delivers: its {link} always fails, "
+                           "so sending it updates is never useful")
+        for k, pr in enumerate(self.processes):
+            loops = [(sv.loop[k], sv.name) for sv in self.servers]
+            shortest, name = min(loops)
+            if pr.tau_cap <= shortest:
+                out.append(f"{self.source}: process '{pr.name}': tau_cap = {pr.tau_cap} is at most the shortest loop "
+                           f"U + T + D of any server ({shortest} slots, server '{name}'): a delivered update is never "
+                           f"fresher than the cap, so its AoI stays at the cap and scheduling it changes nothing; "
+                           f"raise tau_cap above {shortest}")
+        return out
+
     def describe(self) -> str:
         """A one-paragraph human summary."""
         procs = ", ".join(f"{pr.name} (n={pr.dim}, cap={pr.tau_cap}, w={pr.weight:g})" for pr in self.processes)
@@ -296,11 +331,12 @@ def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for item in items:
         if not isinstance(item, str) or "=" not in item:
-            raise ScenarioError("<command line>", str(item), "expected KEY=VALUE", what="override")
+            raise ScenarioError("--set", str(item), "expected KEY=VALUE, e.g. --set p=0.8", what="override")
         key, value = item.split("=", 1)
         key, value = key.strip(), value.strip()
         if not key:
-            raise ScenarioError("<command line>", item, "expected a non-empty KEY in KEY=VALUE", what="override")
+            raise ScenarioError("--set", item, "expected a non-empty KEY in KEY=VALUE, e.g. --set p=0.8",
+                                what="override")
         try:
             parsed = tomllib.loads(f"v = {value}")["v"]
         except tomllib.TOMLDecodeError:

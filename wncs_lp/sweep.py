@@ -27,8 +27,8 @@ Resume: rows already in ``sweep.csv`` (complete and parseable) are kept and not 
 deleted or truncated row is recomputed.
 
 Warm start: with one worker the grid is walked in order and the optimal solve of value v_i
-starts from the solution at v_{i-1} when the state space is the same (``rvi``: ``h0`` = previous
-bias; ``pi``: ``policy0`` = previous policy; ``lp``: none). With several workers (a
+starts from the solution at v_{i-1} when the state space is the same (``auto``, ``vi``, ``rvi``:
+``h0`` = previous bias; ``pi``: ``policy0`` = previous policy; ``lp``: none). With several workers (a
 ``concurrent.futures`` process pool, or Dask when installed and asked for) the grid values are
 independent tasks and are not warm-started.
 """
@@ -49,6 +49,7 @@ import numpy as np
 
 from .files import atomic_write_text, csv_records
 from .errors import WncsError
+from .methods import DEFAULT_METHOD, LP_METHODS, check_method
 from .models.system import System
 from .policies import POLICY_NAMES, make_policy, parse_policy_names
 from .scenario import Scenario
@@ -236,11 +237,12 @@ def compute_point(
     sc = scenario.with_overrides({param: _override_value(param, value)})
     system = System.from_scenario(sc)
     exact = opts.get("exact", True)
+    method = opts.get("method", DEFAULT_METHOD)
     need_mdp = exact or any(p in ("optimal", "best_static") for p in policies)
-    mdp = build(sc) if need_mdp else None
+    need_lp = "optimal" in policies and method in LP_METHODS
+    mdp = build(sc, force=bool(opts.get("force", False)), need_lp=need_lp) if need_mdp else None
     rows: list[SweepRow] = []
     new_warm: dict | None = None
-    method = opts.get("method", "pi")
     for name in policies:
         t0 = time.perf_counter()
         gain = sim_mean = sim_err = math.nan
@@ -250,12 +252,12 @@ def compute_point(
             solution = None
             if name == "optimal":
                 kw: dict[str, Any] = {}
-                if _same_space(mdp, warm):  # pi starts from the previous policy, rvi from its bias
+                if _same_space(mdp, warm):  # pi starts from the previous policy, the others from its bias
                     if method == "pi":
                         kw["policy0"] = warm["policy"]
-                    elif method == "rvi":
+                    elif method in ("rvi", "vi", "auto"):
                         kw["h0"] = warm["bias"]
-                    warm_used = method in ("pi", "rvi")
+                    warm_used = method in ("pi", "rvi", "vi", "auto")
                 solution = solve(mdp, method=method, **kw)
                 new_warm = {"n_pairs": mdp.n_pairs, "space": _space_key(mdp),
                             "bias": solution.bias, "policy": solution.policy}
@@ -324,7 +326,8 @@ def run_sweep(
     policies: Sequence[str] | str = ("optimal", "suboptimal", "static", "greedy"),
     out_dir: str | Path | None = None,
     *,
-    method: str = "pi",
+    method: str = DEFAULT_METHOD,
+    force: bool = False,
     exact: bool = True,
     simulate_slots: int = 0,
     reps: int = 20,
@@ -351,7 +354,11 @@ def run_sweep(
     out_dir : path, optional
         Output folder (created). Without it nothing is written and nothing is resumed.
     method : str
-        Solver of the optimal policy (``pi``, ``rvi``, ``lp``, ``lp-cvxpy``).
+        Solver of the optimal policy (:data:`wncs_lp.methods.METHODS`, default ``"auto"``); every
+        grid value after the first starts from the previous one's answer (``pi``: its policy;
+        ``auto``, ``vi``, ``rvi``: its bias).
+    force : bool
+        Build past the size guard (:func:`wncs_lp.build`).
     exact : bool
         Evaluate every policy exactly on the enumerated MDP (default). With False only
         simulation is done (for scenarios too large to enumerate; ``optimal`` and
@@ -386,8 +393,9 @@ def run_sweep(
         raise WncsError(f"max_workers must be >= 1, got {max_workers}")
     if executor not in EXECUTORS:  # up front: a one-point sweep never builds the executor
         raise WncsError(f"unknown executor {executor!r}; expected one of {', '.join(map(repr, EXECUTORS))}")
+    check_method(method)
     opts = {"method": method, "exact": exact, "simulate_slots": simulate_slots, "reps": reps, "seed": seed,
-            "burn_in": burn_in, "progress": progress}
+            "burn_in": burn_in, "progress": progress, "force": force}
     meta = _meta(scenario, param, opts)
     files: dict[str, str] = {}
     done: dict[tuple[str, str], SweepRow] = {}

@@ -1,6 +1,6 @@
 """Cross-check of ``build_wncs`` against an independent, plain reference (tests/reference/wncs.py).
 
-The reference was written from ``shared/spec/model.md`` sections 1, 2 and 4 alone, without
+The reference was written from the model's specification (now ``docs/model.md``) alone, without
 reading the package's builder.  For every scenario below we compare
 
 1. the numbers of states and state-action pairs;

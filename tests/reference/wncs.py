@@ -1,9 +1,9 @@
 """A deliberately plain reference builder for the Section II "wncs" model.
 
-Written straight from ``shared/spec/model.md`` sections 1, 2 and 4, independently of
+Written straight from the model's specification (now ``docs/model.md``, Section II), independently of
 ``wncs_lp/models/wncs.py`` and ``space.py`` (which the author did not read), so that the two
 can be cross-checked by ``tests/test_wncs_reference.py``.  Everything here is per state and
-per action, with Python loops and dictionaries: slow, but easy to check against the spec text.
+per action, with Python loops and dictionaries: slow, but easy to check against that text.
 
 Representation
 --------------

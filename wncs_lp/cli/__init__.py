@@ -1,7 +1,10 @@
 """The ``wncs-lp`` command line. Thin: parse, call the library, print.
 
 Every subcommand takes a scenario file and ``--set KEY=VALUE`` overrides; with ``--json`` it
-prints exactly one JSON object on stdout (messages and progress go to stderr). Errors from bad
+prints exactly one JSON object on stdout (messages, warnings and progress go to stderr). The
+commands that solve share one ``--method`` vocabulary (:mod:`wncs_lp.methods`, default
+``auto``); ``--progress/--no-progress`` (default: on a terminal without ``--json``) shows the
+phases and the solver's iterations on stderr. Errors from bad
 input print one line ``error: ...`` on stderr and exit with status 2 (with ``--json`` also one
 object ``{"error", "type", "source", "field"}`` on stdout).
 
@@ -44,9 +47,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    import warnings
+
+    from ..errors import ScenarioWarning
+
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            # the commands print a degenerate scenario's warnings themselves, in words (common.load)
+            warnings.filterwarnings("ignore", category=ScenarioWarning)
+            return int(args.func(args) or 0)
     except WncsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         if getattr(args, "json", False):  # --json promises one JSON object on stdout, errors included

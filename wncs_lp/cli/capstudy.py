@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import Command, add_scenario_args, emit_json, head, load
+from .common import Command, add_method_arg, add_scenario_args, emit_json, head, load
 
 
 def cmd_capstudy(args: argparse.Namespace) -> int:
@@ -49,8 +49,7 @@ def _configure(p: argparse.ArgumentParser) -> None:
                    help="stop when the optimal policy's mass at the cap is at most this (default 0.01)")
     p.add_argument("--gain-rtol", type=float, default=1e-3,
                    help="... and the relative change of the gain from the previous cap at most this (default 1e-3)")
-    p.add_argument("--method", default="auto", choices=["auto", "lp", "lp-cvxpy", "rvi", "vi", "pi"],
-                   help="solver of each cap (default auto)")
+    add_method_arg(p, "solver of each cap")
 
 
 COMMANDS = [

@@ -2,9 +2,14 @@
 from __future__ import annotations
 
 import argparse
-from typing import Callable, NamedTuple
+import sys
+from pathlib import Path
+from typing import Callable, NamedTuple, Sequence
 
-__all__ = ["Command", "add_scenario_args", "load", "emit_json", "head"]
+from ..methods import DEFAULT_METHOD, METHOD_HELP, METHODS
+
+__all__ = ["Command", "add_scenario_args", "add_method_arg", "add_progress_arg", "progress_for", "load",
+           "emit_json", "head", "output_file", "warn"]
 
 
 class Command(NamedTuple):
@@ -23,26 +28,80 @@ def emit_json(payload: dict) -> None:
     print(dumps(payload, indent=2))
 
 
+def warn(text: str) -> None:
+    """One ``warning: ...`` line on stderr (never on stdout, so ``--json`` stays clean)."""
+    print(f"warning: {text}", file=sys.stderr, flush=True)
+
+
 def add_scenario_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scenario", help="scenario TOML file (see formulations/)")
+    p.add_argument("scenario", help="scenario TOML file (see formulations/ and docs/scenarios.md)")
     p.add_argument(
         "--set",
         dest="overrides",
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override a field: p=0.8, tau_cap=15, process.2.weight=2, server.edge.p_up=0.7 (repeatable)",
+        help="override a field: p=0.8, tau_cap=15, process.2.weight=2, server.edge.p_up=0.7, "
+             "constraint.1.max=0.3 (repeatable; processes, servers and constraints by 1-based index or name)",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.add_argument("--force", action="store_true",
                    help="build even when the size guard estimates more memory than the machine has available")
 
 
+def add_method_arg(p: argparse.ArgumentParser, what: str = "") -> None:
+    """``--method`` with the one vocabulary of :mod:`wncs_lp.methods` (default auto)."""
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS,
+                   help=(f"{what}: " if what else "") + METHOD_HELP)
+
+
+def add_progress_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="show progress on stderr (phases, value-iteration sweeps with the certificate gap, LP "
+                        "iterations); default: on when stderr is a terminal and --json is not given")
+
+
+def progress_for(args: argparse.Namespace):
+    """The :class:`~wncs_lp.progress.Progress` of a command (on, off, or by the terminal)."""
+    from ..progress import Progress, wanted
+
+    return Progress(wanted(getattr(args, "progress", None), getattr(args, "json", False)))
+
+
 def load(args: argparse.Namespace):
-    """The scenario of ``args.scenario`` with the ``--set`` overrides applied."""
+    """The scenario of ``args.scenario`` with the ``--set`` overrides applied (degenerate
+    scenarios get ``warning:`` lines on stderr)."""
     from ..scenario import load_scenario
 
-    return load_scenario(args.scenario, args.overrides)
+    scenario = load_scenario(args.scenario, args.overrides)
+    for text in scenario.degenerate_warnings():
+        warn(text)
+    return scenario
+
+
+def output_file(path: str, option: str, suffixes: Sequence[str] | None = None) -> Path:
+    """Check an output file before any work: its folder exists (nothing is created) and, with
+    ``suffixes``, its extension is one of them.
+
+    Raises
+    ------
+    WncsError
+        One line naming the option, the path and what is wrong.
+    """
+    from ..errors import WncsError
+
+    out = Path(path)
+    if suffixes is not None and out.suffix.lower().lstrip(".") not in suffixes:
+        found = f"'{out.suffix}'" if out.suffix else "no extension"
+        raise WncsError(f"{option} {path}: expected a file ending in "
+                        f"{', '.join('.' + s for s in suffixes)}, found {found}")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        what = "is not a folder" if parent.exists() else "does not exist"
+        raise WncsError(f"{option} {path}: the folder {parent} {what} (create it first)")
+    if out.is_dir():
+        raise WncsError(f"{option} {path}: is a folder, expected a file name")
+    return out
 
 
 def head(args: argparse.Namespace, scenario, mdp=None) -> dict:

@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 from typing import Sequence
 
-from .common import Command, add_scenario_args, emit_json, load
+from .common import (Command, add_method_arg, add_progress_arg, add_scenario_args, emit_json, load, output_file,
+                     progress_for)
 
 
 def _parse_axes(text: str) -> tuple[int, ...]:
@@ -30,24 +31,34 @@ def _parse_fix(items: Sequence[str]) -> dict[int, int]:
 
 def cmd_map(args: argparse.Namespace) -> int:
     from ..maps import parse_config_spec, region_stats
-    from ..models.guard import build_checked
-    from ..solvers import solve
-    from ..viz import file_backend, plot_policy_map, plot_policy_slice, save_figure
+    from ..methods import CONSTRAINED_METHODS, LP_METHODS
+    from ..viz import file_backend, image_formats, plot_policy_map, plot_policy_slice, save_figure
+    from .solve import build_with_progress
 
     file_backend()
+    # before any work: an image format matplotlib writes, in an existing folder
+    output_file(args.out, "--out", image_formats())
 
     scenario = load(args)
     axes = _parse_axes(args.axes)
     fixed = _parse_fix(args.fix)
-    mdp = build_checked(scenario, force=args.force)
+    prog = progress_for(args)
+    constrained = bool(scenario.constraints) and not args.ignore_constraints
+    mdp, _ = build_with_progress(args, scenario, prog, need_lp=args.method in LP_METHODS)
     config = parse_config_spec(mdp, args.servers)
-    if scenario.constraints and not args.ignore_constraints:
+    if constrained:
         from ..constrained import solve_constrained
 
         # the constrained optimum (randomised states are starred on the map)
-        sol = solve_constrained(mdp, scenario.constraints, "lp" if args.method == "lp" else "auto")
+        method = args.method if args.method in CONSTRAINED_METHODS else "auto"
+        prog.phase(f"solving the constrained problem with method {method}")
+        sol = solve_constrained(mdp, scenario.constraints, method)
     else:
-        sol = solve(mdp, method=args.method)
+        from ..solvers import solve
+
+        prog.phase(f"solving with method {args.method}")
+        sol = solve(mdp, method=args.method, progress=prog)
+    prog.phase(f"drawing the map and writing {args.out}")
     if args.slice is not None:
         axes = axes if len(axes) == 3 else (1, 2, 3)
         ax = plot_policy_slice(mdp, sol, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
@@ -81,10 +92,12 @@ def cmd_map(args: argparse.Namespace) -> int:
 def _configure_map(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
     p.add_argument("--servers", required=True, metavar="SPEC",
-                   help="the configuration: 'idle'; '#ID'; its description as in state labels, e.g. "
+                   help="the configuration: 'idle'; '#ID' (its 0-based id, as configuration_id in --json "
+                        "output); its description as in state labels, e.g. "
                         "'edge: job 3 d=3' (servers not named are idle) or 'b=10 | serving 2(d=2,g=2) | down [-]'; "
                         "or a Python literal of the configuration tuple")
-    p.add_argument("--out", required=True, help="output image (.png, .svg, .pdf)")
+    p.add_argument("--out", required=True, help="output image in an existing folder: .png, .svg, .pdf (or any "
+                                                "format matplotlib writes); checked before the solve")
     p.add_argument("--axes", default="1,2", help="processes on the x,y axes, 1-based (default 1,2); with --slice "
                                                  "three of them (default 1,2,3)")
     p.add_argument("--fix", action="append", default=[], metavar="K=TAU",
@@ -92,11 +105,12 @@ def _configure_map(p: argparse.ArgumentParser) -> None:
                         "most reachable states)")
     p.add_argument("--slice", type=int, default=None, metavar="TOTAL",
                    help="draw the plane tau_i + tau_j + tau_k = TOTAL as a triangle (three processes)")
-    p.add_argument("--method", default="pi", choices=["pi", "rvi", "lp"], help="solver (default: pi)")
+    add_method_arg(p, "solver of the optimal policy (constrained scenarios: auto, lp or lp-cvxpy)")
     p.add_argument("--ignore-constraints", action="store_true",
                    help="map the unconstrained optimum even if the scenario has [[constraint]] tables (by default "
                         "the constrained optimum is drawn, with its randomised states starred)")
     p.add_argument("--dpi", type=int, default=120, help="resolution of raster output (default 120)")
+    add_progress_arg(p)
 
 
 COMMANDS = [

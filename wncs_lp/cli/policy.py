@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import Command, add_scenario_args, emit_json, head, load
+from .common import (Command, add_method_arg, add_progress_arg, add_scenario_args, emit_json, head, load,
+                     progress_for)
 
 
 def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
@@ -12,38 +13,43 @@ def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
         "--policy",
         required=required,
         metavar="NAME",
-        help="optimal, suboptimal, static, best_static, greedy or random",
+        help="optimal (solved exactly), suboptimal (the paper's separable policy), static (one fixed server per "
+        "process), best_static (the best static assignment, by exact evaluation), greedy (the process of largest "
+        "current cost first, to its shortest-loop server) or random (uniform over the feasible actions)",
     )
-    p.add_argument(
-        "--method",
-        default="pi",
-        choices=["lp", "lp-cvxpy", "rvi", "pi"],
-        help="solver of the optimal policy (default: pi; pi falls back to rvi on a multichain iterate)",
-    )
+    add_method_arg(p, "solver of the optimal policy")
     p.add_argument(
         "--assignment",
         default=None,
         metavar="SERVERS",
         help="static policy: one server per process, by name or 1-based index, e.g. remote,edge "
-        "(default: the paper's assignment, see policies.md)",
+        "(default: the paper's: the largest process to the server with its shortest loop U + T + D, every "
+        "other process to the other server(s); docs/policies.md)",
     )
+    add_progress_arg(p)
 
 
-def _policy(args: argparse.Namespace, scenario, *, need_mdp: bool):
+def _policy(args: argparse.Namespace, scenario, *, need_mdp: bool, prog=False):
     from ..policies import policy_for
 
     return policy_for(scenario, args.policy, method=args.method, assignment=args.assignment,
-                      need_mdp=need_mdp, force=args.force)
+                      need_mdp=need_mdp, force=args.force, progress=prog)
 
 
 # ----------------------------------------------------------------------------- evaluate
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from ..evaluate import evaluate
+    from ..errors import PolicyError
+    from ..evaluate import MultichainEvaluationError, evaluate
 
     scenario = load(args)
-    made = _policy(args, scenario, need_mdp=True)
+    prog = progress_for(args)
+    made = _policy(args, scenario, need_mdp=True, prog=prog)
     mdp, policy = made.mdp, made.policy
-    ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error")
+    prog.phase(f"evaluating the {policy.name} policy exactly (its chain's stationary law)")
+    try:
+        ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error")
+    except MultichainEvaluationError as exc:
+        raise PolicyError(f"{exc.detail} (rerun with --from-initial for the averages from the initial state)") from None
     payload = {
         **head(args, scenario, mdp),
         **ev.to_dict(),
@@ -82,10 +88,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from ..simulate import simulate
 
     scenario = load(args)
-    made = _policy(args, scenario, need_mdp=False)
+    prog = progress_for(args)
+    made = _policy(args, scenario, need_mdp=False, prog=prog)
     policy = made.policy
-    progress = False if (args.no_progress or args.json and not sys.stderr.isatty()) else None
-    res = simulate(policy, slots=args.slots, reps=args.reps, seed=args.seed, burn_in=args.burn_in, progress=progress)
+    res = simulate(policy, slots=args.slots, reps=args.reps, seed=args.seed, burn_in=args.burn_in,
+                   progress=prog.enabled)
     payload = {
         **head(args, scenario),
         "configs": made.system.n_configs,
@@ -111,7 +118,6 @@ def _configure_simulate(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reps", type=int, default=20, help="independent replications (default 20)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--burn-in", type=int, default=1000, help="slots discarded first (default 1000)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 # ----------------------------------------------------------------------------- sweep
@@ -127,6 +133,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         args.policies,
         args.out,
         method=args.method,
+        force=args.force,
         exact=not args.no_exact,
         simulate_slots=args.simulate_slots,
         reps=args.reps,
@@ -168,8 +175,7 @@ def _configure_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policies", default="optimal,suboptimal,static,greedy",
                    help="comma list from optimal,suboptimal,static,best_static,greedy,random")
     p.add_argument("--out", required=True, help="output folder (resumed when it holds rows)")
-    p.add_argument("--method", default="pi", choices=["lp", "lp-cvxpy", "rvi", "pi"],
-                   help="solver of the optimal policy (default pi)")
+    add_method_arg(p, "solver of the optimal policy at every grid value")
     p.add_argument("--simulate-slots", type=int, default=0, help="also simulate each policy for this many slots")
     p.add_argument("--reps", type=int, default=20, help="replications when simulating (default 20)")
     p.add_argument("--seed", type=int, default=0, help="simulation seed (default 0)")

@@ -4,40 +4,65 @@ from __future__ import annotations
 import argparse
 import time
 
-from .common import Command, add_scenario_args, emit_json, head, load
+from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD, LP_METHODS, METHOD_HELP, METHODS
+from .common import Command, add_progress_arg, add_scenario_args, emit_json, head, load, output_file, progress_for
 
-#: Methods of an unconstrained solve, and of a constrained one (a scenario with [[constraint]] tables).
-UNCONSTRAINED_METHODS = ("auto", "lp", "lp-cvxpy", "rvi", "vi", "pi")
-CONSTRAINED_METHODS = ("auto", "lp", "lp-cvxpy", "lagrangian")
+#: Methods of an unconstrained solve (:data:`wncs_lp.methods.METHODS`), and of a constrained one.
+UNCONSTRAINED_METHODS = METHODS
+
+
+def build_with_progress(args: argparse.Namespace, scenario, prog, *, need_lp: bool = False):
+    """The scenario's MDP after the size guard (with ``need_lp``: the LP's memory counted too),
+    with the phases on ``prog``; returns ``(mdp, build seconds)``."""
+    from ..models.guard import build_checked
+
+    t0 = time.perf_counter()
+    prog.phase(f"building the MDP of {scenario.source} (size guard first{', LP memory included' if need_lp else ''})")
+    mdp = build_checked(scenario, force=args.force, need_lp=need_lp)
+    t_build = time.perf_counter() - t0
+    prog.phase(f"built: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs, {mdp.P.nnz:,} transitions "
+               f"in {t_build:.2f} s")
+    return mdp, t_build
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
     from ..errors import SolverError
-    from ..models.guard import build_checked
 
+    if args.out is not None:
+        output_file(args.out, "--out")  # before any work: its folder must exist
     scenario = load(args)
     constrained = bool(scenario.constraints) and not args.ignore_constraints
     allowed = CONSTRAINED_METHODS if constrained else UNCONSTRAINED_METHODS
     if args.method not in allowed:
         what = "a scenario with [[constraint]] tables" if constrained else "an unconstrained scenario"
         raise SolverError(f"--method {args.method} does not solve {what}; expected one of {', '.join(allowed)}")
+    prog = progress_for(args)
     t0 = time.perf_counter()
-    mdp = build_checked(scenario, force=args.force, need_lp=constrained and args.method in ("lp", "lp-cvxpy"))
-    t_build = time.perf_counter() - t0
+    mdp, t_build = build_with_progress(args, scenario, prog, need_lp=args.method in LP_METHODS)
     if constrained:
-        return _constrained(args, scenario, mdp, t0, t_build)
+        return _constrained(args, scenario, mdp, t0, t_build, prog)
     from ..solvers import solve
-
     from ..truncation import policy_cap_mass
 
-    sol = solve(mdp, method=args.method)
+    prog.phase(f"solving with method {args.method}")
+    sol = solve(mdp, method=args.method, progress=prog)
+    if sol.pair_actions is None:
+        import dataclasses
+
+        sol = dataclasses.replace(sol, pair_actions=mdp.a_indices)
+    prog.phase("measuring the optimal policy's time at the AoI cap")
     cap = policy_cap_mass(mdp, sol.policy)
+    extra = {}
+    if args.out is not None:
+        extra["out"] = str(_save(args, scenario, mdp, sol, prog))
     if args.json:
-        emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build))
+        emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, **extra))
     else:
         _header(scenario, mdp, t_build)
         used = f"{sol.method} -> {sol.stats['auto_choice']}" if "auto_choice" in sol.stats else sol.method
         print(f"method {used}: status {sol.status}, {sol.iterations} iterations, {sol.seconds:.2f} s")
+        if not sol.ok:
+            print(f"  ({sol.message})")
         print(f"optimal average cost (gain): {sol.gain:.10g}")
         print(f"certificate: {sol.gain_lower:.12g} <= g* <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e})")
         if "auto_choice" in sol.stats:
@@ -45,10 +70,19 @@ def cmd_solve(args: argparse.Namespace) -> int:
             print(f"auto: chose {st['auto_choice']} ({st['auto_reason']})")
             if st.get("cross_check_method"):
                 verdict = {True: "agrees", False: "DISAGREES", None: "failed"}[st.get("cross_check_agree")]
-                extra = f", relative difference {st['cross_check_rel_diff']:.2e}" if "cross_check_rel_diff" in st else ""
-                print(f"cross-check with {st['cross_check_method']}: {verdict}{extra}")
+                diff = f", relative difference {st['cross_check_rel_diff']:.2e}" if "cross_check_rel_diff" in st else ""
+                print(f"cross-check with {st['cross_check_method']}: {verdict}{diff}")
         print(f"truncation: under the optimal policy {cap.message()}")
+        if "out" in extra:
+            print(f"policy and bias written to {extra['out']} (format: see wncs_lp.export)")
     return 0 if sol.ok else 1
+
+
+def _save(args: argparse.Namespace, scenario, mdp, sol, prog):
+    from ..export import save_solution_npz
+
+    prog.phase(f"writing the policy and the bias to {args.out}")
+    return save_solution_npz(args.out, mdp, sol, scenario=scenario)
 
 
 def _payload(args: argparse.Namespace, scenario, mdp, sol, cap, t0: float, t_build: float, **extra) -> dict:
@@ -62,14 +96,18 @@ def _header(scenario, mdp, t_build: float) -> None:
     print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs, built in {t_build:.2f} s")
 
 
-def _constrained(args: argparse.Namespace, scenario, mdp, t0: float, t_build: float) -> int:
+def _constrained(args: argparse.Namespace, scenario, mdp, t0: float, t_build: float, prog) -> int:
     from ..constrained import solve_constrained
     from ..truncation import cap_mass
 
+    prog.phase(f"solving the constrained problem ({len(scenario.constraints)} bound(s)) with method {args.method}")
     sol = solve_constrained(mdp, scenario.constraints, args.method)
     cap = cap_mass(mdp, sol.occupation)
+    extra = {}
+    if args.out is not None:
+        extra["out"] = str(_save(args, scenario, mdp, sol, prog))
     if args.json:
-        emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, mixes=sol.mixes(mdp)))
+        emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, mixes=sol.mixes(mdp), **extra))
         return 0 if sol.ok else 1
     _header(scenario, mdp, t_build)
     print(f"constrained solve ({sol.method}): status {sol.status}, {sol.seconds:.2f} s")
@@ -87,6 +125,8 @@ def _constrained(args: argparse.Namespace, scenario, mdp, t0: float, t_build: fl
     else:
         print("the policy is deterministic (no bound forces a mix)")
     print(f"truncation: under the returned policy {cap.message()}")
+    if "out" in extra:
+        print(f"policy written to {extra['out']} (format: see wncs_lp.export)")
     return 0 if sol.ok else 1
 
 
@@ -94,17 +134,18 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
     p.add_argument(
         "--method",
-        default="auto",
-        choices=sorted(set(UNCONSTRAINED_METHODS) | set(CONSTRAINED_METHODS)),
-        help="auto: LP or value iteration by size, cross-checked when both are cheap (says which); "
-        "lp: occupation-measure LP on Clarabel (direct); lp-cvxpy: same LP through cvxpy; "
-        "rvi: relative value iteration; vi: certified value iteration on the fused kernel; "
-        "pi: policy iteration; lagrangian: (constrained scenarios, one bound) multiplier search with "
-        "certified value iteration. A scenario with [[constraint]] tables takes auto, lp, lp-cvxpy or "
-        "lagrangian (default: auto)",
+        default=DEFAULT_METHOD,
+        choices=METHODS + ("lagrangian",),
+        help=METHOD_HELP + "; and for a scenario with [[constraint]] tables: auto, lp, lp-cvxpy or lagrangian "
+        "(one bound: multiplier search with certified value iteration)",
     )
     p.add_argument("--ignore-constraints", action="store_true",
                    help="solve the unconstrained problem even if the scenario has [[constraint]] tables")
+    p.add_argument("--out", default=None, metavar="FILE.npz",
+                   help="also write the optimal policy and the bias (and the action per state, the state decoding "
+                        "and the certificate) to this .npz file, in an existing folder; numpy.load reads it "
+                        "(format: wncs_lp.export.save_solution_npz)")
+    add_progress_arg(p)
 
 
 COMMANDS = [

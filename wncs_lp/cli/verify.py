@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from .common import Command, add_scenario_args, emit_json, head, load
+from .common import Command, add_method_arg, add_scenario_args, emit_json, head, load
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
@@ -56,7 +56,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
 def _configure_verify(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
-    p.add_argument("--method", default="pi", choices=["pi", "rvi", "lp"], help="solver (default: pi)")
+    add_method_arg(p)
     p.add_argument("--atol", type=float, default=1e-9, help="absolute part of the tie tolerance (default 1e-9)")
     p.add_argument("--rtol", type=float, default=1e-9,
                    help="part of the tie tolerance relative to span(V) = max V - min V (default 1e-9)")

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from ..files import scalars
+from ..status import status_code, status_message
 
 __all__ = ["ConstraintReport", "ConstrainedSolution"]
 
@@ -76,7 +77,9 @@ class ConstrainedSolution:
         ``"optimal"`` when the certificate closes to the requested tolerance and the returned
         policy meets every bound within the feasibility tolerance; otherwise
         ``"inaccurate:<why>"`` (``certificate``, ``infeasible_policy``, ``multichain``, the
-        solver's own status...).
+        solver's own status...). As for :class:`~wncs_lp.solvers.result.Solution`,
+        :attr:`status_code` is one of the codes of :mod:`wncs_lp.status` and :attr:`message`
+        says it in words.
     gain : float
         The exact average cost of the returned policy (= ``gain_upper`` when it is feasible).
     gain_lower, gain_upper : float
@@ -128,6 +131,16 @@ class ConstrainedSolution:
         return (self.gain_upper - self.gain_lower) / max(abs(self.gain), 1e-300)
 
     @property
+    def status_code(self) -> str:
+        """The status as one of :data:`wncs_lp.status.STATUS_CODES`."""
+        return status_code(self.status)
+
+    @property
+    def message(self) -> str:
+        """What the status means, in words."""
+        return status_message(self.status)
+
+    @property
     def n_randomized(self) -> int:
         return int(self.randomized_states.size)
 
@@ -159,6 +172,8 @@ class ConstrainedSolution:
         out = {
             "method": self.method,
             "status": self.status,
+            "status_code": self.status_code,
+            "message": self.message,
             "gain": float(self.gain),
             "gain_lower": float(self.gain_lower),
             "gain_upper": float(self.gain_upper),

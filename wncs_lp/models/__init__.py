@@ -55,6 +55,40 @@ def model_type(mdp: MDP) -> type[Model]:
     return WncsModel
 
 
-def build(scenario: Scenario, model: Model | None = None) -> MDP:
-    """Build the MDP of a scenario (``model``: a :class:`Model` of it whose automaton to reuse)."""
-    return (model if model is not None else model_for(scenario)).build()
+def build(scenario: Scenario, model: Model | None = None, *, force: bool = False, need_lp: bool = False) -> MDP:
+    """Build the MDP of a scenario, after the size guard.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    model : Model, optional
+        A :class:`Model` of the scenario whose explored automaton to reuse.
+    force : bool
+        Build even when the size guard estimates more memory than half of what is available
+        now (:func:`wncs_lp.models.guard.check_size`); the estimate itself is cheap (the
+        automaton times per-axis AoI sets, no state enumerated).
+    need_lp : bool
+        Count the memory of an interior-point LP solve too (for ``method="lp"``/``"lp-cvxpy"``).
+
+    Warns
+    -----
+    ScenarioWarning
+        A degenerate scenario (:meth:`~wncs_lp.scenario.Scenario.degenerate_warnings`).
+
+    Raises
+    ------
+    SizeLimitError
+        (a :class:`~wncs_lp.errors.WncsError`) the estimate exceeds the limit: the message gives
+        the estimated states, pairs, nonzeros and memory, the limit, and cheaper routes;
+        ``exc.estimate`` holds the :class:`~wncs_lp.models.guard.SizeEstimate`.
+    """
+    import warnings
+
+    from ..errors import ScenarioWarning
+    from .guard import check_size
+
+    for text in scenario.degenerate_warnings():
+        warnings.warn(text, ScenarioWarning, stacklevel=2)
+    model = model if model is not None else model_for(scenario)
+    check_size(scenario, force=force, need_lp=need_lp, model=model)
+    return model.build()

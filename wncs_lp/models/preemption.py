@@ -1,4 +1,4 @@
-"""The Section IV model (``model.md`` section 3): one server with processing preemption.
+"""The Section IV model (``docs/model.md``, "Section IV"): one server with processing preemption.
 
 Every slot every sensor transmits on its own orthogonal channel; the update of process k reaches
 the server with probability ``pu`` (independently per process). The scheduler then chooses which
@@ -40,7 +40,7 @@ reported preemption is strictly better than continuing.
   cases a stacked job of process k is discarded. Restarting the same process (``a = k`` while
   serving k) is allowed.
 
-One slot (the spec's order, resolved as follows)
+One slot (the order of ``docs/model.md``, resolved as follows)
 ------------------------------------------------
 1. The action is applied (push / cancel / discard as above).
 2. Service: the job in service (if any, including one started at step 1) gets one slot,
@@ -71,7 +71,7 @@ Initial configurations: every ``b`` in {0,1}^N with an idle server, an empty sta
 downlink; the state space is what is reachable from those times the whole tau box (with
 pu in {0, 1} some of those initial ``b`` are never reached again but remain states).
 
-With this reading the spec's reference row (processes 1, 2, remote server U = D = 1,
+With this reading the reference row (processes 1, 2, remote server U = D = 1,
 T_k = n_k, p = 0.9, tau_hat = 12; ``formulations/paper_preemption_p12.toml``) has 692
 configurations, 23,268 states, 46,536 state-action pairs and optimal gain 1078.548921698
 (``tests/models/test_preemption.py``). The paper's own recursion (its T_1/T_2/E_t equations) keeps one

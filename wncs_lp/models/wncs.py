@@ -9,7 +9,7 @@ A server's configuration is the tuple ``(up, job, d, down)``:
   completed ``i + 1`` slots ago (0 = empty); ``down[D - 1]`` is delivered this slot.
 
 A joint configuration is the tuple of the servers' configurations. One slot of one server, for
-an action (the process sent to it, or 0), follows the order of the spec exactly:
+an action (the process sent to it, or 0), follows the order of ``docs/model.md`` exactly:
 uplink loss -> start at once if U = 0 -> service -> downlink -> start from the uplink if U >= 1
 -> downlink loss. A delivered command of process k sets delta_k = U + T_k + D (its age).
 """

@@ -7,6 +7,7 @@ from typing import Any, Sequence
 
 from ..errors import PolicyError
 from ..mdp import MDP
+from ..methods import DEFAULT_METHOD, LP_METHODS
 from ..models.system import System
 from ..solvers import solve
 from .base import Policy
@@ -26,9 +27,10 @@ def make_policy(
     system: System,
     mdp: MDP | None = None,
     *,
-    method: str = "pi",
+    method: str = DEFAULT_METHOD,
     solution: Any = None,
     assignment: Sequence[int] | None = None,
+    progress: Any = False,
 ) -> Policy:
     """Build a policy by name.
 
@@ -40,11 +42,13 @@ def make_policy(
         Needed by ``optimal`` (solved with ``method`` unless ``solution`` is given) and
         ``best_static`` (exact evaluation of every assignment).
     method : str
-        Solver method for ``optimal`` (default ``"pi"``).
+        Solver method for ``optimal`` (:data:`wncs_lp.methods.METHODS`, default ``"auto"``).
     solution : Solution, optional
         A solution of ``mdp`` to wrap instead of solving.
     assignment : sequence of int, optional
         For ``static`` (0-based servers); default :func:`default_assignment`.
+    progress : bool or Progress
+        The solver's progress on stderr (``optimal``).
 
     Raises
     ------
@@ -57,7 +61,7 @@ def make_policy(
         raise PolicyError(f"policy {name!r} needs the enumerated MDP")
     if name == "optimal":
         if solution is None:
-            solution = solve(mdp, method=method)
+            solution = solve(mdp, method=method, progress=progress)
         return OptimalPolicy(mdp, solution, system)
     if name == "suboptimal":
         return SuboptimalPolicy(system)
@@ -102,6 +106,10 @@ def parse_assignment(text: str | None, scenario: Any) -> list[int] | None:
             out.append(names.index(item))
         else:
             raise PolicyError(f"--assignment: {item!r} is not a server; expected a name from {names} or 1..{len(names)}")
+    n = len(scenario.processes)
+    if len(out) != n:
+        raise PolicyError(f"--assignment {text!r}: expected one server per process ({n} processes, e.g. "
+                          f"{','.join(names[k % len(names)] for k in range(n))}), found {len(out)}")
     return out
 
 
@@ -120,10 +128,11 @@ def policy_for(
     scenario: Any,
     name: str,
     *,
-    method: str = "pi",
+    method: str = DEFAULT_METHOD,
     assignment: str | Sequence[int] | None = None,
     need_mdp: bool = False,
     force: bool = False,
+    progress: Any = False,
 ) -> PolicySetup:
     """Build a scenario's system, its MDP when needed, and the policy ``name`` on them.
 
@@ -136,13 +145,16 @@ def policy_for(
     name : str
         One of :data:`POLICY_NAMES`.
     method : str
-        Solver method of ``optimal`` (default ``"pi"``).
+        Solver method of ``optimal`` (:data:`wncs_lp.methods.METHODS`, default ``"auto"``); with
+        ``"lp"``/``"lp-cvxpy"`` the size guard counts the LP's memory too.
     assignment : str or sequence of int, optional
         For ``static``: text for :func:`parse_assignment` or 0-based server indices.
     need_mdp : bool
         Build the MDP even when the policy does not need it (for an exact evaluation).
     force : bool
         Build even when the size guard refuses.
+    progress : bool or Progress
+        Phases and the solver's progress on stderr.
 
     Raises
     ------
@@ -152,15 +164,24 @@ def policy_for(
         The MDP is too large and ``force`` is False.
     """
     from ..models.guard import build_checked
+    from ..progress import as_progress
 
     if name not in POLICY_NAMES:
         raise PolicyError(f"unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
+    prog = as_progress(progress)
     t0 = time.perf_counter()
     if isinstance(assignment, str):
         assignment = parse_assignment(assignment, scenario)
     system = System.from_scenario(scenario)
     mdp = None
     if name in ("optimal", "best_static") or need_mdp:
-        mdp = build_checked(scenario, force=force)
-    policy = make_policy(name, system, mdp, method=method, assignment=assignment)
+        need_lp = name == "optimal" and method in LP_METHODS
+        prog.phase(f"building the MDP of {scenario.source} (size guard first{', LP memory included' if need_lp else ''})")
+        mdp = build_checked(scenario, force=force, need_lp=need_lp)
+        prog.phase(f"built: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs")
+    if name == "optimal":
+        prog.phase(f"solving for the optimal policy with method {method}")
+    elif name == "best_static":
+        prog.phase("evaluating every static assignment exactly")
+    policy = make_policy(name, system, mdp, method=method, assignment=assignment, progress=prog)
     return PolicySetup(system, mdp, policy, time.perf_counter() - t0)

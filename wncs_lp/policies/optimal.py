@@ -7,6 +7,7 @@ import numpy as np
 
 from ..errors import PolicyError
 from ..mdp import MDP
+from ..methods import DEFAULT_METHOD
 from ..models import build
 from ..models.system import System
 from ..scenario import Scenario
@@ -47,9 +48,10 @@ class OptimalPolicy(Policy):
         self._local = pol - mdp.pair_ptr[:-1]
 
     @classmethod
-    def from_scenario(cls, scenario: Scenario, method: str = "pi", system: System | None = None,
+    def from_scenario(cls, scenario: Scenario, method: str = DEFAULT_METHOD, system: System | None = None,
                       mdp: MDP | None = None, **solve_kw: Any) -> "OptimalPolicy":
-        """Build the MDP (unless given), solve it with ``method`` and wrap the solution."""
+        """Build the MDP (unless given; after the size guard, :func:`wncs_lp.build`), solve it with
+        ``method`` (:data:`wncs_lp.methods.METHODS`, default ``"auto"``) and wrap the solution."""
         system = system or System.from_scenario(scenario)
         mdp = mdp if mdp is not None else build(scenario)
         return cls(mdp, solve(mdp, method=method, **solve_kw), system)

@@ -27,6 +27,7 @@ from typing import Any
 
 from ..errors import SolverError
 from ..mdp import MDP
+from ..progress import Progress, as_progress
 from .result import Solution
 
 __all__ = ["solve_auto", "LP_SMALL_PAIRS", "LP_MAX_PAIRS", "CROSS_CHECK_MAX_PAIRS"]
@@ -58,6 +59,8 @@ def solve_auto(
     lp_options: dict | None = None,
     vi_options: dict | None = None,
     h0: Any = None,
+    tol: float | None = None,
+    progress: bool | Progress = False,
 ) -> Solution:
     """Solve with the LP or value iteration, chosen by size and ``need``; see the module doc.
 
@@ -76,6 +79,11 @@ def solve_auto(
         Keyword arguments of :func:`solve_lp` / :func:`value_iteration`.
     h0 : array, optional
         Warm start for value iteration.
+    tol : float, optional
+        The relative certificate width asked for: value iteration's ``tol`` and the LP's
+        ``cert_rtol`` (unless ``vi_options`` / ``lp_options`` set them).
+    progress : bool or Progress
+        Show the choice, then the chosen method's progress and the cross-check's, on stderr.
     """
     import time
 
@@ -91,6 +99,13 @@ def solve_auto(
     vi_kw = dict(vi_options or {})
     if h0 is not None:
         vi_kw.setdefault("h0", h0)
+    if tol is not None:
+        vi_kw.setdefault("tol", tol)
+        lp_kw.setdefault("cert_rtol", tol)
+    prog = as_progress(progress)
+    if prog.enabled:
+        vi_kw.setdefault("progress", prog)
+        lp_kw.setdefault("progress", prog)
     if need in ("occupation", "lp"):
         if L <= lp_max_pairs:
             choice, reason = "lp", f"need={need} and {L} pairs <= {lp_max_pairs}"
@@ -104,6 +119,7 @@ def solve_auto(
     def run(which: str) -> Solution:
         return solve_lp(mdp, **lp_kw) if which == "lp" else value_iteration(mdp, **vi_kw)
 
+    prog.phase(f"[auto] {reason}: solving with {'the LP' if choice == 'lp' else 'value iteration'}")
     sol = run(choice)
     stats = dict(sol.stats)
     stats.update(method_requested="auto", auto_choice=choice, auto_reason=reason,
@@ -111,6 +127,8 @@ def solve_auto(
     status = sol.status
     if L <= cross_check_max_pairs:
         other = "vi" if choice == "lp" else "lp"
+        prog.phase(f"[auto] {L} pairs <= {cross_check_max_pairs}: cross-checking with "
+                   f"{'the LP' if other == 'lp' else 'value iteration'}")
         try:
             o = run(other)
         except SolverError as exc:  # the cross-check failing is reported, not raised

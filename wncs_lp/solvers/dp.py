@@ -5,7 +5,6 @@ use) the certificate of :mod:`wncs_lp.solvers.certify`.
 """
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass
 
@@ -16,6 +15,7 @@ import scipy.sparse.linalg as spla
 from ..chain import class_stationary, policy_matrices, recurrent_classes
 from ..errors import PolicyError, SolverError
 from ..mdp import MDP
+from ..progress import Progress, as_progress
 from .certify import bracket, certificate_closed, greedy_first, q_values
 from .result import Solution
 
@@ -227,7 +227,7 @@ def relative_value_iteration(
     aperiodicity: float = 0.5,
     h0: np.ndarray | None = None,
     ref_state: int = 0,
-    progress: bool = False,
+    progress: bool | Progress = False,
     kernel: str = "auto",
     threads: int | None = None,
 ) -> Solution:
@@ -264,8 +264,9 @@ def relative_value_iteration(
         Warm start, in the scale of the original bias (e.g. a previous ``Solution.bias``).
     ref_state : int
         The state whose value is subtracted each sweep.
-    progress : bool
-        Print the certificate to stderr every 1000 sweeps.
+    progress : bool or Progress
+        Show the sweeps and the certificate on stderr (:mod:`wncs_lp.progress`: one line
+        rewritten on a terminal).
     kernel : {"auto", "numba", "scipy"}
         The sweep kernel (:mod:`wncs_lp.solvers.kernels`): numba's fused single pass when
         importable (``"auto"``), else scipy's mat-vec + ``reduceat``. Same iterates up to
@@ -298,6 +299,7 @@ def relative_value_iteration(
         K = get_kernel(mdp, kernel, threads)
     except ValueError as exc:
         raise SolverError(str(exc)) from exc
+    prog = as_progress(progress)
     converged = False
     lo = hi = np.nan
     h_next = np.empty(n)
@@ -309,13 +311,19 @@ def relative_value_iteration(
         if width <= tol * abs(0.5 * (lo + hi)) or width <= atol:
             converged = True
             break
-        if progress and it % 1000 == 0:
-            print(f"[rvi] it={it} lo={lo:.12g} hi={hi:.12g} rel={width / max(abs(0.5 * (lo + hi)), 1e-300):.3g}",
-                  file=sys.stderr)
+        if prog.enabled and prog.due():
+            prog.tick(_cert_line("rvi", it, lo, hi, tol))
         h_next -= h_next[ref_state]
         h, h_next = h_next, h
+    prog.done(_cert_line("rvi", it, lo, hi, tol))
     return _iteration_solution(mdp, "rvi", h, lo, hi, converged, it, t0,
                                {"tau": tau, "tol": tol, "kernel": K.name, "threads": K.threads})
+
+
+def _cert_line(name: str, sweeps: int, lo: float, hi: float, tol: float) -> str:
+    """One progress line of a value iteration: the sweeps and the certificate gap against its target."""
+    rel = (hi - lo) / max(abs(0.5 * (lo + hi)), 1e-300)
+    return f"[{name}] sweep {sweeps:,}: {lo:.10g} <= g* <= {hi:.10g}, gap {rel:.2e} (target {tol:.0e})"
 
 
 def _iteration_solution(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: float, converged: bool,
@@ -338,6 +346,7 @@ def _iteration_solution(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: flo
         iterations=iterations,
         seconds=time.perf_counter() - t0,
         stats={**stats, "span": hi - lo, "rel_gap": (hi - lo) / max(abs(gain), 1e-300), "converged": converged},
+        pair_actions=mdp.a_indices,
     )
 
 
@@ -360,7 +369,7 @@ def value_iteration(
     kernel: str = "auto",
     threads: int | None = None,
     stall_checks: int = 40,
-    progress: bool = False,
+    progress: bool | Progress = False,
 ) -> Solution:
     """Certified average-cost value iteration: Gauss-Seidel / modified policy iteration sweeps.
 
@@ -409,8 +418,8 @@ def value_iteration(
         numba threads of the Jacobi sweeps (default 1; the in-place sweeps are sequential;
         >= 2 uses numba's parallel layer, not fork-safe with GNU OpenMP).
     stall_checks : int
-    progress : bool
-        Print the certificate to stderr at every check.
+    progress : bool or Progress
+        Show the sweeps and the certificate gap on stderr as it shrinks (:mod:`wncs_lp.progress`).
 
     Returns
     -------
@@ -440,6 +449,7 @@ def value_iteration(
     if scheme in ("mpi", "gs") and not K.supports_gauss_seidel:
         raise SolverError(f"scheme {scheme!r} needs in-place sweeps, which the {K.name} kernel does not have")
     h = _initial_bias(h0, n, 0)
+    prog = as_progress(progress)
     h_next = np.empty(n)
     pol = mdp.pair_ptr[:-1].astype(np.int64)
     n_eval = eval_sweeps if scheme == "mpi" else 0
@@ -471,9 +481,8 @@ def value_iteration(
         checks += 1
         width = hi - lo
         mid = 0.5 * (lo + hi)
-        if progress:
-            print(f"[vi:{cur}] sweeps={used} lo={lo:.12g} hi={hi:.12g} rel={width / max(abs(mid), 1e-300):.3g}",
-                  file=sys.stderr)
+        if prog.enabled and prog.due():
+            prog.tick(_cert_line(f"vi:{cur}", used, lo, hi, tol))
         if width <= tol * abs(mid) or width <= atol:
             converged = True
             break
@@ -488,6 +497,7 @@ def value_iteration(
         h, h_next = h_next, h
     from .kernels import prepare
 
+    prog.done(_cert_line(f"vi:{cur}", used, lo, hi, tol))
     return _iteration_solution(mdp, "vi", h, lo, hi, converged, used, t0, {
         "scheme": scheme,
         "kernel": K.name,
@@ -521,11 +531,14 @@ def policy_iteration(
     mdp: MDP,
     *,
     policy0: np.ndarray | None = None,
+    h0: np.ndarray | None = None,
     max_iter: int = 100,
+    tol: float | None = None,
     rtol: float = 1e-12,
-    cert_rtol: float = 1e-6,
+    cert_rtol: float | None = None,
     multichain: str = "fallback",
     kernel: str = "auto",
+    progress: bool | Progress = False,
 ) -> Solution:
     """Howard's policy iteration for unichain average-cost MDPs.
 
@@ -542,12 +555,18 @@ def policy_iteration(
     mdp : MDP
     policy0 : (n,) int array, optional
         Initial pair indices; default the cheapest pair of each state (greedy for h = 0).
+    h0 : (n,) array, optional
+        Warm start as a bias (the keyword value iteration takes): policy iteration starts from
+        its greedy policy. Give ``policy0`` or ``h0``, not both.
     max_iter : int
         Maximum number of evaluations.
+    tol : float, optional
+        The relative certificate width (hi - lo)/|g| required for status ``"optimal"`` (the
+        keyword every method takes; default 1e-6). ``cert_rtol`` is its older name.
     rtol : float
         Relative tie tolerance for keeping the current action.
-    cert_rtol : float
-        Status is ``"optimal"`` only if the policy is stable and (hi - lo)/|g| <= cert_rtol.
+    cert_rtol : float, optional
+        Same as ``tol`` (give one of them).
     multichain : {"fallback", "raise"}
         What to do when an iterate induces several recurrent classes (exact evaluation is
         then undefined; it happens at p = 1, e.g. the preemption paper instance). With
@@ -558,6 +577,8 @@ def policy_iteration(
         ``"raise"`` re-raises the :class:`MultichainPolicyError`.
     kernel : str
         Sweep kernel of the fallback value iteration.
+    progress : bool or Progress
+        Show each improvement (gain of the evaluated policy, states changed) on stderr.
 
     Returns
     -------
@@ -569,9 +590,22 @@ def policy_iteration(
     ------
     PolicyError
         A malformed ``policy0``; with ``multichain="raise"``, a multichain iterate.
+    SolverError
+        ``tol`` and ``cert_rtol`` both given and different, ``policy0`` and ``h0`` both given,
+        or a bad ``h0``.
     """
     t0 = time.perf_counter()
-    if policy0 is None:
+    if tol is not None and cert_rtol is not None and tol != cert_rtol:
+        raise SolverError(f"policy iteration: give tol or its older name cert_rtol, not both ({tol} and {cert_rtol})")
+    cert_rtol = float(tol if tol is not None else cert_rtol if cert_rtol is not None else 1e-6)
+    if not cert_rtol >= 0:
+        raise SolverError(f"tol must be >= 0, got {cert_rtol}")
+    prog = as_progress(progress)
+    if policy0 is not None and h0 is not None:
+        raise SolverError("policy iteration starts from policy0 or from the greedy policy of h0, not both")
+    if h0 is not None:
+        d = greedy_first(mdp, q_values(mdp, _initial_bias(h0, mdp.n_states, 0)))
+    elif policy0 is None:
         d = greedy_first(mdp, mdp.cost)
     else:
         d = np.asarray(policy0)
@@ -595,7 +629,8 @@ def policy_iteration(
             if vi is not None:  # the value-iteration policy is multichain too: its certificate stands
                 fallback = f"value iteration (its greedy policy is multichain too: {exc})"
                 return _vi_as_pi(mdp, vi, t0, it, changes, fallback, cert_rtol)
-            vi = value_iteration(mdp, h0=None if ev is None else ev.bias, kernel=kernel)
+            prog.phase(f"[pi] iterate {it} is multichain: value iteration, then policy iteration from its policy")
+            vi = value_iteration(mdp, h0=None if ev is None else ev.bias, kernel=kernel, progress=prog)
             fallback = f"iterate {it} multichain; restarted from the value-iteration policy ({vi.iterations} sweeps)"
             d = vi.policy.astype(np.int64)
             changes.append(-1)
@@ -605,6 +640,8 @@ def policy_iteration(
         d_new = _improve(mdp, q, d, rtol)
         nchg = int(np.count_nonzero(d_new != d))
         changes.append(nchg)
+        prog.tick(f"[pi] iteration {it}: gain of the evaluated policy {ev.gain:.10g}, {nchg:,} states improve",
+                  force=True)
         if nchg == 0:
             stable = True
             break
@@ -622,6 +659,7 @@ def policy_iteration(
         status = "inaccurate"
     occ = np.zeros(mdp.n_pairs)
     occ[d] = ev.stationary
+    prog.done(f"[pi] {it} evaluation(s): {lo:.10g} <= g* <= {hi:.10g}, gap {rel:.2e} ({status})")
     return Solution(
         method="pi",
         status=status,
@@ -634,7 +672,8 @@ def policy_iteration(
         iterations=it,
         seconds=time.perf_counter() - t0,
         stats={"stable": stable, "changes": changes, "rel_gap": rel, "eval_residual": ev.residual,
-               "fallback": fallback, "vi_sweeps": None if vi is None else vi.iterations},
+               "fallback": fallback, "vi_sweeps": None if vi is None else vi.iterations, "tol": cert_rtol},
+        pair_actions=mdp.a_indices,
     )
 
 
@@ -653,4 +692,5 @@ def _vi_as_pi(mdp: MDP, vi: Solution, t0: float, it: int, changes: list, fallbac
         seconds=time.perf_counter() - t0,
         stats={"stable": False, "changes": changes, "rel_gap": vi.gap, "eval_residual": None,
                "fallback": fallback, "vi_sweeps": vi.iterations, "multichain_policy": True},
+        pair_actions=mdp.a_indices,
     )

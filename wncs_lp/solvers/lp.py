@@ -74,6 +74,7 @@ import scipy.sparse as sp
 
 from ..errors import PolicyError, SolverError
 from ..mdp import MDP
+from ..progress import Progress, as_progress
 from .certify import bracket, certificate_closed, greedy_first, q_values
 from .dp import policy_iteration
 from .result import Solution
@@ -250,7 +251,26 @@ def clarabel_settings(tol: float, max_iter: int, verbose: bool, settings: dict |
     return st
 
 
-def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, settings: dict | None):
+def _watch(solver, prog: Progress | None, what: str = "lp") -> None:
+    """Report Clarabel's interior-point iterations through ``prog`` (a termination callback that
+    never terminates)."""
+    if prog is None or not prog.enabled:
+        return
+
+    def callback(info) -> bool:
+        if prog.due():
+            prog.tick(f"[{what}] interior-point iteration {info.iterations}: relative gap {info.gap_rel:.1e}, "
+                      f"residuals {info.res_primal:.1e} (primal) {info.res_dual:.1e} (dual)")
+        return False
+
+    try:
+        solver.set_termination_callback(callback)
+    except AttributeError:  # an older Clarabel without callbacks: no iteration progress
+        pass
+
+
+def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, settings: dict | None,
+                         prog: Progress | None = None):
     """The gain-bias LP  max g  s.t.  g + h(s_l) - (P h)_l <= c_l,  h(0) = 0, on Clarabel.
 
     Variables (u, h_1..h_{n-1}) = (g, h) / c_s; objective -n u, so that the multipliers z of
@@ -268,6 +288,7 @@ def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, set
     q[0] = -float(n)
     st = clarabel_settings(tol, max_iter, verbose, settings)
     solver = clarabel.DefaultSolver(sp.csc_matrix((n, n)), q, A, mdp.cost / cs, [clarabel.NonnegativeConeT(L)], st)
+    _watch(solver, prog)
     sol = solver.solve()
     info = solver.get_info()
     status = str(sol.status)
@@ -363,7 +384,8 @@ def _kkt(lp: LPData, y: np.ndarray, z_eq: np.ndarray) -> dict[str, float]:
             "negative_y": float(max(0.0, -float(y.min())))}
 
 
-def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settings: dict | None):
+def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settings: dict | None,
+                    prog: Progress | None = None):
     import clarabel
 
     L, m = lp.n_pairs, lp.n_eq
@@ -372,6 +394,7 @@ def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settin
     Pz = sp.csc_matrix((L, L))
     st = clarabel_settings(tol, max_iter, verbose, settings)
     solver = clarabel.DefaultSolver(Pz, lp.q, A, b, [clarabel.ZeroConeT(m), clarabel.NonnegativeConeT(L)], st)
+    _watch(solver, prog)
     sol = solver.solve()
     info = solver.get_info()
     status = str(sol.status)
@@ -388,7 +411,8 @@ def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settin
     return status, status == "Solved", y, z[:m], stats
 
 
-def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings: dict | None):
+def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings: dict | None,
+                 prog: Progress | None = None):
     import cvxpy as cp
 
     L = lp.n_pairs
@@ -437,6 +461,7 @@ def solve_lp(
     polish_max_iter: int = 50,
     settings: dict | None = None,
     formulation: str = "auto",
+    progress: bool | Progress = False,
 ) -> Solution:
     """Solve the occupation-measure LP and certify the answer.
 
@@ -490,6 +515,9 @@ def solve_lp(
         (max g s.t. g + h(s_l) <= c_l + (P h)_l; Clarabel only), whose multipliers are x.
         ``"auto"``: ``"reduced"`` when that LP has at most :data:`REDUCE_NNZ_RATIO` of the
         plain LP's nonzeros, else ``"primal"`` (``stats["formulation"]`` says which).
+    progress : bool or Progress
+        Show the phases (building, solving, polishing), Clarabel's interior-point iterations
+        (direct backend; cvxpy hides them) and the polish on stderr (:mod:`wncs_lp.progress`).
 
     Returns
     -------
@@ -524,6 +552,8 @@ def solve_lp(
     if polish not in (False, "pi", "vi"):
         raise SolverError(f"polish must be True, False, 'pi' or 'vi'; got {polish!r}")
     method = "lp" if backend == "clarabel" else "lp-cvxpy"
+    prog = as_progress(progress)
+    prog.phase(f"[{method}] building the occupation-measure LP ({mdp.n_pairs:,} pairs, {mdp.n_states:,} states)")
     red = None
     form = formulation
     if form == "dual" and backend != "clarabel":
@@ -537,7 +567,8 @@ def solve_lp(
             else:
                 form, red = "primal", None
     if form == "dual":
-        status, solved, x, g_dual, h_dual, stats = _solve_clarabel_dual(mdp, tol, max_iter, verbose, settings)
+        prog.phase(f"[{method}] solving the gain-bias (dual) LP with Clarabel")
+        status, solved, x, g_dual, h_dual, stats = _solve_clarabel_dual(mdp, tol, max_iter, verbose, settings, prog)
         if status in FAILED_STATUSES or not (np.all(np.isfinite(x)) and np.isfinite(g_dual) and np.all(np.isfinite(h_dual))):
             raise SolverError(f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
                               f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution")
@@ -545,7 +576,9 @@ def solve_lp(
     else:
         lp = lp_r if form == "reduced" else build_lp(mdp)
         runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
-        status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings)
+        prog.phase(f"[{method}] solving the {form} LP ({lp.n_eq:,} rows, {lp.n_pairs:,} columns) with "
+                   f"{'Clarabel' if backend == 'clarabel' else 'cvxpy and Clarabel'}")
+        status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings, prog)
         if status in FAILED_STATUSES or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (lp.n_pairs,):
             raise SolverError(
                 f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
@@ -580,16 +613,19 @@ def solve_lp(
     issue = None
     use_dual = not polish
     iterations = stats["solver_iterations"]
+    prog.done(f"[{method}] solver status {status} after {iterations} interior-point iterations")
     if polish:
+        prog.phase(f"[{method}] polishing the LP's policy ({'value iteration, then ' if polish == 'vi' else ''}"
+                   "policy iteration with exact evaluation)")
         try:
             start = policy0
             if polish == "vi":
                 from .dp import value_iteration
 
-                vi = value_iteration(mdp, h0=h_dual)
+                vi = value_iteration(mdp, h0=h_dual, progress=prog)
                 stats["polish_vi_sweeps"] = vi.iterations
                 start = vi.policy
-            pi = policy_iteration(mdp, policy0=start, max_iter=polish_max_iter, cert_rtol=cert_rtol)
+            pi = policy_iteration(mdp, policy0=start, max_iter=polish_max_iter, cert_rtol=cert_rtol, progress=prog)
         except PolicyError as exc:
             stats["polish_error"] = str(exc)
             use_dual = True
@@ -635,4 +671,5 @@ def solve_lp(
         iterations=int(iterations),
         seconds=time.perf_counter() - t0,
         stats=stats,
+        pair_actions=mdp.a_indices,
     )

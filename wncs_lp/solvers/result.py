@@ -7,13 +7,23 @@ from typing import Any
 import numpy as np
 
 from ..files import scalars
+from ..status import (FAILED, INACCURATE, INFEASIBLE, INTERRUPTED, MAX_ITER, OPTIMAL, STATUS_CODES, status_code,
+                      status_message)
 
-__all__ = ["Solution"]
+__all__ = ["Solution", "OPTIMAL", "INACCURATE", "MAX_ITER", "INTERRUPTED", "INFEASIBLE", "FAILED", "STATUS_CODES"]
 
 
 @dataclass(frozen=True, eq=False)
 class Solution:
     """An average-cost solution of an :class:`~wncs_lp.mdp.MDP`, with its certificate.
+
+    Printing one shows its scalars, scipy ``OptimizeResult`` style (``print(sol)``)::
+
+        Solution of 10,419 states by pi
+             status: optimal (the certificate closed: ...)
+               gain: 749.8343263
+         gain_lower: 749.8343263
+         ...
 
     Attributes
     ----------
@@ -21,8 +31,12 @@ class Solution:
         ``"lp"`` (Clarabel direct), ``"lp-cvxpy"``, ``"rvi"``, ``"vi"``, ``"pi"`` or ``"auto"``
         (then ``stats["auto_choice"]`` says whose answer it is).
     status : str
-        ``"optimal"`` when the certificate closes to the requested tolerance, otherwise a word
-        saying what went wrong (``"inaccurate"``, ``"max_iter"``, the solver's own status...).
+        ``"optimal"`` when the certificate closes to the requested tolerance, otherwise
+        ``"max_iter"``, ``"inaccurate"`` or ``"inaccurate:<reason>"`` (the reason: ``certificate``,
+        ``polish_max_iter``, ``cross_check`` or the LP solver's own status). Branch on
+        :attr:`status_code` (one of the constants of :mod:`wncs_lp.status`: ``OPTIMAL``,
+        ``INACCURATE``, ``MAX_ITER``, ``INTERRUPTED``, ``INFEASIBLE``, ``FAILED``) and show
+        :attr:`message` to a person; the string itself stays as it was for older code.
     gain : float
         The best estimate of the optimal gain g* (for LP: the exact gain of the returned policy
         when polishing verified it, else the LP objective).
@@ -32,7 +46,8 @@ class Solution:
     bias : (n,) array
         A relative value function h (normalised so that h[0] = 0).
     policy : (n,) int array
-        The chosen pair index of each state (``mdp.a_indices[policy]`` gives the actions).
+        The chosen **pair** index of each state (the MDP's state-action-pair layout:
+        ``mdp.s_indices[policy[s]] == s``). For the action per state, see :attr:`sigma`.
     occupation : (L,) array or None
         The stationary state-action frequencies x(s, a) (sum 1) when the method gives them.
     iterations : int
@@ -40,6 +55,15 @@ class Solution:
         Wall time of the whole solve (build of the solver's matrices included).
     stats : dict
         Method-specific numbers: residuals, solver status, raw LP objective, span, ...
+    pair_actions : (L,) int array or None
+        The MDP's ``a_indices`` (the action of every pair), which the solvers attach so that
+        :attr:`sigma` needs no MDP; None for a Solution made by hand.
+
+    Conventions for readers of other toolkits: :attr:`sigma` is QuantEcon's ``DiscreteDP``
+    ``sigma`` (an action index per state, here a row of ``mdp.action_table``); :meth:`chain`
+    is the Markov chain the policy induces (QuantEcon's ``mc``), a
+    :class:`~wncs_lp.chain.PolicyChain` with its transition matrix ``P``, recurrent classes and
+    stationary law.
     """
 
     method: str
@@ -53,6 +77,7 @@ class Solution:
     iterations: int = 0
     seconds: float = 0.0
     stats: dict[str, Any] = field(default_factory=dict)
+    pair_actions: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def gap(self) -> float:
@@ -61,17 +86,50 @@ class Solution:
 
     @property
     def ok(self) -> bool:
-        return self.status == "optimal"
+        """``status_code == OPTIMAL``."""
+        return self.status == OPTIMAL
+
+    @property
+    def status_code(self) -> str:
+        """The status as one of :data:`wncs_lp.status.STATUS_CODES` (``"inaccurate:certificate"`` ->
+        ``INACCURATE``)."""
+        return status_code(self.status)
+
+    @property
+    def message(self) -> str:
+        """What the status means, in words (:func:`wncs_lp.status.status_message`)."""
+        return status_message(self.status)
+
+    @property
+    def sigma(self) -> np.ndarray | None:
+        """The action index chosen in each state, (n,) int: QuantEcon's ``sigma``.
+
+        ``mdp.action_table[sol.sigma[s]]`` is the decoded action of state s (for the wncs model,
+        what each server is sent). The same as :meth:`actions`, without the MDP; None when the
+        solution carries no :attr:`pair_actions` (made by hand): use ``actions(mdp)`` then.
+        """
+        if self.pair_actions is None:
+            return None
+        return np.asarray(self.pair_actions)[np.asarray(self.policy, dtype=np.int64)]
 
     def actions(self, mdp) -> np.ndarray:
-        """The action index (into ``mdp.action_table``) chosen in each state."""
+        """The action index (into ``mdp.action_table``) chosen in each state (= :attr:`sigma`)."""
         return mdp.a_indices[self.policy]
+
+    def chain(self, mdp):
+        """The Markov chain the policy induces on ``mdp`` (a :class:`wncs_lp.chain.PolicyChain`:
+        ``P``, ``cost``, ``recurrent_classes``, ``is_unichain``, ``stationary``)."""
+        from ..chain import PolicyChain
+
+        return PolicyChain(mdp, np.asarray(self.policy, dtype=np.int64))
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready scalars (no arrays)."""
         out = {
             "method": self.method,
             "status": self.status,
+            "status_code": self.status_code,
+            "message": self.message,
             "gain": float(self.gain),
             "gain_lower": float(self.gain_lower),
             "gain_upper": float(self.gain_upper),
@@ -81,3 +139,41 @@ class Solution:
         }
         out.update(scalars(self.stats))
         return out
+
+    def __repr__(self) -> str:
+        return _repr(self)
+
+
+def _describe_array(a: Any, what: str) -> str:
+    if a is None:
+        return "None"
+    a = np.asarray(a)
+    return f"array of {a.size:,} {what} ({a.dtype})"
+
+
+def _repr(sol: Solution) -> str:
+    """Multi-line, scipy ``OptimizeResult`` style: names right-aligned, scalars, arrays by size."""
+    n = np.asarray(sol.policy).size
+    used = sol.method
+    if "auto_choice" in sol.stats:
+        used = f"{sol.method} -> {sol.stats['auto_choice']}"
+    rows = [
+        ("status", f"{sol.status}" + ("" if sol.status == sol.status_code else f" (code {sol.status_code})")),
+        ("message", sol.message),
+        ("gain", f"{sol.gain:.12g}"),
+        ("gain_lower", f"{sol.gain_lower:.12g}"),
+        ("gain_upper", f"{sol.gain_upper:.12g}"),
+        ("gap", f"{sol.gap:.3g} (relative certificate width)"),
+        ("iterations", f"{sol.iterations}"),
+        ("seconds", f"{sol.seconds:.3g}"),
+        ("bias", _describe_array(sol.bias, "floats") + ", h[0] = 0"),
+        ("policy", _describe_array(sol.policy, "pair indices") + ", one per state"),
+        ("sigma", "None (use actions(mdp))" if sol.pair_actions is None
+         else _describe_array(sol.sigma, "action indices") + ", one per state"),
+        ("occupation", _describe_array(sol.occupation, "pair frequencies")),
+        ("stats", f"{len(sol.stats)} entries: " + ", ".join(list(sol.stats)[:8])
+         + (", ..." if len(sol.stats) > 8 else "")),
+    ]
+    width = max(len(k) for k, _ in rows)
+    head = f"{type(sol).__name__} of {n:,} states by {used}"
+    return "\n".join([head] + [f"{k:>{width + 2}}: {v}" for k, v in rows])

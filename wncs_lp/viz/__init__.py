@@ -12,6 +12,7 @@ from .tradeoff import plot_tradeoff, save_tradeoff_figure
 
 __all__ = [
     "file_backend",
+    "image_formats",
     "subplots",
     "ACTION_STYLES",
     "POLICY_STYLE",
@@ -30,6 +31,13 @@ def file_backend() -> None:
     import matplotlib
 
     matplotlib.use("Agg")
+
+
+def image_formats() -> list[str]:
+    """The file extensions matplotlib can save a figure as (``png``, ``svg``, ``pdf``, ...)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    return sorted(FigureCanvasBase.get_supported_filetypes())
 
 
 def subplots(*args, **kw):

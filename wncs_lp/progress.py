@@ -1,0 +1,115 @@
+"""Progress on stderr for long work: phases, and ticks that rewrite one line on a terminal.
+
+The solvers take ``progress=True`` (or a :class:`Progress` to share one line between several
+steps) and report through it: value iteration its sweeps and the certificate gap shrinking,
+policy iteration its improvements, the LP its interior-point iterations. Nothing goes to stdout,
+so ``--json`` output stays one clean object.
+
+On a terminal a tick rewrites the current line at most every 0.2 s; elsewhere (a log file, a
+pipe, when ``--progress`` forces it) each tick is its own line, at most one every 2 s. The
+command line shows progress by default only when stderr is a terminal and ``--json`` is not
+given (:func:`wanted`).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any, TextIO
+
+__all__ = ["Progress", "as_progress", "wanted"]
+
+
+def _isatty(stream: Any) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def wanted(flag: bool | None, json: bool = False, stream: Any = None) -> bool:
+    """Whether to show progress: ``flag`` when given (``--progress`` / ``--no-progress``), else
+    only on a terminal (stderr) and not under ``--json``."""
+    if flag is not None:
+        return bool(flag)
+    return not json and _isatty(sys.stderr if stream is None else stream)
+
+
+class Progress:
+    """Phase lines and rate-limited ticks on a stream (default: ``sys.stderr`` at creation).
+
+    Parameters
+    ----------
+    enabled : bool
+        When False every call does nothing (so code can report unconditionally).
+    stream : text stream, optional
+    every : float, optional
+        Least seconds between two ticks (default 0.2 on a terminal, 2 elsewhere).
+    """
+
+    def __init__(self, enabled: bool = True, stream: TextIO | None = None, every: float | None = None):
+        self.enabled = bool(enabled)
+        self.stream = sys.stderr if stream is None else stream
+        self.tty = _isatty(self.stream)
+        self.every = (0.2 if self.tty else 2.0) if every is None else float(every)
+        self._last = -float("inf")
+        self._open = False
+
+    def __bool__(self) -> bool:
+        return self.enabled
+
+    def _close_line(self) -> None:
+        if self._open:
+            self.stream.write("\n")
+            self._open = False
+
+    def phase(self, text: str) -> None:
+        """A new phase (always shown, on its own line)."""
+        if not self.enabled:
+            return
+        self._close_line()
+        self.stream.write(text + "\n")
+        self.stream.flush()
+        self._last = -float("inf")
+
+    def due(self) -> bool:
+        """Whether a :meth:`tick` would be shown now (to skip formatting a line that would not be)."""
+        return self.enabled and time.monotonic() - self._last >= self.every
+
+    def tick(self, text: str, force: bool = False) -> None:
+        """A step within a phase: shown when ``every`` seconds passed since the last one (or ``force``)."""
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if not force and now - self._last < self.every:
+            return
+        self._last = now
+        if self.tty:
+            self.stream.write("\r\x1b[K" + text)
+            self._open = True
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def done(self, text: str | None = None) -> None:
+        """End the current line (and show ``text`` as its last state)."""
+        if not self.enabled:
+            return
+        if text is not None:
+            self.tick(text, force=True)
+        self._close_line()
+        self.stream.flush()
+
+
+_OFF = None
+
+
+def as_progress(progress: bool | Progress | None) -> Progress:
+    """A :class:`Progress` from a solver's ``progress`` argument (True, False/None or one to share)."""
+    if isinstance(progress, Progress):
+        return progress
+    if progress:
+        return Progress(True)
+    global _OFF
+    if _OFF is None:
+        _OFF = Progress(False)
+    return _OFF
