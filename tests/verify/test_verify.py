@@ -241,7 +241,7 @@ def enumerate_paths(mdp: MDP, sol, s: int, tol: float, q: np.ndarray) -> tuple[i
 
 def test_consistency_counts_match_plain_enumeration(pre):
     _, mdp, sol = pre
-    rep = check_consistency(mdp, sol, examples=10_000)
+    rep = check_consistency(mdp, sol, examples=10_000, starts="all")
     ctx = policy_context(mdp, sol)
     starts = [s for s in range(mdp.n_states) if mdp.action_label(sol.policy[s])[0] != 0]
     assert rep.checked == len(starts)
@@ -258,7 +258,9 @@ def test_consistency_non_preemptive_holds_by_construction():
     sol = solve(mdp, "pi")
     rep = check_consistency(mdp, sol)
     starts = sum(1 for s in range(mdp.n_states) if mdp.action_label(sol.policy[s])[0] != 0)
-    assert rep.holds and rep.violations == 0 and rep.checked == starts > 0
+    assert rep.holds and rep.violations == 0 and rep.checked == 0  # no job is started by preempting
+    every = check_consistency(mdp, sol, starts="all")
+    assert every.holds and every.checked == starts > 0
     assert rep.details["starts_by_type"]["preempting"] == 0
     assert rep.details["counterexample"] is None
 
@@ -266,7 +268,7 @@ def test_consistency_non_preemptive_holds_by_construction():
 def test_consistency_planted_preemption(pre):
     _, mdp, sol = pre
     sp = mdp.states
-    base = check_consistency(mdp, sol, examples=100_000)
+    base = check_consistency(mdp, sol, examples=100_000, starts="all")
     flagged = {e.states[0] for e in base.examples}
     q = q_values(mdp, sol.bias)
     tol = base.tol
@@ -292,8 +294,12 @@ def test_consistency_planted_preemption(pre):
     s, y, j, l = target
     pol = sol.policy.copy()
     pol[y] = l
-    rep = check_consistency(mdp, dataclasses.replace(sol, policy=pol), examples=100_000)
+    rep = check_consistency(mdp, dataclasses.replace(sol, policy=pol), examples=100_000, starts="all")
     assert not rep.holds and rep.violations > base.violations
+    # the planted start is on an idle server: outside Theorem 3's own wording (jobs started by preempting)
+    scoped = check_consistency(mdp, dataclasses.replace(sol, policy=pol), examples=100_000)
+    assert s not in {e.states[0] for e in scoped.examples}
+    assert all(e.info["start_type"] == "preempting" for e in scoped.examples)
     ex = next(e for e in rep.examples if e.states[0] == s)
     traj = ex.info["trajectory"]
     assert traj[0]["state"] == s and traj[-1]["state"] == y
@@ -304,9 +310,10 @@ def test_consistency_planted_preemption(pre):
 
 def test_consistency_breakdown_by_start_type(pre):
     _, mdp, sol = pre
-    rep = check_consistency(mdp, sol)
+    rep = check_consistency(mdp, sol, starts="all")
     by = rep.details["by_start_type"]
     kinds = ("idle_server", "preempting", "restarting_own")
+    assert by["all"]["checked"] == rep.checked and by["all"]["violations"] == rep.violations
     assert sum(by[k]["checked"] for k in kinds) == rep.checked
     assert sum(by[k]["violations"] for k in kinds) == rep.violations
     assert sum(by[k]["recurrent_violations"] for k in kinds) == rep.recurrent_violations
@@ -314,6 +321,16 @@ def test_consistency_breakdown_by_start_type(pre):
     for k, v in by.items():
         if v["violations"]:
             assert v["counterexample"]["info"]["trajectory"][0]["state"] == v["counterexample"]["states"][0]
+    # Theorem 3's own wording: the headline counts are the preempting starts', with preempting examples
+    own = check_consistency(mdp, sol, examples=1_000)
+    pre_ = by["preempting"]
+    assert (own.checked, own.violations, own.recurrent_violations, own.at_cap_violations) == (
+        pre_["checked"], pre_["violations"], pre_["recurrent_violations"], pre_["at_cap_violations"])
+    assert own.split["recurrent_below_cap"] == pre_["recurrent_below_cap"]
+    assert all(e.info["start_type"] == "preempting" for e in own.examples)
+    assert own.unit == "preempting start states" and own.details["scope"] == "preempting"
+    with pytest.raises(ModelError, match="starts must be"):
+        check_consistency(mdp, sol, starts="some")
 
 
 def test_recurrent_means_every_state_involved(p12):

@@ -8,16 +8,20 @@ from .common import Command, emit_json
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from ..reproduce import run_reproduction
+    from ..reproduce.report import basis_words
 
     result = run_reproduction(args.out, args.profile, force=args.recompute,
                               claims=[c.strip().upper() for c in args.claims.split(",")] if args.claims else None,
                               progress=not args.json)
     if args.json:
         emit_json({"files": result["files"], "seconds": result["seconds"],
-                   "claims": [{k: c[k] for k in ("id", "verdict", "summary")} for c in result["claims"]]})
+                   "claims": [{**{k: c[k] for k in ("id", "verdict", "summary")},
+                               "rests_on": basis_words(c.get("basis") or {}),
+                               "leans_on_truncation": bool((c.get("basis") or {}).get("flag"))}
+                              for c in result["claims"]]})
     else:
         for c in result["claims"]:
-            print(f"{c['id']:>4} {c['verdict']:<8} {c['summary']}")
+            print(f"{c['id']:>4} {c['verdict']:<8} [{basis_words(c.get('basis') or {})}] {c['summary']}")
         print(f"report: {result['files']['md']} and {result['files']['html']} ({result['seconds']:.0f} s)")
     errors = [c["id"] for c in result["claims"] if c["verdict"] == "ERROR"]
     if errors:

@@ -1,4 +1,10 @@
-"""``wncs-lp verify``: check the structural theorems on the solved model."""
+"""``wncs-lp verify``: check the structural theorems on the solved model.
+
+Each check's verdict comes from its numbers by the one rule the reproduction uses too
+(:mod:`wncs_lp.verify.verdict`): HOLDS (no violation), FAILS (a violation in recurrent states away
+from the AoI cap), DEPENDS (violations only in transient states or at the cap). Exit status: 0 when
+no check FAILS and the solve is certified, 1 otherwise (2: bad input).
+"""
 from __future__ import annotations
 
 import argparse
@@ -11,14 +17,18 @@ def cmd_verify(args: argparse.Namespace) -> int:
     from ..models.guard import build_checked
     from ..solvers import solve
     from ..verify import Tolerance, verify_all
+    from ..verify.verdict import FAILS, RULE, combine
 
     scenario = load(args)
     t0 = time.perf_counter()
     mdp = build_checked(scenario, force=args.force)
     sol = solve(mdp, method=args.method)
     reports = verify_all(mdp, sol, tolerance=Tolerance(args.atol, args.rtol), examples=args.examples)
+    verdicts = [r.verdict for r in reports]
     payload = {
         **head(args, scenario, mdp),
+        "verdict": combine(verdicts),
+        "verdict_rule": RULE,
         "method": sol.method,
         "solve_status": sol.status,
         "gain": sol.gain,
@@ -41,6 +51,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
                   f"{r.at_cap_violations:>7} {r.ties:>6} {w:>11}  {r.unit}")
         print(f"tie tolerance: tol = {reports[0].atol:g} + {reports[0].rtol:g} * span(V) = {reports[0].tol:.3g}; "
               f"recurrent = {reports[0].recurrence_rule}")
+        print(f"verdicts: {RULE}")
         for r in reports:
             if r.examples:
                 e = r.examples[0]
@@ -51,6 +62,11 @@ def cmd_verify(args: argparse.Namespace) -> int:
                 for step in e.info.get("trajectory", []):
                     print(f"      -> {step['label']}  action {tuple(step['action'])}  p={step['prob']:.3g}"
                           + (f"  [{step['event']}]" if "event" in step else ""))
+    if FAILS in verdicts:
+        import sys
+
+        print(f"verify: {', '.join(r.name for r in reports if r.verdict == FAILS)} FAILS", file=sys.stderr)
+        return 1
     return 0 if sol.ok else 1
 
 
@@ -64,6 +80,7 @@ def _configure_verify(p: argparse.ArgumentParser) -> None:
 
 
 COMMANDS = [
-    Command("verify", "check Theorems 1-3 (monotone V, threshold policy, consistency) on the solved model",
+    Command("verify", "check Theorems 1-3 (monotone V, threshold policy, consistency) on the solved model; "
+                      "exit 1 when a check FAILS",
             _configure_verify, cmd_verify),
 ]

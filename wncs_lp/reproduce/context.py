@@ -19,10 +19,12 @@ from ..models import build
 from ..scenario import Scenario, load_scenario
 from ..solvers import solve
 from ..solvers.result import Solution
+from ..truncation import CAP_MASS_WARN, CapMass, cap_mass
 from ..viz import save_figure
 from .cache import StepCache
 
-__all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "PI_MAX_STATES"]
+__all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "Table", "PI_MAX_STATES", "assignment_label",
+           "short_name"]
 
 #: The reproduction solves by policy iteration up to this many states, by relative value
 #: iteration above (policy iteration's own multichain fallback is the only fallback).
@@ -32,7 +34,14 @@ PI_MAX_STATES = 60_000
 @dataclass(frozen=True)
 class Profile:
     """How much to compute. Caps are truncations of the paper's unbounded AoI, so every
-    cap-sensitive claim is reported at each cap listed here."""
+    cap-sensitive claim is judged at each cap listed here. Every cap lies above the longest loop
+    U + T + D of the paper's processes (6 on the remote server for process 1, 8 on the edge): at
+    or below it an update never arrives fresher than the cap and the model degenerates.
+
+    ``sweep_cap_2p`` / ``sweep_cap_3p``: the cap of the Monte Carlo runs beside the exact values
+    (Figs. 5 and 10; exact values are computed at every cap). ``c4_planes``: the planes
+    tau_1 + tau_2 + tau_3 = const of claim C4, each used at every cap of ``caps_3p`` up to 2.25 x cap.
+    """
 
     name: str
     caps_2p: tuple[int, ...]
@@ -41,12 +50,11 @@ class Profile:
     p_grid: tuple[float, ...]
     sweep_cap_2p: int
     sweep_cap_3p: int
-    sweep_cap_pre: int
     mc_slots: int
     mc_reps: int
     mc_slots_3p: int
     mc_reps_3p: int
-    slice_total_3p: tuple[int, ...]  # the tau_1 + tau_2 + tau_3 plane, one per cap in caps_3p (the paper's 45 at cap 20)
+    c4_planes: tuple[int, ...]
     c13_caps: tuple[int, ...]
     c13_big_cap: int
     seed: int = 20221
@@ -56,18 +64,17 @@ PROFILES: dict[str, Profile] = {
     "quick": Profile(
         name="quick",
         caps_2p=(8, 12),
-        caps_3p=(6,),
-        caps_pre=(8,),
+        caps_3p=(8,),
+        caps_pre=(8, 10),
         p_grid=(0.8, 0.9, 1.0),
-        sweep_cap_2p=8,
-        sweep_cap_3p=5,
-        sweep_cap_pre=6,
+        sweep_cap_2p=12,
+        sweep_cap_3p=8,
         mc_slots=2_000,
         mc_reps=4,
         mc_slots_3p=1_000,
         mc_reps_3p=4,
-        slice_total_3p=(9,),
-        c13_caps=(6, 8),
+        c4_planes=(12, 18),
+        c13_caps=(7, 8),
         c13_big_cap=12,
     ),
     "default": Profile(
@@ -76,34 +83,59 @@ PROFILES: dict[str, Profile] = {
         caps_3p=(12, 16, 20),
         caps_pre=(12, 20, 25),
         p_grid=(0.8, 0.85, 0.9, 0.95, 1.0),
-        sweep_cap_2p=12,
-        sweep_cap_3p=12,
-        sweep_cap_pre=12,
+        sweep_cap_2p=30,
+        sweep_cap_3p=20,
         mc_slots=40_000,
         mc_reps=20,
         mc_slots_3p=10_000,
         mc_reps_3p=10,
-        slice_total_3p=(18, 24, 45),
-        c13_caps=(6, 8, 10, 12),
+        c4_planes=(18, 24, 30, 36, 45),
+        c13_caps=(7, 8, 10, 12),
         c13_big_cap=30,
     ),
 }
 
 
 @dataclass
+class Table:
+    """A table shown in the report (Markdown and HTML), with its caption."""
+
+    caption: str
+    header: list[str]
+    rows: list[list[Any]]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"caption": self.caption, "header": list(self.header), "rows": [list(r) for r in self.rows]}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "Table":
+        return cls(d.get("caption", ""), list(d.get("header", [])), [list(r) for r in d.get("rows", [])])
+
+
+@dataclass
 class ClaimResult:
-    """One claim of ``claims.md`` with its verdict and the numbers that decide it."""
+    """One claim of ``claims.md`` with its verdict and the numbers that decide it.
+
+    ``basis`` says which caps the verdict rests on: every instance used (scenario, cap, p) with the
+    stationary mass the optimal policy spends with some AoI at its cap, the deciding instance and
+    whether its mass exceeds :data:`~wncs_lp.truncation.CAP_MASS_WARN` (``flag``); see
+    :func:`cap_basis`. ``shown`` are the tables of the report, ``captions`` the figures' captions
+    (keyed by the PNG's path).
+    """
 
     id: str
     paper: str
     statement: str
-    verdict: str  # HOLDS | FAILS | DEPENDS
+    verdict: str  # HOLDS | FAILS | DEPENDS | ERROR
     summary: str
     numbers: dict[str, Any] = field(default_factory=dict)
     figures: list[str] = field(default_factory=list)
     tables: list[str] = field(default_factory=list)
     details: str = ""  # markdown
     seconds: float = 0.0
+    basis: dict[str, Any] = field(default_factory=dict)
+    shown: list[Table] = field(default_factory=list)
+    captions: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -112,12 +144,107 @@ class ClaimResult:
             "statement": self.statement,
             "verdict": self.verdict,
             "summary": self.summary,
+            "basis": self.basis,
             "numbers": self.numbers,
             "figures": self.figures,
+            "captions": self.captions,
             "tables": self.tables,
+            "shown": [t.to_dict() for t in self.shown],
             "details": self.details,
             "seconds": self.seconds,
         }
+
+    @classmethod
+    def from_dict(cls, c: dict[str, Any]) -> "ClaimResult":
+        return cls(c["id"], c.get("paper", ""), c.get("statement", ""), c["verdict"], c["summary"],
+                   c.get("numbers", {}), c.get("figures", []), c.get("tables", []), c.get("details", ""),
+                   c.get("seconds", 0.0), c.get("basis", {}), [Table.from_dict(t) for t in c.get("shown", [])],
+                   c.get("captions", {}))
+
+
+def evidence(label: str, cap: int, mass: float, verdict: str, scenario: str = "", p: float | None = None,
+             per_process: Sequence[float] = ()) -> dict[str, Any]:
+    """One instance a verdict rests on (see :func:`cap_basis`)."""
+    def share(x: float) -> float:  # a probability, round-off of a summed law clipped to [0, 1]
+        return float(min(1.0, max(0.0, x)))
+
+    return {"label": label, "scenario": scenario, "cap": int(cap), "p": p, "mass": share(mass),
+            "per_process": [share(m) for m in per_process], "verdict": verdict}
+
+
+def cap_basis(entries: Sequence[dict[str, Any]], verdict: str, note: str = "", decides: bool = True) -> dict[str, Any]:
+    """Which caps a verdict rests on, and whether the deciding one leans on the truncation.
+
+    ``entries`` come from :func:`evidence`, one per instance (scenario, cap, p or p-grid) with
+    its own verdict and the stationary mass of the optimal policy at the cap (for a p-grid: the
+    largest over p). The *deciding* instances are the least-truncated ones that show the
+    verdict: for HOLDS, in each scenario the instance of smallest mass (the verdict needs them
+    all); otherwise the single instance of smallest mass among those whose own verdict equals
+    the claim's (all instances when none does, e.g. a verdict that changes with the cap). The
+    verdict is *flagged* when a deciding instance has more than CAP_MASS_WARN of its long-run time
+    with some AoI at its cap. ``decides=False`` (a claim the truncation cannot change, said in
+    ``note``): nothing is flagged.
+    """
+    entries = list(entries)
+    out: dict[str, Any] = {"instances": entries, "caps": sorted({e["cap"] for e in entries}),
+                           "threshold": CAP_MASS_WARN, "note": note}
+    if not entries or not decides:
+        return {**out, "deciding": [], "deciding_mass": None, "flag": False}
+    if verdict == "HOLDS":
+        by_sc: dict[str, dict] = {}
+        for e in entries:
+            cur = by_sc.get(e["scenario"])
+            if cur is None or (e["mass"], -e["cap"]) < (cur["mass"], -cur["cap"]):
+                by_sc[e["scenario"]] = e
+        deciding = list(by_sc.values())
+    else:
+        agree = [e for e in entries if e["verdict"] == verdict] or entries
+        deciding = [min(agree, key=lambda e: (e["mass"], -e["cap"]))]
+    worst = max(e["mass"] for e in deciding)
+    return {**out, "deciding": [e["label"] for e in deciding], "deciding_caps": sorted({e["cap"] for e in deciding}),
+            "deciding_mass": worst, "flag": bool(worst > CAP_MASS_WARN)}
+
+
+def subclaims_verdict(results: dict[str, dict[Any, bool | None]]) -> str:
+    """The verdict of a claim made of sub-claims, each checked at several instances (caps).
+
+    HOLDS: every sub-claim holds at every instance; FAILS: some sub-claim fails at every instance
+    where it is checked (it is false whatever the truncation); DEPENDS: otherwise (some sub-claim
+    fails at some instances only). ``None`` marks a sub-claim not checked at an instance.
+    """
+    any_fail, everywhere = False, False
+    for per in results.values():
+        vals = [v for v in per.values() if v is not None]
+        if not vals:
+            continue
+        if not all(vals):
+            any_fail = True
+        if not any(vals):
+            everywhere = True
+    return "FAILS" if everywhere else ("DEPENDS" if any_fail else "HOLDS")
+
+
+def one_verdict(holds: bool | None, fails: bool | None = None) -> str:
+    """HOLDS when ``holds``; FAILS when ``fails`` (default: not ``holds``); DEPENDS otherwise."""
+    if holds:
+        return "HOLDS"
+    if fails is None or fails:
+        return "FAILS"
+    return "DEPENDS"
+
+
+def short_name(name: str) -> str:
+    """``process-4`` -> ``4``; other names unchanged."""
+    import re
+
+    m = re.fullmatch(r"(?i)process[-_ ]?(\w+)", name.strip())
+    return m.group(1) if m else name
+
+
+def assignment_label(scenario: Scenario, assignment: Sequence[int]) -> str:
+    """A static assignment in words: ``1->remote, 2->edge, 3->edge`` (paper process names)."""
+    return ", ".join(f"{short_name(p.name)}\u2192{scenario.servers[m].name}"
+                     for p, m in zip(scenario.processes, assignment))
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,6 +266,17 @@ class Solved:
     def recurrent(self) -> np.ndarray:
         """(n,) bool: the state lies in a closed class of the policy's chain (:mod:`wncs_lp.chain`)."""
         return PolicyChain(self.mdp, self.policy).recurrent
+
+    @cached_property
+    def cap_mass(self) -> CapMass:
+        """The stationary mass of the optimal policy with some AoI at its cap (:mod:`wncs_lp.truncation`)."""
+        return cap_mass(self.mdp, self.stationary)
+
+    def evidence(self, label: str, verdict: str) -> dict[str, Any]:
+        """This solve as one instance a verdict rests on (:func:`cap_basis`)."""
+        m = self.cap_mass
+        return evidence(label, max(self.scenario.tau_caps), m.total, verdict, Path(str(self.scenario.source)).stem,
+                        self.scenario.p, m.per_process)
 
     @property
     def actions(self) -> np.ndarray:
@@ -236,6 +374,49 @@ class Context:
         )
         self._solved[key] = solved
         return solved
+
+    def evaluate(self, scenario: Scenario, policy: str, assignment: Sequence[int] | None = None) -> dict[str, Any]:
+        """Exact long-run average cost of a baseline policy (cached on disk).
+
+        ``policy``: ``static`` (the spec's default assignment, or ``assignment``), ``greedy``,
+        ``suboptimal`` or ``random``. A multichain chain (e.g. a static policy at p = 1) is
+        averaged from the initial state (:func:`wncs_lp.evaluate.evaluate`, ``multichain="initial"``).
+        Returns ``{"gain", "name", "label", "assignment", "recurrent_classes"}``.
+        """
+        from ..evaluate import evaluate
+        from ..models.system import System
+        from ..policies import GreedyPolicy, RandomPolicy, StaticPolicy, SuboptimalPolicy, default_assignment
+
+        if policy == "static" and assignment is None:
+            assignment = default_assignment(scenario)
+        a = None if assignment is None else [int(x) for x in assignment]
+
+        def compute():
+            system = System.from_scenario(scenario)
+            pol = {"static": lambda: StaticPolicy(system, a), "greedy": lambda: GreedyPolicy(system),
+                   "suboptimal": lambda: SuboptimalPolicy(system), "random": lambda: RandomPolicy(system)}[policy]()
+            ev = evaluate(self.mdp(scenario), pol, system, multichain="initial")
+            return {"gain": float(ev.gain), "name": pol.name, "recurrent_classes": int(ev.recurrent_classes)}, None
+
+        res, _ = self.cache.get_or_compute("evaluate", {"fingerprint": scenario.fingerprint(), "policy": policy,
+                                                        "assignment": a}, compute)
+        label = policy if a is None else f"{policy} ({assignment_label(scenario, a)})"
+        return {**res, "assignment": a, "label": label}
+
+    def static_search(self, scenario: Scenario) -> dict[str, Any]:
+        """The default static assignment and ``best_static``: every assignment that gives each
+        server a process (:func:`wncs_lp.policies.static_assignments`), evaluated exactly.
+
+        Returns ``{"default": {...}, "best": {...}, "all": [{...}, ...]}`` (entries as
+        :meth:`evaluate`; ``best`` is the one of least gain, ties: the first).
+        """
+        from ..policies import default_assignment
+        from ..policies.rules import static_assignments
+
+        default = self.evaluate(scenario, "static", default_assignment(scenario))
+        every = [self.evaluate(scenario, "static", a) for a in static_assignments(scenario)]
+        best = min(every, key=lambda e: e["gain"])
+        return {"default": default, "best": best, "all": every}
 
     # ------------------------------------------------------------------ outputs
     def save_figure(self, fig, stem: str) -> list[str]:

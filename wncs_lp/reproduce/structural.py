@@ -1,22 +1,45 @@
-"""Claims about the optimal policy's structure: C1, C2, C4, C5 (maps), C7-C10 (theorems)."""
+"""Claims about the optimal policy's structure: C1, C2, C4, C5 (maps), C7-C10 (theorems).
+
+Every claim is judged at every cap the profile solves, and says which caps its verdict rests on
+(:func:`~wncs_lp.reproduce.context.cap_basis`). Structural findings are decided by the one rule
+of :mod:`wncs_lp.verify.verdict`, shared with ``wncs-lp verify``.
+"""
 from __future__ import annotations
 
-from typing import Any
+from pathlib import Path
+from typing import Any, Sequence
 
 import numpy as np
 
-from ..maps import region_stats
+from ..maps import action_name, map_names, region_stats, slice_grid
 from ..verify import check_consistency, check_monotonicity, check_threshold, policy_context
+from ..verify.verdict import combine, structural_verdict, verdict_of
 from ..viz import plot_policy_map, plot_policy_slice, subplots
-from .context import ClaimResult, Context, Solved
+from .context import ClaimResult, Context, Solved, Table, cap_basis, evidence
+
+CONFIGURATION_NOTE = ("Recurrent: the state lies in a closed class of the optimal policy's chain (positive stationary "
+                      "probability); at the cap: some AoI equals its cap.")
 
 
-def _idle_grid(solved: Solved) -> tuple[np.ndarray, np.ndarray]:
-    """State ids over the tau box in the idle-server configuration, and the chosen actions."""
+def across(verdicts: Sequence[str]) -> str:
+    """A descriptive claim over several instances: the common verdict, or DEPENDS when they differ."""
+    vs = list(verdicts)
+    return vs[0] if vs and all(v == vs[0] for v in vs) else "DEPENDS"
+
+
+def pct(x: float | None, digits: int = 2) -> str:
+    """A share as a percentage; "n/a" for None; never "-0.00%" (round-off below the last digit shows as 0)."""
+    if x is None:
+        return "n/a"
+    y = round(100 * float(x), digits)
+    return f"{y + 0.0:.{digits}f}%"
+
+
+def _idle_ids(solved: Solved) -> np.ndarray:
+    """State ids over the tau box in the idle-server configuration."""
     mdp = solved.mdp
     grid = mdp.states.lookup_grid(mdp.states.model.initial_config())
-    ids = grid[grid >= 0]
-    return grid, ids
+    return grid[grid >= 0]
 
 
 def _split(solved: Solved, states: np.ndarray) -> dict[str, int]:
@@ -32,242 +55,419 @@ def _split(solved: Solved, states: np.ndarray) -> dict[str, int]:
     }
 
 
+def tidy_ticks(ax, cap_x: int, cap_y: int) -> None:
+    """Readable integer ticks on a policy map (1, 5, 10, ... above cap 15, so labels never collide)."""
+    def ticks(c: int) -> list[int]:
+        if c <= 15:
+            return list(range(1, c + 1))
+        step = 5 if c <= 40 else 10
+        return [1] + list(range(step, c + 1, step))
+
+    ax.set_xticks(ticks(cap_x))
+    ax.set_yticks(ticks(cap_y))
+
+
 def _maps_figure(ctx: Context, panels: list[tuple[Solved, Any, dict]], stem: str, suptitle: str) -> list[str]:
     n = len(panels)
-    fig, axes = subplots(1, n, figsize=(6.2 * n, 5.6), squeeze=False)
+    fig, axes = subplots(1, n, figsize=(6.6 * n, 5.8), squeeze=False)
     for ax, (solved, config, kw) in zip(axes[0], panels):
         plot_policy_map(solved.mdp, solved.as_solution(), config, ax=ax, stationary=solved.stationary,
                         scenario=solved.scenario, **kw)
+        caps = solved.mdp.states.caps
+        i, j = kw.get("axes", (1, 2))
+        tidy_ticks(ax, caps[i - 1], caps[j - 1])
     fig.suptitle(suptitle)
     fig.tight_layout()
     return ctx.save_figure(fig, stem)
 
 
-def _verdict_from_split(splits: list[dict[str, int]]) -> str:
-    if all(s["total"] == 0 for s in splits):
-        return "HOLDS"
-    if all(s["recurrent_below_cap"] == 0 for s in splits):
-        return "DEPENDS"
-    return "FAILS"
+def _act(solved: Solved, label: Sequence[int], config: Any = None) -> str:
+    return action_name(solved.mdp, tuple(int(x) for x in label), config, scenario=solved.scenario)
+
+
+def _mass_cell(solved: Solved) -> str:
+    return pct(solved.cap_mass.total)
 
 
 # ============================================================================ C1, C2: two processes
 def claim_c1(ctx: Context) -> ClaimResult:
     prof = ctx.profile
-    per_cap, panels = [], []
+    per_cap, solves, ev = [], [], []
     for cap in prof.caps_2p:
         solved = ctx.solve(ctx.scenario("paper_p14.toml", [f"tau_cap={cap}"]))
-        _, ids = _idle_grid(solved)
+        ids = _idle_ids(solved)
         acts = [solved.action_tuple(s) for s in ids]
         other = ids[np.array([a != (1, 2) for a in acts], dtype=bool)]
         split = _split(solved, other)
-        labels = sorted({a for a in acts})
-        per_cap.append({"cap": cap, "idle_states": int(ids.size), "actions_seen": [list(a) for a in labels],
-                        "other_action_states": split, "gain": solved.gain})
-        panels.append((solved, "idle", {"axes": (1, 2)}))
-    verdict = _verdict_from_split([r["other_action_states"] for r in per_cap])
-    figs = _maps_figure(ctx, panels[-1:], "c1_fig3_policy_p14", "Processes 1 and 4, idle servers (Fig. 3)")
-    tab = ctx.save_table([{"cap": r["cap"], "idle_states": r["idle_states"],
+        v = structural_verdict(split["total"] == 0, split["recurrent_below_cap"])
+        others = sorted({a for a in acts if a != (1, 2)})
+        per_cap.append({"cap": cap, "idle_states": int(ids.size), "other_actions": [_act(solved, a) for a in others],
+                        "other_action_states": split, "gain": solved.gain, "verdict": v,
+                        "cap_mass": solved.cap_mass.to_dict()})
+        solves.append(solved)
+        ev.append(solved.evidence(f"processes 1, 4 at cap {cap}", v))
+    verdict = combine([r["verdict"] for r in per_cap])
+    panels = [(s, "idle", {"axes": (1, 2)}) for s in (solves[:1] + solves[-1:] if len(solves) > 1 else solves)]
+    figs = _maps_figure(ctx, panels, "c1_fig3_policy_p14",
+                        "Processes 1 and 4, idle servers (Fig. 3), caps " + " and ".join(
+                            str(s.scenario.tau_caps[0]) for s, _, _ in panels))
+    tab = ctx.save_table([{"cap": r["cap"], "idle_states": r["idle_states"], "verdict": r["verdict"],
+                           "cap_mass": r["cap_mass"]["total"],
                            **{f"other_{k}": v for k, v in r["other_action_states"].items()}} for r in per_cap],
                          "c1_fig3_counts")
-    parts = [f"cap {r['cap']}: {r['other_action_states']['total']} of {r['idle_states']} idle states choose another "
-             f"action ({r['other_action_states']['recurrent']} recurrent)" for r in per_cap]
+    shown = [Table("Idle-server states that do not choose (1 to remote, 4 to edge), per cap.",
+                   ["cap", "idle states", "other action", "recurrent", "transient", "at the cap",
+                    "recurrent below the cap", "verdict at this cap", "mass at the cap"],
+                   [[r["cap"], r["idle_states"], r["other_action_states"]["total"],
+                     r["other_action_states"]["recurrent"], r["other_action_states"]["transient"],
+                     r["other_action_states"]["at_cap"], r["other_action_states"]["recurrent_below_cap"],
+                     r["verdict"], pct(r["cap_mass"]["total"])] for r in per_cap])]
+    parts = []
+    for r in per_cap:
+        s = r["other_action_states"]
+        parts.append(f"cap {r['cap']}: {s['total']} of {r['idle_states']} idle states choose another action"
+                     + (f" (action {', '.join(r['other_actions'])}; {s['recurrent']} recurrent)" if s["total"] else ""))
     return ClaimResult("C1", "Fig. 3", "", verdict, "; ".join(parts) + ".", {"per_cap": per_cap}, figs, [tab],
                        details="Action (1, 2) here means paper process 1 to the remote server and paper process 4 "
-                               "(our process 2 of this scenario) to the edge.")
+                               "(our process 2 of this scenario) to the edge. " + CONFIGURATION_NOTE,
+                       basis=cap_basis(ev, verdict), shown=shown,
+                       captions={figs[0]: "The optimal action in the idle-server states over (tau_1, tau_4) at the "
+                                          "smallest and the largest cap; grey background: transient states."})
 
 
 def claim_c2(ctx: Context) -> ClaimResult:
     prof = ctx.profile
-    per_cap, panels = [], []
+    per_cap, solves, ev = [], [], []
     for cap in prof.caps_2p:
         solved = ctx.solve(ctx.scenario("paper_p12.toml", [f"tau_cap={cap}"]))
-        _, ids = _idle_grid(solved)
+        ids = _idle_ids(solved)
         acts = np.array([solved.action_tuple(s) for s in ids])
         is21 = np.all(acts == (2, 1), axis=1)
         is12 = np.all(acts == (1, 2), axis=1)
         tau = solved.mdp.states.tau[ids]
-        s21 = ids[is21]
-        t21 = tau[is21]
+        s21, t21 = ids[is21], tau[is21]
+        upper_left = bool(np.all(t21[:, 1] > t21[:, 0])) if s21.size else False
+        share = float(is12.mean())
+        if share > 0.5 and s21.size and upper_left:
+            v = "HOLDS"
+        elif share <= 0.5 or not s21.size:
+            v = "FAILS"
+        else:
+            v = "DEPENDS"
         rec = {
             "cap": cap,
             "idle_states": int(ids.size),
-            "share_(1,2)": float(is12.mean()),
-            "count_(2,1)": int(is21.sum()),
-            "(2,1)_split": _split(solved, s21),
-            "(2,1)_tau1_range": [int(t21[:, 0].min()), int(t21[:, 0].max())] if s21.size else None,
-            "(2,1)_tau2_range": [int(t21[:, 1].min()), int(t21[:, 1].max())] if s21.size else None,
-            "(2,1)_all_upper_left": bool(np.all(t21[:, 1] > t21[:, 0])) if s21.size else None,
+            "share_12": share,
+            "count_21": int(is21.sum()),
+            "split_21": _split(solved, s21),
+            "tau1_range_21": [int(t21[:, 0].min()), int(t21[:, 0].max())] if s21.size else [],
+            "tau2_range_21": [int(t21[:, 1].min()), int(t21[:, 1].max())] if s21.size else [],
+            "all_upper_left_21": upper_left,
             "gain": solved.gain,
+            "verdict": v,
+            "cap_mass": solved.cap_mass.to_dict(),
         }
         per_cap.append(rec)
-        panels.append((solved, "idle", {"axes": (1, 2)}))
-    shape = all(r["share_(1,2)"] > 0.5 and r["count_(2,1)"] > 0 and r["(2,1)_all_upper_left"] for r in per_cap)
-    any_rec = any(r["(2,1)_split"]["recurrent"] > 0 for r in per_cap)
-    verdict = "HOLDS" if shape else ("DEPENDS" if any(r["count_(2,1)"] > 0 for r in per_cap) else "FAILS")
-    figs = _maps_figure(ctx, panels[:1] + panels[-1:] if len(panels) > 1 else panels,
-                        "c2_fig4_policy_p12", "Processes 1 and 2, idle servers (Fig. 4)")
-    tab = ctx.save_table([{k: (v if not isinstance(v, dict) else str(v)) for k, v in r.items()} for r in per_cap],
-                         "c2_fig4_counts")
-    parts = [f"cap {r['cap']}: (1,2) in {r['share_(1,2)']:.0%} of idle states, (2,1) in {r['count_(2,1)']} "
-             f"(tau_1 in {r['(2,1)_tau1_range']}, tau_2 in {r['(2,1)_tau2_range']}; "
-             f"{r['(2,1)_split']['recurrent']} recurrent)" for r in per_cap]
-    any_21 = any(r["count_(2,1)"] > 0 for r in per_cap)
+        solves.append(solved)
+        ev.append(solved.evidence(f"processes 1, 2 at cap {cap}", v))
+    verdict = across([r["verdict"] for r in per_cap])
+    panels = [(s, "idle", {"axes": (1, 2)}) for s in (solves[:1] + solves[-1:] if len(solves) > 1 else solves)]
+    figs = _maps_figure(ctx, panels, "c2_fig4_policy_p12",
+                        "Processes 1 and 2, idle servers (Fig. 4), caps " + " and ".join(
+                            str(s.scenario.tau_caps[0]) for s, _, _ in panels))
+
+    def rng(x: list[int]) -> str:
+        return f"{x[0]}-{x[1]}" if x else "none"
+
+    tab = ctx.save_table([{"cap": r["cap"], "idle_states": r["idle_states"], "share_12": r["share_12"],
+                           "count_21": r["count_21"], "recurrent_21": r["split_21"]["recurrent"],
+                           "tau1_range_21": rng(r["tau1_range_21"]), "tau2_range_21": rng(r["tau2_range_21"]),
+                           "all_upper_left_21": r["all_upper_left_21"], "verdict": r["verdict"],
+                           "cap_mass": r["cap_mass"]["total"]} for r in per_cap], "c2_fig4_counts")
+    shown = [Table("The (2 to remote, 1 to edge) region of the idle-server map, per cap.",
+                   ["cap", "share of (1,2)", "(2,1) states", "tau_1 range", "tau_2 range", "all tau_2 > tau_1",
+                    "recurrent", "verdict at this cap", "mass at the cap"],
+                   [[r["cap"], pct(r["share_12"], 1), r["count_21"], rng(r["tau1_range_21"]), rng(r["tau2_range_21"]),
+                     r["all_upper_left_21"] if r["count_21"] else "n/a", r["split_21"]["recurrent"], r["verdict"],
+                     pct(r["cap_mass"]["total"])] for r in per_cap])]
+    parts = [f"cap {r['cap']}: (1,2) in {r['share_12']:.0%} of idle states, (2,1) in {r['count_21']}"
+             + (f" (tau_1 {rng(r['tau1_range_21'])}, tau_2 {rng(r['tau2_range_21'])}; "
+                f"{r['split_21']['recurrent']} recurrent)" if r["count_21"] else "") for r in per_cap]
     summary = "; ".join(parts) + "."
-    if any_21 and not any_rec:
-        summary += (" The (2,1) states are never visited in the long run under the optimal policy, so they do not "
-                    "change its average cost.")
-    elif not any_21:
-        summary += " No idle state chooses (2,1) at these caps."
-    return ClaimResult("C2", "Fig. 4", "", verdict, summary, {"per_cap": per_cap}, figs, [tab])
+    if verdict == "DEPENDS":
+        summary += (" The upper-left (2,1) corner is a matter of the cap: "
+                    + ", ".join(f"{r['verdict']} at cap {r['cap']}" for r in per_cap) + ".")
+    return ClaimResult("C2", "Fig. 4", "", verdict, summary, {"per_cap": per_cap}, figs, [tab],
+                       details="Per cap: HOLDS when (1,2) is the majority and a (2,1) region exists with every state "
+                               "above the diagonal (tau_2 > tau_1); FAILS when no (2,1) state exists or (1,2) is not "
+                               "the majority. Across caps: DEPENDS when the caps disagree.",
+                       basis=cap_basis(ev, verdict), shown=shown,
+                       captions={figs[0]: "The optimal action in the idle-server states over (tau_1, tau_2) at the "
+                                          "smallest and the largest cap; grey background: transient states."})
 
 
 # ============================================================================ C4, C5: three processes
+def _planes(prof, cap: int) -> list[int]:
+    return [t for t in prof.c4_planes if 3 <= t <= 2.25 * cap]
+
+
 def claim_c4(ctx: Context) -> ClaimResult:
     prof = ctx.profile
-    per_cap, figs = [], []
-    for cap, total in zip(prof.caps_3p, prof.slice_total_3p):
+    rows, ev, by_cap = [], [], {}
+    for cap in prof.caps_3p:
         solved = ctx.solve(ctx.scenario("paper_p123.toml", [f"tau_cap={cap}"]))
+        by_cap[cap] = solved
         sol = solved.as_solution()
-        stats = region_stats(solved.mdp, sol, "idle", total=total, axes=(1, 2, 3), scenario=solved.scenario)
-        per = stats["per_action"]
-        per_cap.append({
-            "cap": cap,
-            "plane_total": total,
-            "cells": stats["cells"],
-            "unreachable": stats["unreachable"],
-            "actions_present": stats["actions_present"],
-            "regions_total": stats["regions_total"],
-            "regions": {name: {k: v[k] for k in ("cells", "components", "holes", "simply_connected")}
-                        for name, v in per.items()},
-        })
-        fig, ax = subplots(figsize=(7.5, 6.8))
-        plot_policy_slice(solved.mdp, sol, "idle", total, ax=ax, stationary=solved.stationary,
-                          scenario=solved.scenario)
-        figs += ctx.save_figure(fig, f"c4_fig7_slice_p123_cap{cap}_sum{total}")
-    def ok(r):
-        return r["regions_total"] == 4 and all(v["simply_connected"] for v in r["regions"].values())
-
-    simply = [all(v["simply_connected"] for v in r["regions"].values()) for r in per_cap]
-    if all(ok(r) for r in per_cap):
-        verdict = "HOLDS"
-    elif any(simply):
-        verdict = "DEPENDS"
-    else:
-        verdict = "FAILS"
-    parts = [f"cap {r['cap']}, plane sum {r['plane_total']}: {r['regions_total']} regions of "
-             f"{r['actions_present']} actions, "
-             + ("each simply connected" if s else "not all simply connected") for r, s in zip(per_cap, simply)]
+        for total in _planes(prof, cap):
+            stats = region_stats(solved.mdp, sol, "idle", total=total, axes=(1, 2, 3), scenario=solved.scenario)
+            A, S, _ = slice_grid(solved.mdp, sol, "idle", total, (1, 2, 3))
+            at_cap = np.zeros(S.shape, bool)
+            ok = S >= 0
+            at_cap[ok] = np.any(solved.mdp.states.tau[S[ok]] == np.asarray(solved.mdp.states.caps), axis=1)
+            regions = {}
+            for name, v in stats["per_action"].items():
+                cells = A == v["action"]
+                regions[name] = {"cells": v["cells"], "components": v["components"], "holes": v["holes"],
+                                 "simply_connected": v["simply_connected"],
+                                 "cells_at_cap": int(np.count_nonzero(cells & at_cap))}
+            good = stats["regions_total"] == 4 and all(r["simply_connected"] for r in regions.values())
+            v = "HOLDS" if good else "FAILS"
+            rows.append({"cap": cap, "plane_total": total, "cells": stats["cells"], "unreachable": stats["unreachable"],
+                         "actions_present": stats["actions_present"], "regions_total": stats["regions_total"],
+                         "regions": regions, "verdict": v, "cap_mass": solved.cap_mass.total})
+            ev.append(solved.evidence(f"processes 1, 2, 3 at cap {cap}, plane {total}", v))
+    verdict = across([r["verdict"] for r in rows])
+    # figures: one plane at every cap (cap effect), every plane at the largest cap (plane effect)
+    figs: list[str] = []
+    captions = {}
+    common = [t for t in prof.c4_planes if all(t in _planes(prof, c) for c in prof.caps_3p)]
+    if len(prof.caps_3p) > 1 and common:
+        t = common[-1]
+        fig, axes = subplots(1, len(prof.caps_3p), figsize=(6.6 * len(prof.caps_3p), 6.2), squeeze=False)
+        for ax, cap in zip(axes[0], prof.caps_3p):
+            s = by_cap[cap]
+            plot_policy_slice(s.mdp, s.as_solution(), "idle", t, ax=ax, stationary=s.stationary, scenario=s.scenario,
+                              title=f"cap {cap}: plane tau_1 + tau_2 + tau_3 = {t}")
+        fig.suptitle(f"Processes 1, 2, 3, idle servers (Figs. 6-7): the plane {t} at caps "
+                     + ", ".join(map(str, prof.caps_3p)))
+        fig.tight_layout()
+        f = ctx.save_figure(fig, f"c4_fig7_plane{t}_by_cap")
+        figs += f
+        captions[f[0]] = (f"The same plane tau_1 + tau_2 + tau_3 = {t} at every cap: how the regions move as the "
+                          "truncation is lifted.")
+    cap = prof.caps_3p[-1]
+    planes = _planes(prof, cap)
+    s = by_cap[cap]
+    ncol = min(len(planes), 3)
+    nrow = -(-len(planes) // ncol)
+    fig, axes = subplots(nrow, ncol, figsize=(6.6 * ncol, 6.2 * nrow), squeeze=False)
+    for k, ax in enumerate(axes.ravel()):
+        if k >= len(planes):
+            ax.set_visible(False)
+            continue
+        plot_policy_slice(s.mdp, s.as_solution(), "idle", planes[k], ax=ax, stationary=s.stationary,
+                          scenario=s.scenario, title=f"cap {cap}: plane tau_1 + tau_2 + tau_3 = {planes[k]}")
+    fig.suptitle(f"Processes 1, 2, 3, idle servers (Figs. 6-7): every plane at cap {cap}")
+    fig.tight_layout()
+    f = ctx.save_figure(fig, f"c4_fig7_planes_cap{cap}")
+    figs += f
+    captions[f[0]] = (f"Several planes at the same cap {cap}, so the plane's effect is not confounded with the "
+                      "cap's; faded markers: transient states.")
     tab = ctx.save_table([{"cap": r["cap"], "plane_total": r["plane_total"], "action": name, **v}
-                          for r in per_cap for name, v in r["regions"].items()], "c4_fig7_regions")
-    return ClaimResult("C4", "Figs. 6-7", "", verdict, "; ".join(parts) + ".", {"per_cap": per_cap}, figs, [tab])
+                          for r in rows for name, v in r["regions"].items()], "c4_fig7_regions")
+    shown = [
+        Table("Per cap and plane: the number of regions (connected components of one action, 6-neighbour on the "
+              "plane) and whether each is simply connected.",
+              ["cap", "plane sum", "cells", "actions", "regions", "all simply connected", "cells at the cap",
+               "verdict", "mass at the cap"],
+              [[r["cap"], r["plane_total"], r["cells"], r["actions_present"], r["regions_total"],
+                all(v["simply_connected"] for v in r["regions"].values()),
+                sum(v["cells_at_cap"] for v in r["regions"].values()), r["verdict"], pct(r["cap_mass"])]
+               for r in rows]),
+        Table("Each region: cells, components, holes and how many of its cells touch the cap (some tau_k = cap).",
+              ["cap", "plane sum", "action", "cells", "components", "holes", "simply connected", "cells at the cap"],
+              [[r["cap"], r["plane_total"], name, v["cells"], v["components"], v["holes"], v["simply_connected"],
+                v["cells_at_cap"]] for r in rows for name, v in r["regions"].items()]),
+    ]
+    good = [f"{r['plane_total']}@{r['cap']}" for r in rows if r["verdict"] == "HOLDS"]
+    bad = [f"{r['plane_total']}@{r['cap']} ({r['regions_total']} regions"
+           + ("" if all(v["simply_connected"] for v in r["regions"].values()) else ", not all simply connected") + ")"
+           for r in rows if r["verdict"] != "HOLDS"]
+    summary = (f"{len(good)} of {len(rows)} (plane@cap) slices show four simply connected regions"
+               + (f" ({', '.join(good)})" if good else "") + (f"; the others: {', '.join(bad)}" if bad else "") + ".")
+    return ClaimResult("C4", "Figs. 6-7", "", verdict, summary, {"slices": rows}, figs, [tab],
+                       details="Per slice: HOLDS when exactly four regions, each simply connected; across slices: "
+                               "DEPENDS when they disagree. Planes up to 2.25 x cap are used (beyond, most of the "
+                               "plane touches the cap).", basis=cap_basis(ev, verdict), shown=shown, captions=captions)
 
 
 def claim_c5(ctx: Context) -> ClaimResult:
     prof = ctx.profile
-    cap = prof.caps_3p[0]
-    sc = ctx.scenario("paper_p123.toml", [f"tau_cap={cap}"])
-    solved = ctx.solve(sc)
-    mdp = solved.mdp
-    remote, edge = sc.servers
-    # Fig. 8: edge serving process 3 with 3 slots left, remote idle; Fig. 9: remote serving 1 with 4 left
-    remote_idle = ((0,) * max(remote.uplink_delay - 1, 0), 0, 0, (0,) * remote.downlink_delay)
-    edge_idle = ((0,) * max(edge.uplink_delay - 1, 0), 0, 0, (0,) * edge.downlink_delay)
-    edge_busy3 = (edge_idle[0], 3, 3, edge_idle[3])
-    remote_busy1 = (remote_idle[0], 1, 4, remote_idle[3])
-    cases = {
-        "fig8: edge busy with process 3": ((remote_idle, edge_busy3), 0, 3),
-        "fig9: remote busy with process 1": ((remote_busy1, edge_idle), 1, 1),
-    }
-    numbers, panels = {}, []
-    splits = []
-    for name, (cfg, free_server, busy_proc) in cases.items():
-        c = mdp.states.config_id(cfg)
-        if c < 0:
-            numbers[name] = {"reachable": False}
-            continue
-        grid = mdp.states.lookup_grid(c)
-        ids = grid[grid >= 0]
-        acts = np.array([solved.action_tuple(s) for s in ids])
-        same = ids[acts[:, free_server] == busy_proc]
-        split = _split(solved, same)
-        splits.append(split)
-        counts: dict[str, int] = {}
-        for a in map(tuple, acts):
-            counts[str(a)] = counts.get(str(a), 0) + 1
-        numbers[name] = {"reachable": True, "states": int(ids.size), "action_counts": counts,
-                         f"free server also sent process {busy_proc}": split}
-        panels.append((solved, c, {"axes": (1, 2)}))
+    per_cap, ev = [], []
+    last = None
+    for cap in prof.caps_3p:
+        sc = ctx.scenario("paper_p123.toml", [f"tau_cap={cap}"])
+        solved = ctx.solve(sc)
+        mdp = solved.mdp
+        remote, edge = sc.servers
+        # Fig. 8: edge serving process 3 with 3 slots left, remote idle; Fig. 9: remote serving 1 with 4 left
+        remote_idle = ((0,) * max(remote.uplink_delay - 1, 0), 0, 0, (0,) * remote.downlink_delay)
+        edge_idle = ((0,) * max(edge.uplink_delay - 1, 0), 0, 0, (0,) * edge.downlink_delay)
+        cases = {
+            "Fig. 8: edge busy with process 3": (((remote_idle, (edge_idle[0], 3, 3, edge_idle[3])), 0, 3)),
+            "Fig. 9: remote busy with process 1": (((remote_idle[0], 1, 4, remote_idle[3]), edge_idle), 1, 1),
+        }
+        cfgs, splits = {}, []
+        for name, (cfg, free_server, busy_proc) in cases.items():
+            c = mdp.states.config_id(cfg)
+            if c < 0:
+                cfgs[name] = {"reachable": False}
+                continue
+            grid = mdp.states.lookup_grid(c)
+            ids = grid[grid >= 0]
+            acts = np.array([solved.action_tuple(s) for s in ids])
+            same = ids[acts[:, free_server] == busy_proc]
+            split = _split(solved, same)
+            splits.append(split)
+            counts: dict[str, int] = {}
+            for a in map(tuple, acts):
+                key = _act(solved, a, c)
+                counts[key] = counts.get(key, 0) + 1
+            cfgs[name] = {"reachable": True, "config": c, "states": int(ids.size), "action_counts": counts,
+                          "busy_process_also_sent": split}
+        v = (combine([structural_verdict(s["total"] == 0, s["recurrent_below_cap"]) for s in splits])
+             if splits else "ERROR")
+        per_cap.append({"cap": cap, "cases": cfgs, "verdict": v, "cap_mass": solved.cap_mass.total})
+        ev.append(solved.evidence(f"processes 1, 2, 3 at cap {cap}", v))
+        last = (solved, cfgs)
+    verdict = combine([r["verdict"] for r in per_cap])
+    solved, cfgs = last
+    cap = prof.caps_3p[-1]
+    panels = [(solved, v["config"], {"axes": (1, 2)}) for v in cfgs.values() if v.get("reachable")]
     figs = _maps_figure(ctx, panels, "c5_figs8_9_busy_server_p123",
-                        f"Processes 1, 2, 3 (cap {cap}): one server busy (Figs. 8-9)")
-    verdict = _verdict_from_split(splits) if splits else "FAILS"
-    parts = []
-    for name, v in numbers.items():
-        if not v.get("reachable"):
-            parts.append(f"{name}: configuration unreachable")
-            continue
-        key = next(k for k in v if k.startswith("free server"))
-        parts.append(f"{name}: the free server is also sent the busy process in {v[key]['total']} of {v['states']} "
-                     f"states ({v[key]['recurrent']} recurrent)")
-    return ClaimResult("C5", "Figs. 8-9", "", verdict, "; ".join(parts) + ".", {"cap": cap, **numbers}, figs, [],
+                        f"Processes 1, 2, 3 at cap {cap}: one server busy (Figs. 8-9)")
+    rows = []
+    for r in per_cap:
+        for name, v in r["cases"].items():
+            if not v.get("reachable"):
+                rows.append([r["cap"], name, "unreachable", "", "", "", "", r["verdict"], pct(r["cap_mass"])])
+                continue
+            s = v["busy_process_also_sent"]
+            rows.append([r["cap"], name, v["states"], s["total"], s["recurrent"], s["at_cap"], s["recurrent_below_cap"],
+                         r["verdict"], pct(r["cap_mass"])])
+    shown = [Table("States of each configuration where the free server is also sent the busy process (the paper: it "
+                   "serves the other processes), per cap.",
+                   ["cap", "configuration", "states", "busy process also sent", "recurrent", "at the cap",
+                    "recurrent below the cap", "verdict at this cap", "mass at the cap"], rows)]
+    actions = [Table(f"The free server's actions at cap {cap} (states per action).", ["configuration", "action", "states"],
+                     [[name, a, n] for name, v in cfgs.items() if v.get("reachable")
+                      for a, n in sorted(v["action_counts"].items(), key=lambda kv: -kv[1])])]
+    parts = [f"cap {r['cap']}: " + "; ".join(
+        f"{name.split(':')[0]} {v['busy_process_also_sent']['total']} of {v['states']} states "
+        f"({v['busy_process_also_sent']['recurrent']} recurrent)" if v.get("reachable") else f"{name}: unreachable"
+        for name, v in r["cases"].items()) for r in per_cap]
+    return ClaimResult("C5", "Figs. 8-9", "", verdict,
+                       "The free server is also sent the busy process in: " + "; ".join(parts) + ".",
+                       {"per_cap": per_cap}, figs, [],
                        details="The paper's remark (end of Sec. II): while one server holds process k, the other "
                                "serves processes other than k. Counted over every reachable AoI vector of each "
-                               "configuration.")
+                               "configuration; the verdict follows the structural rule. " + CONFIGURATION_NOTE,
+                       basis=cap_basis(ev, verdict), shown=shown + actions,
+                       captions={figs[0]: f"The optimal action of the free server over (tau_1, tau_2) at cap {cap}, "
+                                          "with tau_3 at its most frequent value."})
 
 
 # ============================================================================ C7-C10: theorems
-def _theorem(ctx: Context, cid: str, paper: str, check, instances: list[tuple[str, list[str]]]) -> ClaimResult:
-    rows, reports = [], []
+def _check_instances(ctx: Context, cid: str, check, instances: list[tuple[str, list[str]]], **kw
+                     ) -> tuple[list[dict], list[dict], list[Solved]]:
+    """Run one structural check on each instance (cached); return the reports, the table rows
+    and the solves."""
+    rows, reports, solves = [], [], []
     for file, overrides in instances:
         sc = ctx.scenario(file, overrides)
+        solved = ctx.solve(sc)
 
-        def compute(sc=sc):
-            solved = ctx.solve(sc)
+        def compute(solved=solved):
             sol = solved.as_solution()
             pctx = policy_context(solved.mdp, sol, stationary=solved.stationary)
-            rep = check(solved.mdp, sol, ctx=pctx)
+            rep = check(solved.mdp, sol, ctx=pctx, **kw)
             return rep.to_json(), None
 
-        rep, _ = ctx.cache.get_or_compute(f"check-{cid}", {"fingerprint": sc.fingerprint()}, compute)
+        rep, _ = ctx.cache.get_or_compute(f"check-{cid}", {"fingerprint": sc.fingerprint(), **kw}, compute)
         reports.append(rep)
+        solves.append(solved)
         worst = rep.get("worst") or {}
         rows.append({
-            "scenario": file,
-            "overrides": " ".join(overrides),
-            "holds": rep["holds"],
+            "scenario": Path(file).stem,
+            "cap": max(sc.tau_caps),
+            "verdict": verdict_of(rep),
             "checked": rep["checked"],
             "violations": rep["violations"],
             "recurrent_violations": rep["recurrent_violations"],
             "at_cap_violations": rep["at_cap_violations"],
             "recurrent_below_cap": rep["split"].get("recurrent_below_cap", 0),
             "ties": rep.get("ties", 0),
-            "worst_size": worst.get("size"),
-            "worst_states": " / ".join(worst.get("labels", [])),
+            "worst_size": worst.get("size", float("nan")),
+            "cap_mass": solved.cap_mass.total,
         })
-    if all(r["holds"] for r in rows):
-        verdict = "HOLDS"
-    elif any(r["recurrent_below_cap"] > 0 for r in rows):
-        verdict = "FAILS"  # violated where the chain lives, away from the truncation
-    else:
-        verdict = "DEPENDS"  # only in states never visited in the long run, or touching the cap
+    return reports, rows, solves
+
+
+NAMES = {"paper_p12": "processes 1, 2", "paper_p14": "processes 1, 4", "paper_p123": "processes 1, 2, 3",
+         "paper_preemption_p12": "preemption, processes 1, 2"}
+
+
+def _counterexample(example: dict | None) -> str:
+    if not example:
+        return ""
+    text = ("Counterexample: " + " vs ".join(f"`{lab}`" for lab in example["labels"])
+            + f" (size {example['size']:.4g}, {'recurrent' if example['recurrent'] else 'transient'}, "
+            f"{'at' if example['at_cap'] else 'below'} the cap)")
+    traj = example.get("info", {}).get("trajectory")
+    if traj:
+        text += "\n\nTrajectory:\n\n" + "\n".join(
+            f"{i}. `{step['label']}`, action {tuple(step['action'])}, probability {step['prob']:.3g}"
+            + (f" -- **{step['event']}**" if step.get("event") else "") for i, step in enumerate(traj, 1))
+    return text
+
+
+def _theorem(ctx: Context, cid: str, paper: str, check, instances: list[tuple[str, list[str]]],
+             unit_note: str = "", **kw) -> tuple[ClaimResult, list[dict], list[Solved]]:
+    """The claim of one structural check over several instances, with the reports and solves."""
+    reports, rows, solves = _check_instances(ctx, cid, check, instances, **kw)
+    verdict = combine([r["verdict"] for r in rows])
+    ev = [s.evidence(f"{NAMES.get(r['scenario'], r['scenario'])} at cap {r['cap']}", r["verdict"])
+          for r, s in zip(rows, solves)]
     tab = ctx.save_table(rows, f"{cid.lower()}_verifier")
-    parts = [f"{r['scenario'].replace('.toml', '')} {r['overrides']}: {r['violations']}/{r['checked']} violations "
-             f"({r['recurrent_violations']} recurrent, {r['at_cap_violations']} at cap, "
-             f"{r['recurrent_below_cap']} recurrent below the cap)" for r in rows]
-    example = next((e for rep in reports for e in rep.get("examples", []) if e["recurrent"] and not e["at_cap"]), None)
-    example = example or next((e for rep in reports for e in rep.get("examples", [])), None)
-    details = ""
-    if example:
-        details = ("Counterexample: " + " vs ".join(f"`{lab}`" for lab in example["labels"])
-                   + f" (size {example['size']:.4g}, {'recurrent' if example['recurrent'] else 'transient'}, "
-                   f"{'at' if example['at_cap'] else 'below'} the cap)")
-        if example.get("info", {}).get("trajectory"):
-            details += "\n\nTrajectory:\n\n" + "\n".join(f"{i}. `{step}`" for i, step in
-                                                        enumerate(example["info"]["trajectory"], 1))
+    shown = [Table(f"The check per scenario and cap{unit_note}.",
+                   ["scenario", "cap", "checked", "violations", "recurrent", "at the cap", "recurrent below the cap",
+                    "worst size", "verdict", "mass at the cap"],
+                   [[NAMES.get(r["scenario"], r["scenario"]), r["cap"], r["checked"], r["violations"],
+                     r["recurrent_violations"], r["at_cap_violations"], r["recurrent_below_cap"],
+                     r["worst_size"] if r["violations"] else "", r["verdict"], pct(r["cap_mass"])] for r in rows])]
+    fails = [f"{NAMES.get(r['scenario'], r['scenario'])} at cap {r['cap']} ({r['recurrent_below_cap']})"
+             for r in rows if r["verdict"] == "FAILS"]
+    depends = [f"{NAMES.get(r['scenario'], r['scenario'])} at cap {r['cap']}" for r in rows if r["verdict"] == "DEPENDS"]
+    total = sum(r["violations"] for r in rows)
+    summary = f"{total:,} violation(s) in {sum(r['checked'] for r in rows):,} cases over {len(rows)} instances"
+    if fails:
+        summary += "; recurrent and below the cap in " + ", ".join(fails)
+    if depends:
+        summary += "; only transient or at the cap in " + ", ".join(depends)
+    summary += "."
+    # the counterexample: recurrent and below the cap first, then from the least-truncated instance
+    ex = [(not e["recurrent"] or e["at_cap"], r["cap_mass"], k, e) for k, (rep, r) in enumerate(zip(reports, rows))
+          for e in rep.get("examples", [])]
+    example = min(ex, key=lambda t: t[:3])[3] if ex else None
+    where = rows[min(ex, key=lambda t: t[:3])[2]] if ex else None
     numbers = {"instances": rows,
                "tolerance": {k: reports[0].get(k) for k in ("atol", "rtol")} if reports else {},
                "notes": reports[0].get("notes") if reports else ""}
-    return ClaimResult(cid, paper, "", verdict, "; ".join(parts) + ".", numbers, [], [tab], details=details)
+    details = (f"In {NAMES.get(where['scenario'], where['scenario'])} at cap {where['cap']}: "
+               + _counterexample(example)) if example else ""
+    res = ClaimResult(cid, paper, "", verdict, summary, numbers, [], [tab], details=details,
+                      basis=cap_basis(ev, verdict), shown=shown)
+    return res, reports, solves
 
 
 def _two_and_three(ctx: Context) -> list[tuple[str, list[str]]]:
@@ -282,38 +482,97 @@ def _preemption(ctx: Context) -> list[tuple[str, list[str]]]:
 
 
 def claim_c7(ctx: Context) -> ClaimResult:
-    return _theorem(ctx, "C7", "Theorem 1", check_monotonicity, _two_and_three(ctx) + _preemption(ctx))
+    return _theorem(ctx, "C7", "Theorem 1", check_monotonicity, _two_and_three(ctx) + _preemption(ctx),
+                    " (one case = a pair (s, s + e_k) in one configuration)")[0]
 
 
 def claim_c8(ctx: Context) -> ClaimResult:
-    return _theorem(ctx, "C8", "Theorem 2", check_threshold, _two_and_three(ctx))
+    return _theorem(ctx, "C8", "Theorem 2", check_threshold, _two_and_three(ctx),
+                    " (one case = an idle state s and a step z along the ray s + z(e_k1 + e_k2))")[0]
+
+
+START_TYPES = {"preempting": "by preempting another process's job", "idle_server": "on an idle server",
+               "restarting_own": "restarting its own process (cancelling its job)"}
 
 
 def claim_c10(ctx: Context) -> ClaimResult:
-    return _theorem(ctx, "C10", "Theorem 3", check_consistency, _preemption(ctx))
+    """Theorem 3 on its own wording: jobs started by preempting; the other starts are reported beside."""
+    res, reports, _ = _theorem(ctx, "C10", "Theorem 3", check_consistency, _preemption(ctx),
+                               " (one case = a state where the optimal policy starts a job by preempting)")
+    rows = []
+    split_json = []
+    for rep, inst in zip(reports, res.numbers["instances"]):
+        by = rep["details"]["by_start_type"]
+        for start, words in START_TYPES.items():
+            b = by.get(start, {})
+            v = structural_verdict(b.get("violations", 0) == 0, b.get("recurrent_below_cap", 0))
+            rows.append([inst["cap"], words, b.get("checked", 0), b.get("violations", 0),
+                         b.get("recurrent_violations", 0), b.get("at_cap_violations", 0),
+                         b.get("recurrent_below_cap", 0), v + (" (the claim)" if start == "preempting" else "")])
+            split_json.append({"cap": inst["cap"], "start": start, **{k: b.get(k, 0) for k in (
+                "checked", "violations", "recurrent_violations", "at_cap_violations", "recurrent_below_cap")}})
+    res.shown.append(Table("Every start of a job, split by how it starts: Theorem 3 speaks of jobs started by "
+                           "preempting; the other kinds are shown for comparison and do not enter the verdict.",
+                           ["cap", "job started", "starts", "later preempted or cancelled", "recurrent", "at the cap",
+                            "recurrent below the cap", "by the structural rule"], rows))
+    res.numbers["by_start_type"] = split_json
+    res.tables.append(ctx.save_table(split_json, "c10_by_start_type"))
+    # the counterexample: a preempting start, recurrent and below the cap where one exists
+    ex = [(not e["recurrent"] or e["at_cap"], inst["cap_mass"], inst["cap"], e)
+          for rep, inst in zip(reports, res.numbers["instances"]) for e in rep.get("examples", [])]
+    if ex:
+        best = min(ex, key=lambda t: t[:3])
+        res.details = (f"At cap {best[2]}, a job started by preempting is itself preempted or cancelled before it "
+                       "completes. " + _counterexample(best[3]))
+    idle = [r for r in split_json if r["start"] == "idle_server"]
+    res.summary += (" Jobs started on an idle server (not the theorem's case): "
+                    + ", ".join(f"{r['recurrent_below_cap']} recurrent below the cap at cap {r['cap']}" for r in idle)
+                    + ".")
+    return res
 
 
 def claim_c9(ctx: Context) -> ClaimResult:
     prof = ctx.profile
-    res = _theorem(ctx, "C9", "Figs. 11-12", check_threshold, _preemption(ctx))
-    # the maps of Figs. 11 (process 2 in service, process 1 arrived) and 12 (the converse)
-    cap = prof.caps_pre[0]
-    solved = ctx.solve(ctx.scenario("paper_preemption_p12.toml", [f"tau_cap={cap}"]))
-    sc = solved.scenario
+    res, reports, solves = _theorem(ctx, "C9", "Figs. 11-12", check_threshold, _preemption(ctx),
+                                    " (the switching-curve property along each axis: one case = an axis-parallel "
+                                    "line and an action, or a line ordering two actions)")
+    rows = []
+    for rep, inst in zip(reports, res.numbers["instances"]):
+        d = rep["details"]
+        kinds = d.get("by_configuration_kind", {})
+        rows.append([inst["cap"], d.get("gaps", {}).get("count", 0), d.get("reversals", {}).get("count", 0),
+                     kinds.get("serving_a_job", {}).get("violations", 0), kinds.get("server_free", {}).get("violations", 0),
+                     d.get("diagonal_gaps", {}).get("count", 0)])
+    res.shown.append(Table("The violations by kind: gaps (an action's region not an interval along an axis), order "
+                           "reversals (two lines of one axis switching between two actions in opposite orders), by "
+                           "configuration kind; and, outside the verdict, the gaps along the diagonals.",
+                           ["cap", "axis gaps", "order reversals", "while serving a job", "server free",
+                            "diagonal gaps (not violations)"], rows))
+    # the maps of Figs. 11 (process 2 in service, process 1 arrived) and 12 (the converse), at the largest cap
+    solved = solves[-1]
+    cap = prof.caps_pre[-1]
     model = solved.mdp.states.model
     panels, regions = [], {}
-    for name, b, k in (("fig11: serving process 2, process 1 arrived", (1, 0), 2),
-                       ("fig12: serving process 1, process 2 arrived", (0, 1), 1)):
-        # the job one slot into service: d = T_k - 1, age U + 1
-        c = solved.mdp.states.config_id(model.serving_config(k, b))
+    for name, b, k in (("Fig. 11: serving process 2, process 1 arrived", (1, 0), 2),
+                       ("Fig. 12: serving process 1, process 2 arrived", (0, 1), 1)):
+        c = solved.mdp.states.config_id(model.serving_config(k, b))  # the job one slot into service
         if c < 0:
-            regions[name] = "configuration unreachable"
             continue
-        st = region_stats(solved.mdp, solved.as_solution(), c, axes=(1, 2), scenario=sc)
+        st = region_stats(solved.mdp, solved.as_solution(), c, axes=(1, 2), scenario=solved.scenario)
         regions[name] = {a: {kk: v[kk] for kk in ("cells", "components", "holes", "simply_connected")}
                          for a, v in st["per_action"].items()}
         panels.append((solved, c, {"axes": (1, 2)}))
     res.figures = _maps_figure(ctx, panels, "c9_figs11_12_preemption_maps",
-                               f"Preemption, processes 1 and 2 (cap {cap}): Figs. 11-12")
+                               f"Preemption, processes 1 and 2 at cap {cap}: Figs. 11-12")
+    res.captions = {res.figures[0]: f"The optimal preemption decision over (tau_1, tau_2) at cap {cap}, one slot into "
+                                    "the job's service: a monotone switching curve separates keeping going from "
+                                    "preempting."}
     res.numbers["maps"] = regions
+    res.shown.append(Table(f"The maps of the figure (cap {cap}): regions of each action.",
+                           ["map", "action", "cells", "components", "holes", "simply connected"],
+                           [[m, a, v["cells"], v["components"], v["holes"], v["simply_connected"]]
+                            for m, acts in regions.items() for a, v in acts.items()]))
+    diag = sum(r[5] for r in rows)
+    res.summary += (f" Along the diagonal direction e_1 + e_2 (tau_1 - tau_2 = const) the regions are not intervals in {diag} "
+                    "line(s) in all; a monotone switching curve may do that, so they are described, not counted.")
     return res

@@ -31,6 +31,7 @@ given in ``details``):
 * monotonicity -- both states of the pair;
 * threshold -- both s and s' (``details["target_recurrent"]``: s' alone); a line gap -- all three
   states;
+* switching curve (C9) -- the three states of a gap; the four states of an order reversal;
 * consistency -- the start state (then every state of its tree is recurrent too, so the
   violation happens with positive long-run frequency).
 
@@ -38,15 +39,25 @@ A violation *touches the cap* when one of the states involved has some ``tau_k =
 (consistency: when every violating path from the start passes through such a state). The cap
 truncates an infinite chain, so such findings may be truncation artefacts.
 
+Verdict
+-------
+Each report's ``verdict`` follows the one rule of :mod:`.verdict`, shared with the reproduction:
+HOLDS (no violation), FAILS (a violation whose states are all recurrent and none at the cap),
+DEPENDS (violations only in transient states or touching the cap).
+
 Checks
 ------
 :func:`check_monotonicity` (Theorem 1), :func:`check_threshold` (Theorem 2 for the Section II
-model; the switching-curve form of Figs. 11-12 for the preemption model),
-:func:`check_consistency` (Theorem 3, preemption model), :func:`verify_all`. Which checks apply,
+model; for the preemption model the switching-curve form of Figs. 11-12: each action's region an
+interval along every axis-parallel line, and the switches between two actions in one order on
+all parallel lines -- a monotone curve; gaps along diagonals are described, not counted),
+:func:`check_consistency` (Theorem 3, preemption model, on jobs started by preempting as the
+theorem says; every start split by kind in its details), :func:`verify_all`. Which checks apply,
 and how the threshold check reads a model, the model class says
 (:attr:`~wncs_lp.models.base.Model.checks`, :attr:`~wncs_lp.models.base.Model.threshold_form`).
 
-Modules: :mod:`.report` (report types), :mod:`.context` (the shared :class:`PolicyContext`),
+Modules: :mod:`.report` (report types), :mod:`.verdict` (the verdict rule), :mod:`.context` (the
+shared :class:`PolicyContext`),
 :mod:`.lines` (line geometry of the AoI box), one module per check (:mod:`.monotonicity`,
 :mod:`.threshold`, :mod:`.consistency`).
 """

@@ -23,8 +23,9 @@ def check_consistency(
     examples: int = DEFAULT_EXAMPLES,
     stationary_tol: float = 0.0,
     ctx: PolicyContext | None = None,
+    starts: str = "preempting",
 ) -> CheckReport:
-    r"""Theorem 3 (claim C10, preemption model): a started job is not preempted before it completes.
+    r"""Theorem 3 (claim C10, preemption model): a job started by preempting is not preempted before it completes.
 
     *Starts.* A state s starts a job when ``pi(s) = (k,)`` with ``k != 0``: process k's fresh update
     enters service as ``(k, T_k, U)`` (on an idle server, preempting another process's job, or
@@ -45,11 +46,12 @@ def check_consistency(
     The job's identity is the job of process k in service (at most one job per process exists),
     so the exploration is memoised on the state x alone; each tree has depth <= T_k - 1.
 
-    Counts: ``checked`` = start states; ``violations`` = start states whose tree contains a
-    violating path; ``details["by_start_type"]`` splits both by the kind of start (on an idle
-    server, preempting another process's job -- claim C10's reading --, restarting its own
-    process; and whether another process's update was also available, i.e. the start was a
-    choice); ``details`` adds the number of paths and of violating paths (over all trees),
+    Counts: ``checked`` = start states of the kind ``starts`` names -- by default the theorem's
+    own wording, jobs started *by preempting* another process's job; ``"all"``: every start --;
+    ``violations`` = those whose tree contains a violating path; ``details["by_start_type"]``
+    splits every start by its kind (on an idle server, preempting another process's job,
+    restarting its own process; and whether another process's update was also available, i.e.
+    the start was a choice), with one counterexample per kind; ``details`` adds the number of paths and of violating paths (over all trees),
     the probability that a start is later preempted/cancelled (max, and the long-run frequency
     ``sum_s pi(s) P(violation | start at s)``), and the starts by type. A violating start is
     recurrent when the start state is; it is *at cap* when every violating path from it passes
@@ -57,13 +59,20 @@ def check_consistency(
     violation probability; ``details["counterexample"]`` is one violating path in full (recurrent
     and below the cap when one exists).
 
+    Parameters
+    ----------
+    starts : {"preempting", "all"}
+        Which starts decide ``holds`` and the headline counts (default: the theorem's, preempting).
+
     Raises
     ------
     ModelError
-        If the model has no consistency check (``"consistency"`` not in its
+        If ``starts`` is neither, or the model has no consistency check (``"consistency"`` not in its
         :attr:`~wncs_lp.models.base.Model.checks`: only the preemption model has one).
     """
     t0 = time.perf_counter()
+    if starts not in ("preempting", "all"):
+        raise ModelError(f"starts must be 'preempting' or 'all', got {starts!r}")
     require_space(mdp)
     model = model_type(mdp)
     if "consistency" not in model.checks:
@@ -142,13 +151,13 @@ def check_consistency(
         paths[x], bad[x], pviol[x] = tp, tb, pv
         bad_free[x] = 0 if ctx.at_cap[x] else tbf
 
-    starts = np.flatnonzero(started != 0)
-    s_paths = np.zeros(starts.size, np.int64)
-    s_bad = np.zeros(starts.size, np.int64)
-    s_bad_free = np.zeros(starts.size, np.int64)
-    s_pv = np.zeros(starts.size)
-    start_type = np.zeros(starts.size, np.int8)  # 0 idle, 1 preempting, 2 restart own
-    for i, s in enumerate(starts):
+    start_states = np.flatnonzero(started != 0)
+    s_paths = np.zeros(start_states.size, np.int64)
+    s_bad = np.zeros(start_states.size, np.int64)
+    s_bad_free = np.zeros(start_states.size, np.int64)
+    s_pv = np.zeros(start_states.size)
+    start_type = np.zeros(start_states.size, np.int8)  # 0 idle, 1 preempting, 2 restart own
+    for i, s in enumerate(start_states):
         s = int(s)
         k = int(started[s])
         cur = job_k[cfg[s]]
@@ -160,11 +169,15 @@ def check_consistency(
             tp, tb, tbf, pv = subtree(int(pol[s]))
         s_paths[i], s_bad[i], s_pv[i] = tp, tb, pv
         s_bad_free[i] = 0 if ctx.at_cap[s] else tbf
-    viol = s_bad > 0
-    vs = starts[viol]
-    rec = ctx.recurrent[vs]
-    cap = s_bad_free[viol] == 0
-    size = s_pv[viol]
+    types = {0: "idle_server", 1: "preempting", 2: "restarting_own"}
+    viol_all = s_bad > 0  # every kind of start
+    in_scope = start_type == 1 if starts == "preempting" else np.ones(start_states.size, bool)
+    rec_all = ctx.recurrent[start_states]
+    cap_all = s_bad_free == 0  # every violating path from the start passes the cap
+    vidx = np.flatnonzero(viol_all & in_scope)  # the headline's violations (indices into start_states)
+    rec = rec_all[vidx]
+    cap = cap_all[vidx]
+    size = s_pv[vidx]
 
     def trajectory(s: int) -> list[dict]:
         """One violating path from start s: prefer cap-free branches, then the likeliest."""
@@ -198,35 +211,32 @@ def check_consistency(
             steps.append(step)
             pair = int(pol[y]) if j == 0 else int(pair0[y])
 
-    def make(i: int) -> Violation:
-        s = int(vs[i])
+    def make(j: int) -> Violation:
+        """The violation of start_states[j] (a violating start)."""
+        s = int(start_states[j])
         traj = trajectory(s)
         last = traj[-1]
         return ctx.violation(
             "preempt" if "preempts" in last.get("event", "") else "cancel",
-            size[i], (s, last["state"]), rec[i], cap[i],
-            {"violation_probability": float(size[i]), "violating_paths": int(s_bad[viol][i]),
-             "paths": int(s_paths[viol][i]), "cap_free_violating_paths": int(s_bad_free[viol][i]),
+            s_pv[j], (s, last["state"]), rec_all[j], cap_all[j],
+            {"start_type": types[int(start_type[j])], "violation_probability": float(s_pv[j]),
+             "violating_paths": int(s_bad[j]), "paths": int(s_paths[j]), "cap_free_violating_paths": int(s_bad_free[j]),
              "steps": len(traj) - 1, "trajectory": traj},
         )
 
-    ex_idx = pick_examples(rec, cap, size, examples)
-    ex = [make(int(i)) for i in ex_idx]
-    worst = make(int(np.argmax(size))) if size.size else None
+    ex = [make(int(vidx[i])) for i in pick_examples(rec, cap, size, examples)]
+    worst = make(int(vidx[np.argmax(size)])) if size.size else None
     counterexample = ex[0].info["trajectory"] if ex else None
     stationary = ctx.stationary
-    freq = float(np.dot(stationary[starts], s_pv)) if stationary is not None and starts.size else None
-    start_freq = float(stationary[starts].sum()) if stationary is not None and starts.size else None
+    freq = float(np.dot(stationary[start_states], s_pv)) if stationary is not None and start_states.size else None
+    start_freq = float(stationary[start_states].sum()) if stationary is not None and start_states.size else None
     vnodes = np.flatnonzero(kind_of > 0)
-    types = {0: "idle_server", 1: "preempting", 2: "restarting_own"}
     # was another process's update available at the start (the start was a choice between two)?
     other = np.array([any(x for j, x in enumerate(model.arrived(space.configs[cfg[s]]), 1) if j != started[s])
-                      for s in starts], dtype=bool) if starts.size else np.zeros(0, bool)
-    rec_all = ctx.recurrent[starts]
-    cap_all = s_bad_free == 0
+                      for s in start_states], dtype=bool) if start_states.size else np.zeros(0, bool)
 
     def breakdown(sel: np.ndarray) -> dict[str, int]:
-        v = sel & viol
+        v = sel & viol_all
         return {"checked": int(np.count_nonzero(sel)), "violations": int(np.count_nonzero(v)),
                 "recurrent_violations": int(np.count_nonzero(v & rec_all)),
                 "at_cap_violations": int(np.count_nonzero(v & cap_all)),
@@ -235,16 +245,17 @@ def check_consistency(
     selections = {types[t]: start_type == t for t in types}
     selections["other_update_available"] = other
     selections["preempting_with_other_available"] = (start_type == 1) & other
+    selections["all"] = np.ones(start_states.size, bool)
     by_type = {name: breakdown(sel) for name, sel in selections.items()}
     for name, sel in selections.items():  # one counterexample per kind of start
-        cand = np.flatnonzero(sel & viol)
+        cand = np.flatnonzero(sel & viol_all)
         if cand.size:
             best = cand[np.lexsort((-s_pv[cand], cap_all[cand], ~rec_all[cand]))[0]]
-            i = int(np.searchsorted(vs, starts[best]))
-            by_type[name]["counterexample"] = make(i).to_json()
+            by_type[name]["counterexample"] = make(int(best)).to_json()
     details = {
         "starts_by_type": {types[t]: int(np.count_nonzero(start_type == t)) for t in types},
-        "violating_starts_by_type": {types[t]: int(np.count_nonzero(start_type[viol] == t)) for t in types},
+        "violating_starts_by_type": {types[t]: int(np.count_nonzero(start_type[viol_all] == t)) for t in types},
+        "scope": starts,
         "by_start_type": by_type,
         "paths": int(s_paths.sum()),
         "violating_paths": int(s_bad.sum()),
@@ -257,13 +268,19 @@ def check_consistency(
         "tie_nodes": int(np.count_nonzero(ties_seen)),
         "counterexample": counterexample,
     }
-    notes = ("One case = one state where the policy starts a job; a violation = a start whose tree of every "
+    notes = ("One case = one state where the policy starts a job "
+             + ("by preempting another process's job (Theorem 3's wording; every other kind of start is in "
+                "details.by_start_type)" if starts == "preempting" else "(any kind)")
+             + "; a violation = a start whose tree of every "
              "positive-probability successor (until the job completes) contains a state where the policy preempts "
              "or cancels that job; a path = a root-to-leaf branch of that tree. Ties (keeping going optimal within "
              "tol) are followed as keep-going and counted in 'ties' (tie states visited).")
     return make_report(
-        "consistency", "Theorem 3 (C10): a started job is not preempted or cancelled before it completes",
-        ctx, holds=not viol.any(), checked=starts.size, violations=int(viol.sum()), rec=rec, cap=cap,
-        ties=int(np.count_nonzero(ties_seen)), unit="start states", worst=worst, examples=ex,
+        "consistency", "Theorem 3 (C10): a job started by preempting is not preempted or cancelled before it "
+                       "completes" if starts == "preempting" else
+                       "Theorem 3 (C10), every start: a started job is not preempted or cancelled before it completes",
+        ctx, holds=vidx.size == 0, checked=int(np.count_nonzero(in_scope)), violations=int(vidx.size), rec=rec,
+        cap=cap, ties=int(np.count_nonzero(ties_seen)),
+        unit="preempting start states" if starts == "preempting" else "start states", worst=worst, examples=ex,
         details=details, notes=notes, t0=t0,
     )

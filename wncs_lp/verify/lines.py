@@ -13,7 +13,8 @@ from ..errors import ModelError
 from .context import PolicyContext
 from .report import Violation
 
-__all__ = ["box_lines", "direction_name", "line_structure", "gap_violations", "gap_violation", "theorem2_direction"]
+__all__ = ["box_lines", "direction_name", "line_structure", "gap_violations", "gap_violation", "theorem2_direction",
+           "switching_orders", "order_violations", "order_violation"]
 
 
 def box_lines(caps: Sequence[int], d: Sequence[int]) -> np.ndarray:
@@ -128,6 +129,114 @@ def gap_violation(ctx: PolicyContext, gap: tuple, rec: bool, cap: bool) -> Viola
         {"direction": name, "action": list(ctx.action(a)), "action_at_gap": list(ctx.action(ctx.act[s_gap])),
          "meaning": "states 1 and 3 choose the action; state 2 between them on the line strictly prefers another "
                     "(size = Q(gap, action) - Q(gap, pi(gap)))"},
+    )
+
+
+def switching_orders(ctx: PolicyContext, configs: Sequence[int], directions: Sequence[tuple[int, ...]]
+                     ) -> tuple[dict, list[tuple]]:
+    """Whether the policy switches between two actions in the same order on every parallel line.
+
+    A monotone switching curve (the threshold form of the paper's Figs. 11-12: one action's region
+    an up-set in one AoI and a down-set in the other) switches between two actions a, b in one
+    direction along every line of an axis: a before b on every line where both occur, or b before
+    a on every line. For each configuration, direction and pair of feasible actions (a, b), a line
+    *orders* them when the states strictly preferring a (pi = a, and b worse beyond tol) all come
+    before, or all after, the states strictly preferring b (interleaved lines are gaps of
+    :func:`line_structure`, not counted here). When both orders occur, each line of the minority
+    order is a *reversal*, witnessed by its switch pair (the last state of the first action and the
+    first of the second) and the switch pair of the nearest line of the majority order.
+
+    Returns (summary per direction, list of reversals (direction, config, a, b, states, size)),
+    ``states`` = (minority a-state, minority b-state, majority a-state, majority b-state) and
+    ``size`` = the smaller of the two strict preferences on the minority line.
+    """
+    mdp = ctx.mdp
+    space = mdp.states
+    caps = tuple(int(c) for c in space.caps)
+    summary: dict[str, dict] = {}
+    out: list[tuple] = []
+    for d in directions:
+        lines = box_lines(caps, d)
+        name = direction_name(d)
+        entry = summary.setdefault(name, {"ordered_line_pairs": 0, "reversals": 0, "groups_reversed": 0})
+        if lines.shape[1] < 2:
+            continue
+        starts = np.stack(np.unravel_index(lines[:, 0], caps), axis=1)  # the line's position across d
+        L = lines.shape[1]
+        idx = np.arange(L)[None, :]
+        for c in configs:
+            feas = np.flatnonzero(ctx.offsets[c] >= 0)
+            if feas.size < 2:
+                continue
+            G = space.lookup_grid(c).ravel()
+            S = np.where(lines >= 0, G[np.maximum(lines, 0)], -1)
+            keep = np.count_nonzero(S >= 0, axis=1) >= 2
+            if np.count_nonzero(keep) < 2:
+                continue
+            S, pos = S[keep], starts[keep]
+            valid = S >= 0
+            Ssafe = np.maximum(S, 0)
+            A = np.where(valid, ctx.act[Ssafe], -1)
+            Q = {int(a): np.where(valid, ctx.q_of(Ssafe.ravel(), np.full(Ssafe.size, a)).reshape(S.shape), np.nan)
+                 for a in feas}
+            for i, a in enumerate(feas):
+                for b in feas[i + 1:]:
+                    a, b = int(a), int(b)
+                    with np.errstate(invalid="ignore"):
+                        sa = valid & (A == a) & (Q[b] - Q[a] > ctx.tol)
+                        sb = valid & (A == b) & (Q[a] - Q[b] > ctx.tol)
+                    both = sa.any(axis=1) & sb.any(axis=1)
+                    if np.count_nonzero(both) < 2:
+                        continue
+                    big = L + 1
+                    fa = np.where(sa, idx, big).min(axis=1)
+                    la = np.where(sa, idx, -1).max(axis=1)
+                    fb = np.where(sb, idx, big).min(axis=1)
+                    lb = np.where(sb, idx, -1).max(axis=1)
+                    ab = both & (la < fb)
+                    ba = both & (lb < fa)
+                    n_ab, n_ba = int(np.count_nonzero(ab)), int(np.count_nonzero(ba))
+                    entry["ordered_line_pairs"] += n_ab + n_ba
+                    if not (n_ab and n_ba):
+                        continue
+                    entry["groups_reversed"] += 1
+                    minority, majority = (ba, ab) if n_ab >= n_ba else (ab, ba)
+                    maj_rows = np.flatnonzero(majority)
+
+                    def switch(r: int) -> tuple[int, int]:  # positions of the (a, b) states at line r's switch
+                        return (int(la[r]), int(fb[r])) if ab[r] else (int(fa[r]), int(lb[r]))
+
+                    for r in np.flatnonzero(minority):
+                        r = int(r)
+                        r2 = int(maj_rows[np.argmin(np.abs(pos[maj_rows] - pos[r]).sum(axis=1))])
+                        ia, ib = switch(r)
+                        ja, jb = switch(r2)
+                        size = float(min(Q[b][r, ia] - Q[a][r, ia], Q[a][r, ib] - Q[b][r, ib]))
+                        out.append((name, int(c), a, b, (int(S[r, ia]), int(S[r, ib]), int(S[r2, ja]), int(S[r2, jb])),
+                                    size))
+                        entry["reversals"] += 1
+    return summary, out
+
+
+def order_violations(ctx: PolicyContext, reversals: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(recurrent, at_cap, size)`` of the reversals of :func:`switching_orders` (recurrent when
+    all four witness states are, at the cap when one of them is)."""
+    if not reversals:
+        z = np.zeros(0, bool)
+        return z, z, np.zeros(0)
+    st = np.asarray([x[4] for x in reversals], dtype=np.int64)
+    return ctx.recurrent[st].all(axis=1), ctx.at_cap[st].any(axis=1), np.asarray([x[5] for x in reversals])
+
+
+def order_violation(ctx: PolicyContext, rev: tuple, rec: bool, cap: bool) -> Violation:
+    """The :class:`~wncs_lp.verify.report.Violation` of one reversal of :func:`switching_orders`."""
+    name, c, a, b, states, size = rev
+    return ctx.violation(
+        "order-reversal", size, states, rec, cap,
+        {"direction": name, "actions": [list(ctx.action(a)), list(ctx.action(b))],
+         "meaning": "along this line the policy switches between the two actions in the opposite order to the "
+                    "nearest line of the majority order (states 1-2: this line's switch, states 3-4: the other "
+                    "line's); size = the smaller strict preference on this line"},
     )
 
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..files import json_ready
+from .verdict import structural_verdict
 
 
 __all__ = ["Tolerance", "Violation", "CheckReport", "split_counts", "pick_examples"]
@@ -100,7 +101,10 @@ class CheckReport:
     claim : str
         The paper's statement checked and the claim id.
     holds : bool
-        No violation beyond the tolerance (see ``notes`` for what exactly enters the verdict).
+        No violation beyond the tolerance (see ``notes`` for what exactly enters it).
+    verdict : str (property)
+        HOLDS / FAILS / DEPENDS from ``holds`` and ``split`` by :mod:`wncs_lp.verify.verdict`: FAILS
+        needs a violation that is recurrent and below the cap.
     checked : int
         Number of cases examined (the unit is in ``unit``).
     violations : int
@@ -151,7 +155,9 @@ class CheckReport:
 
     @property
     def verdict(self) -> str:
-        return "HOLDS" if self.holds else "FAILS"
+        """HOLDS, FAILS or DEPENDS by the one rule shared with the reproduction
+        (:func:`wncs_lp.verify.verdict.structural_verdict`)."""
+        return structural_verdict(self.holds, self.split.get("recurrent_below_cap", 0))
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (strict JSON once NaN/inf are mapped to null by the caller)."""

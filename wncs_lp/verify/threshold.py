@@ -11,7 +11,8 @@ from ..mdp import MDP
 from ..models import model_type
 from ..solvers.result import Solution
 from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, idle_configs, use_context
-from .lines import box_lines, gap_violation, gap_violations, line_structure, theorem2_direction
+from .lines import (box_lines, gap_violation, gap_violations, line_structure, order_violation, order_violations,
+                    switching_orders, theorem2_direction)
 from .report import CheckReport, Tolerance, Violation, pick_examples, split_counts
 
 __all__ = ["check_threshold"]
@@ -48,11 +49,21 @@ def check_threshold(
     diagonal ``e_i + e_j`` -- a line has a gap for action a when two states choosing a enclose a
     reachable state that strictly prefers another action (beyond tol).
 
-    **Intervals** (``threshold_form = "intervals"``: the preemption model): Theorem 2 does not
-    apply; claim C9 ("the preemption policy is of
-    threshold type", Figs. 11-12) is checked as the interval property above, in every
-    configuration with at least two feasible actions, along every axis and diagonal; one case
-    = one (line, action) pair where the action occurs; a violation = a gap.
+    **Switching curve** (``threshold_form = "intervals"``: the preemption model): Theorem 2 does
+    not apply; claim C9 ("the preemption policy is of threshold type", Figs. 11-12: a monotone
+    switching curve, an up-set in one AoI and a down-set in the other) is checked along each
+    axis, in every configuration with at least two feasible actions:
+
+    * *gaps* -- each action's region is an interval on every axis-parallel line (one case = one
+      (line, action) pair where the action occurs);
+    * *order reversals* -- on all parallel lines of one axis the policy switches between two
+      actions in the same order (one case = one line on which both actions occur in order; a
+      violation = a line of the minority order, see :func:`~wncs_lp.verify.lines.switching_orders`).
+
+    A monotone switching curve may cross a diagonal line several times, so gaps along the
+    diagonals e_i + e_j are counted in ``details["diagonal_gaps"]`` only, outside the verdict;
+    ``details["by_configuration_kind"]`` splits the violations between configurations serving
+    a job (the preemption decisions of the figures) and those with a free server.
 
     Parameters
     ----------
@@ -93,27 +104,67 @@ def check_threshold(
         for c in cfg_ids:
             if not 0 <= c < len(space.configs):
                 raise ModelError(f"configuration id {c} out of range 0..{len(space.configs) - 1}")
-    directions: list[tuple[int, ...]] = [tuple(int(i == k) for i in range(N)) for k in range(N)]
-    directions += [tuple(int(i in (a, b)) for i in range(N)) for a in range(N) for b in range(a + 1, N)]
-    line_summary, gaps = line_structure(ctx, cfg_ids, directions)
-    grec, gcap, gsize = gap_violations(ctx, gaps)
+    axes_d: list[tuple[int, ...]] = [tuple(int(i == k) for i in range(N)) for k in range(N)]
+    diagonals = [tuple(int(i in (a, b)) for i in range(N)) for a in range(N) for b in range(a + 1, N)]
+    directions = axes_d + diagonals
 
     if form == "intervals":
-        order = pick_examples(grec, gcap, gsize, examples)
-        ex = [gap_violation(ctx, gaps[int(i)], grec[i], gcap[i]) for i in order]
-        worst = None
-        if gaps:
-            i = int(np.argmax(np.abs(gsize)))
-            worst = gap_violation(ctx, gaps[i], grec[i], gcap[i])
-        checked = sum(v["checked"] for v in line_summary.values())
-        serving = [c for c in cfg_ids if model.job_in_service(space.configs[c]) is not None]
-        details = {"lines": line_summary, "configurations": len(cfg_ids), "configurations_serving": len(serving)}
-        notes = ("Preemption model: Theorem 2 is stated for the Section II model; here the C9 reading is checked -- "
-                 "each action's region is an interval on every axis-parallel and diagonal line of every configuration "
-                 "with >= 2 feasible actions (tie-robust).")
+        # the switching-curve property, along each axis: every action region an interval on every
+        # axis-parallel line (one switch per pair of actions), and the switches in one order on all
+        # parallel lines (a monotone curve); diagonal gaps are a described statistic only
+        axis_summary, gaps = line_structure(ctx, cfg_ids, axes_d)
+        order_summary, revs = switching_orders(ctx, cfg_ids, axes_d)
+        diag_summary, dgaps = line_structure(ctx, cfg_ids, diagonals)
+        grec, gcap, gsize = gap_violations(ctx, gaps)
+        orec, ocap, osize = order_violations(ctx, revs)
+        rec = np.concatenate([grec, orec])
+        cap = np.concatenate([gcap, ocap])
+        size = np.concatenate([gsize, osize])
+
+        def make(i: int) -> Violation:
+            if i < len(gaps):
+                return gap_violation(ctx, gaps[i], grec[i], gcap[i])
+            j = i - len(gaps)
+            return order_violation(ctx, revs[j], orec[j], ocap[j])
+
+        ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples)]
+        worst = make(int(np.argmax(np.abs(size)))) if size.size else None
+        serving = {c for c in cfg_ids if model.job_in_service(space.configs[c]) is not None}
+        g_serv = np.array([g[1] in serving for g in gaps] + [r[1] in serving for r in revs], dtype=bool)
+        drec, dcap, _ = gap_violations(ctx, dgaps)
+        checked = (sum(v["checked"] for v in axis_summary.values())
+                   + sum(v["ordered_line_pairs"] for v in order_summary.values()))
+        details = {
+            "axis_lines": axis_summary,
+            "axis_orders": order_summary,
+            "gaps": {"count": len(gaps), "split": split_counts(grec, gcap)},
+            "reversals": {"count": len(revs), "split": split_counts(orec, ocap)},
+            "by_configuration_kind": {
+                "serving_a_job": {"configurations": len(serving), "violations": int(np.count_nonzero(g_serv)),
+                                  "split": split_counts(rec[g_serv], cap[g_serv])},
+                "server_free": {"configurations": len(cfg_ids) - len(serving),
+                                "violations": int(np.count_nonzero(~g_serv)),
+                                "split": split_counts(rec[~g_serv], cap[~g_serv])},
+            },
+            "diagonal_gaps": {"count": len(dgaps), "split": split_counts(drec, dcap), "lines": diag_summary,
+                              "note": "not violations: a monotone switching curve may cross a diagonal "
+                                      "tau_i + tau_j = const several times"},
+            "configurations": len(cfg_ids),
+            "configurations_serving": len(serving),
+        }
+        notes = ("Preemption model: Theorem 2 is stated for the Section II model; here the C9 reading is checked, the "
+                 "switching-curve (threshold) property along each axis in every configuration with >= 2 feasible "
+                 "actions: each action's region is an interval on every axis-parallel line ('line-gap' violations, "
+                 "one case per (line, action) pair), and the policy switches between two actions in the same order "
+                 "on all parallel lines ('order-reversal' violations, one case per line ordering a pair of actions). "
+                 "Tie-robust. Gaps along the diagonals are counted in details.diagonal_gaps, outside the verdict.")
         return make_report("threshold", "C9 (Figs. 11-12): preemption policy of threshold (switching-curve) type", ctx,
-                           holds=not gaps, checked=checked, violations=len(gaps), rec=grec, cap=gcap, ties=0,
-                           unit="(line, action) pairs", worst=worst, examples=ex, details=details, notes=notes, t0=t0)
+                           holds=(len(gaps) + len(revs) == 0), checked=checked, violations=len(gaps) + len(revs),
+                           rec=rec, cap=cap, ties=0, unit="(line, action) pairs and ordered (line, action pair)s",
+                           worst=worst, examples=ex, details=details, notes=notes, t0=t0)
+
+    line_summary, gaps = line_structure(ctx, cfg_ids, directions)
+    grec, gcap, gsize = gap_violations(ctx, gaps)
 
     # ---- Theorem 2 rays
     n_checked = 0
