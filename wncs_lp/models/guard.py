@@ -11,6 +11,11 @@ sets contains the true reachable set, so
 an upper bound that costs O(configs x sum_k tau_hat_k) instead of O(configs x prod_k tau_hat_k).
 Pairs and transition nonzeros follow by weighting each configuration's count with its number of
 actions and outcomes (upper bounds too: merging of equal successors only lowers the truth).
+
+The matrix-free solver (:mod:`wncs_lp.solvers.matrix_free`) stores no matrix: it sweeps, per
+configuration, the box spanned by the per-axis sets' intervals (their hull), keeping one float64
+value vector, one byte of policy and (only when its bracket needs it) one byte of reachability
+mask per box state: ``matrix_free_bytes``.
 """
 from __future__ import annotations
 
@@ -35,6 +40,11 @@ BYTES_PER_STATE = 48
 LP_FACTOR = 40.0
 #: Fraction of the available memory a build may use before it is refused.
 MEMORY_FRACTION = 0.5
+#: Bytes per state of the matrix-free solver: the float64 value vector, the uint8 policy and the
+#: uint8 reachability mask (used only when the hull's bracket needs it; counted always).
+MATRIX_FREE_BYTES_PER_STATE = 10
+#: Fixed extra of the matrix-free solver (interpreter, numba, tables), measured ~0.3 GB.
+MATRIX_FREE_OVERHEAD = 400 << 20
 
 
 class SizeLimitError(WncsError):
@@ -61,6 +71,10 @@ class SizeEstimate:
         Estimated peak memory of the build.
     lp_bytes : int
         Estimated peak memory of an interior-point LP solve.
+    matrix_free_states : int
+        States of the matrix-free solver's layout (the per-axis interval hull; exact).
+    matrix_free_bytes : int
+        Peak memory of a matrix-free solve (no matrix: see the module docstring).
     """
 
     configs: int
@@ -70,6 +84,8 @@ class SizeEstimate:
     nnz: int
     build_bytes: int
     lp_bytes: int
+    matrix_free_states: int = 0
+    matrix_free_bytes: int = 0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -143,7 +159,14 @@ def estimate_size(scenario: Scenario, model=None) -> SizeEstimate:
     nnz = int((per_cfg * n_out).sum())
     build = nnz * BUILD_BYTES_PER_NNZ + pairs * BYTES_PER_PAIR + states * BYTES_PER_STATE + nC * int(np.prod(caps))
     lp = int(LP_FACTOR * (nnz * 16 + pairs * 8))
-    return SizeEstimate(nC, int(np.prod(caps)), states, pairs, nnz, int(build), lp)
+    hull = np.ones(nC, dtype=np.int64)
+    for k in range(N):
+        first = masks[k].argmax(axis=1)
+        last = caps[k] - 1 - masks[k][:, ::-1].argmax(axis=1)
+        hull *= last - first + 1
+    mf_states = int(hull.sum())
+    mf = mf_states * MATRIX_FREE_BYTES_PER_STATE + MATRIX_FREE_OVERHEAD
+    return SizeEstimate(nC, int(np.prod(caps)), states, pairs, nnz, int(build), lp, mf_states, int(mf))
 
 
 def _gib(b: float) -> str:
@@ -157,12 +180,16 @@ def check_size(
     need_lp: bool = False,
     limit_bytes: int | None = None,
     model=None,
+    method: str | None = None,
 ) -> SizeEstimate:
     """Refuse (raise :class:`SizeLimitError`) a build whose estimate exceeds the memory limit.
 
     The limit is ``MEMORY_FRACTION`` of :func:`available_memory` unless ``limit_bytes`` is given.
     With ``need_lp`` the LP's memory counts too. ``force=True`` only returns the estimate.
     The message gives the estimate and the cheaper routes that exist.
+    With ``method="matrix-free"`` the need is the matrix-free solver's (``matrix_free_bytes``:
+    nothing is built), against the whole available memory (the estimate is exact up to the
+    fixed overhead, not an upper bound with slack).
     """
     if model is None:
         from . import model_for
@@ -171,6 +198,18 @@ def check_size(
     est = estimate_size(scenario, model)
     if force:
         return est
+    if method == "matrix-free":
+        limit = int(0.9 * available_memory()) if limit_bytes is None else int(limit_bytes)
+        if est.matrix_free_bytes <= limit:
+            return est
+        raise SizeLimitError(
+            f"{scenario.source}: the matrix-free solver would sweep {est.matrix_free_states:,} states "
+            f"(one float64 value, one policy byte and one mask byte each), needing about "
+            f"{_gib(est.matrix_free_bytes)}, over the limit of {_gib(limit)} (90% of the memory available now). "
+            f"Cheaper routes: a smaller cap (--set tau_cap=...); "
+            + "; ".join(model.cheaper_routes() or ["none"]) + ". Use --force (force=True) to run anyway.",
+            est,
+        )
     limit = int(MEMORY_FRACTION * available_memory()) if limit_bytes is None else int(limit_bytes)
     need = est.build_bytes + (est.lp_bytes if need_lp else 0)
     if need <= limit:
@@ -178,6 +217,9 @@ def check_size(
     routes = []
     if need_lp and est.build_bytes <= limit:
         routes.append("value iteration (--method rvi) instead of the LP, which fits")
+    if est.matrix_free_bytes <= limit:
+        routes.append(f"the matrix-free solver (--method matrix-free, about {_gib(est.matrix_free_bytes)}: "
+                      "no matrix is built), which fits")
     routes += model.cheaper_routes()
     routes.append(f"a smaller cap (--set tau_cap=...; the box is {est.box:,} AoI vectors per configuration)")
     raise SizeLimitError(

@@ -10,7 +10,11 @@
 * ``"pi"``       -- Howard policy iteration with exact evaluation (sparse LU; BiCGSTAB on large
   chains; falls back to value iteration on a multichain iterate);
 * ``"auto"``     -- picks LP or value iteration by size and cross-checks them when both are
-  cheap (:func:`solve_auto`).
+  cheap (:func:`solve_auto`);
+* ``"matrix-free"`` -- certified value iteration without the transition matrix, on the MDP's
+  scenario (:mod:`wncs_lp.solvers.matrix_free`; the answer is returned on the MDP). For systems
+  too large to build, call :func:`solve_scenario` (``method="matrix-free"``) or
+  :func:`wncs_lp.solvers.matrix_free.matrix_free_value_iteration` on the scenario.
 
 Every solution carries the bracket ``gain_lower <= g* <= gain_upper`` from one Bellman
 step on its bias (:func:`bracket`).
@@ -54,19 +58,24 @@ __all__ = [
     "build_lp",
     "extract_policy",
     "solve_lp",
+    "MATRIX_FREE",
+    "solve_scenario",
 ]
 
-#: The method names accepted by :func:`solve`.
+#: The method names accepted by :func:`solve` (and :data:`MATRIX_FREE`, which needs an MDP built
+#: from a scenario, so it is not in this tuple of methods for any MDP).
 METHODS = ("lp", "lp-cvxpy", "rvi", "vi", "pi", "auto")
+#: The matrix-free method (:mod:`wncs_lp.solvers.matrix_free`).
+MATRIX_FREE = "matrix-free"
 
 
-def solve(mdp: MDP, method: str = "lp", **kw: Any) -> Solution:
+def solve(mdp: MDP, method: str = "auto", **kw: Any) -> Solution:
     """Solve an average-cost MDP with the named method.
 
     Parameters
     ----------
     mdp : MDP
-    method : {"lp", "lp-cvxpy", "rvi", "vi", "pi", "auto"}
+    method : {"lp", "lp-cvxpy", "rvi", "vi", "pi", "auto", "matrix-free"}
     **kw
         Passed to :func:`solve_lp` (``backend`` is set by the method name),
         :func:`relative_value_iteration`, :func:`value_iteration`, :func:`policy_iteration`
@@ -89,4 +98,18 @@ def solve(mdp: MDP, method: str = "lp", **kw: Any) -> Solution:
         return policy_iteration(mdp, **kw)
     if method == "auto":
         return solve_auto(mdp, **kw)
-    raise SolverError(f"unknown solver method {method!r}; expected one of {', '.join(map(repr, METHODS))}")
+    if method == MATRIX_FREE:
+        from .matrix_free import solve_mdp
+
+        return solve_mdp(mdp, **kw)
+    raise SolverError(f"unknown solver method {method!r}; expected one of "
+                      f"{', '.join(map(repr, METHODS + (MATRIX_FREE,)))}")
+
+
+def solve_scenario(scenario: Any, method: str = MATRIX_FREE, **kw: Any) -> Solution:
+    """Solve a scenario: ``"matrix-free"`` without building the MDP (a
+    :class:`~wncs_lp.solvers.matrix_free.MatrixFreeSolution`); any other method builds the MDP
+    after the size guard (``force=True`` skips it) and calls :func:`solve`."""
+    from .matrix_free import solve_scenario as _solve_scenario
+
+    return _solve_scenario(scenario, method, **kw)

@@ -1,0 +1,243 @@
+"""Issue 17: the matrix-free certified solver against the stored-matrix one, and alone at scale.
+
+    python benchmarks/matrix_free.py --out benchmarks/matrix_free.csv         # ~40 min on 2 cores
+    python benchmarks/matrix_free.py --quick --out /tmp/mf.csv                # ~2 min
+    python benchmarks/matrix_free.py --sections big --caps 20 --out /tmp/mf20.csv
+    python benchmarks/matrix_free.py --sections big --caps 40 --policies "" --no-extrapolate   # largest
+
+Sections (one CSV row per measurement, a table on stdout):
+
+* ``compare`` -- instances where both run (processes 1, 2 at caps 12-40; 1-3 at 12-18; 1-4 at
+  6-10): ``build`` + ``solve(mdp, "vi")`` (numba MPI, certificate passes on ``--threads``
+  threads) against ``matrix_free_value_iteration`` (1 and ``--threads`` threads), both to a
+  relative bracket of 1e-9. Checked: each gain lies in the other's bracket and the two agree to
+  1e-9 relative. ``ratio`` = stored seconds (build + solve) / matrix-free seconds.
+* ``big`` -- processes 1-4 (``formulations/paper_p1234.toml``) at ``--caps`` (default 20, 25,
+  30), each in its own process (so the peak RSS, ``resource.getrusage``, is that case's): the
+  optimal gain certified to 1e-9 (and the time at which the bracket first reached 1e-6), then
+  the exact (certified) gains of the ``--policies`` (default suboptimal, static, greedy) by
+  matrix-free policy evaluation, and their gaps to the optimum.
+
+The machine is shared: every row records the 1-minute load average when it started (2 cores;
+a load above ~1 means another job competed for them).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import wncs_lp  # noqa: E402
+from wncs_lp.models.system import System  # noqa: E402
+from wncs_lp.policies import make_policy  # noqa: E402
+from wncs_lp.solvers.matrix_free import (  # noqa: E402
+    matrix_free_evaluate,
+    matrix_free_value_iteration,
+)
+
+COLUMNS = ["section", "instance", "cap", "states", "method", "threads", "seconds", "seconds_to_1e-6", "sweeps",
+           "eval_sweeps", "gain", "gain_lower", "gain_upper", "rel_gap", "gap_to_optimum", "ratio",
+           "peak_rss_gib", "load1", "status", "note"]
+
+COMPARE = [("paper_p12", c) for c in (12, 16, 20, 24, 28, 32, 36, 40)] + \
+          [("paper_p123", c) for c in (12, 14, 16, 18)] + [("paper_p1234", c) for c in (6, 8, 10)]
+COMPARE_QUICK = [("paper_p12", 12), ("paper_p12", 24), ("paper_p123", 12), ("paper_p1234", 6), ("paper_p1234", 8)]
+
+
+def load1() -> float:
+    return round(os.getloadavg()[0], 2)
+
+
+def rss_gib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20  # ru_maxrss is in KiB on Linux
+
+
+def time_to(history, rel) -> float | None:
+    for _, _, t, lo, hi in history:
+        if hi - lo <= rel * abs(0.5 * (lo + hi)):
+            return round(t, 2)
+    return None
+
+
+def scenario(name, cap):
+    return wncs_lp.load_scenario(wncs_lp.scenario_path(name), [f"tau_cap={cap}"])
+
+
+def row(**kw):
+    out = {c: "" for c in COLUMNS}
+    out.update({k: v for k, v in kw.items() if k in out})
+    return out
+
+
+# ----------------------------------------------------------------------------- compare
+def warm_up(threads):
+    """Load (or compile) the kernels of both solvers before anything is timed."""
+    import warnings
+
+    from wncs_lp.solvers import matrix_free as mf_mod
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = scenario("paper_p12", 8)
+        wncs_lp.solve(wncs_lp.build(sc), "vi", threads=threads)
+        old = mf_mod.PARALLEL_MIN_STATES
+        mf_mod.PARALLEL_MIN_STATES = 0
+        try:
+            for th in sorted({1, threads}):
+                matrix_free_value_iteration(sc, threads=th)
+                matrix_free_evaluate(sc, make_policy("greedy", System.from_scenario(sc)), threads=th)
+        finally:
+            mf_mod.PARALLEL_MIN_STATES = old
+
+
+def compare(instances, threads, tol):
+    rows = []
+    warm_up(threads)
+    for name, cap in instances:
+        sc = scenario(name, cap)
+        ld = load1()
+        t = time.perf_counter()
+        mdp = wncs_lp.build(sc)
+        t_build = time.perf_counter() - t
+        t = time.perf_counter()
+        vi = wncs_lp.solve(mdp, "vi", tol=tol, threads=threads)
+        t_vi = time.perf_counter() - t
+        stored = t_build + t_vi
+        n = mdp.n_states
+        del mdp
+        rows.append(row(section="compare", instance=name, cap=cap, states=n, method="stored vi", threads=threads,
+                        seconds=round(stored, 3), sweeps=vi.stats["sweeps"], eval_sweeps=vi.stats["eval_sweeps"],
+                        gain=vi.gain, gain_lower=vi.gain_lower, gain_upper=vi.gain_upper, rel_gap=vi.gap,
+                        load1=ld, status=vi.status, note=f"build {t_build:.3f} s + solve {t_vi:.3f} s"))
+        for th in sorted({1, threads}):
+            ld = load1()
+            mf = matrix_free_value_iteration(sc, tol=tol, threads=th)
+            if mf.stats["threads"] != th:  # below PARALLEL_MIN_STATES the solver uses one thread
+                continue
+            slack = 1e-12 * abs(mf.gain)
+            inside = (vi.gain_lower - slack <= mf.gain <= vi.gain_upper + slack
+                      and mf.gain_lower - slack <= vi.gain <= mf.gain_upper + slack)
+            rel = abs(mf.gain - vi.gain) / abs(vi.gain)
+            rows.append(row(section="compare", instance=name, cap=cap, states=mf.stats["n_states"],
+                            method="matrix-free", threads=th, seconds=round(mf.seconds, 3), sweeps=mf.stats["sweeps"],
+                            eval_sweeps=mf.stats["eval_sweeps"], gain=mf.gain, gain_lower=mf.gain_lower,
+                            gain_upper=mf.gain_upper, rel_gap=mf.gap, ratio=round(stored / mf.seconds, 2), load1=ld,
+                            status=mf.status,
+                            note=f"|g - g_vi|/g = {rel:.1e}; {'agree' if inside and rel <= 1e-9 else 'DISAGREE'}; "
+                                 f"solve-only ratio {t_vi / mf.seconds:.2f}; "
+                                 f"layout {mf.stats['n_states']:,} vs {n:,} reachable"))
+            print(f"compare {name} cap {cap} ({n:,} states): stored {t_build:.2f} + {t_vi:.2f} s, matrix-free "
+                  f"{th} thread(s) {mf.seconds:.2f} s (ratio {stored / mf.seconds:.2f}, solve only "
+                  f"{t_vi / mf.seconds:.2f}), |dg|/g {rel:.1e} {'ok' if inside else 'BRACKETS DISJOINT'}, "
+                  f"load {ld}", flush=True)
+    return rows
+
+
+# ----------------------------------------------------------------------------- big (worker)
+def big_worker(cap, threads, tol, policies, extrapolate=True):
+    sc = scenario("paper_p1234", cap)
+    system = System.from_scenario(sc)
+    out = []
+    ld = load1()
+    sol = matrix_free_value_iteration(system, tol=tol, threads=threads, progress=True, extrapolate=extrapolate)
+    rss_solve = rss_gib()
+    g, glo, ghi = sol.gain, sol.gain_lower, sol.gain_upper
+    out.append(row(section="big", instance="paper_p1234", cap=cap, states=sol.stats["n_states"], method="optimal",
+                   threads=threads, seconds=round(sol.seconds, 2),
+                   **{"seconds_to_1e-6": time_to(sol.stats["history"], 1e-6)},
+                   sweeps=sol.stats["sweeps"], eval_sweeps=sol.stats["eval_sweeps"], gain=g, gain_lower=glo,
+                   gain_upper=ghi, rel_gap=sol.gap, gap_to_optimum=0.0, peak_rss_gib=round(rss_solve, 2), load1=ld,
+                   status=sol.status, note=f"setup {sol.stats['seconds_setup']:.1f} s; fallback {sol.stats['fallback']}; "
+                                           f"{sol.stats['value_vectors']} value vector(s), "
+                                           f"{sol.stats['extrapolations']} extrapolation(s)"))
+    print(json.dumps(out[-1]), flush=True)
+    del sol
+    for pname in policies:
+        ld = load1()
+        t = time.perf_counter()
+        pol = make_policy(pname, system)
+        t_make = time.perf_counter() - t
+        ev = matrix_free_evaluate(system, pol, tol=tol, threads=threads, progress=True)
+        # the policy's exact gain lies in [ev.gain_lower, ev.gain_upper] and g* in [glo, ghi]:
+        # its gap (g_pi - g*)/g* is bracketed too; the midpoint is reported
+        gap = (ev.gain - g) / g
+        gap_lo, gap_hi = (ev.gain_lower - ghi) / ghi, (ev.gain_upper - glo) / glo
+        out.append(row(section="big", instance="paper_p1234", cap=cap, states=ev.stats["n_states"], method=pname,
+                       threads=threads, seconds=round(ev.seconds + t_make, 2),
+                       **{"seconds_to_1e-6": time_to(ev.stats["history"], 1e-6)}, sweeps=ev.iterations,
+                       gain=ev.gain, gain_lower=ev.gain_lower, gain_upper=ev.gain_upper, rel_gap=ev.gap,
+                       gap_to_optimum=gap, peak_rss_gib=round(rss_gib(), 2), load1=ld, status=ev.status,
+                       note=f"gap in [{gap_lo:.4%}, {gap_hi:.4%}]; policy built in {t_make:.1f} s, "
+                            f"table {ev.stats['seconds_setup']:.1f} s"))
+        print(json.dumps(out[-1]), flush=True)
+        del pol, ev
+    return out
+
+
+def big(caps, threads, tol, policies, extrapolate=True):
+    rows = []
+    for cap in caps:
+        cmd = [sys.executable, __file__, "--worker", str(cap), "--threads", str(threads), "--tol", str(tol),
+               "--policies", ",".join(policies)] + ([] if extrapolate else ["--no-extrapolate"])
+        print(f"big: processes 1-4 at cap {cap} (load {load1()}) ...", flush=True)
+        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None, text=True)
+        for line in proc.stdout.splitlines():
+            if line.startswith("{"):
+                r = json.loads(line)
+                rows.append(r)
+                print(f"  {r['method']:10s} gain {float(r['gain']):.9f} [{float(r['gain_lower']):.9f}, "
+                      f"{float(r['gain_upper']):.9f}] {r['seconds']} s (1e-6 at {r['seconds_to_1e-6']} s), "
+                      f"sweeps {r['sweeps']}, peak {r['peak_rss_gib']} GiB, gap {float(r['gap_to_optimum']):.4%}, "
+                      f"load {r['load1']}", flush=True)
+        if proc.returncode != 0:
+            print(f"  worker failed with exit code {proc.returncode}", flush=True)
+    return rows
+
+
+def main(argv=None):
+    warnings.filterwarnings("ignore", message=".*is at most the shortest loop.*")
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, default=None, help="CSV to write")
+    ap.add_argument("--sections", default="compare,big")
+    ap.add_argument("--quick", action="store_true", help="a few small comparisons and the big case at cap 16")
+    ap.add_argument("--caps", default=None, help="caps of the big section (default 20,25,30)")
+    ap.add_argument("--policies", default="suboptimal,static,greedy")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--tol", type=float, default=1e-9)
+    ap.add_argument("--no-extrapolate", action="store_true",
+                    help="solve with one value vector (no extrapolation): the largest caps")
+    ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    policies = [p for p in a.policies.split(",") if p]
+    if a.worker is not None:
+        big_worker(a.worker, a.threads, a.tol, policies, not a.no_extrapolate)
+        return 0
+    sections = a.sections.split(",")
+    caps = [int(c) for c in a.caps.split(",")] if a.caps else ([16] if a.quick else [20, 25, 30])
+    print(f"matrix-free benchmark: {os.cpu_count()} cores, load {os.getloadavg()}, threads {a.threads}", flush=True)
+    rows = []
+    if "compare" in sections:
+        rows += compare(COMPARE_QUICK if a.quick else COMPARE, a.threads, a.tol)
+    if "big" in sections:
+        rows += big(caps, a.threads, a.tol, policies, not a.no_extrapolate)
+    if a.out:
+        with open(a.out, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=COLUMNS)
+            w.writeheader()
+            w.writerows(rows)
+        print(f"wrote {a.out} ({len(rows)} rows)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,429 @@
+"""numba kernels of :mod:`wncs_lp.solvers.matrix_free` (imported only when numba is available).
+
+The state space is a union of dense sub-boxes, one per configuration c: axis k runs over the
+0-based AoI indices ``lo[c, k] .. lo[c, k] + dims[c, k] - 1``, C order, the last axis
+contiguous; the box of c starts at ``off[c]`` of every state vector. Outcome e (a global index
+of :class:`~wncs_lp.models.automaton.FlatAutomaton`) of configuration c moves the state
+(c, t) to (c', t') with t'_k = min(t_k + 1, m[e, k]) (``m`` folds in the delivery and the
+cap), whose index is
+
+    e_base[e] + sum_k e_stride[e, k] * t'_k        (e_stride[e, N-1] = 1).
+
+Order of a sweep. The first N - 2 axes are *tiles* (absolute AoI indices, C order); a sweep
+visits the tiles in turn and, in each, the *plane* (last two axes) of every configuration
+whose box has that tile. The successors of a tile lie in a few neighbouring tiles (t + 1, or
+the small AoI a delivery resets to), so a sweep streams the value vector about once instead
+of once per predecessor configuration. Within a plane, rows (the last axis) are computed one
+at a time: per row, the offset ``P[o]`` of every outcome's successor row; along the row the
+successor index grows by one until the last axis saturates at ``m[e, N-1]`` (position
+``split[o]``), then stays. So each outcome is two contiguous loops, vectorised by LLVM.
+
+Two details make the loops fast (measured on processes 1-4, cap 20: 19 -> 11 ns a state):
+indices into the value vector are **unsigned** (numba emits a negative-index wraparound for
+signed ones, and LLVM then turned the contiguous loads into AVX-512 gathers), and the work of a
+whole chunk of planes is one function (a call per plane passes ~30 arrays, and numba's atomic
+reference counting of them cost ~10%).
+
+Kernels (each with a serial driver and a ``prange`` one over chunks of work items):
+
+* :func:`all_actions_ser` / ``_par`` -- every action's value on a row (``acc``), then the
+  minimum over actions (``mode = 0``: the Bellman operator T, first minimiser kept, ``arg``)
+  or the weighted sum with per-configuration action weights ``W[c, j]`` (``mode = 1``: a
+  tau-independent randomised policy). ``write = 0`` only computes min / max of (T h - h)
+  (over the states with ``mask`` set when ``use_mask``), ``1`` updates h in place
+  (Gauss-Seidel: ``h += relax (T h - h - shift)``), ``2`` writes ``h_out`` (Jacobi);
+  ``write_pol`` stores the minimiser in ``pol`` (uint8).
+* :func:`fixed_policy_ser` / ``_par`` -- the same for one action per state (``pol``).
+* :func:`reach_all` -- marks the successors of the marked states to a fixed point.
+
+With threads, a Gauss-Seidel sweep is asynchronous across the chunks (a plane may
+read another's values before or after their update): still a valid value-iteration scheme,
+but its iterates depend on timing. Chunks are contiguous ranges of tiles, so most reads
+(t -> t + 1) stay in the reading thread's own range and follow the serial order; splitting the
+configurations of every tile between the threads instead was measured to need 1.5x more
+sweeps (evaluation of the suboptimal policy, processes 1-4, cap 16: 517 against 331 serial). Certificate passes (``write`` 0 or 2) read one fixed h and
+are deterministic.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange, uint64
+
+
+@njit(cache=True, nogil=True, boundscheck=False, fastmath={"contract"})
+def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m, e_base,
+               e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask, iscr, fscr,
+               los, his):
+    P = iscr[0]
+    split = iscr[1]
+    sat = iscr[2]
+    A = iscr[3]
+    rs = iscr[4]
+    rm = iscr[5]
+    arg = iscr[6]
+    acc = fscr[0]
+    best = fscr[1]
+    dd = fscr[2]
+    lo = np.inf
+    hi = -np.inf
+    for x in range(x0, x1):
+        c = tile_cfg[x]
+        L = dims[c, N - 1]
+        loN = lo_[c, N - 1]
+        a0 = act_ptr[c]
+        na = act_ptr[c + 1] - a0
+        o0 = out_ptr[a0]
+        nO = out_ptr[a0 + na] - o0
+        # ---- plane setup: per outcome, the last axis' split / saturation, the offset due
+        # to the tile's axes (A) and the stride / saturation of the row axis N - 2
+        for o in range(nO):
+            e = o0 + o
+            mN = e_m[e, N - 1]
+            sat[o] = mN
+            split[o] = min(max(mN - loN, 0), L)
+            v = e_base[e]
+            for k in range(N - 2):
+                tk = tc[k] + 1
+                mk = e_m[e, k]
+                v += e_stride[e, k] * (tk if tk < mk else mk)
+            A[o] = v
+            if N >= 2:
+                rs[o] = e_stride[e, N - 2]
+                rm[o] = e_m[e, N - 2]
+            else:
+                rs[o] = 0
+                rm[o] = 0
+        s0 = off[c]
+        qo0 = 0.0
+        for k in range(N - 2):
+            s0 += (tc[k] - lo_[c, k]) * strides[c, k]
+            qo0 += q[k, tc[k]]
+        nrows = 1
+        tr = 0
+        if N >= 2:
+            nrows = dims[c, N - 2]
+            tr = lo_[c, N - 2]
+        qN = q[N - 1]
+        qu = uint64(loN)
+        # ---- rows
+        for r in range(nrows):
+            qo = qo0
+            if N >= 2:
+                qo += q[N - 2, tr]
+            t1 = tr + 1
+            for o in range(nO):
+                m = rm[o]
+                P[o] = A[o] + rs[o] * (t1 if t1 < m else m)
+            first = True
+            for j in range(na):
+                w = 1.0
+                if mode == 1:
+                    w = W[c, j]
+                    if w == 0.0:
+                        continue
+                ob = out_ptr[a0 + j] - o0
+                oe = out_ptr[a0 + j + 1] - o0
+                for oo in range(ob, oe):
+                    p = e_prob[o0 + oo]
+                    b = uint64(P[oo] + loN + 1)
+                    sp = split[oo]
+                    v = p * h[P[oo] + sat[oo]]
+                    if oo == ob:
+                        for i in range(sp):
+                            acc[i] = p * h[b + uint64(i)]
+                        for i in range(sp, L):
+                            acc[i] = v
+                    else:
+                        for i in range(sp):
+                            acc[i] += p * h[b + uint64(i)]
+                        for i in range(sp, L):
+                            acc[i] += v
+                if mode == 0:
+                    if first:
+                        for i in range(L):
+                            best[i] = acc[i]
+                            arg[i] = j
+                    else:
+                        for i in range(L):
+                            xa = acc[i]
+                            yb = best[i]
+                            better = xa < yb
+                            best[i] = xa if better else yb
+                            arg[i] = j if better else arg[i]
+                else:
+                    if first:
+                        for i in range(L):
+                            best[i] = w * acc[i]
+                    else:
+                        for i in range(L):
+                            best[i] += w * acc[i]
+                first = False
+            su = uint64(s0)
+            for i in range(L):
+                dd[i] = (qo + qN[qu + uint64(i)] + best[i]) - h[su + uint64(i)]
+            if use_mask:
+                for i in range(L):
+                    if mask[su + uint64(i)] != 0:
+                        lo = min(lo, dd[i])
+                        hi = max(hi, dd[i])
+            else:
+                for i in range(L):
+                    lo = min(lo, dd[i])
+                    hi = max(hi, dd[i])
+            if write == 1:
+                for i in range(L):
+                    h[su + uint64(i)] += relax * (dd[i] - shift)
+            elif write == 2:
+                for i in range(L):
+                    h_out[su + uint64(i)] = h[su + uint64(i)] + relax * (dd[i] - shift)
+            if write_pol:
+                for i in range(L):
+                    pol[su + uint64(i)] = arg[i]
+            s0 += L
+            tr += 1
+    if lo < los[ci]:
+        los[ci] = lo
+    if hi > his[ci]:
+        his[ci] = hi
+
+
+@njit(cache=True, nogil=True, boundscheck=False, fastmath={"contract"})
+def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m, e_base,
+                 e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, iscr, fscr, los, his):
+    split = iscr[1]
+    sat = iscr[2]
+    A = iscr[3]
+    rs = iscr[4]
+    rm = iscr[5]
+    arg = iscr[6]
+    acc = fscr[0]
+    best = fscr[1]
+    dd = fscr[2]
+    lo = np.inf
+    hi = -np.inf
+    for x in range(x0, x1):
+        c = tile_cfg[x]
+        L = dims[c, N - 1]
+        loN = lo_[c, N - 1]
+        a0 = act_ptr[c]
+        na = act_ptr[c + 1] - a0
+        o0 = out_ptr[a0]
+        nO = out_ptr[act_ptr[c + 1]] - o0
+        for o in range(nO):
+            e = o0 + o
+            mN = e_m[e, N - 1]
+            sat[o] = mN
+            split[o] = min(max(mN - loN, 0), L)
+            v = e_base[e]
+            for k in range(N - 2):
+                tk = tc[k] + 1
+                mk = e_m[e, k]
+                v += e_stride[e, k] * (tk if tk < mk else mk)
+            A[o] = v
+            if N >= 2:
+                rs[o] = e_stride[e, N - 2]
+                rm[o] = e_m[e, N - 2]
+            else:
+                rs[o] = 0
+                rm[o] = 0
+        s0 = off[c]
+        qo0 = 0.0
+        for k in range(N - 2):
+            s0 += (tc[k] - lo_[c, k]) * strides[c, k]
+            qo0 += q[k, tc[k]]
+        nrows = 1
+        tr = 0
+        if N >= 2:
+            nrows = dims[c, N - 2]
+            tr = lo_[c, N - 2]
+        qN = q[N - 1]
+        qu = uint64(loN)
+        for r in range(nrows):
+            qo = qo0
+            if N >= 2:
+                qo += q[N - 2, tr]
+            t1 = tr + 1
+            su = uint64(s0)
+            # the actions used on this row (a bit set; configurations have at most 64 actions
+            # here, else every action is tried), each computed on the whole row as in the
+            # improvement kernel and kept where the policy chose it
+            used = uint64(0)
+            for i in range(L):
+                pol_i = pol[su + uint64(i)]
+                arg[i] = pol_i
+                used |= uint64(1) << uint64(pol_i & 63)
+            for j in range(na):
+                if na <= 64 and (used >> uint64(j)) & uint64(1) == uint64(0):
+                    continue
+                ob = out_ptr[a0 + j] - o0
+                oe = out_ptr[a0 + j + 1] - o0
+                for oo in range(ob, oe):
+                    m = rm[oo]
+                    Po = A[oo] + rs[oo] * (t1 if t1 < m else m)
+                    p = e_prob[o0 + oo]
+                    b = uint64(Po + loN + 1)
+                    sp = split[oo]
+                    v = p * h[Po + sat[oo]]
+                    if oo == ob:
+                        for i in range(sp):
+                            acc[i] = p * h[b + uint64(i)]
+                        for i in range(sp, L):
+                            acc[i] = v
+                    else:
+                        for i in range(sp):
+                            acc[i] += p * h[b + uint64(i)]
+                        for i in range(sp, L):
+                            acc[i] += v
+                for i in range(L):
+                    best[i] = acc[i] if arg[i] == j else best[i]
+            for i in range(L):
+                dd[i] = (qo + qN[qu + uint64(i)] + best[i]) - h[su + uint64(i)]
+            if use_mask:
+                for i in range(L):
+                    if mask[su + uint64(i)] != 0:
+                        lo = min(lo, dd[i])
+                        hi = max(hi, dd[i])
+            else:
+                for i in range(L):
+                    lo = min(lo, dd[i])
+                    hi = max(hi, dd[i])
+            if write == 1:
+                for i in range(L):
+                    h[su + uint64(i)] += relax * (dd[i] - shift)
+            elif write == 2:
+                for i in range(L):
+                    h_out[su + uint64(i)] = h[su + uint64(i)] + relax * (dd[i] - shift)
+            s0 += L
+            tr += 1
+    if lo < los[ci]:
+        los[ci] = lo
+    if hi > his[ci]:
+        his[ci] = hi
+
+
+# ----------------------------------------------------------------------------- drivers
+# A sweep is a list of work items (tile, x0, x1): the planes of configurations
+# tile_cfg[x0:x1] in that tile. Chunk ci does items[ip[ci]:ip[ci + 1]] in order, and the chunks
+# run on numba's threads in one parallel region per sweep (a region per tile was measured 10x
+# slower on a loaded machine: every region waits for both threads to be scheduled). The chunks
+# are contiguous ranges of tiles (matrix_free._work_items), so each thread's in-place sweep
+# runs in the serial order over its part of the AoI box.
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def all_actions_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
+                    e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
+                    maxO, maxL, los, his):
+    for ci in prange(ip.size - 1):
+        los[ci] = np.inf
+        his[ci] = -np.inf
+        iscr = np.zeros((7, max(maxO, maxL)), np.int64)
+        fscr = np.zeros((3, maxL))
+        for it in range(ip[ci], ip[ci + 1]):
+            _all_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
+                       off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, W, mode, write,
+                       write_pol, relax, shift, mask, use_mask, iscr, fscr, los, his)
+
+
+@njit(cache=True, nogil=True)
+def all_actions_ser(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
+                    e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
+                    maxO, maxL, los, his):
+    for ci in range(ip.size - 1):
+        los[ci] = np.inf
+        his[ci] = -np.inf
+        iscr = np.zeros((7, max(maxO, maxL)), np.int64)
+        fscr = np.zeros((3, maxL))
+        for it in range(ip[ci], ip[ci + 1]):
+            _all_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
+                       off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, W, mode, write,
+                       write_pol, relax, shift, mask, use_mask, iscr, fscr, los, his)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def fixed_policy_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
+                     e_base, e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, maxO, maxL, los, his):
+    for ci in prange(ip.size - 1):
+        los[ci] = np.inf
+        his[ci] = -np.inf
+        iscr = np.zeros((7, max(maxO, maxL)), np.int64)
+        fscr = np.zeros((3, maxL))
+        for it in range(ip[ci], ip[ci + 1]):
+            _fixed_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
+                         off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, write, relax,
+                         shift, mask, use_mask, iscr, fscr, los, his)
+
+
+@njit(cache=True, nogil=True)
+def fixed_policy_ser(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
+                     e_base, e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, maxO, maxL, los, his):
+    for ci in range(ip.size - 1):
+        los[ci] = np.inf
+        his[ci] = -np.inf
+        iscr = np.zeros((7, max(maxO, maxL)), np.int64)
+        fscr = np.zeros((3, maxL))
+        for it in range(ip[ci], ip[ci + 1]):
+            _fixed_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
+                         off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, write, relax,
+                         shift, mask, use_mask, iscr, fscr, los, his)
+
+
+# ----------------------------------------------------------------------------- reachability
+@njit(cache=True, nogil=True, boundscheck=False)
+def _reach_config(c, N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride, mask, t, P):
+    """Mark the successors (under every action) of the marked states of configuration c;
+    returns how many states were newly marked."""
+    L = dims[c, N - 1]
+    loN = lo_[c, N - 1]
+    o0 = out_ptr[act_ptr[c]]
+    nO = out_ptr[act_ptr[c + 1]] - o0
+    nrows = 1
+    for k in range(N - 1):
+        nrows *= dims[c, k]
+        t[k] = lo_[c, k]
+    new = 0
+    s0 = off[c]
+    for r in range(nrows):
+        for o in range(nO):
+            e = o0 + o
+            v = e_base[e]
+            for k in range(N - 1):
+                tk = t[k] + 1
+                mk = e_m[e, k]
+                v += e_stride[e, k] * (tk if tk < mk else mk)
+            P[o] = v
+        for i in range(L):
+            if mask[s0 + i] == 0:
+                continue
+            tN = loN + i + 1
+            for o in range(nO):
+                mN = e_m[o0 + o, N - 1]
+                idx = P[o] + (tN if tN < mN else mN)
+                if mask[idx] == 0:
+                    mask[idx] = 1
+                    new += 1
+        s0 += L
+        k = N - 2
+        while k >= 0:
+            t[k] += 1
+            if t[k] < lo_[c, k] + dims[c, k]:
+                break
+            t[k] = lo_[c, k]
+            k -= 1
+    return new
+
+
+@njit(cache=True, nogil=True)
+def reach_all(N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride, mask, maxO, max_passes):
+    """Passes over every configuration until no state is newly marked; returns the passes made
+    (``max_passes + 1`` if it had not settled)."""
+    nC = off.size - 1
+    t = np.empty(max(N, 1), np.int64)
+    P = np.empty(maxO, np.int64)
+    for it in range(max_passes):
+        new = 0
+        for c in range(nC):
+            new += _reach_config(c, N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride, mask, t, P)
+        if new == 0:
+            return it + 1
+    return max_passes + 1
