@@ -40,7 +40,7 @@ def test_every_command_has_the_same_methods_and_default_auto(command):
     assert opt.default == "auto"
     assert set(methods.METHODS) <= set(opt.choices)
     extra = set(opt.choices) - set(methods.METHODS)
-    assert extra <= {"lagrangian"}  # solve also names the constrained route
+    assert extra <= {"lagrangian", "matrix-free"}  # solve also names the constrained route and the matrix-free solver
 
 
 def test_library_defaults_are_auto_and_the_vocabulary_is_the_solvers():

@@ -25,20 +25,53 @@ def build_with_progress(args: argparse.Namespace, scenario, prog, *, need_lp: bo
     return mdp, t_build
 
 
+def _matrix_free(args: argparse.Namespace, scenario, t0: float, prog, why: str) -> int:
+    """Certified value iteration without building the MDP (:mod:`wncs_lp.solvers.matrix_free`)."""
+    from ..errors import SolverError
+    from ..solvers import solve_scenario
+
+    if scenario.model.kind != "wncs":
+        raise SolverError("--method matrix-free solves the Section II model (kind = \"wncs\") only")
+    if args.out is not None:
+        raise SolverError("--out is not available with the matrix-free method (its policy is one small integer "
+                          "per state of the AoI box; save it from the library: MatrixFreeSolution.save)")
+    prog.phase(f"solving without a stored matrix ({why})")
+    sol = solve_scenario(scenario, "matrix-free", progress=bool(getattr(prog, "enabled", False)))
+    payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)), **sol.summary(),
+               "matrix_free_reason": why, "seconds": time.perf_counter() - t0}
+    if args.json:
+        emit_json(payload)
+    else:
+        print(scenario.describe())
+        print(f"method matrix-free ({why}): status {sol.status}, {sol.iterations} sweeps, {sol.seconds:.2f} s")
+        print(f"optimal average cost (gain): {sol.gain:.10g}")
+        print(f"certificate: {sol.gain_lower:.12g} <= g* <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e})")
+    return 0 if sol.ok else 1
+
+
 def cmd_solve(args: argparse.Namespace) -> int:
     from ..errors import SolverError
+    from ..models.guard import SizeLimitError
 
     if args.out is not None:
         output_file(args.out, "--out")  # before any work: its folder must exist
     scenario = load(args)
     constrained = bool(scenario.constraints) and not args.ignore_constraints
-    allowed = CONSTRAINED_METHODS if constrained else UNCONSTRAINED_METHODS
+    allowed = CONSTRAINED_METHODS if constrained else UNCONSTRAINED_METHODS + ("matrix-free",)
     if args.method not in allowed:
         what = "a scenario with [[constraint]] tables" if constrained else "an unconstrained scenario"
         raise SolverError(f"--method {args.method} does not solve {what}; expected one of {', '.join(allowed)}")
     prog = progress_for(args)
     t0 = time.perf_counter()
-    mdp, t_build = build_with_progress(args, scenario, prog, need_lp=args.method in LP_METHODS)
+    if args.method == "matrix-free":
+        return _matrix_free(args, scenario, t0, prog, "asked for")
+    try:
+        mdp, t_build = build_with_progress(args, scenario, prog, need_lp=args.method in LP_METHODS)
+    except SizeLimitError:
+        # auto: a model whose stored matrix would not fit is solved without one, where the model allows
+        if args.method != "auto" or constrained or scenario.model.kind != "wncs":
+            raise
+        return _matrix_free(args, scenario, t0, prog, "auto: the stored matrix would not fit in memory")
     if constrained:
         return _constrained(args, scenario, mdp, t0, t_build, prog)
     from ..solvers import solve
@@ -135,9 +168,11 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--method",
         default=DEFAULT_METHOD,
-        choices=METHODS + ("lagrangian",),
-        help=METHOD_HELP + "; and for a scenario with [[constraint]] tables: auto, lp, lp-cvxpy or lagrangian "
-        "(one bound: multiplier search with certified value iteration)",
+        choices=METHODS + ("lagrangian", "matrix-free"),
+        help=METHOD_HELP + "; matrix-free: certified value iteration without building the MDP (Section II "
+        "model; auto switches to it when the stored matrix would not fit in memory); and for a scenario with "
+        "[[constraint]] tables: auto, lp, lp-cvxpy or lagrangian (one bound: multiplier search with certified "
+        "value iteration)",
     )
     p.add_argument("--ignore-constraints", action="store_true",
                    help="solve the unconstrained problem even if the scenario has [[constraint]] tables")
