@@ -21,7 +21,6 @@ from wncs_lp.simulate import simulate  # noqa: E402
 from wncs_lp.solvers import bracket, solve_scenario  # noqa: E402
 from wncs_lp.solvers.matrix_free import (  # noqa: E402
     BoxLayout,
-    MatrixFreePolicy,
     MatrixFreeSolution,
     drains_to_initial,
     load_solution,
@@ -219,7 +218,9 @@ def test_gain_grows_with_the_cap():
 def test_monte_carlo_of_the_policy_agrees_with_its_gain():
     sc = paper("paper_p1234", "tau_cap=7")
     sol = matrix_free_value_iteration(sc)
-    pol = sol.as_policy()
+    from wncs_lp.policies import MatrixFreePolicy
+
+    pol = MatrixFreePolicy.from_solution(sol)
     assert isinstance(pol, MatrixFreePolicy)
     res = simulate(pol, slots=4000, reps=16, seed=3, burn_in=200, progress=False)
     assert abs(res.mean - sol.gain) <= 4 * res.stderr, (res.mean, res.stderr, sol.gain)

@@ -41,6 +41,10 @@ def test_auto_switches_to_matrix_free_when_the_guard_refuses(capsys, monkeypatch
     assert main(["solve", path, "--set", "tau_cap=9", "--method", "vi"]) == 2
 
 
-def test_matrix_free_refuses_the_preemption_model():
-    assert main(["solve", str(wncs_lp.scenario_path("paper_preemption_p12")), "--set", "tau_cap=8",
-                 "--method", "matrix-free"]) == 2
+def test_matrix_free_solves_the_preemption_model_too(capsys):
+    path = str(wncs_lp.scenario_path("paper_preemption_p12"))
+    assert main(["solve", path, "--set", "tau_cap=8", "--method", "matrix-free", "--json"]) == 0
+    mf = _json(capsys)
+    assert main(["solve", path, "--set", "tau_cap=8", "--method", "vi", "--json"]) == 0
+    vi = _json(capsys)
+    assert vi["gain_lower"] - 1e-9 * vi["gain"] <= mf["gain"] <= vi["gain_upper"] + 1e-9 * vi["gain"]

@@ -30,8 +30,6 @@ def _matrix_free(args: argparse.Namespace, scenario, t0: float, prog, why: str) 
     from ..errors import SolverError
     from ..solvers import solve_scenario
 
-    if scenario.model.kind != "wncs":
-        raise SolverError("--method matrix-free solves the Section II model (kind = \"wncs\") only")
     if args.out is not None:
         raise SolverError("--out is not available with the matrix-free method (its policy is one small integer "
                           "per state of the AoI box; save it from the library: MatrixFreeSolution.save)")
@@ -67,11 +65,14 @@ def cmd_solve(args: argparse.Namespace) -> int:
         return _matrix_free(args, scenario, t0, prog, "asked for")
     try:
         mdp, t_build = build_with_progress(args, scenario, prog, need_lp=args.method in LP_METHODS)
-    except SizeLimitError:
+    except SizeLimitError as refused:
         # auto: a model whose stored matrix would not fit is solved without one, where the model allows
-        if args.method != "auto" or constrained or scenario.model.kind != "wncs":
+        if args.method != "auto" or constrained:
             raise
-        return _matrix_free(args, scenario, t0, prog, "auto: the stored matrix would not fit in memory")
+        try:
+            return _matrix_free(args, scenario, t0, prog, "auto: the stored matrix would not fit in memory")
+        except SolverError:  # not a model the matrix-free solver takes: the guard's refusal stands
+            raise refused from None
     if constrained:
         return _constrained(args, scenario, mdp, t0, t_build, prog)
     from ..solvers import solve

@@ -33,6 +33,7 @@ from __future__ import annotations
 from ..models.system import OutcomeTables, System
 from .base import Policy, as_rng
 from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
+from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
 from .optimal import CappedPolicy, OptimalPolicy
 from .rules import (
@@ -56,6 +57,7 @@ __all__ = [
     "OptimalPolicy",
     "CappedPolicy",
     "MixedPolicy",
+    "MatrixFreePolicy",
     "TauIndependentPolicy",
     "RandomPolicy",
     "RankRulePolicy",

@@ -44,7 +44,7 @@ Policies
 ``uint8`` per layout state, the *local* action index j (``system.automaton.actions[c][j]``,
 the MDP's action order for that configuration) of the greedy policy of the certified bias.
 :meth:`MatrixFreeSolution.on_mdp` converts a solution to the ordinary pair-index form on an
-enumerated MDP of the same scenario; :class:`MatrixFreePolicy` is a
+enumerated MDP of the same scenario; :class:`wncs_lp.policies.MatrixFreePolicy` is a
 :class:`~wncs_lp.policies.Policy` (``act``, ``on_mdp``) usable by the simulator and the
 evaluators; :meth:`MatrixFreeSolution.save` / :func:`load_solution` store it.
 
@@ -64,7 +64,6 @@ import numpy as np
 
 from ..errors import PolicyError, SolverError
 from ..models.system import System
-from ..policies.base import Policy
 from ..scenario import Scenario
 from .result import Solution
 
@@ -72,7 +71,6 @@ __all__ = [
     "BoxLayout",
     "MatrixFreeSolution",
     "MatrixFreeEvaluation",
-    "MatrixFreePolicy",
     "matrix_free_value_iteration",
     "matrix_free_evaluate",
     "policy_table",
@@ -510,7 +508,7 @@ class MatrixFreeSolution(Solution):
       when the solve used one (``domain="reachable"``), else None.
 
     :meth:`on_mdp` gives the ordinary pair-index ``Solution`` on an enumerated MDP;
-    :meth:`as_policy` a :class:`MatrixFreePolicy`.
+    :class:`wncs_lp.policies.MatrixFreePolicy` wraps it as a policy.
     """
 
     layout: BoxLayout | None = None
@@ -526,8 +524,6 @@ class MatrixFreeSolution(Solution):
                               "is outside the solved layout")
         return self.policy[idx].astype(np.int64)
 
-    def as_policy(self, name: str = "optimal") -> "MatrixFreePolicy":
-        return MatrixFreePolicy(self.system, self.layout, self.policy, name=name, solution=self)
 
     def layout_index_of(self, mdp) -> np.ndarray:
         """Layout index of every state of an enumerated MDP of the same scenario."""
@@ -577,33 +573,6 @@ def load_solution(path, system_or_scenario: System | Scenario) -> MatrixFreeSolu
                               gain_lower=meta["gain_lower"], gain_upper=meta["gain_upper"], bias=bias,
                               policy=policy, iterations=meta["iterations"], seconds=meta["seconds"],
                               stats={"loaded_from": str(path)}, layout=layout, system=system)
-
-
-class MatrixFreePolicy(Policy):
-    """A deterministic policy stored as one local action index (uint8) per layout state.
-
-    ``act`` looks the states up in the layout, which contains every reachable state, so the
-    simulator, :func:`wncs_lp.evaluate.evaluate` (through ``on_mdp``) and
-    :func:`matrix_free_evaluate` all accept it.
-    """
-
-    def __init__(self, system: System, layout: BoxLayout, table: np.ndarray, name: str = "optimal",
-                 solution: MatrixFreeSolution | None = None):
-        super().__init__(system)
-        if table.shape != (layout.n_states,):
-            raise PolicyError(f"the policy table must have one entry per layout state ({layout.n_states})")
-        self.layout = layout
-        self.table = table
-        self.name = name
-        self.solution = solution
-
-    def act(self, tau, config_ids, rng=None):
-        tau, c = self._check_inputs(tau, config_ids)
-        idx = self.layout.index(tau, c)
-        if np.any(idx < 0):
-            r = int(np.flatnonzero(idx < 0)[0])
-            raise PolicyError(f"state tau={tau[r].tolist()}, configuration {int(c[r])} is outside the policy's layout")
-        return self.table[idx].astype(np.int64)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1031,7 +1000,7 @@ def matrix_free_value_iteration(
 
 
 # ============================================================================ evaluation
-def policy_table(system: System, layout: BoxLayout, policy: Policy, *, batch: int = 1 << 21) -> np.ndarray:
+def policy_table(system: System, layout: BoxLayout, policy: Any, *, batch: int = 1 << 21) -> np.ndarray:
     """(n,) uint8 local action of a deterministic ``policy`` at every layout state (``policy.act``
     called on batches of whole configurations)."""
     n = layout.n_states
@@ -1114,10 +1083,10 @@ def matrix_free_evaluate(
     if isinstance(policy, MatrixFreeSolution):
         table = policy.policy
         pname = name or "optimal"
-    elif isinstance(policy, MatrixFreePolicy):
+    elif hasattr(policy, "table") and hasattr(policy, "layout"):  # a wncs_lp.policies.MatrixFreePolicy
         table = policy.table
         pname = name or policy.name
-    elif isinstance(policy, Policy):
+    elif hasattr(policy, "act"):  # any wncs_lp.policies.Policy (duck-typed: solvers sit below policies)
         pname = name or policy.name
         probs = getattr(policy, "probs", None)
         if probs is not None:
