@@ -21,6 +21,7 @@ from .result import Solution
 
 __all__ = [
     "MultichainPolicyError",
+    "initial_bias",
     "PolicyEvaluation",
     "evaluate_policy",
     "relative_value_iteration",
@@ -149,7 +150,7 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: n
     M = (M + sp.csc_matrix((np.ones(n), (np.arange(n), np.full(n, r))), shape=(n, n))).tocsc()
     solver = "splu"
     z = None
-    z0 = None if h0 is None else _initial_bias(h0, n, r)  # checked whichever path runs
+    z0 = None if h0 is None else initial_bias(h0, n, r)  # checked whichever path runs
     if method == "iterative" or (method == "auto" and n >= EVAL_ITERATIVE_MIN_STATES):
         if z0 is not None:
             z0[r] = float(np.median(c_pi + P_pi @ z0 - z0))  # a gain estimate for the unknown g
@@ -205,7 +206,7 @@ def _bicgstab(A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray | None, maxiter: i
 
 
 # ---------------------------------------------------------------------------- RVI
-def _initial_bias(h0: np.ndarray | None, n: int, ref: int) -> np.ndarray:
+def initial_bias(h0: np.ndarray | None, n: int, ref: int) -> np.ndarray:
     """A warm-start bias (zeros by default), checked and normalised so that h[ref] = 0."""
     if h0 is None:
         return np.zeros(n)
@@ -292,7 +293,7 @@ def relative_value_iteration(
         raise SolverError(f"ref_state must be in 0..{n - 1}, got {ref_state}")
     if max_iter < 1:
         raise SolverError(f"max_iter must be >= 1, got {max_iter}")
-    h = _initial_bias(h0, n, ref_state)
+    h = initial_bias(h0, n, ref_state)
     from .kernels import get_kernel
 
     try:
@@ -448,7 +449,7 @@ def value_iteration(
         scheme = "mpi" if K.supports_gauss_seidel else "jacobi"
     if scheme in ("mpi", "gs") and not K.supports_gauss_seidel:
         raise SolverError(f"scheme {scheme!r} needs in-place sweeps, which the {K.name} kernel does not have")
-    h = _initial_bias(h0, n, 0)
+    h = initial_bias(h0, n, 0)
     prog = as_progress(progress)
     h_next = np.empty(n)
     pol = mdp.pair_ptr[:-1].astype(np.int64)
@@ -604,7 +605,7 @@ def policy_iteration(
     if policy0 is not None and h0 is not None:
         raise SolverError("policy iteration starts from policy0 or from the greedy policy of h0, not both")
     if h0 is not None:
-        d = greedy_first(mdp, q_values(mdp, _initial_bias(h0, mdp.n_states, 0)))
+        d = greedy_first(mdp, q_values(mdp, initial_bias(h0, mdp.n_states, 0)))
     elif policy0 is None:
         d = greedy_first(mdp, mdp.cost)
     else:

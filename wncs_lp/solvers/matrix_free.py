@@ -65,6 +65,7 @@ import numpy as np
 from ..errors import PolicyError, SolverError
 from ..models.system import System
 from ..scenario import Scenario
+from .dp import initial_bias
 from .result import Solution
 
 __all__ = [
@@ -610,17 +611,10 @@ class MatrixFreeEvaluation:
 
 # ============================================================================ helpers
 def _initial_h(h0: Any, n: int) -> np.ndarray:
-    if h0 is None:
-        return np.zeros(n)
+    """A warm start: a bias array or a matrix-free result's bias (checked by :func:`~wncs_lp.solvers.dp.initial_bias`)."""
     if isinstance(h0, (MatrixFreeSolution, MatrixFreeEvaluation)):
         h0 = h0.bias
-    try:
-        h = np.array(h0, dtype=float)
-    except (TypeError, ValueError):
-        h = None
-    if h is None or h.shape != (n,) or not np.all(np.isfinite(h)):
-        raise SolverError(f"h0 must be a finite array of shape ({n},) (one value per layout state)")
-    return h - h[0]
+    return initial_bias(h0, n, 0)
 
 
 def _closed(lo: float, hi: float, tol: float, atol: float, scale: float) -> bool:
