@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from ..files import scalars
+from ..solvers.result import certificate_summary
 from ..status import status_code, status_message
 
 __all__ = ["ConstraintReport", "ConstrainedSolution"]
@@ -170,14 +171,7 @@ class ConstrainedSolution:
     def summary(self) -> dict[str, Any]:
         """JSON-ready scalars and the per-constraint reports (no arrays)."""
         out = {
-            "method": self.method,
-            "status": self.status,
-            "status_code": self.status_code,
-            "message": self.message,
-            "gain": float(self.gain),
-            "gain_lower": float(self.gain_lower),
-            "gain_upper": float(self.gain_upper),
-            "certificate_gap": float(self.gap),
+            **certificate_summary(self),
             "solver_gain": float(self.solver_gain),
             "randomized_states": self.n_randomized,
             "iterations": int(self.iterations),

@@ -10,7 +10,23 @@ from ..files import scalars
 from ..status import (FAILED, INACCURATE, INFEASIBLE, INTERRUPTED, MAX_ITER, OPTIMAL, STATUS_CODES, status_code,
                       status_message)
 
-__all__ = ["Solution", "OPTIMAL", "INACCURATE", "MAX_ITER", "INTERRUPTED", "INFEASIBLE", "FAILED", "STATUS_CODES"]
+__all__ = ["Solution", "certificate_summary", "OPTIMAL", "INACCURATE", "MAX_ITER", "INTERRUPTED", "INFEASIBLE", "FAILED", "STATUS_CODES"]
+
+
+def certificate_summary(result: Any) -> dict[str, Any]:
+    """The keys every result's JSON starts with: method, status (code, message), gain and its
+    certificate ``[gain_lower, gain_upper]`` with its relative width (a :class:`Solution` or a
+    :class:`~wncs_lp.constrained.ConstrainedSolution`)."""
+    return {
+        "method": result.method,
+        "status": result.status,
+        "status_code": result.status_code,
+        "message": result.message,
+        "gain": float(result.gain),
+        "gain_lower": float(result.gain_lower),
+        "gain_upper": float(result.gain_upper),
+        "certificate_gap": float(result.gap),
+    }
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,14 +142,7 @@ class Solution:
     def summary(self) -> dict[str, Any]:
         """JSON-ready scalars (no arrays)."""
         out = {
-            "method": self.method,
-            "status": self.status,
-            "status_code": self.status_code,
-            "message": self.message,
-            "gain": float(self.gain),
-            "gain_lower": float(self.gain_lower),
-            "gain_upper": float(self.gain_upper),
-            "certificate_gap": float(self.gap),
+            **certificate_summary(self),
             "iterations": int(self.iterations),
             "seconds": float(self.seconds),
         }
