@@ -78,6 +78,8 @@ __all__ = [
     "drains_to_initial",
     "reachable_mask",
     "load_solution",
+    "cap_cost",
+    "matrix_free_cap_mass",
     "solve_scenario",
     "matrix_free_bytes",
     "DOMAINS",
@@ -610,6 +612,47 @@ class MatrixFreeEvaluation:
 
 
 # ============================================================================ helpers
+def _with_cost(op: _Operator, cost: Any) -> _Operator:
+    """The operator with another separable cost table (checked: shape, finite)."""
+    c = np.asarray(cost, dtype=float)
+    if c.ndim != 2 or c.shape[0] != op.N or c.shape[1] < int(op.caps.max()):
+        raise SolverError(f"cost must be an (N, max cap) = ({op.N}, {int(op.caps.max())}) table of per-process "
+                          f"costs by AoI; got shape {c.shape}")
+    if not np.all(np.isfinite(c)):
+        raise SolverError("cost holds a non-finite entry")
+    q = np.zeros_like(op.q)
+    for k in range(op.N):
+        q[k, : op.caps[k]] = c[k, : op.caps[k]]
+    scale = float(sum(float(np.max(np.abs(q[k]))) for k in range(op.N)))
+    return replace(op, q=q, cost_scale=max(scale, 1e-300))
+
+
+def cap_cost(scenario_or_system: Scenario | System) -> np.ndarray:
+    """The (N, max cap) cost table sum_k [tau_k = cap_k]: its average is the expected number of
+    processes at their cap, E[#{k : tau_k = cap_k}] = sum_k m_k (:mod:`wncs_lp.truncation`)."""
+    caps = np.asarray(_as_system(scenario_or_system).caps, dtype=np.int64)
+    c = np.zeros((caps.size, int(caps.max())))
+    c[np.arange(caps.size), caps - 1] = 1.0
+    return c
+
+
+def matrix_free_cap_mass(scenario_or_system: Scenario | System, policy: Any, *, atol: float = 1e-7,
+                         **kw: Any) -> "MatrixFreeEvaluation":
+    r"""How much a policy leans on the AoI cap, certified, without a transition matrix.
+
+    The long-run average of :math:`\sum_k [\tau_k = \hat\tau_k]`, i.e. the expected number of
+    processes at their cap :math:`\sum_k m_k`, by :func:`matrix_free_evaluate` with
+    :func:`cap_cost`. It brackets the mass with *some* process at its cap (the quantity of
+    :func:`wncs_lp.truncation.cap_mass`, which needs the stationary law):
+    :math:`\frac1N \sum_k m_k \le m \le \sum_k m_k`, so the result is an upper bound on m.
+    ``atol`` is the absolute width at which the bracket counts as closed (a share of time, so
+    1e-7 is ample); ``tol`` (relative, default 1e-8 here) also closes it.
+    """
+    kw.setdefault("tol", 1e-8)
+    kw.setdefault("name", f"{getattr(policy, 'name', 'policy')}: processes at the cap")
+    return matrix_free_evaluate(scenario_or_system, policy, cost=cap_cost(scenario_or_system), atol=atol, **kw)
+
+
 def _initial_h(h0: Any, n: int) -> np.ndarray:
     """A warm start: a bias array or a matrix-free result's bias (checked by :func:`~wncs_lp.solvers.dp.initial_bias`)."""
     if isinstance(h0, (MatrixFreeSolution, MatrixFreeEvaluation)):
@@ -1037,6 +1080,7 @@ def matrix_free_evaluate(
     warm_start: bool = True,
     warm_rel: float = 0.05,
     warm_max: int = 100,
+    cost: Any = None,
 ) -> MatrixFreeEvaluation:
     """Exact average cost of a stationary policy, certified, without a transition matrix.
 
@@ -1054,6 +1098,10 @@ def matrix_free_evaluate(
         action probabilities per configuration, e.g. the random policy: evaluated with those
         weights), a :class:`MatrixFreeSolution` (its policy), or an (n,) array of local
         action indices over the layout.
+    cost : array, optional
+        A separable per-slot cost c(s) = sum_k cost[k, tau_k - 1] instead of the MSE: an
+        (N, max cap) table (entries past a process's cap are ignored). With
+        :func:`cap_cost` it measures the time spent at the cap (:func:`matrix_free_cap_mass`).
     Other parameters as in :func:`matrix_free_value_iteration`.
 
     Returns
@@ -1102,6 +1150,8 @@ def matrix_free_evaluate(
     if table is not None and table.shape != (n,):
         raise PolicyError(f"the policy's table has {table.shape[0]} states, the layout {n}")
     op = _Operator.build(system, layout)
+    if cost is not None:
+        op = _with_cost(op, cost)
     mask = reachable_mask(system, layout) if use_mask else None
     sw = _Sweeper(op, threads, mask)
     h = _initial_h(h0, n)
