@@ -69,6 +69,10 @@ __all__ = [
     "policy_grid",
     "slice_grid",
     "region_stats",
+    "system_names",
+    "system_config",
+    "matrix_free_grid",
+    "matrix_free_region_stats",
 ]
 
 # ============================================================================ names
@@ -98,13 +102,20 @@ def map_names(mdp: MDP, scenario: Any = None) -> dict:
         except Exception:
             pass
     elif sc is not None:
-        info["processes"] = [_short_process(p.name, k) for k, p in enumerate(sc.processes, 1)]
-        info["servers"] = [s.name for s in sc.servers]
-        info["p"] = sc.p
-        info["name"] = Path(str(sc.source)).stem
+        info.update(_scenario_names(sc))
     if info["servers"] is None:
         info["servers"] = model.default_servers(mdp.states.configs)
     return info
+
+
+def _scenario_names(sc: Any) -> dict:
+    return {"processes": [_short_process(p.name, k) for k, p in enumerate(sc.processes, 1)],
+            "servers": [s.name for s in sc.servers], "p": sc.p, "name": Path(str(sc.source)).stem}
+
+
+def system_names(system: Any) -> dict:
+    """:func:`map_names` of a :class:`~wncs_lp.models.system.System` (no MDP: matrix-free maps)."""
+    return {**_scenario_names(system.scenario), "model": type(system.model)}
 
 
 def action_name(mdp: MDP, action: int | Sequence[int], config: Any = None, *, scenario: Any = None,
@@ -160,38 +171,52 @@ def parse_config_spec(mdp: MDP, spec: Any) -> int:
     space = mdp.states
     if space is None or not hasattr(space, "configs"):
         raise ModelError(f"{mdp!r} has no decoded state space; cannot select a configuration")
-    configs = space.configs
+    return _config_id(space.configs, space.describe_config, model_type(mdp), mdp.name, spec)
+
+
+def system_config(system: Any, spec: Any) -> int:
+    """:func:`parse_config_spec` over a :class:`~wncs_lp.models.system.System`'s configurations."""
+    name = Path(str(system.scenario.source)).stem
+    return _config_id(list(system.automaton.configs), system.model.describe, type(system.model), name, spec)
+
+
+def _config_id(configs: list, describe: Any, model: Any, name: str, spec: Any) -> int:
+    def lookup(obj: Any) -> int:
+        try:
+            return configs.index(obj)
+        except ValueError:
+            return -1
+
     if isinstance(spec, (int, np.integer)):
         if not 0 <= int(spec) < len(configs):
             raise ModelError(f"configuration id {spec} out of range 0..{len(configs) - 1}")
         return int(spec)
     if not isinstance(spec, str):
-        c = space.config_id(_tuplify(spec))
+        c = lookup(_tuplify(spec))
         if c < 0:
-            raise ModelError(f"configuration {spec!r} is not reachable in {mdp.name}")
+            raise ModelError(f"configuration {spec!r} is not reachable in {name}")
         return c
-    model = model_type(mdp)
     text = spec.strip()
     if text.lower() == "idle":
         ids = [i for i, c in enumerate(configs) if model.is_idle(c)]
         if len(ids) == 1:
             return ids[0]
         if not ids:
-            raise ModelError(f"{mdp.name}: no configuration with every server idle")
-        raise ModelError(f"{mdp.name}: 'idle' is ambiguous ({len(ids)} configurations); give the description, "
-                         f"e.g. {space.describe_config(configs[ids[0]])!r}")
+            raise ModelError(f"{name}: no configuration with every server idle")
+        raise ModelError(f"{name}: 'idle' is ambiguous ({len(ids)} configurations); give the description, "
+                         f"e.g. {describe(configs[ids[0]])!r}")
     if text.startswith("#") and text[1:].strip().isdigit():
-        return parse_config_spec(mdp, int(text[1:]))
+        return _config_id(configs, describe, model, name, int(text[1:]))
     if text[:1] in "([":
         try:
             obj = _tuplify(ast.literal_eval(text))
         except (ValueError, SyntaxError) as exc:
             raise ModelError(f"configuration literal {text!r} is not a valid Python literal: {exc}") from None
-        c = space.config_id(obj)
+        c = lookup(obj)
         if c < 0:
-            raise ModelError(f"configuration {obj!r} is not reachable in {mdp.name}")
+            raise ModelError(f"configuration {obj!r} is not reachable in {name}")
         return c
-    descs = [space.describe_config(c) for c in configs]
+    descs = [describe(c) for c in configs]
     target = _norm(text)
     normed = [_norm(d) for d in descs]
     if target in normed:
@@ -203,7 +228,7 @@ def parse_config_spec(mdp: MDP, spec: Any) -> int:
         return normed.index(_norm(full))
     close = difflib.get_close_matches(target, normed, n=6, cutoff=0.5)
     hint = "; ".join(repr(descs[normed.index(c)]) for c in close) or "none close"
-    raise ModelError(f"no reachable configuration matches {text!r} in {mdp.name}; close matches: {hint}")
+    raise ModelError(f"no reachable configuration matches {text!r} in {name}; close matches: {hint}")
 
 
 # ============================================================================ grids
@@ -554,4 +579,71 @@ def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any
         total_regions += int(ncomp)
     out["actions_present"] = len(out["per_action"])
     out["regions_total"] = total_regions
+    return out
+
+
+# ============================================================================ matrix-free policies
+def matrix_free_grid(policy: Any, config: Any, axes: Sequence[int] = (1, 2),
+                     fixed_tau: Mapping[int, int] | None = None) -> tuple[np.ndarray, list, dict[int, int], int]:
+    """The chosen action over (tau_i, tau_j) of a matrix-free policy, for one configuration.
+
+    The policy is a :class:`~wncs_lp.policies.MatrixFreePolicy` (``system``, ``layout``,
+    ``table``: one local action index per state of the configuration's AoI box, no MDP). The
+    AoIs not on the axes take ``fixed_tau`` or, by default, the *lower end* of the box of this
+    configuration (the freshest value it can hold: there is no stationary law to choose by at
+    this scale; pass ``fixed_tau`` for another).
+
+    Returns
+    -------
+    actions : (cap_i, cap_j) int array
+        Local action index (into ``labels``) at ``[tau_i - 1, tau_j - 1]``; -1 = outside the
+        configuration's box (not reachable with this configuration).
+    labels : list of tuples
+        The configuration's action labels (``system.automaton.actions[c]``).
+    fixed : dict
+        The values used for the other AoIs (1-based process -> tau).
+    config : int
+        The configuration id.
+    """
+    system, layout, table = policy.system, policy.layout, policy.table
+    caps = [int(c) for c in system.caps]
+    N = len(caps)
+    axes = _check_axes(N, axes, 2)
+    c = system_config(system, config)
+    lo, dims = layout.lo[c], layout.dims[c]
+    fixed = {int(k): int(v) for k, v in (fixed_tau or {}).items()}
+    for k, v in fixed.items():
+        if not 1 <= k <= N or k in axes:
+            raise ModelError(f"fixed_tau: process {k} must be in 1..{N} and not on the axes {tuple(axes)}")
+        if not 1 <= v <= caps[k - 1]:
+            raise ModelError(f"fixed_tau: tau_{k} = {v} outside 1..{caps[k - 1]}")
+        if not lo[k - 1] + 1 <= v <= lo[k - 1] + dims[k - 1]:
+            raise ModelError(f"fixed_tau: tau_{k} = {v} is not reachable with this configuration "
+                             f"(it holds tau_{k} in {lo[k - 1] + 1}..{lo[k - 1] + dims[k - 1]})")
+    for k in range(1, N + 1):
+        if k not in axes and k not in fixed:
+            fixed[k] = int(lo[k - 1]) + 1
+    i, j = axes
+    ti, tj = np.meshgrid(np.arange(1, caps[i - 1] + 1), np.arange(1, caps[j - 1] + 1), indexing="ij")
+    tau = np.empty((ti.size, N), np.int64)
+    for k in range(1, N + 1):
+        tau[:, k - 1] = ti.ravel() if k == i else (tj.ravel() if k == j else fixed[k])
+    idx = layout.index(tau, np.full(ti.size, c, np.int64))
+    A = np.where(idx >= 0, table[np.maximum(idx, 0)].astype(np.int64), -1).reshape(ti.shape)
+    return A, list(system.automaton.actions[c]), fixed, c
+
+
+def matrix_free_region_stats(policy: Any, config: Any, axes: Sequence[int] = (1, 2),
+                             fixed_tau: Mapping[int, int] | None = None) -> dict:
+    """:func:`region_stats` of a matrix-free policy's map (:func:`matrix_free_grid`), with the
+    actions named and ``configuration``, ``configuration_id`` and ``fixed_tau`` added."""
+    A, labels, fixed, c = matrix_free_grid(policy, config, axes, fixed_tau)
+    system = policy.system
+    conf = system.automaton.configs[c]
+    info = system_names(system)
+    out = region_stats(A, connectivity="grid4")
+    out["per_action"] = {info["model"].action_name(tuple(int(x) for x in np.atleast_1d(labels[int(k)])), conf, info): v
+                         for k, v in out["per_action"].items()}
+    out.update(configuration=system.model.describe(conf), configuration_id=int(c),
+               fixed_tau={str(k): v for k, v in sorted(fixed.items())})
     return out

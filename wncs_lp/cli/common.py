@@ -49,10 +49,11 @@ def add_scenario_args(p: argparse.ArgumentParser) -> None:
                    help="build even when the size guard estimates more memory than the machine has available")
 
 
-def add_method_arg(p: argparse.ArgumentParser, what: str = "") -> None:
-    """``--method`` with the one vocabulary of :mod:`wncs_lp.methods` (default auto)."""
-    p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS,
-                   help=(f"{what}: " if what else "") + METHOD_HELP)
+def add_method_arg(p: argparse.ArgumentParser, what: str = "", extra: tuple[str, ...] = (), extra_help: str = "") -> None:
+    """``--method`` with the one vocabulary of :mod:`wncs_lp.methods` (default auto), plus ``extra``
+    methods a command takes beyond it (e.g. ``matrix-free``), described by ``extra_help``."""
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS + tuple(extra),
+                   help=(f"{what}: " if what else "") + METHOD_HELP + (f"; {extra_help}" if extra_help else ""))
 
 
 def add_progress_arg(p: argparse.ArgumentParser) -> None:

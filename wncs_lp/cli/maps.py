@@ -29,9 +29,45 @@ def _parse_fix(items: Sequence[str]) -> dict[int, int]:
     return out
 
 
+def _matrix_free_map(args: argparse.Namespace, scenario, axes, fixed, prog, why: str) -> int:
+    """Solve without a stored matrix and draw the policy (:func:`wncs_lp.viz.plot_matrix_free_map`)."""
+    from ..errors import SolverError
+    from ..policies import MatrixFreePolicy
+    from ..solvers import solve_scenario
+    from ..maps import matrix_free_region_stats
+    from ..viz import plot_matrix_free_map, save_figure
+
+    if args.slice is not None:
+        raise SolverError("--slice is not available with the matrix-free method; draw a map over two AoIs with "
+                          "the others fixed (--axes I,J --fix K=TAU)")
+    if scenario.constraints and not args.ignore_constraints:
+        raise SolverError("the matrix-free method solves unconstrained scenarios only; pass --ignore-constraints "
+                          "to map the unconstrained optimum")
+    prog.phase(f"solving without a stored matrix ({why})")
+    sol = solve_scenario(scenario, "matrix-free", progress=bool(getattr(prog, "enabled", False)))
+    pol = MatrixFreePolicy.from_solution(sol)
+    prog.phase(f"drawing the map and writing {args.out}")
+    ax = plot_matrix_free_map(pol, args.servers, axes=axes if len(axes) == 2 else (1, 2), fixed_tau=fixed)
+    save_figure(ax.figure, args.out, dpi=args.dpi, bbox_inches="tight")
+    stats = matrix_free_region_stats(pol, args.servers, axes if len(axes) == 2 else (1, 2), fixed)
+    payload = {"scenario": scenario.source, "overrides": args.overrides, "out": args.out,
+               "configuration": stats["configuration"], "configuration_id": stats["configuration_id"],
+               "axes": list(axes), "gain": sol.gain, "gain_lower": sol.gain_lower, "gain_upper": sol.gain_upper,
+               "status": sol.status, "method": "matrix-free", "matrix_free_reason": why, "regions": stats}
+    if args.json:
+        emit_json(payload)
+    else:
+        print(f"map of [{payload['configuration']}] written to {args.out} (matrix-free, {why}; "
+              f"g* in [{sol.gain_lower:.10g}, {sol.gain_upper:.10g}])")
+        _print_regions(stats)
+    return 0 if sol.ok else 1
+
+
 def cmd_map(args: argparse.Namespace) -> int:
+    from ..errors import SolverError
     from ..maps import parse_config_spec, region_stats
     from ..methods import CONSTRAINED_METHODS, LP_METHODS
+    from ..models.guard import SizeLimitError
     from ..viz import file_backend, image_formats, plot_policy_map, plot_policy_slice, save_figure
     from .solve import build_with_progress
 
@@ -44,7 +80,18 @@ def cmd_map(args: argparse.Namespace) -> int:
     fixed = _parse_fix(args.fix)
     prog = progress_for(args)
     constrained = bool(scenario.constraints) and not args.ignore_constraints
-    mdp, _ = build_with_progress(args, scenario, prog, need_lp=args.method in LP_METHODS)
+    if args.method == "matrix-free":
+        return _matrix_free_map(args, scenario, axes, fixed, prog, "asked for")
+    try:
+        mdp, _ = build_with_progress(args, scenario, prog, need_lp=args.method in LP_METHODS)
+    except SizeLimitError as refused:
+        # auto: a model whose stored matrix would not fit is solved and drawn without one, where it can be
+        if args.method != "auto" or constrained or args.slice is not None:
+            raise
+        try:
+            return _matrix_free_map(args, scenario, axes, fixed, prog, "auto: the stored matrix would not fit in memory")
+        except SolverError:
+            raise refused from None
     config = parse_config_spec(mdp, args.servers)
     if constrained:
         from ..constrained import solve_constrained
@@ -83,10 +130,14 @@ def cmd_map(args: argparse.Namespace) -> int:
         emit_json(payload)
     else:
         print(f"map of [{payload['configuration']}] written to {args.out}")
-        for name, r in stats["per_action"].items():
-            print(f"  {name}: {r['cells']} cells, {r['components']} region(s), {r['holes']} hole(s)"
-                  f"{'' if r['connected'] else '  -- not connected'}")
+        _print_regions(stats)
     return 0
+
+
+def _print_regions(stats: dict) -> None:
+    for name, r in stats["per_action"].items():
+        print(f"  {name}: {r['cells']} cells, {r['components']} region(s), {r['holes']} hole(s)"
+              f"{'' if r['connected'] else '  -- not connected'}")
 
 
 def _configure_map(p: argparse.ArgumentParser) -> None:
@@ -105,7 +156,10 @@ def _configure_map(p: argparse.ArgumentParser) -> None:
                         "most reachable states)")
     p.add_argument("--slice", type=int, default=None, metavar="TOTAL",
                    help="draw the plane tau_i + tau_j + tau_k = TOTAL as a triangle (three processes)")
-    add_method_arg(p, "solver of the optimal policy (constrained scenarios: auto, lp or lp-cvxpy)")
+    add_method_arg(p, "solver of the optimal policy (constrained scenarios: auto, lp or lp-cvxpy)", ("matrix-free",),
+                   "matrix-free: certified value iteration without building the MDP, for models too large to "
+                   "store (auto switches to it when the stored matrix would not fit; two-AoI maps only, the "
+                   "AoIs off the axes default to the lower end of the configuration's box)")
     p.add_argument("--ignore-constraints", action="store_true",
                    help="map the unconstrained optimum even if the scenario has [[constraint]] tables (by default "
                         "the constrained optimum is drawn, with its randomised states starred)")

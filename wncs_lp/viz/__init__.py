@@ -5,7 +5,7 @@ imported lazily inside them, so importing this package does not import matplotli
 """
 from __future__ import annotations
 
-from .maps import ACTION_STYLES, plot_policy_map, plot_policy_slice
+from .maps import ACTION_STYLES, plot_matrix_free_map, plot_policy_map, plot_policy_slice
 from .save import save_figure
 from .sweeps import POLICY_STYLE, plot_sweep, save_sweep_figure
 from .tradeoff import plot_tradeoff, save_tradeoff_figure
@@ -17,6 +17,7 @@ __all__ = [
     "ACTION_STYLES",
     "POLICY_STYLE",
     "plot_policy_map",
+    "plot_matrix_free_map",
     "plot_policy_slice",
     "plot_sweep",
     "save_sweep_figure",

@@ -27,6 +27,7 @@ from ..maps import (
     NEIGHBOURS,
     action_name,
     map_names,
+    matrix_free_grid,
     mixed_states,
     parse_config_spec,
     policy_grid,
@@ -36,11 +37,12 @@ from ..maps import (
     short_action_name,
     slice_grid,
     state_mix,
+    system_names,
 )
 from ..mdp import MDP
 
 __all__ = ["ACTION_STYLES", "MIX_GID", "MIX_MARKER", "MIX_OFFSET", "MIX_LEGEND_MAX", "plot_policy_map",
-           "plot_policy_slice"]
+           "plot_policy_slice", "plot_matrix_free_map"]
 
 #: (marker, colour) per action index (row of ``mdp.action_table``), cycled.
 ACTION_STYLES: list[tuple[str, str]] = [
@@ -375,4 +377,92 @@ def plot_policy_slice(
     if legend:
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8.5,
                   title="action" if probs is None else "most likely action", title_fontsize=9)
+    return ax
+
+
+def plot_matrix_free_map(
+    policy: Any,
+    config: Any,
+    axes: Sequence[int] = (1, 2),
+    fixed_tau: Mapping[int, int] | None = None,
+    ax: Any = None,
+    *,
+    title: str | None = None,
+    legend: bool = True,
+) -> Any:
+    r"""Draw a matrix-free policy over (tau_i, tau_j) for one configuration (no MDP needed).
+
+    The map of :func:`plot_policy_map` for a policy of
+    :func:`~wncs_lp.solvers.matrix_free.matrix_free_value_iteration` (the paper's four processes
+    at cap 30 and beyond): one marker per action, dark grey outside the configuration's AoI box.
+    There is no stationary law at this scale, so transient states are not shaded, and the AoIs
+    off the axes default to the lower end of the configuration's box
+    (:func:`~wncs_lp.maps.matrix_free_grid`); the title says which values were used.
+
+    Parameters
+    ----------
+    policy : MatrixFreePolicy or MatrixFreeSolution
+    config : configuration (id, object or spec string, see :func:`~wncs_lp.maps.parse_config_spec`)
+    axes : (i, j)
+        1-based processes on the x and y axes.
+    fixed_tau : {k: tau_k}, optional
+    ax : matplotlib Axes, optional
+    title : str, optional
+    legend : bool
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    if not hasattr(policy, "table"):  # a MatrixFreeSolution
+        from ..policies import MatrixFreePolicy
+
+        policy = MatrixFreePolicy.from_solution(policy)
+    A, labels, fixed, cid = matrix_free_grid(policy, config, axes, fixed_tau)
+    system = policy.system
+    info = system_names(system)
+    conf = system.automaton.configs[cid]
+    # one style per action label across configurations (sorted labels), like the MDP's action rows
+    every = sorted({tuple(int(x) for x in np.atleast_1d(a)) for acts in system.automaton.actions for a in acts})
+    style_of = {lab: every.index(lab) for lab in every}
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8.6, 6.2))
+    ci, cj = A.shape
+    bg = np.ones((cj, ci, 3))
+    reach = A >= 0
+    bg[(~reach).T] = np.array([0x7F, 0x7F, 0x7F]) / 255
+    ax.imshow(bg, origin="lower", extent=(0.5, ci + 0.5, 0.5, cj + 0.5), interpolation="nearest", aspect="auto")
+    ms = max(3.0, min(9.0, 160.0 / max(ci, cj)))
+    handles = []
+    for a in np.unique(A[reach]):
+        lab = tuple(int(x) for x in np.atleast_1d(labels[int(a)]))
+        xs, ys = np.nonzero(A == a)
+        mk, col = _style(style_of[lab])
+        ax.plot(xs + 1, ys + 1, linestyle="none", marker=mk, color=col, markersize=ms,
+                markerfacecolor=col if mk not in ("x", "+") else None, alpha=_FILLED_ALPHA,
+                markeredgewidth=1.4 if mk in ("x", "+") else 0.6)
+        name = info["model"].action_name(lab, conf, info)
+        handles.append(Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
+                              label=f"{name}  [{int(xs.size)} cells]"))
+    if (~reach).any():
+        handles.append(Patch(facecolor=_UNREACHABLE_BG, edgecolor="0.3", label="outside this configuration's box"))
+    i, j = axes
+    pn = info["processes"]
+    ax.set_xlabel(f"{_tau(i, info)}  (AoI of process {pn[i - 1]})")
+    ax.set_ylabel(f"{_tau(j, info)}  (AoI of process {pn[j - 1]})")
+    ax.set_xlim(0.5, ci + 0.5)
+    ax.set_ylim(0.5, cj + 0.5)
+    _ticks(ax, ci, cj)
+    caps = [int(c) for c in system.caps]
+    par = [f"p = {info['p']:g}", f"cap {caps[0]}" if len(set(caps)) == 1 else "caps " + ",".join(map(str, caps))]
+    extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(fixed.items()))
+    ax.set_title(title or f"{info['name']}: policy in [{system.model.describe(conf)}] (matrix-free)\n"
+                 f"{extra + ', ' if extra else ''}{', '.join(par)}", fontsize=10)
+    if legend:
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8.5, title="action",
+                  title_fontsize=9, frameon=True)
     return ax
