@@ -119,15 +119,17 @@ def run_reproduction(
     out : path
         Output folder (created). Its ``cache/`` makes a second run fast and an interrupted run
         resumable.
-    profile : {"quick", "default"} or Profile
-        ``quick`` (under a minute: small caps and grids) or ``default`` (the caps of claims.md:
-        12, 20, 30 where the size allows; about 7 minutes on 2 cores). Every verdict says which
+    profile : {"quick", "default", "full"} or Profile
+        ``quick`` (about a minute: small caps and grids), ``default`` (the caps of claims.md:
+        12, 20, 30 where the size allows, and the paper's four processes at caps 12 and 20; about
+        20 minutes on 2 cores) or ``full`` (``default`` plus the four processes at caps 25 and 30
+        and their sweep over p at cap 20). Every verdict says which
         caps it rests on and whether its deciding cap leans on the truncation (``basis``).
     force : bool
         Recompute every step, ignoring the cache.
     claims : sequence of str, optional
-        Only these claims (default all, C1-C13, and the "beyond the paper" sections, B1;
-        name B1 here to compute it in a partial run).
+        Only these claims (default all, C1-C13, and the "beyond the paper" sections, B1 and B2;
+        name B1 or B2 here to compute it in a partial run).
     progress : bool
         A progress bar over the claims on stderr.
 

@@ -1,5 +1,7 @@
 """Beyond the paper: results the paper does not state, computed with the same care (no verdict).
 
+B2 -- the paper's four processes solved exactly (:mod:`~wncs_lp.reproduce.fullscale`).
+
 B1 -- what it costs to use the cloud less. Processes 1 and 2 (``paper_p12.toml``) with
 ``model.allow_idle = true`` (a server may be left unused), total average MSE against a bound b
 on the remote server's send rate (the fraction of slots in which it is sent an update,
@@ -17,7 +19,7 @@ import math
 import shutil
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -25,13 +27,14 @@ import numpy as np
 from ..constrained.tradeoff import TradeoffResult, tradeoff
 from ..scenario import ConstraintSpec
 from ..viz import plot_tradeoff, subplots
-from .context import Context, Profile
+from .context import Context, ExtraResult, Profile
+from .fullscale import section_b2
 
 __all__ = ["BEYOND", "BeyondSettings", "SETTINGS", "ExtraResult", "run_beyond", "section_b1", "settings_for",
            "tradeoff_findings"]
 
 #: The sections of "beyond the paper", in report order.
-BEYOND = ("B1",)
+BEYOND = ("B1", "B2")
 
 SCENARIO = "paper_p12.toml"
 SERVER = "remote"
@@ -61,6 +64,7 @@ class BeyondSettings:
 SETTINGS: dict[str, BeyondSettings] = {
     "quick": BeyondSettings(caps=(8, 12), values=_grid(0.0, 0.3, 0.05)),
     "default": BeyondSettings(caps=(12, 30), values=_grid(0.0, 0.3, 0.025)),
+    "full": BeyondSettings(caps=(12, 30), values=_grid(0.0, 0.3, 0.025)),
 }
 
 
@@ -69,24 +73,6 @@ def settings_for(profile: Profile) -> BeyondSettings:
         return SETTINGS[profile.name]
     caps = tuple(sorted({profile.caps_2p[0], profile.caps_2p[-1]}))
     return BeyondSettings(caps=caps, values=_grid(0.0, 0.3, 0.05))
-
-
-@dataclass
-class ExtraResult:
-    """One section of "beyond the paper": like a claim, but an extra result without a verdict."""
-
-    id: str
-    title: str
-    summary: str
-    numbers: dict[str, Any] = field(default_factory=dict)
-    figures: list[str] = field(default_factory=list)
-    tables: list[str] = field(default_factory=list)
-    details: str = ""  # markdown
-    seconds: float = 0.0
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"id": self.id, "title": self.title, "summary": self.summary, "numbers": self.numbers,
-                "figures": self.figures, "tables": self.tables, "details": self.details, "seconds": self.seconds}
 
 
 # ----------------------------------------------------------------------------- one curve
@@ -306,7 +292,7 @@ def section_b1(ctx: Context) -> ExtraResult:
                        numbers, figs, [tab], details)
 
 
-_SECTIONS: dict[str, Callable[[Context], ExtraResult]] = {"B1": section_b1}
+_SECTIONS: dict[str, Callable[[Context], ExtraResult]] = {"B1": section_b1, "B2": section_b2}
 
 
 def run_beyond(ctx: Context, ids: Sequence[str] = BEYOND, say: Callable[[str], None] | None = None) -> list[dict]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import csv
 import io
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -94,6 +94,9 @@ PROFILES: dict[str, Profile] = {
         c13_big_cap=30,
     ),
 }
+#: ``full``: the claims as in ``default``; "beyond the paper" B2 adds the four processes at caps 25 and 30
+#: and its sweep over p at cap 20 (about 45 more minutes on 2 cores).
+PROFILES["full"] = replace(PROFILES["default"], name="full")
 
 
 @dataclass
@@ -160,6 +163,24 @@ class ClaimResult:
                    c.get("numbers", {}), c.get("figures", []), c.get("tables", []), c.get("details", ""),
                    c.get("seconds", 0.0), c.get("basis", {}), [Table.from_dict(t) for t in c.get("shown", [])],
                    c.get("captions", {}))
+
+
+@dataclass
+class ExtraResult:
+    """One section of "beyond the paper": like a claim, but an extra result without a verdict."""
+
+    id: str
+    title: str
+    summary: str
+    numbers: dict[str, Any] = field(default_factory=dict)
+    figures: list[str] = field(default_factory=list)
+    tables: list[str] = field(default_factory=list)
+    details: str = ""  # markdown
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"id": self.id, "title": self.title, "summary": self.summary, "numbers": self.numbers,
+                "figures": self.figures, "tables": self.tables, "details": self.details, "seconds": self.seconds}
 
 
 def evidence(label: str, cap: int, mass: float, verdict: str, scenario: str = "", p: float | None = None,

@@ -1,0 +1,330 @@
+"""Beyond the paper, B2: the paper's four processes solved exactly (no verdict).
+
+The paper proposes its separable suboptimal policy because the optimum of its four-process
+system (``paper_p1234.toml``) could not be computed. The matrix-free certified value iteration
+(:mod:`wncs_lp.solvers.matrix_free`) computes it, and :func:`~wncs_lp.solvers.matrix_free.matrix_free_evaluate`
+gives the exact (certified) average cost of each baseline at the same scale, so every gap below
+is a ratio of two certified numbers, not a Monte Carlo estimate:
+
+* at p = 0.9, one instance per cap of the profile: optimal, suboptimal, static (the
+  specification's default assignment) and greedy;
+* a Fig. 10-style sweep over the success probability p at one cap (the largest the profile
+  affords): the same four policies.
+
+Every instance also gets the certified long-run expected number of processes at their cap
+(:func:`~wncs_lp.solvers.matrix_free.matrix_free_cap_mass`) of the optimal policy (and of the
+baselines on the smaller instances): an upper bound on the share of time with some process at
+its cap, the measure of how much a number leans on the truncation (:mod:`wncs_lp.truncation`).
+
+p = 1 is not in the sweep: there a static assignment's chain has several recurrent classes
+(a process never loses an update, so the class depends on the initial state) and one certified
+gain over every state does not exist; the claims' C6 covers p = 1 on the enumerated models.
+
+Caching: one step of the reproduction cache per (instance, policy), so an interrupted run
+resumes solve by solve.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..truncation import CAP_MASS_WARN
+from ..viz import subplots
+from .context import Context, ExtraResult, Profile, assignment_label
+
+__all__ = ["FullScaleSettings", "SETTINGS", "POLICIES", "settings_for", "section_b2", "fullscale_findings", "summary_text"]
+
+SCENARIO = "paper_p1234.toml"
+#: The baselines, in the order of the paper's Fig. 10.
+POLICIES = ("suboptimal", "static", "greedy")
+LABELS = {"optimal": "optimal (certified)", "suboptimal": "suboptimal (paper, Sec. III)", "static": "static",
+          "greedy": "greedy"}
+
+
+@dataclass(frozen=True)
+class FullScaleSettings:
+    """How much B2 computes.
+
+    ``caps``: the caps of the instances at ``p``; ``sweep_cap`` / ``p_grid``: the sweep over p;
+    ``tol``: the relative width of every certificate; ``mass_max_states``: the baselines' time
+    at the cap is computed up to this many states (the optimal policy's always).
+    """
+
+    caps: tuple[int, ...]
+    sweep_cap: int
+    p_grid: tuple[float, ...]
+    p: float = 0.9
+    tol: float = 1e-7
+    mass_max_states: int = 5_000_000
+
+
+#: Per profile, chosen by measurement on 2 cores: processes 1-4 at cap 12 (2.9M states) take
+#: about 10 s per solve or evaluation, at cap 20 (38.0M) 30-120 s, at cap 25 (108M) 2-4 min and
+#: at cap 30 (247M) 3-6 min; the default profile stays near 10 minutes for this section, so caps
+#: 25 and 30 and the sweep at cap 20 are in ``full``.
+SETTINGS: dict[str, FullScaleSettings] = {
+    "quick": FullScaleSettings(caps=(10,), sweep_cap=10, p_grid=(0.8, 0.9)),
+    "default": FullScaleSettings(caps=(12, 20), sweep_cap=12, p_grid=(0.8, 0.85, 0.9, 0.95)),
+    "full": FullScaleSettings(caps=(12, 20, 25, 30), sweep_cap=20, p_grid=(0.8, 0.85, 0.9, 0.95)),
+}
+
+
+def settings_for(profile: Profile) -> FullScaleSettings:
+    return SETTINGS.get(profile.name, SETTINGS["quick"])
+
+
+# ----------------------------------------------------------------------------- one instance
+def _instance(ctx: Context, cap: int, p: float, st: FullScaleSettings) -> dict[str, Any]:
+    """Optimal gain and every baseline's exact gain at one (cap, p); each a cached step."""
+    from ..models.system import System
+    from ..policies import GreedyPolicy, MatrixFreePolicy, StaticPolicy, SuboptimalPolicy, default_assignment
+    from ..solvers.matrix_free import (matrix_free_cap_mass, matrix_free_evaluate,
+                                       matrix_free_value_iteration)
+
+    sc = ctx.scenario(SCENARIO, [f"tau_cap={cap}", f"p={p!r}"])
+    fp = sc.fingerprint()
+    system = System.from_scenario(sc)
+    assignment = [int(a) for a in default_assignment(sc)]
+    where = f"B2 cap {cap} p={p:g}"
+
+    def mass_of(policy) -> dict[str, Any]:
+        ev = matrix_free_cap_mass(system, policy, on_interrupt="raise")
+        return {"at_cap": float(ev.gain), "at_cap_lower": float(ev.gain_lower),
+                "at_cap_upper": float(ev.gain_upper), "at_cap_status": ev.status}
+
+    def optimal():
+        t0 = time.perf_counter()
+        sol = matrix_free_value_iteration(system, tol=st.tol, on_interrupt="raise")
+        n = int(sol.stats.get("n_states", sol.policy.size))
+        ctx.log(f"{where}: optimal g* = {sol.gain:.10g} ({n:,} states, {time.perf_counter() - t0:.1f} s)")
+        res = {"gain": float(sol.gain), "gain_lower": float(sol.gain_lower), "gain_upper": float(sol.gain_upper),
+               "status": sol.status, "states": n, "sweeps": int(sol.iterations),
+               "seconds": time.perf_counter() - t0}
+        res.update(mass_of(MatrixFreePolicy.from_solution(sol)))
+        res["seconds_total"] = time.perf_counter() - t0
+        return res, None
+
+    out = {"cap": cap, "p": p, "assignment": assignment, "assignment_label": assignment_label(sc, assignment)}
+    out["optimal"], _ = ctx.cache.get_or_compute("b2_optimal", {"fingerprint": fp, "tol": st.tol}, optimal)
+    n = out["optimal"]["states"]
+    with_mass = n <= st.mass_max_states
+    for name in POLICIES:
+        def evaluate(name=name):
+            t0 = time.perf_counter()
+            pol = {"suboptimal": lambda: SuboptimalPolicy(system), "static": lambda: StaticPolicy(system, assignment),
+                   "greedy": lambda: GreedyPolicy(system)}[name]()
+            ev = matrix_free_evaluate(system, pol, tol=st.tol, on_interrupt="raise", name=name)
+            ctx.log(f"{where}: {name} g = {ev.gain:.10g} ({time.perf_counter() - t0:.1f} s)")
+            res = {"gain": float(ev.gain), "gain_lower": float(ev.gain_lower), "gain_upper": float(ev.gain_upper),
+                   "status": ev.status, "sweeps": int(ev.iterations), "seconds": time.perf_counter() - t0}
+            if with_mass:
+                res.update(mass_of(pol))
+            res["seconds_total"] = time.perf_counter() - t0
+            return res, None
+
+        params = {"fingerprint": fp, "tol": st.tol, "policy": name, "mass": with_mass,
+                  "assignment": assignment if name == "static" else None}
+        out[name], _ = ctx.cache.get_or_compute("b2_evaluate", params, evaluate)
+    return out
+
+
+# ----------------------------------------------------------------------------- the findings
+def _gap(res: dict[str, Any], opt: dict[str, Any]) -> tuple[float, float, float]:
+    """(gap, lower, upper) of g_pi / g* - 1, the interval from both certificates."""
+    return (res["gain"] / opt["gain"] - 1.0, res["gain_lower"] / opt["gain_upper"] - 1.0,
+            res["gain_upper"] / opt["gain_lower"] - 1.0)
+
+
+def fullscale_findings(instances: list[dict[str, Any]]) -> dict[str, Any]:
+    """The numbers the text quotes, computed from the instances.
+
+    Returns ``gaps`` ({policy: [(cap, p, gap, lower, upper), ...]}), ``ordered`` (optimal <=
+    suboptimal <= static <= greedy at every instance, each comparison decided by the
+    certificates: a pair whose intervals overlap counts as not violating), ``violations`` (the
+    instances where a certified order is reversed), ``all_certified`` (every status optimal)
+    and ``mass`` ({(cap, p): processes at the cap of the optimal policy}).
+    """
+    gaps: dict[str, list] = {name: [] for name in POLICIES}
+    violations: list[str] = []
+    order = ("optimal",) + POLICIES
+    certified = True
+    for inst in instances:
+        opt = inst["optimal"]
+        for name in order:
+            certified &= inst[name]["status"] == "optimal"
+            certified &= inst[name].get("at_cap_status", "optimal") == "optimal"
+        for name in POLICIES:
+            gaps[name].append((inst["cap"], inst["p"], *_gap(inst[name], opt)))
+        for a, b in zip(order, order[1:]):
+            if inst[a]["gain_lower"] > inst[b]["gain_upper"]:  # certified: a is worse than b
+                violations.append(f"{a} > {b} at cap {inst['cap']}, p = {inst['p']:g}")
+    return {"gaps": gaps, "ordered": not violations, "violations": violations, "all_certified": bool(certified),
+            "mass": {(i["cap"], i["p"]): i["optimal"]["at_cap"] for i in instances}}
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:+.2f}%"
+
+
+def _above(x: tuple) -> str:
+    """Words for one (cap, p, gap, lower, upper) entry: a gap whose interval holds 0 is no gap."""
+    if x[3] <= 0.0 <= x[4]:
+        return f"equal to the optimum within the certificates at cap {x[0]}"
+    return f"{_pct(x[2])} above the optimum at cap {x[0]}"
+
+
+def _trend(values: list[float]) -> str:
+    d = np.diff(values)
+    if d.size == 0:
+        return ""
+    if np.all(d > 0):
+        return "grows with the cap"
+    if np.all(d < 0):
+        return "shrinks with the cap"
+    return "is not monotone in the cap"
+
+
+def summary_text(at_p: list[dict[str, Any]], sweep: list[dict[str, Any]], found: dict[str, Any],
+          st: FullScaleSettings, later: FullScaleSettings | None) -> str:
+    caps = [i["cap"] for i in at_p]
+    p = st.p
+    parts = [f"Processes 1-4 at p = {p:g}, solved exactly without a stored matrix: "
+             + "; ".join(f"cap {i['cap']} ({i['optimal']['states']:,} states) g* = {i['optimal']['gain']:.10g} "
+                         f"(certified to [{i['optimal']['gain_lower']:.10g}, {i['optimal']['gain_upper']:.10g}])"
+                         for i in at_p) + "."]
+    for name in POLICIES:
+        g = [x for x in found["gaps"][name] if x[1] == p and x[0] in caps]
+        label = name if name != "static" else f"the static policy ({at_p[0]['assignment_label']})"
+        if name == "suboptimal":
+            label = "The paper's suboptimal policy"
+        s = f"{label[0].upper() + label[1:]} is " + ", ".join(_above(x) for x in g)
+        if len(g) > 1:
+            s += f" (the gap {_trend([x[2] for x in g])})"
+        parts.append(s + ".")
+    ms = [(i["cap"], i["optimal"]["at_cap"]) for i in at_p]
+    s = ("Time at the cap (the optimal policy's long-run expected number of processes at their cap, an upper bound "
+         "on the share of time with some process there): " + ", ".join(f"{m:.3g} at cap {c}" for c, m in ms))
+    lean = [c for c, m in ms if m > CAP_MASS_WARN]
+    if lean:
+        s += (f"; above {CAP_MASS_WARN:g} at cap{'s' if len(lean) > 1 else ''} "
+              f"{', '.join(map(str, lean))}: those numbers lean on the truncation, the larger caps' less so")
+    parts.append(s + ".")
+    if sweep:
+        sc = sweep[0]["cap"]
+        ps = [i["p"] for i in sweep]
+        rng = {name: [x[2] for x in found["gaps"][name] if x[0] == sc and x[1] in ps] for name in POLICIES}
+        parts.append(f"Over p = {', '.join(f'{q:g}' for q in ps)} at cap {sc}: the suboptimal policy is "
+                     f"{_pct(min(rng['suboptimal']))} to {_pct(max(rng['suboptimal']))} above the optimum, static "
+                     f"{_pct(min(rng['static']))} to {_pct(max(rng['static']))}, greedy "
+                     f"{_pct(min(rng['greedy']))} to {_pct(max(rng['greedy']))}.")
+    parts.append("Optimal <= suboptimal <= static <= greedy at every instance (by the certificates)."
+                 if found["ordered"] else "The order optimal <= suboptimal <= static <= greedy is reversed, "
+                 "certified: " + "; ".join(found["violations"]) + ".")
+    if not found["all_certified"]:
+        parts.append("NOT every number closed its certificate: see the status column.")
+    if later is not None:
+        more = [c for c in later.caps if c not in caps]
+        if more or later.sweep_cap != st.sweep_cap:
+            parts.append(f"`wncs-lp reproduce --profile full` adds cap{'s' if len(more) > 1 else ''} "
+                         f"{', '.join(map(str, more))} and the sweep over p at cap {later.sweep_cap}.")
+    return " ".join(parts)
+
+
+def _rows(instances: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    rows = []
+    for inst in instances:
+        opt = inst["optimal"]
+        for name in ("optimal",) + POLICIES:
+            r = inst[name]
+            gap = _gap(r, opt) if name != "optimal" else (0.0, 0.0, 0.0)
+            rows.append({"cap": inst["cap"], "p": inst["p"], "states": opt["states"],
+                         "policy": name if name != "static" else f"static ({inst['assignment_label']})",
+                         "gain": r["gain"], "gain_lower": r["gain_lower"], "gain_upper": r["gain_upper"],
+                         "gap_to_optimum": gap[0], "gap_lower": gap[1], "gap_upper": gap[2],
+                         "processes_at_cap": r.get("at_cap", math.nan), "seconds": r.get("seconds_total", r["seconds"]),
+                         "status": r["status"]})
+    return rows
+
+
+def _table_md(rows: list[dict[str, Any]]) -> str:
+    md = ["| cap | p | states | policy | average MSE | certificate [lower, upper] | gap to optimum | "
+          "processes at the cap | seconds | status |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        gap = "-" if r["policy"] == "optimal" else f"{_pct(r['gap_to_optimum'])}"
+        mass = "-" if math.isnan(r["processes_at_cap"]) else f"{r['processes_at_cap']:.4g}"
+        md.append(f"| {r['cap']} | {r['p']:g} | {r['states']:,} | {r['policy']} | {r['gain']:.10g} | "
+                  f"[{r['gain_lower']:.10g}, {r['gain_upper']:.10g}] | {gap} | {mass} | {r['seconds']:.1f} | "
+                  f"{r['status']} |")
+    return "\n".join(md)
+
+
+def _figure(ctx: Context, at_p: list[dict[str, Any]], sweep: list[dict[str, Any]], st: FullScaleSettings) -> list[str]:
+    fig, axes = subplots(1, 2, figsize=(12.5, 4.6))
+    ax = axes[0]
+    caps = [i["cap"] for i in at_p]
+    for j, name in enumerate(("optimal",) + POLICIES):
+        label = LABELS[name] if name != "static" else f"static ({at_p[0]['assignment_label']})"
+        ax.plot(caps, [i[name]["gain"] for i in at_p], "o-", color=f"C{j}", label=label)
+    for i in at_p:
+        g = _gap(i["suboptimal"], i["optimal"])[0]
+        ax.annotate(_pct(g), (i["cap"], i["suboptimal"]["gain"]), textcoords="offset points", xytext=(4, 6),
+                    fontsize=8, color="C1")
+    ax.set(xlabel="AoI cap", ylabel="long-run average MSE", xticks=caps)
+    ax.set_title(f"Processes 1-4, p = {st.p:g}: exact gains by cap", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(frameon=False, fontsize=8)
+    ax = axes[1]
+    if sweep:
+        ps = [i["p"] for i in sweep]
+        for j, name in enumerate(("optimal",) + POLICIES):
+            label = LABELS[name] if name != "static" else f"static ({sweep[0]['assignment_label']})"
+            ax.plot(ps, [i[name]["gain"] for i in sweep], "o-", color=f"C{j}", label=label)
+        ax.set(xlabel="success probability p", ylabel="long-run average MSE", xticks=ps)
+        ax.set_title(f"Processes 1-4, cap {sweep[0]['cap']}: exact gains vs p (cf. paper Fig. 10)", fontsize=10)
+        ax.grid(True, alpha=0.3)
+        ax.legend(frameon=False, fontsize=8)
+    fig.tight_layout()
+    return ctx.save_figure(fig, "b2_four_processes_exact")
+
+
+def section_b2(ctx: Context) -> ExtraResult:
+    """B2: the paper's four processes, exact optimum vs the baselines (see the module docstring)."""
+    st = settings_for(ctx.profile)
+    done: dict[tuple[int, float], dict[str, Any]] = {}
+
+    def instance(cap: int, p: float) -> dict[str, Any]:
+        if (cap, p) not in done:
+            done[cap, p] = _instance(ctx, cap, p, st)
+        return done[cap, p]
+
+    at_p = [instance(cap, st.p) for cap in st.caps]
+    sweep = [instance(st.sweep_cap, p) for p in st.p_grid]
+    instances = list(done.values())
+    found = fullscale_findings(instances)
+    later = SETTINGS["full"] if ctx.profile.name != "full" else None
+    summary = summary_text(at_p, sweep, found, st, later)
+    figs = _figure(ctx, at_p, sweep, st)
+    rows = _rows(instances)
+    tab = ctx.save_table(rows, "b2_four_processes_exact")
+    details = (
+        f"Setup: `{SCENARIO}` (the paper's processes 1-4 on the remote and the edge server), p = {st.p:g} at caps "
+        f"{', '.join(map(str, st.caps))}, and p = {', '.join(f'{q:g}' for q in st.p_grid)} at cap {st.sweep_cap}. "
+        "The optimum is `matrix_free_value_iteration` (certified value iteration without a stored matrix: the "
+        "Bellman bracket min (Th - h) <= g* <= max (Th - h) over every state); each baseline's average MSE is "
+        "`matrix_free_evaluate` (the same bracket for the fixed policy), so a gap is a ratio of two certified "
+        f"numbers (relative certificate width {st.tol:g}; the gap's interval from both brackets is in the CSV). "
+        "'processes at the cap' is the policy's long-run expected number of processes whose AoI is at its cap "
+        "(`matrix_free_cap_mass`, certified to 1e-7): an upper bound on the share of time with some process at "
+        f"its cap (computed for the baselines up to {st.mass_max_states:,} states). p = 1 is left out: a static "
+        "assignment's chain is then multichain and has no single gain (claim C6 covers p = 1 on the enumerated "
+        "models). This is an extra result, not a claim of the paper: there is no verdict.\n\n" + _table_md(rows))
+    numbers = {"caps": list(st.caps), "p": st.p, "sweep_cap": st.sweep_cap, "p_grid": list(st.p_grid),
+               "tol": st.tol, "ordered": found["ordered"], "violations": found["violations"],
+               "all_certified": found["all_certified"], "instances": instances,
+               "gaps": {k: [list(x) for x in v] for k, v in found["gaps"].items()}}
+    return ExtraResult("B2", "The paper's four processes solved exactly: how far the suboptimal policy is",
+                       summary, numbers, figs, [tab], details)
