@@ -56,6 +56,7 @@ def __dir__() -> list[str]:
 _SOLVER_FUNCTIONS = {
     "lp": ("wncs_lp.solvers.lp", "solve_lp"),
     "lp-cvxpy": ("wncs_lp.solvers.lp", "solve_lp"),
+    "lp-highs": ("wncs_lp.solvers.lp", "solve_lp"),
     "rvi": ("wncs_lp.solvers.dp", "relative_value_iteration"),
     "vi": ("wncs_lp.solvers.dp", "value_iteration"),
     "pi": ("wncs_lp.solvers.dp", "policy_iteration"),

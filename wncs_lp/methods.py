@@ -13,6 +13,9 @@ Every command that solves (``solve``, ``evaluate``, ``simulate``, ``sweep``, ``v
                pairs). ``stats["auto_choice"]`` says whose answer it is.
 ``lp``         the occupation-measure LP on Clarabel (direct), its policy polished and
                exactly evaluated.
+``lp-highs``   the same LP on HiGHS (simplex or interior point + crossover, by the LP's
+               shape). The library's ``solve_lp`` (and ``auto``'s LP) picks Clarabel or
+               HiGHS by a measured rule; ``stats["lp_choice"]`` says why.
 ``lp-cvxpy``   the same LP built with cvxpy.
 ``vi``         certified value iteration (Gauss-Seidel modified policy iteration on the
                numba kernel, Jacobi relative value iteration without numba).
@@ -38,19 +41,19 @@ __all__ = ["METHODS", "DEFAULT_METHOD", "CONSTRAINED_METHODS", "LP_METHODS", "ME
 
 #: The methods of an unconstrained solve, in the order the help lists them
 #: (the same names as :data:`wncs_lp.solvers.METHODS`).
-METHODS = ("auto", "lp", "lp-cvxpy", "vi", "rvi", "pi")
+METHODS = ("auto", "lp", "lp-highs", "lp-cvxpy", "vi", "rvi", "pi")
 #: The default of every command and library function that solves.
 DEFAULT_METHOD = "auto"
 #: The methods of a constrained solve (a scenario with ``[[constraint]]`` tables).
 CONSTRAINED_METHODS = ("auto", "lp", "lp-cvxpy", "lagrangian")
 #: The methods that solve an interior-point LP (their memory need is the size guard's LP estimate).
-LP_METHODS = ("lp", "lp-cvxpy")
+LP_METHODS = ("lp", "lp-highs", "lp-cvxpy")
 
 #: One help text for ``--method``, shared by every command.
 METHOD_HELP = ("solver: auto (default: the LP on small models, certified value iteration above, "
                "cross-checked when both are cheap; it says which it chose), lp (occupation-measure LP on "
-               "Clarabel), lp-cvxpy (the same LP through cvxpy), vi (certified value iteration), rvi "
-               "(relative value iteration), pi (policy iteration)")
+               "Clarabel), lp-highs (the same LP on HiGHS), lp-cvxpy (the same LP through cvxpy), vi "
+               "(certified value iteration), rvi (relative value iteration), pi (policy iteration)")
 
 
 def check_method(method: str, allowed: tuple[str, ...] = METHODS, what: str = "method") -> str:

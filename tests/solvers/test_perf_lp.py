@@ -148,7 +148,7 @@ def test_default_settings_and_their_override(p12, refs, refine, monkeypatch):
 
     monkeypatch.setattr(lpmod, "clarabel_settings", spy)
     extra = None if refine is None else {"iterative_refinement_enable": True}
-    s = solve_lp(p12, settings=extra, polish=False)
+    s = solve_lp(p12, backend="clarabel", settings=extra, polish=False)
     assert seen == [bool(refine)]
     assert s.stats["clarabel_settings"]["iterative_refinement_enable"] is bool(refine)
     assert s.stats["lp_objective"] == pytest.approx(refs[id(p12)].gain, rel=1e-7)

@@ -3,6 +3,7 @@
 ``solve(mdp, method)`` dispatches to
 
 * ``"lp"``       -- occupation-measure LP, Clarabel called directly (:func:`solve_lp`);
+* ``"lp-highs"`` -- the same LP on HiGHS (:mod:`wncs_lp.solvers.highs`);
 * ``"lp-cvxpy"`` -- the same LP built with cvxpy and solved by Clarabel;
 * ``"rvi"``      -- relative value iteration with the aperiodicity transform;
 * ``"vi"``       -- certified value iteration on the fused kernels (Gauss-Seidel modified
@@ -64,7 +65,7 @@ __all__ = [
 
 #: The method names accepted by :func:`solve` (and :data:`MATRIX_FREE`, which needs an MDP built
 #: from a scenario, so it is not in this tuple of methods for any MDP).
-METHODS = ("lp", "lp-cvxpy", "rvi", "vi", "pi", "auto")
+METHODS = ("lp", "lp-highs", "lp-cvxpy", "rvi", "vi", "pi", "auto")
 #: The matrix-free method (:mod:`wncs_lp.solvers.matrix_free`).
 MATRIX_FREE = "matrix-free"
 
@@ -75,7 +76,7 @@ def solve(mdp: MDP, method: str = "auto", **kw: Any) -> Solution:
     Parameters
     ----------
     mdp : MDP
-    method : {"lp", "lp-cvxpy", "rvi", "vi", "pi", "auto", "matrix-free"}
+    method : {"lp", "lp-highs", "lp-cvxpy", "rvi", "vi", "pi", "auto", "matrix-free"}
     **kw
         Passed to :func:`solve_lp` (``backend`` is set by the method name),
         :func:`relative_value_iteration`, :func:`value_iteration`, :func:`policy_iteration`
@@ -88,6 +89,8 @@ def solve(mdp: MDP, method: str = "auto", **kw: Any) -> Solution:
     """
     if method == "lp":
         return solve_lp(mdp, backend="clarabel", **kw)
+    if method == "lp-highs":
+        return solve_lp(mdp, backend="highs", **kw)
     if method == "lp-cvxpy":
         return solve_lp(mdp, backend="cvxpy", **kw)
     if method == "rvi":

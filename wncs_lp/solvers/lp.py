@@ -1,4 +1,4 @@
-"""The occupation-measure linear program of an average-cost MDP, solved with Clarabel.
+"""The occupation-measure linear program of an average-cost MDP, solved with Clarabel or HiGHS.
 
 Primal (Manne 1960; Puterman, *Markov Decision Processes*, Sec. 8.8). With x_l the
 long-run frequency of pair l = (s_l, a_l):
@@ -48,7 +48,24 @@ Formulations (``solve_lp(formulation=...)``, measured in ``benchmarks/run.py``)
   back to every state. Clarabel is 1.5-2x faster on it; the raw LP gain is as accurate.
 * ``"dual"`` -- the gain-bias LP (max g s.t. g + h(s_l) <= c_l + (P h)_l). More IPM
   iterations and no faster, but its raw gain is ~1000x more accurate (1e-11 vs 1e-8).
-* ``"auto"`` -- reduced when that shrinks the constraint matrix enough, else primal.
+* ``"auto"`` -- reduced when that does not densify the constraint matrix, else primal
+  (:func:`choose_lp`).
+
+Backends (``solve_lp(backend=...)``, measured in ``benchmarks/lp_backends.py``)
+-------------------------------------------------------------------------------
+* ``"clarabel"`` -- the interior point the project is built on (below).
+* ``"highs"`` -- HiGHS through highspy (:mod:`~wncs_lp.solvers.highs`): dual simplex or IPX with
+  crossover; its answer is a vertex, so the raw LP gain is exact to round-off (1e-14 against
+  Clarabel's 1e-9..1e-11), and the same unscaling, policy extraction, polish and certificate
+  follow.
+* ``"cvxpy"`` -- Clarabel through cvxpy.
+* ``"auto"`` (the default) -- :func:`choose_lp`: HiGHS on LPs of at most
+  ``highs_max_rows(width)`` rows (width = columns per row, the mean number of actions of a
+  decision state), Clarabel above. HiGHS's time grows faster with the size than Clarabel's
+  (processes 1, 2: ~states^3.8 against ~states^1.9), but Clarabel's KKT system carries every
+  pair while HiGHS's bases are rows x rows, so many actions per state move the crossover up:
+  ~4,000 rows at width 2 (processes 1, 2), beyond 33,000 rows at width 3.3 (processes 1-3),
+  where HiGHS was 1.4-7x faster.
 
 Other levers: Clarabel's default ``direct_solve_method`` ("auto") is faer here; qdldl is
 3x slower. Turning iterative refinement off saves ~30% at an unchanged raw LP gain on these
@@ -77,9 +94,12 @@ from ..mdp import MDP
 from ..progress import Progress, as_progress
 from .certify import bracket, certificate_closed, greedy_first, q_values
 from .dp import policy_iteration
+from .highs import solve_highs
 from .result import Solution
 
-__all__ = ["LPData", "build_lp", "build_reduced_lp", "solve_lp", "extract_policy", "VISIT_TOL", "FORMULATIONS",
+__all__ = ["LPData", "LPChoice", "build_lp", "build_reduced_lp", "choose_lp", "solve_lp", "extract_policy", "VISIT_TOL",
+           "FORMULATIONS", "BACKENDS", "REDUCE_MAX_NNZ_RATIO", "HIGHS_ROWS_AT_WIDTH_2", "HIGHS_WIDTH_EXPONENT", "HIGHS_SIMPLEX_MAX_WIDTH",
+           "highs_max_rows",
            "CLARABEL_DEFAULTS", "POLISH_VI_MIN_STATES", "FAILED_STATUSES", "clarabel_settings", "clarabel_stats",
            "cost_scale_of"]
 
@@ -203,9 +223,149 @@ def _occupation_lp(col_state: np.ndarray, T: sp.spmatrix, weights: np.ndarray, c
 
 
 #: ``formulation="auto"`` uses the reduced LP when its constraint matrix has at most this
-#: fraction of the plain LP's nonzeros (wncs: ~0.78; preemption, whose forced states are
-#: few and whose elimination densifies Q 8x: far above).
-REDUCE_NNZ_RATIO = 0.85
+#: fraction of the plain LP's nonzeros. Measured (``benchmarks/lp_backends.py``): the reduced LP
+#: was the faster form on every instance where it is not denser than the plain one (wncs
+#: models: ratio 0.74-0.97, 1.3-2.7x faster on Clarabel, 1.0-1.4x on HiGHS); the preemption
+#: models' elimination densifies Q (ratio 2.7-7.4) and is much slower there.
+REDUCE_MAX_NNZ_RATIO = 1.0
+
+#: ``backend="auto"`` runs HiGHS when the LP to be solved has at most
+#: ``HIGHS_ROWS_AT_WIDTH_2 * (width / 2) ** HIGHS_WIDTH_EXPONENT`` rows, ``width`` = columns
+#: per row (the mean number of actions of a decision state), else Clarabel. Measured
+#: (``benchmarks/lp_backends.py``): HiGHS's simplex-based solves grow faster with the size
+#: than Clarabel's interior point, but many actions per state hurt Clarabel (its KKT system
+#: carries every pair) and not HiGHS (its bases are rows x rows). Processes 1, 2 (width 2):
+#: the two cross near 5,000 rows (cap 12); processes 1-3 (width 3.3): HiGHS was still 1.4x
+#: faster at 33,000 rows (cap 10).
+HIGHS_ROWS_AT_WIDTH_2 = 4_000
+HIGHS_WIDTH_EXPONENT = 5.0
+
+#: HiGHS runs its dual simplex on LPs of at most this many columns per row and its interior
+#: point (IPX, with crossover) on wider ones, unless ``settings={"variant": ...}`` says which.
+#: Measured: the simplex was 1.1-1.5x faster at width 2 (processes 1, 2 and 1, 4), IPX
+#: 1.5-2x faster at width 3.3 (processes 1-3) and 5.3 (processes 1-4).
+HIGHS_SIMPLEX_MAX_WIDTH = 2.5
+
+#: The LP backends of :func:`solve_lp`.
+BACKENDS = ("auto", "clarabel", "highs", "cvxpy")
+_BACKEND_NAMES = {"clarabel": "Clarabel", "highs": "HiGHS", "cvxpy": "cvxpy and Clarabel"}
+
+
+@dataclass(frozen=True, eq=False)
+class LPChoice:
+    """What :func:`choose_lp` picked and why.
+
+    Attributes
+    ----------
+    backend : {"clarabel", "highs", "cvxpy"}
+    formulation : {"primal", "reduced", "dual"}
+    rule : str
+        A short name of the rule that fired (``"asked"``, ``"settings"``, ``"dual"``,
+        ``"highs-width"``, ``"clarabel-size"``, ...), for tests and tables.
+    reason : str
+        The same in words, with the numbers it compared.
+    reduction, reduced_lp
+        The forced-state reduction and its LP when they were built (else None).
+    highs_variant : {"simplex", "ipx"} or None
+        With HiGHS and no ``settings["variant"]``: the simplex up to
+        :data:`HIGHS_SIMPLEX_MAX_WIDTH` columns per row, else IPX.
+    """
+
+    backend: str
+    formulation: str
+    rule: str
+    reason: str
+    reduction: Any = None
+    reduced_lp: Any = None
+    highs_variant: str | None = None
+
+
+def highs_max_rows(width: float) -> float:
+    """The largest LP (rows) that ``backend="auto"`` hands to HiGHS at ``width`` columns per row:
+    ``HIGHS_ROWS_AT_WIDTH_2 * (width / 2) ** HIGHS_WIDTH_EXPONENT``."""
+    return HIGHS_ROWS_AT_WIDTH_2 * (max(float(width), 1.0) / 2.0) ** HIGHS_WIDTH_EXPONENT
+
+
+def choose_lp(mdp: MDP, backend: str = "auto", formulation: str = "auto", settings: dict | None = None) -> LPChoice:
+    """The backend and formulation :func:`solve_lp` runs (the measured rules of ``"auto"``).
+
+    Formulation (``formulation="auto"``): ``"reduced"`` when the forced-state reduction
+    eliminates some state and its constraint matrix has at most :data:`REDUCE_MAX_NNZ_RATIO`
+    times the plain LP's nonzeros (``nnz = nnz(P) + 2 L``), else ``"primal"``. The dual
+    (gain-bias) LP is never chosen automatically (measured no faster).
+
+    Backend (``backend="auto"``), on the LP of that formulation with ``m`` rows and ``k``
+    columns (width ``w = k / m``):
+
+    * ``settings`` given, or the dual formulation: Clarabel (the settings are Clarabel's; the
+      dual LP is built for Clarabel only);
+    * ``m <= highs_max_rows(w)``: HiGHS (small, or many actions per state);
+    * else Clarabel (large LPs with few actions per state, where its interior point scales best).
+
+    Parameters
+    ----------
+    mdp : MDP
+    backend : {"auto", "clarabel", "highs", "cvxpy"}
+    formulation : {"auto", "primal", "reduced", "dual"}
+    settings : dict, optional
+        The caller's solver settings (their presence keeps ``"auto"`` on Clarabel).
+
+    Returns
+    -------
+    LPChoice
+    """
+    red = lp_r = None
+    words = []
+    form = formulation
+    if form in ("auto", "reduced"):
+        lp_r, red = build_reduced_lp(mdp)
+        if form == "auto":
+            plain_nnz = mdp.P.nnz + 2 * mdp.n_pairs
+            ratio = lp_r.A_eq.nnz / max(plain_nnz, 1)
+            if red.n_eliminated and ratio <= REDUCE_MAX_NNZ_RATIO:
+                form = "reduced"
+                words.append(f"reduced LP: eliminating {red.n_eliminated:,} forced states leaves "
+                             f"{ratio:.3f} of the plain LP's nonzeros (<= {REDUCE_MAX_NNZ_RATIO})")
+            else:
+                why = ("no forced state on an acyclic forced path" if not red.n_eliminated else
+                       f"the reduced LP would have {ratio:.3f} x the plain LP's nonzeros (> {REDUCE_MAX_NNZ_RATIO})")
+                form, red, lp_r = "primal", None, None
+                words.append(f"primal LP: {why}")
+        else:
+            words.append("reduced LP: asked for")
+    else:
+        words.append(f"{form} LP: asked for")
+    if form == "primal":
+        m, k = mdp.n_states, mdp.n_pairs
+    elif form == "reduced":
+        m, k = lp_r.n_eq, lp_r.n_pairs
+    else:
+        m, k = mdp.n_pairs, mdp.n_states
+    if backend != "auto":
+        rule = "asked"
+        words.append(f"backend {backend}: asked for")
+    elif settings:
+        backend, rule = "clarabel", "settings"
+        words.append("Clarabel: solver settings were given (they are Clarabel's)")
+    elif form == "dual":
+        backend, rule = "clarabel", "dual"
+        words.append("Clarabel: the dual LP is built for Clarabel only")
+    else:
+        w = k / max(m, 1)
+        cap = highs_max_rows(w)
+        if m <= cap:
+            backend, rule = "highs", "highs-width"
+            words.append(f"HiGHS: {m:,} rows <= {cap:,.0f}, the measured crossover at {w:.2f} columns per row")
+        else:
+            backend, rule = "clarabel", "clarabel-size"
+            words.append(f"Clarabel: {m:,} rows > {cap:,.0f}, the measured crossover at {w:.2f} columns per row")
+    variant = None
+    if backend == "highs" and "variant" not in (settings or {}):
+        w = k / max(m, 1)
+        variant = "simplex" if w <= HIGHS_SIMPLEX_MAX_WIDTH else "ipx"
+        words.append(f"HiGHS {variant}: {w:.2f} columns per row {'<=' if variant == 'simplex' else '>'} "
+                     f"{HIGHS_SIMPLEX_MAX_WIDTH}")
+    return LPChoice(backend, form, rule, "; ".join(words), red, lp_r, variant)
 
 #: Clarabel settings :func:`solve_lp` uses with the direct backend unless ``settings``
 #: overrides them. Iterative refinement off: on the paper's models it saved ~30% of the IPM
@@ -451,7 +611,7 @@ def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings:
 def solve_lp(
     mdp: MDP,
     *,
-    backend: str = "clarabel",
+    backend: str = "auto",
     tol: float = 1e-9,
     polish: bool = True,
     max_iter: int = 200,
@@ -465,8 +625,10 @@ def solve_lp(
 ) -> Solution:
     """Solve the occupation-measure LP and certify the answer.
 
-    Steps: build the scaled LP (:func:`build_lp`); solve it with Clarabel, either directly
-    (``backend="clarabel"``, ``method="lp"``) or through cvxpy (``backend="cvxpy"``,
+    Steps: choose backend and formulation (:func:`choose_lp`); build the scaled LP
+    (:func:`build_lp` or :func:`build_reduced_lp`); solve it with Clarabel directly
+    (``backend="clarabel"``, ``method="lp"``), with HiGHS (``backend="highs"``,
+    ``method="lp-highs"``) or with Clarabel through cvxpy (``backend="cvxpy"``,
     ``method="lp-cvxpy"``); unscale x and the dual (g, h); read a deterministic policy off x
     (:func:`extract_policy`); then
 
@@ -488,13 +650,16 @@ def solve_lp(
     Parameters
     ----------
     mdp : MDP
-    backend : {"clarabel", "cvxpy"}
+    backend : {"auto", "clarabel", "highs", "cvxpy"}
+        ``"auto"`` (default): :func:`choose_lp`'s measured rule (``stats["lp_choice"]`` says which
+        rule fired and why). ``"highs"``: :func:`~wncs_lp.solvers.highs.solve_highs`.
     tol : float
-        Clarabel ``tol_gap_abs = tol_gap_rel = tol_feas`` (on the scaled problem).
+        Clarabel ``tol_gap_abs = tol_gap_rel = tol_feas`` (on the scaled problem); HiGHS's primal
+        and dual feasibility tolerances (at least 1e-10) and IPM optimality tolerance.
     polish : bool or {"pi", "vi"}
         True = "vi" from :data:`POLISH_VI_MIN_STATES` states on, else "pi".
     max_iter : int
-        Clarabel iteration limit.
+        Interior-point iteration limit (Clarabel's, or HiGHS IPX's).
     verbose : bool
         Solver log to stdout.
     cert_rtol : float
@@ -507,13 +672,16 @@ def solve_lp(
         Extra Clarabel settings (``DefaultSettings`` attribute names), e.g.
         ``{"direct_solve_method": "qdldl"}``. With the direct backend they override
         :data:`CLARABEL_DEFAULTS` (iterative refinement off); pass
-        ``{"iterative_refinement_enable": True}`` for Clarabel's own default.
+        ``{"iterative_refinement_enable": True}`` for Clarabel's own default. With
+        ``backend="highs"``: HiGHS options by name plus ``"variant"`` (``"simplex"`` or
+        ``"ipx"``), e.g. ``{"time_limit": 60}``. Given with ``backend="auto"``, they keep it on
+        Clarabel.
     formulation : {"auto", "primal", "reduced", "dual"}
         ``"primal"``: the plain occupation-measure LP (:func:`build_lp`). ``"reduced"``: the
         same LP with the forced states substituted out (:func:`build_reduced_lp`; exact, same
         optimum; x and h are lifted back to every state). ``"dual"``: the gain-bias LP
         (max g s.t. g + h(s_l) <= c_l + (P h)_l; Clarabel only), whose multipliers are x.
-        ``"auto"``: ``"reduced"`` when that LP has at most :data:`REDUCE_NNZ_RATIO` of the
+        ``"auto"``: ``"reduced"`` when that LP has at most :data:`REDUCE_MAX_NNZ_RATIO` of the
         plain LP's nonzeros, else ``"primal"`` (``stats["formulation"]`` says which).
     progress : bool or Progress
         Show the phases (building, solving, polishing), Clarabel's interior-point iterations
@@ -528,10 +696,12 @@ def solve_lp(
         ``lp_dual_gain`` (-c_s z_norm), ``n_visited_states``, ``polish_iterations``,
         ``kkt_*`` (our own residual check on the LP actually solved), ``full_*`` (the same
         (x, g, h) checked against the original LP, :func:`_full_residuals`), ``formulation``,
-        ``lp_rows`` / ``lp_cols`` / ``lp_nnz``, ``reduction_*`` (reduced only), ``dual_bias``
+        ``lp_rows`` / ``lp_cols`` / ``lp_nnz``, ``reduction_*`` (reduced only), ``backend``,
+        ``lp_choice`` (the rule that chose backend and formulation, in words), ``lp_choice_rule``
+        (its short name, :class:`LPChoice`), ``highs_*`` (HiGHS only), ``dual_bias``
         (array), ``extracted_policy`` (array), ``cost_scale``.
         ``status``: ``"optimal"``; ``"inaccurate:<solver status>"`` when the solver did not
-        report success; ``"inaccurate:certificate"`` when the bracket stays wider than
+        report success (HiGHS's statuses in Clarabel's words, :data:`~wncs_lp.solvers.highs.HIGHS_STATUS`); ``"inaccurate:certificate"`` when the bracket stays wider than
         cert_rtol; ``"inaccurate:polish_max_iter"``.
 
     Raises
@@ -541,31 +711,23 @@ def solve_lp(
         non-finite x); the message carries its status and residuals.
     """
     t0 = time.perf_counter()
-    if backend not in ("clarabel", "cvxpy"):
-        raise SolverError(f"unknown LP backend {backend!r}; expected 'clarabel' or 'cvxpy'")
+    if backend not in BACKENDS:
+        raise SolverError(f"unknown LP backend {backend!r}; expected one of {', '.join(BACKENDS)}")
     if formulation not in FORMULATIONS:
         raise SolverError(f"unknown LP formulation {formulation!r}; expected one of {', '.join(FORMULATIONS)}")
     if polish is True:
         polish = "vi" if mdp.n_states >= POLISH_VI_MIN_STATES else "pi"
-    if backend == "clarabel":
-        settings = {**CLARABEL_DEFAULTS, **(settings or {})}
     if polish not in (False, "pi", "vi"):
         raise SolverError(f"polish must be True, False, 'pi' or 'vi'; got {polish!r}")
-    method = "lp" if backend == "clarabel" else "lp-cvxpy"
-    prog = as_progress(progress)
-    prog.phase(f"[{method}] building the occupation-measure LP ({mdp.n_pairs:,} pairs, {mdp.n_states:,} states)")
-    red = None
-    form = formulation
-    if form == "dual" and backend != "clarabel":
+    if formulation == "dual" and backend not in ("clarabel", "auto"):
         raise SolverError("the dual (gain-bias) formulation is solved with backend 'clarabel' only")
-    if form in ("auto", "reduced"):
-        lp_r, red = build_reduced_lp(mdp)
-        if form == "auto":
-            plain_nnz = mdp.P.nnz + 2 * mdp.n_pairs
-            if red.n_eliminated and lp_r.A_eq.nnz <= REDUCE_NNZ_RATIO * plain_nnz:
-                form = "reduced"
-            else:
-                form, red = "primal", None
+    prog = as_progress(progress)
+    prog.phase(f"[lp] building the occupation-measure LP ({mdp.n_pairs:,} pairs, {mdp.n_states:,} states)")
+    choice = choose_lp(mdp, backend, formulation, settings=settings)
+    backend, form, red, lp_r = choice.backend, choice.formulation, choice.reduction, choice.reduced_lp
+    method = {"clarabel": "lp", "highs": "lp-highs", "cvxpy": "lp-cvxpy"}[backend]
+    if backend == "clarabel":
+        settings = {**CLARABEL_DEFAULTS, **(settings or {})}
     if form == "dual":
         prog.phase(f"[{method}] solving the gain-bias (dual) LP with Clarabel")
         status, solved, x, g_dual, h_dual, stats = _solve_clarabel_dual(mdp, tol, max_iter, verbose, settings, prog)
@@ -575,10 +737,14 @@ def solve_lp(
         lp_obj = g_dual
     else:
         lp = lp_r if form == "reduced" else build_lp(mdp)
-        runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
         prog.phase(f"[{method}] solving the {form} LP ({lp.n_eq:,} rows, {lp.n_pairs:,} columns) with "
-                   f"{'Clarabel' if backend == 'clarabel' else 'cvxpy and Clarabel'}")
-        status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings, prog)
+                   f"{_BACKEND_NAMES[backend]}")
+        if backend == "highs":
+            hs = settings if choice.highs_variant is None else {**(settings or {}), "variant": choice.highs_variant}
+            status, solved, y, z_eq, stats = solve_highs(lp.A_eq, lp.b_eq, lp.q, tol, max_iter, verbose, hs, prog)
+        else:
+            runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
+            status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings, prog)
         if status in FAILED_STATUSES or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (lp.n_pairs,):
             raise SolverError(
                 f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
@@ -595,6 +761,9 @@ def solve_lp(
             stats.update(reduction_decision_states=red.n_decision, reduction_eliminated=red.n_eliminated,
                          reduction_levels=int(red.level_ptr.size - 1), reduction_seconds=red.seconds)
     stats["formulation"] = form
+    stats["backend"] = backend
+    stats["lp_choice"] = choice.reason
+    stats["lp_choice_rule"] = choice.rule
     stats["polish"] = polish or None
     if backend == "clarabel":
         stats["clarabel_settings"] = dict(settings)
@@ -613,7 +782,8 @@ def solve_lp(
     issue = None
     use_dual = not polish
     iterations = stats["solver_iterations"]
-    prog.done(f"[{method}] solver status {status} after {iterations} interior-point iterations")
+    prog.done(f"[{method}] solver status {status} after {iterations} "
+              f"{'interior-point' if backend != 'highs' else 'interior-point + simplex'} iterations")
     if polish:
         prog.phase(f"[{method}] polishing the LP's policy ({'value iteration, then ' if polish == 'vi' else ''}"
                    "policy iteration with exact evaluation)")

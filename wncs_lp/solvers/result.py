@@ -44,7 +44,7 @@ class Solution:
     Attributes
     ----------
     method : str
-        ``"lp"`` (Clarabel direct), ``"lp-cvxpy"``, ``"rvi"``, ``"vi"``, ``"pi"`` or ``"auto"``
+        ``"lp"`` (Clarabel direct), ``"lp-highs"``, ``"lp-cvxpy"``, ``"rvi"``, ``"vi"``, ``"pi"`` or ``"auto"``
         (then ``stats["auto_choice"]`` says whose answer it is).
     status : str
         ``"optimal"`` when the certificate closes to the requested tolerance, otherwise

@@ -1,0 +1,203 @@
+"""HiGHS as a backend of the occupation-measure LP (``solve_lp(backend="highs")``), through highspy.
+
+The LP is the scaled standard form of :mod:`wncs_lp.solvers.lp`,
+
+.. math:: \\min_y q^T y \\quad\\text{s.t.}\\quad A y = b,\\; y \\ge 0,
+
+handed to HiGHS column-wise (CSC, no copy of the pattern beyond highspy's own). HiGHS reports
+row duals ``lambda`` with reduced costs ``q - A^T lambda >= 0``; Clarabel's equality multipliers
+satisfy ``q + A^T z >= 0``, so ``z = -lambda`` and the rest of the pipeline (unscaling, policy
+extraction, polish, certificate) is shared unchanged.
+
+Variants (``HIGHS_VARIANTS``; measured in ``benchmarks/lp_backends.py``):
+
+* ``"ipx"`` -- HiGHS's interior-point solver IPX (what ``scipy.optimize.linprog(method=
+  "highs-ipm")`` runs), then crossover to a vertex.
+* ``"simplex"`` -- the dual simplex (``linprog(method="highs-ds")``).
+
+Statuses are mapped into Clarabel's vocabulary (:data:`HIGHS_STATUS`), so that
+``FAILED_STATUSES`` and ``"inaccurate:<status>"`` of :func:`~wncs_lp.solvers.lp.solve_lp` mean the
+same thing whichever backend ran; the native HiGHS status is kept in ``stats["highs_status"]``.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import SolverError
+from ..progress import Progress
+
+__all__ = ["HIGHS_VARIANTS", "HIGHS_DEFAULT_VARIANT", "HIGHS_STATUS", "solve_highs"]
+
+#: The HiGHS solver variants :func:`solve_highs` accepts.
+HIGHS_VARIANTS = ("ipx", "simplex")
+#: The variant ``backend="highs"`` runs unless ``settings={"variant": ...}`` says otherwise.
+HIGHS_DEFAULT_VARIANT = "ipx"
+
+#: HiGHS model status (``highspy.HighsModelStatus`` name) -> the Clarabel status of the same
+#: meaning. Only ``kOptimal`` counts as solved; a limit maps to Clarabel's limit statuses
+#: ("inaccurate:MaxTime" / "inaccurate:MaxIterations" when HiGHS still returns a primal-dual
+#: point); infeasibility and every error to the failed statuses (a :class:`SolverError`).
+HIGHS_STATUS = {
+    "kOptimal": "Solved",
+    "kInfeasible": "PrimalInfeasible",
+    "kUnbounded": "DualInfeasible",
+    "kUnboundedOrInfeasible": "DualInfeasible",
+    "kTimeLimit": "MaxTime",
+    "kIterationLimit": "MaxIterations",
+    "kInterrupt": "CallbackTerminated",
+    "kHighsInterrupt": "CallbackTerminated",
+}
+
+
+def _variant_options(variant: str) -> dict[str, Any]:
+    if variant == "ipx":
+        return {"solver": "ipx", "run_crossover": "on"}
+    if variant == "simplex":
+        return {"solver": "simplex", "simplex_strategy": 1}
+    raise SolverError(f"unknown HiGHS variant {variant!r}; expected one of {', '.join(HIGHS_VARIANTS)}")
+
+
+_HEADER_SHOWN = False
+
+
+def _new_highs(verbose: bool):
+    """A ``highspy.Highs``. HiGHS prints its copyright header on stdout when the first one of a
+    process is made, whatever ``output_flag`` says; stdout carries results (``solve --json``),
+    so that first construction runs with file descriptor 1 on /dev/null unless ``verbose``."""
+    import highspy
+
+    global _HEADER_SHOWN
+    if verbose or _HEADER_SHOWN:
+        return highspy.Highs()
+    _HEADER_SHOWN = True
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):  # no usable stdout descriptor: nothing to protect
+        return highspy.Highs()
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+        os.close(devnull)
+        h = highspy.Highs()
+        try:  # the header sits in C's stdout buffer when stdout is a pipe: flush it to /dev/null
+            import ctypes
+
+            ctypes.CDLL(None).fflush(None)
+        except (OSError, AttributeError):
+            pass
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    return h
+
+
+def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_iter: int, verbose: bool,
+                settings: dict | None, prog: Progress | None = None):
+    """Solve ``min q^T y  s.t.  A y = b, y >= 0`` with HiGHS.
+
+    Parameters
+    ----------
+    A, b, q
+        The scaled LP (:class:`~wncs_lp.solvers.lp.LPData`'s ``A_eq``, ``b_eq``, ``q``).
+    tol : float
+        Primal and dual feasibility tolerances and the IPM optimality tolerance (HiGHS's floor
+        is 1e-10 for the feasibility ones; smaller values are raised to it).
+    max_iter : int
+        The interior-point iteration limit (``ipm_iteration_limit``); the simplex and crossover
+        are not limited by it.
+    verbose : bool
+        HiGHS's log to stdout.
+    settings : dict, optional
+        ``"variant"`` (one of :data:`HIGHS_VARIANTS`) and any HiGHS option by name, e.g.
+        ``{"time_limit": 60, "presolve": "off"}``; an unknown option raises :class:`SolverError`.
+    prog : Progress, optional
+        Only the phase is shown (highspy offers no cheap per-iteration hook here).
+
+    Returns
+    -------
+    (status, solved, y, z_eq, stats)
+        ``status`` in Clarabel's vocabulary (:data:`HIGHS_STATUS`; unknown HiGHS statuses map to
+        ``"Unsolved"``), ``solved = status == "Solved"``, ``y`` the primal, ``z_eq = -row_dual``
+        (Clarabel's sign), ``stats`` with ``solver``, ``solver_status``, ``highs_status``,
+        ``highs_variant``, ``solver_iterations`` (IPM + simplex/crossover iterations),
+        ``ipm_iterations``, ``simplex_iterations``, ``r_prim`` / ``r_dual`` (HiGHS's max primal /
+        dual infeasibility), ``duality_gap``, ``solve_time``, ``obj_scaled``, ``lp_rows``,
+        ``lp_cols``, ``lp_nnz``. ``y`` and ``z_eq`` are NaN when HiGHS holds no primal / dual
+        solution (the caller raises :class:`SolverError` then).
+    """
+    import highspy
+
+    opts = dict(settings or {})
+    variant = str(opts.pop("variant", HIGHS_DEFAULT_VARIANT))
+    A = sp.csc_matrix(A)
+    A.sort_indices()
+    m, L = A.shape
+    h = _new_highs(verbose)
+    h.setOptionValue("output_flag", bool(verbose))
+    ftol = max(float(tol), 1e-10)
+    base = {"primal_feasibility_tolerance": ftol, "dual_feasibility_tolerance": ftol,
+            "ipm_optimality_tolerance": max(float(tol), 1e-12), "ipm_iteration_limit": int(max_iter),
+            # HiGHS drops |a_ij| <= 1e-9 by default; the densified reduced LP of the preemption
+            # models has such entries, and dropping them moved the LP gain by 1e-8 relative
+            "small_matrix_value": 1e-12,
+            **_variant_options(variant)}
+    for k, v in {**base, **opts}.items():
+        try:
+            st = h.setOptionValue(k, v)
+        except Exception as exc:  # highspy raises on a type mismatch
+            raise SolverError(f"HiGHS option {k!r} rejected value {v!r}: {exc}") from exc
+        if st == highspy.HighsStatus.kError:
+            raise SolverError(f"unknown HiGHS option {k!r} or bad value {v!r}")
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = int(L), int(m)
+    lp.col_cost_ = np.asarray(q, float)
+    lp.col_lower_ = np.zeros(L)
+    lp.col_upper_ = np.full(L, highspy.kHighsInf)
+    lp.row_lower_ = lp.row_upper_ = np.asarray(b, float)
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = int(L), int(m)
+    lp.a_matrix_.start_ = A.indptr.astype(np.int32)
+    lp.a_matrix_.index_ = A.indices.astype(np.int32)
+    lp.a_matrix_.value_ = A.data.astype(float)
+    # kWarning: HiGHS dropped entries below small_matrix_value (set to its floor 1e-12 above); the
+    # residual checks on the original LP (full_*) and the certificate see what that costs
+    if h.passModel(lp) == highspy.HighsStatus.kError:
+        raise SolverError("HiGHS rejected the LP (passModel failed)")
+    if prog is not None and prog.enabled:
+        prog.tick(f"[lp] HiGHS ({variant}) running on {m:,} rows x {L:,} columns")
+    h.run()
+    native = h.modelStatusToString(h.getModelStatus())
+    ms = h.getModelStatus().name
+    info = h.getInfo()
+    sol = h.getSolution()
+    y = np.asarray(sol.col_value, float) if sol.value_valid and len(sol.col_value) == L else np.full(L, np.nan)
+    z = -np.asarray(sol.row_dual, float) if sol.dual_valid and len(sol.row_dual) == m else np.full(m, np.nan)
+    status = HIGHS_STATUS.get(ms, "Unsolved")
+    ipm_it = max(int(info.ipm_iteration_count), 0)
+    spx_it = max(int(info.simplex_iteration_count), 0) + max(int(info.crossover_iteration_count), 0)
+    pobj = float(info.objective_function_value)
+    gap = float(info.primal_dual_objective_error) if hasattr(info, "primal_dual_objective_error") else np.nan
+    stats = {
+        "solver": "highs",
+        "solver_status": status,
+        "highs_status": f"{ms} ({native})",
+        "highs_variant": variant,
+        "solver_iterations": ipm_it + spx_it,
+        "ipm_iterations": ipm_it,
+        "simplex_iterations": spx_it,
+        "r_prim": float(info.max_primal_infeasibility),
+        "r_dual": float(info.max_dual_infeasibility),
+        "duality_gap": gap,
+        "solve_time": float(h.getRunTime()),
+        "obj_scaled": pobj if np.isfinite(pobj) else float(np.asarray(q) @ np.nan_to_num(y)),
+        "lp_rows": int(m),
+        "lp_cols": int(L),
+        "lp_nnz": int(A.nnz),
+    }
+    return status, status == "Solved", y, z, stats
