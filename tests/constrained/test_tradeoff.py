@@ -134,17 +134,19 @@ class _Counting:
 
 
 def test_resume_after_interrupt_solves_only_the_missing_bounds(p6, tmp_path, monkeypatch):
+    # cold points (warm=False): each is one solve_constrained call to count; the warm sweep's
+    # resume is in test_tradeoff_warm.py
     real = constrained.solve_constrained
     grid = [0.05, 0.1, 0.15, 0.2, 0.25]
     first = _Counting(real, stop=3)
     monkeypatch.setattr(constrained, "solve_constrained", first)
     with pytest.raises(KeyboardInterrupt):
-        tradeoff(p6, [REMOTE], 0, grid, method="lp", out=tmp_path / "t", plot=False)
+        tradeoff(p6, [REMOTE], 0, grid, method="lp", out=tmp_path / "t", plot=False, warm=False)
     done = read_points(tmp_path / "t" / "tradeoff.csv")
     assert [p.bound for p in done] == [0.05, 0.1]  # written after each point
     second = _Counting(real)
     monkeypatch.setattr(constrained, "solve_constrained", second)
-    res = tradeoff(p6, [REMOTE], 0, grid, method="lp", out=tmp_path / "t", plot=False)
+    res = tradeoff(p6, [REMOTE], 0, grid, method="lp", out=tmp_path / "t", plot=False, warm=False)
     assert second.calls == 3 and sorted(second.bounds) == [0.15, 0.2, 0.25]
     assert res.computed == 3 and res.reused == 2
     assert [p.bound for p in res.points] == grid
@@ -154,7 +156,7 @@ def test_resume_after_interrupt_solves_only_the_missing_bounds(p6, tmp_path, mon
     # a third run solves nothing; a wider grid only the new bound
     third = _Counting(real)
     monkeypatch.setattr(constrained, "solve_constrained", third)
-    res3 = tradeoff(p6, [REMOTE], 0, grid + [0.3], method="lp", out=tmp_path / "t", plot=False)
+    res3 = tradeoff(p6, [REMOTE], 0, grid + [0.3], method="lp", out=tmp_path / "t", plot=False, warm=False)
     assert third.calls == 1 and res3.reused == 5 and len(res3.points) == 6
     with open(tmp_path / "t" / "tradeoff.csv", newline="") as fh:
         assert len(list(csv.DictReader(fh))) == 6

@@ -26,7 +26,7 @@ def cmd_tradeoff(args: argparse.Namespace) -> int:
     log = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
     res = tradeoff(mdp, scenario.constraints, args.constraint - 1, values, side=side, method=args.method,
                    out=args.out, progress=log, plot=not args.no_plot, max_workers=args.max_workers,
-                   fallback=args.fallback)
+                   fallback=args.fallback, warm=not args.cold)
     payload = {**head(args, scenario, mdp), "constraint_number": args.constraint, **res.summary()}
     if args.json:
         emit_json(payload)
@@ -63,7 +63,11 @@ def _configure_tradeoff(p: argparse.ArgumentParser) -> None:
                         "Lagrangian route beyond)")
     p.add_argument("--fallback", default=None, choices=["lp", "lp-cvxpy", "lagrangian"],
                    help="solve again with this method the points the first one does not certify as optimal")
-    p.add_argument("--max-workers", type=int, default=1, help="bounds solved in parallel processes (default 1)")
+    p.add_argument("--max-workers", type=int, default=1,
+                   help="bounds solved in parallel processes (default 1; more than 1 solves every point cold)")
+    p.add_argument("--cold", action="store_true",
+                   help="solve every LP point from scratch (Clarabel) instead of re-solving it from the previous "
+                        "point's basis (HiGHS dual simplex, the default when the LP solves the points)")
     p.add_argument("--no-plot", action="store_true", help="do not write tradeoff.png")
 
 

@@ -72,9 +72,9 @@ def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = "auto"
     if not cons:
         raise SolverError("solve_constrained needs at least one constraint (use wncs_lp.solve for the unconstrained problem)")
     if method == "auto":
-        from .lagrangian import LP_MAX_PAIRS
+        from .lagrangian import auto_method
 
-        method = "lp" if (mdp.n_pairs <= LP_MAX_PAIRS or len(cons) > 1) else "lagrangian"
+        method = auto_method(mdp, cons)
         sol = solve_constrained(mdp, cons, method, **kw)
         sol.stats["method_requested"] = "auto"
         return sol

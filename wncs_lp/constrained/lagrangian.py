@@ -89,7 +89,7 @@ from .lp import check_reachable
 from .problem import LinearConstraint, max_form
 from .result import ConstrainedSolution
 
-__all__ = ["LP_MAX_PAIRS", "solve_lagrangian"]
+__all__ = ["LP_MAX_PAIRS", "auto_method", "solve_lagrangian"]
 
 #: ``solve_constrained(method="auto")`` uses the LP up to this many pairs, this route beyond.
 #: Measured by ``benchmarks/constrained.py`` (send_rate[remote] <= 0.2 on p12/p123 with
@@ -100,6 +100,12 @@ __all__ = ["LP_MAX_PAIRS", "solve_lagrangian"]
 #: pairs the LP stays within a few seconds, and it is kept there because it assumes nothing of
 #: the chains (this route needs unichain greedy policies) and returns a vertex by itself.
 LP_MAX_PAIRS = 20_000
+
+
+def auto_method(mdp: MDP, constraints) -> str:
+    """What ``method="auto"`` of a constrained solve runs: ``"lp"`` up to :data:`LP_MAX_PAIRS`
+    pairs or with more than one constraint (the Lagrangian route handles one), else ``"lagrangian"``."""
+    return "lp" if (mdp.n_pairs <= LP_MAX_PAIRS or len(constraints) > 1) else "lagrangian"
 
 #: Largest relative VI tolerance of a search step; the smallest (round-off floor).
 _VI_TOL_MAX, _VI_TOL_MIN = 1e-8, 1e-12

@@ -25,6 +25,9 @@ again on the pairs the interior point leaves in play (reduced cost within a tole
 visibly positive x) with HiGHS's dual simplex (``scipy.optimize.linprog``), whose answer is a
 vertex; it is kept when its objective agrees with Clarabel's. Clarabel's answer is used as it is
 when the crossover is off or fails (``stats["crossover"]`` says which).
+
+Trade-off curves re-solve this LP for many bounds from the previous basis instead
+(:mod:`~wncs_lp.constrained.warm`); both routes end in :func:`certify_lp_solution`.
 """
 from __future__ import annotations
 
@@ -43,7 +46,8 @@ from .certify import CERT_RTOL, certify, policy_from_occupation
 from .problem import LinearConstraint, Rows, max_form, with_cost
 from .result import ConstrainedSolution
 
-__all__ = ["solve_constrained_lp", "reachable_range", "check_reachable", "basic_solution", "RC_TOL"]
+__all__ = ["solve_constrained_lp", "reachable_range", "check_reachable", "basic_solution", "scaled_rows",
+           "certify_lp_solution", "RC_TOL"]
 
 #: Crossover: a pair stays in play when its scaled reduced cost is at most RC_TOL * (1 + max|q|).
 RC_TOL = 1e-6
@@ -51,8 +55,17 @@ RC_TOL = 1e-6
 _INFEASIBLE = {"PrimalInfeasible", "AlmostPrimalInfeasible", "infeasible", "infeasible_inaccurate"}
 
 
-def _scaled_rows(lp: LPData, rows: Rows) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
-    """``(D / s) y <= n b / s`` with ``s_j = max|D_j|`` (1 for an all-zero row)."""
+def scaled_rows(lp: LPData, rows: Rows) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
+    """The bound rows as the LP carries them: ``(D / s) y <= n b / s`` with ``s_j = max|D_j|``
+    (1 for an all-zero row).
+
+    Returns
+    -------
+    G : (K, L) CSR matrix
+    h : (K,) array
+    s : (K,) array
+        The row scales (a row dual z_j is the multiplier ``c_s z_j / s_j`` in problem units).
+    """
     s = np.max(np.abs(rows.D), axis=1) if rows.n_rows else np.zeros(0)
     s = np.where(s > 0, s, 1.0)
     G = sp.csr_matrix(rows.D / s[:, None])
@@ -239,7 +252,7 @@ def solve_constrained_lp(
     constraints = tuple(constraints)
     rows = max_form(constraints, mdp.n_pairs)
     lp = build_lp(mdp)
-    G, h, s = _scaled_rows(lp, rows)
+    G, h, s = scaled_rows(lp, rows)
     if backend == "clarabel":
         # iterative refinement stays on (Clarabel's default): the multipliers are an output here
         status, solved, y, z_eq, z_in, mu, stats = _run_clarabel(lp, G, h, tol, max_iter, verbose, settings)
@@ -252,12 +265,7 @@ def solve_constrained_lp(
             or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq)) and np.all(np.isfinite(z_in))):
         raise SolverError(f"{method}: the constrained LP failed with status {status} "
                           f"(iterations={stats.get('solver_iterations')}); no usable solution")
-    lam_rows = np.maximum(lp.cost_scale * z_in / s, 0.0)
-    g_lag = -lp.cost_scale * float(z_eq[-1])
-    _, h_dual = lp.unscale_duals(z_eq)
-    solver_gain = lp.objective(stats["obj_scaled"])
-    stats.update(lp_rows=int(lp.n_eq + rows.n_rows), lp_cols=int(lp.n_pairs), lagrangian_dual_gain=g_lag,
-                 row_multipliers=[float(v) for v in lam_rows])
+    stats.update(lp_rows=int(lp.n_eq + rows.n_rows), lp_cols=int(lp.n_pairs))
     yb = y
     if crossover:
         yv, info = basic_solution(mdp, lp.A_eq, lp.b_eq, lp.q, G, h, y, mu, stats["obj_scaled"])
@@ -267,11 +275,44 @@ def solve_constrained_lp(
             yb = yv
     else:
         stats["crossover"] = "off"
-    x = lp.unscale_x(np.maximum(yb, 0.0))
+    return certify_lp_solution(mdp, constraints, lp, s, yb, z_eq, z_in, method=method,
+                               solver_status="optimal" if solved else status, stats=stats, t0=t0,
+                               cert_rtol=cert_rtol)
+
+
+def certify_lp_solution(mdp: MDP, constraints: Sequence[LinearConstraint], lp: LPData, s: np.ndarray, y: np.ndarray,
+                        z_eq: np.ndarray, z_in: np.ndarray, *, method: str, solver_status: str, stats: dict,
+                        t0: float, cert_rtol: float = CERT_RTOL) -> ConstrainedSolution:
+    r"""From a solution of the scaled constrained LP to a certified :class:`ConstrainedSolution`.
+
+    Shared by the Clarabel route and the warm-started HiGHS re-solves
+    (:mod:`~wncs_lp.constrained.warm`).
+
+    Parameters
+    ----------
+    lp : LPData
+        The scaled unconstrained LP (:func:`~wncs_lp.solvers.lp.build_lp`).
+    s : (K,) array
+        Row scales of :func:`scaled_rows`.
+    y : (L,) array
+        The scaled occupation measure ``y = n x`` (a basic solution randomises in at most K states).
+    z_eq, z_in : arrays
+        Duals of the equality rows and of the bound rows in Clarabel's sign (``q + A^T z >= 0``,
+        ``z_in >= 0``); :math:`\lambda_j = c_s z_j / s_j`, the Lagrangian gain is ``-c_s z_eq[-1]``.
+    stats : dict
+        Must hold ``obj_scaled`` (the LP's scaled objective); updated with the multipliers.
+    solver_status : str
+        ``"optimal"`` or the solver's word for what went wrong.
+    """
+    lam_rows = np.maximum(lp.cost_scale * np.asarray(z_in, float) / s, 0.0)
+    g_lag = -lp.cost_scale * float(z_eq[-1])
+    _, h_dual = lp.unscale_duals(z_eq)
+    solver_gain = lp.objective(stats["obj_scaled"])
+    stats.update(lagrangian_dual_gain=g_lag, row_multipliers=[float(v) for v in lam_rows])
+    x = lp.unscale_x(np.maximum(y, 0.0))
     x = x / x.sum()
     lp_values = np.array([float(c.values @ x) for c in constraints])
     probs, randomized = policy_from_occupation(mdp, x, h_dual)
-    return certify(mdp, constraints, probs, randomized, lam_rows, method=method,
-                   solver_status="optimal" if solved else status, solver_gain=solver_gain, lp_values=lp_values,
-                   h0=h_dual, cert_rtol=cert_rtol, iterations=int(stats.get("solver_iterations", 0)), t0=t0,
-                   stats=stats)
+    return certify(mdp, constraints, probs, randomized, lam_rows, method=method, solver_status=solver_status,
+                   solver_gain=solver_gain, lp_values=lp_values, h0=h_dual, cert_rtol=cert_rtol,
+                   iterations=int(stats.get("solver_iterations", 0)), t0=t0, stats=stats)

@@ -72,7 +72,8 @@ class ConstrainedSolution:
     Attributes
     ----------
     method : str
-        ``"lp"`` (Clarabel direct), ``"lp-cvxpy"``, ``"lagrangian"`` (certified value
+        ``"lp"`` (Clarabel direct), ``"lp-cvxpy"``, ``"lp-highs"`` / ``"lp-warm"`` (a trade-off point
+        solved by HiGHS from scratch / re-solved from the previous point's basis), ``"lagrangian"`` (certified value
         iteration and a one-state mix) or ``"convex"`` (:class:`OccupationProgram`).
     status : str
         ``"optimal"`` when the certificate closes to the requested tolerance and the returned

@@ -8,6 +8,14 @@ of the point), and it reaches the optimum *without* the constraint at the bound 
 constraint stops binding: the constraint's value under that optimum's policy (the
 "threshold").
 
+Warm start. Consecutive points differ only in one right-hand side, so when the LP solves them
+(``method="lp"``, or ``"auto"`` choosing it) one after another, the LP is kept in one HiGHS
+model (:class:`~wncs_lp.constrained.warm.WarmConstrainedLP`): the first point is solved cold
+(HiGHS interior point + crossover, method ``"lp-highs"``), each next one by the dual simplex
+from the previous point's basis (method ``"lp-warm"``). ``warm=False`` (CLI ``--cold``), or
+``max_workers > 1``, solves every point cold with Clarabel as before (method ``"lp"``). A warm
+point that does not certify as optimal is solved again cold (``"lp-warm->lp"``).
+
 Every point keeps its certificate ``[gain_lower, gain_upper]``. A bound no policy meets is a
 point with status ``"infeasible"`` and ``reachable`` = the least (``max``) / largest (``min``)
 value any policy reaches, not an exception; a solver failure is a point with status
@@ -26,7 +34,9 @@ Resume. A rerun into the same folder keeps the points already in ``tradeoff.csv`
 parseable rows whose status is not ``error``) and solves only the missing bounds; the grid may
 grow or shrink freely. The settings must match: the MDP (a digest of its arrays, and the
 scenario fingerprint when it has one), the swept constraint (quantity, per-pair values, side,
-its other bound), every other constraint (values and bounds) and the method. A folder holding
+its other bound), every other constraint (values and bounds) and the method (warm or cold is not
+a setting: both solve the same LP to the same certificate, so a folder may hold ``lp``,
+``lp-highs`` and ``lp-warm`` rows, each saying how it was solved). A folder holding
 another curve is *refused* with a :class:`~wncs_lp.errors.WncsError` naming the settings that
 differ (points of two different problems are never mixed on one curve; use another folder or
 delete it).
@@ -366,25 +376,39 @@ def _meta(mdp: MDP, cons: Sequence[LinearConstraint], index: int, side: str, met
 
 
 def _solve_point(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: str, bound: float,
-                 method: str, fallback: str | None = None) -> TradeoffPoint:
+                 method: str, fallback: str | None = None, warm: Any = None) -> TradeoffPoint:
     """One constrained solve at one bound (module level: a picklable task for worker processes).
 
     With ``fallback``, a point that ``method`` does not certify as optimal (status
     ``inaccurate:...`` or a solver error) is solved again with ``fallback``; the optimal (else
     the better-certified) of the two is kept and its ``method`` reads ``"lagrangian->lp"``.
+
+    With ``warm`` (a :class:`~wncs_lp.constrained.warm.WarmConstrainedLP` of the sweep), the
+    point is re-solved from the previous point's basis; one it does not certify as optimal, or
+    a HiGHS failure, is solved again cold (``"lp"``, or ``fallback`` when given) and the better
+    one is kept (``"lp-warm->lp"``).
     """
     t0 = time.perf_counter()
     c = cons[index].with_bounds(**{side: float(bound)})
     trial = cons[:index] + (c,) + cons[index + 1:]
-    first = _one_solve(mdp, trial, index, side, bound, c.label, method)
+    first = _one_solve(mdp, trial, index, side, bound, c.label, method, warm)
     best = first
-    if fallback and fallback != method and not first.ok and first.status != "infeasible":
-        second = _one_solve(mdp, trial, index, side, bound, c.label, fallback)
+    second_method = fallback if fallback else ("lp" if warm is not None else None)
+    if second_method and (warm is not None or second_method != method) and not first.ok \
+            and first.status != "infeasible":
+        second = _one_solve(mdp, trial, index, side, bound, c.label, second_method)
         if second.ok or (second.feasible and (not first.feasible or _width(second) < _width(first))):
             best = second
-        best = replace(best, method=f"{first.method or method}->{second.method or fallback}"
-                       if best is second else f"{first.method or method} (->{fallback}: {second.status})")
+        best = replace(best, method=f"{first.method or method}->{second.method or second_method}"
+                       if best is second else f"{first.method or method} (->{second_method}: {second.status})")
     return replace(best, seconds=time.perf_counter() - t0)
+
+
+def _lp_route(mdp: MDP, cons: Sequence[LinearConstraint], method: str) -> bool:
+    """Whether :func:`~wncs_lp.constrained.solve_constrained` would solve these with Clarabel's LP."""
+    from .lagrangian import auto_method
+
+    return method == "lp" or (method == "auto" and auto_method(mdp, cons) == "lp")
 
 
 def _width(p: TradeoffPoint) -> float:
@@ -393,20 +417,21 @@ def _width(p: TradeoffPoint) -> float:
 
 
 def _one_solve(mdp: MDP, trial: tuple[LinearConstraint, ...], index: int, side: str, bound: float, label: str,
-               method: str) -> TradeoffPoint:
+               method: str, warm: Any = None) -> TradeoffPoint:
     from . import solve_constrained  # looked up at call time (tests count the solves)
 
     try:
-        sol = solve_constrained(mdp, trial, method)
+        sol = warm.solve(trial) if warm is not None else solve_constrained(mdp, trial, method)
     except InfeasibleConstraintsError as exc:
         reach = math.nan
         for lab, r, s in zip(exc.constraints, exc.reachable, exc.sides):
             if lab == label and s == side:
                 reach = float(r)
-        return TradeoffPoint(bound=float(bound), reachable=reach, status="infeasible", method=method)
+        return TradeoffPoint(bound=float(bound), reachable=reach, status="infeasible",
+                             method="lp-warm" if warm is not None else method)
     except WncsError as exc:
         msg = str(exc).replace("\n", " ")
-        return TradeoffPoint(bound=float(bound), status=f"error: {msg}", method=method)
+        return TradeoffPoint(bound=float(bound), status=f"error: {msg}", method="lp-warm" if warm is not None else method)
     rep = sol.constraints[index]
     lam = 0.0 if (rep.side is not None and rep.side != side) else float(rep.multiplier)
     return TradeoffPoint(bound=float(bound), gain=float(sol.gain), gain_lower=float(sol.gain_lower),
@@ -459,6 +484,7 @@ def tradeoff(
     max_workers: int = 1,
     unconstrained: str = "vi",
     fallback: str | None = None,
+    warm: bool = True,
 ) -> TradeoffResult:
     """Sweep the bound of one constraint and solve the constrained problem at each bound.
 
@@ -492,6 +518,14 @@ def tradeoff(
         ``method="lagrangian", fallback="lp"``): such a point is solved again and the optimal
         one is kept (its ``method`` column reads ``"lagrangian->lp"``). Not part of the
         settings a resumed run must match.
+    warm : bool
+        When the points are solved by the LP (``method="lp"``, or ``"auto"`` choosing it) one
+        after another (``max_workers=1``): keep the LP in one HiGHS model and re-solve each
+        bound from the previous point's basis (dual simplex;
+        :class:`~wncs_lp.constrained.warm.WarmConstrainedLP`), instead of a cold Clarabel
+        solve per point. The points are certified the same way; their ``method`` column reads
+        ``"lp-warm"`` (``"lp-highs"`` for a cold HiGHS start). False: every point cold. Not
+        part of the settings a resumed run must match (both solve the same LP).
 
     Returns
     -------
@@ -624,8 +658,14 @@ def tradeoff(
 
     todo = sorted((b for k, b in grid.items() if k not in done))
     if max_workers == 1 or len(todo) <= 1:
+        solver = None
+        if warm and todo and _lp_route(mdp, cons, method):
+            from .warm import WarmConstrainedLP
+
+            first = cons[index].with_bounds(**{side: float(todo[0])})
+            solver = WarmConstrainedLP(mdp, cons[:index] + (first,) + cons[index + 1:])
         for b in todo:
-            record(_solve_point(mdp, cons, index, side, b, method, fallback))
+            record(_solve_point(mdp, cons, index, side, b, method, fallback, solver))
     else:
         ex = ProcessPoolExecutor(max_workers=max_workers)
         try:

@@ -31,7 +31,7 @@ import scipy.sparse as sp
 from ..errors import SolverError
 from ..progress import Progress
 
-__all__ = ["HIGHS_VARIANTS", "HIGHS_DEFAULT_VARIANT", "HIGHS_STATUS", "solve_highs"]
+__all__ = ["HIGHS_VARIANTS", "HIGHS_DEFAULT_VARIANT", "HIGHS_STATUS", "new_highs", "solve_highs"]
 
 #: The HiGHS solver variants :func:`solve_highs` accepts.
 HIGHS_VARIANTS = ("ipx", "simplex")
@@ -65,7 +65,7 @@ def _variant_options(variant: str) -> dict[str, Any]:
 _HEADER_SHOWN = False
 
 
-def _new_highs(verbose: bool):
+def new_highs(verbose: bool = False):
     """A ``highspy.Highs``. HiGHS prints its copyright header on stdout when the first one of a
     process is made, whatever ``output_flag`` says; stdout carries results (``solve --json``),
     so that first construction runs with file descriptor 1 on /dev/null unless ``verbose``."""
@@ -138,7 +138,7 @@ def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_
     A = sp.csc_matrix(A)
     A.sort_indices()
     m, L = A.shape
-    h = _new_highs(verbose)
+    h = new_highs(verbose)
     h.setOptionValue("output_flag", bool(verbose))
     ftol = max(float(tol), 1e-10)
     base = {"primal_feasibility_tolerance": ftol, "dual_feasibility_tolerance": ftol,
