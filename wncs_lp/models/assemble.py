@@ -145,7 +145,10 @@ def _assemble_P(
         indices[t0:t1] = col
         data[t0:t1] = flat.out_prob[pp]
         s0 = s1
-    indptr = np.r_[0, np.cumsum(row_len)].astype(idx_dtype)
+    # cumulated straight into the index dtype: np.r_[0, np.cumsum(row_len)].astype(...) made three
+    # length-L temporaries (~4 bytes per transition) at the build's peak, with data and indices full
+    indptr = np.zeros(row_len.size + 1, dtype=idx_dtype)
+    np.cumsum(row_len, dtype=idx_dtype, out=indptr[1:])
     P = sp.csr_matrix((data, indices, indptr), shape=(row_len.size, n))
     P.has_sorted_indices = False
     P.sum_duplicates()
@@ -198,11 +201,17 @@ def build_aoi_mdp(
     lookup = np.full((nC, box), -1, dtype=np.int64)
     lookup[cfg_idx, flat_of_state] = np.arange(n, dtype=np.int64)
     cfg_of_state = cfg_idx.astype(np.int32)
-    flat_of_state = flat_of_state.astype(np.int64)
-    tau_idx = np.stack(np.unravel_index(flat_of_state, caps), axis=1) if n else np.zeros((0, N), np.int64)
+    flat_of_state = flat_of_state.astype(np.int64)  # a copy: frees np.nonzero's (2, n) block with cfg_idx
+    del cfg_idx
+    # the AoI vectors made as int32 (what StateSpace keeps) before P: an int64 (n, N) copy alive
+    # across _assemble_P was ~3 bytes per transition of the build's peak (issue 18)
+    tau = np.empty((n, N), dtype=np.int32)
     state_cost = np.zeros(n)
-    for k in range(N):
-        state_cost += np.asarray(q_tables[k], dtype=float)[tau_idx[:, k]]
+    for k in range(N):  # C order of the box: axis k of f is (f // prod(caps[k+1:])) % caps[k]
+        tk = (flat_of_state // int(np.prod(caps[k + 1:], dtype=np.int64))) % caps[k]
+        state_cost += np.asarray(q_tables[k], dtype=float)[tk]  # summed in process order, as always
+        tau[:, k] = tk + 1
+        del tk
 
     # 3. pairs and action table
     label_id: dict[tuple, int] = {}
@@ -219,13 +228,12 @@ def build_aoi_mdp(
     s_idx = np.repeat(np.arange(n, dtype=np.int64), na_state)
     a_glob = np.repeat(flat.act_ptr[:-1][cfg_of_state] - pair_ptr[:-1], na_state) + np.arange(L, dtype=np.int64)
     a_idx = act_label[a_glob]
-    row_len = np.diff(flat.out_ptr)[a_glob]
+    row_len = np.diff(flat.out_ptr).astype(np.int32)[a_glob]  # outcomes per pair: small
     del a_glob
     P = _assemble_P(flat, cfg_of_state, flat_of_state, lookup.ravel(), fmap, box, row_len)
     cost = np.repeat(state_cost, na_state)
 
     action_table = np.array(sorted(label_id, key=label_id.get), dtype=np.int64)
-    tau = (tau_idx + 1).astype(np.int32)
     tau.setflags(write=False)
     space = StateSpace(tau, cfg_of_state, list(auto.configs), caps, describe_config, lookup, model)
     info = dict(meta or {})

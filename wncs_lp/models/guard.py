@@ -30,11 +30,18 @@ from ..scenario import Scenario
 
 __all__ = ["SizeEstimate", "SizeLimitError", "estimate_size", "check_size", "build_checked", "available_memory"]
 
-#: Bytes per stored transition nonzero while building (COO row/col/val, CSR copy, sort scratch).
-BUILD_BYTES_PER_NNZ = 64
-#: Bytes per pair and per state kept by the MDP and its decoded view.
+#: Bytes per stored transition nonzero at the peak of a build followed by a stored-matrix value
+#: iteration: P's float64 data and int32 indices (12) and the sweeps' uint8 probability code (1),
+#: plus slack. Measured peaks (``benchmarks/dp_memory.py``, issue 18), processes 1-4 at caps 16
+#: and 18: 32.6 and 31.4 bytes per transition in all (pairs and states included; 66.4 and 65.5
+#: before the compact sweep arrays stopped copying P and sorting its data); with the three
+#: constants here the estimate is ~7.8 GiB at cap 18 against 6.6 GiB measured.
+BUILD_BYTES_PER_NNZ = 16
+#: Bytes per pair (state, action, cost, row pointer, the build's row lengths) and per state (AoI
+#: vector, configuration, numbering, state cost, pointers; the iteration's value vectors, policy
+#: and bias) at that peak.
 BYTES_PER_PAIR = 40
-BYTES_PER_STATE = 48
+BYTES_PER_STATE = 100
 #: Extra factor for an interior-point LP (KKT matrix and its sparse factorisation), measured on
 #: the paper's instances to be 10-40x the MDP's own size.
 LP_FACTOR = 40.0

@@ -27,9 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import SolverError
 from ..mdp import MDP
 
-__all__ = ["SweepData", "prepare", "get_kernel", "numba_available", "ScipyKernel", "KERNELS"]
+__all__ = ["SweepData", "prepare", "code_table", "get_kernel", "numba_available", "ScipyKernel", "KERNELS"]
 
 #: kernel names accepted by :func:`get_kernel`
 KERNELS = ("auto", "numba", "scipy")
@@ -43,9 +44,10 @@ class SweepData:
 
     Attributes
     ----------
-    indptr, indices : P's CSR row pointer (L + 1) and column indices (int32 when they fit)
-    codes : (nnz,) uint8/uint16 index into ``table`` (or int64 0..nnz-1 when P has too many
-        distinct values, ``table`` then being P.data itself)
+    indptr, indices : P's CSR row pointer (L + 1) and column indices (int32 when they fit;
+        P's own arrays, not copies, when they already are)
+    codes : (nnz,) uint8/uint16 index into ``table`` (:func:`code_table`; or int32/int64
+        0..nnz-1 when P has more than 65536 distinct values, ``table`` then being P.data itself)
     table : float64 distinct probability values
     cost : per-state cost (n,) when ``cost_per_state`` else per-pair cost (L,)
     cost_per_state : bool
@@ -69,23 +71,108 @@ class SweepData:
 
 
 def _small_int(a: np.ndarray, limit: int) -> np.ndarray:
-    return a.astype(np.int32) if limit < np.iinfo(np.int32).max else a.astype(np.int64)
+    """``a`` as int32 when ``limit`` fits, else int64 -- without a copy when it already has that dtype
+    (so the sweep arrays share the MDP's CSR pointers and indices instead of doubling them)."""
+    dtype = np.int32 if limit < np.iinfo(np.int32).max else np.int64
+    return np.ascontiguousarray(a, dtype=dtype)
+
+
+#: Probabilities coded per chunk of this many entries: bounds the temporaries of
+#: :func:`code_table` (an int64 position and a bool per entry of the chunk, ~40 MB) whatever nnz is.
+CODE_CHUNK = 1 << 22
+#: Largest code table; beyond it the probabilities are kept uncoded (``table`` = P.data itself).
+MAX_CODES = 1 << 16
+
+
+def code_table(data: np.ndarray, *, chunk: int = CODE_CHUNK, max_codes: int = MAX_CODES):
+    """Code an array of doubles exactly as ``table[codes]``, chunk by chunk, without sorting it.
+
+    ``np.unique(data, return_inverse=True)`` would sort a copy of all of ``data`` and allocate an
+    int64 inverse and an int64 permutation: 24 bytes per entry of temporaries and ~36 s at 2.3e8
+    entries (processes 1-4, cap 18). The probabilities of these models take a handful of distinct
+    values, so each chunk is looked up in the (sorted view of the) table found so far,
+    ``np.searchsorted`` being O(log |table|) per entry, and only the entries that miss -- the
+    first occurrences of a new value, rare after the first chunk -- are ``np.unique``'d and
+    appended to the table. Codes are assigned in order of first appearance, so earlier codes
+    never change; they start as uint8 and widen to uint16 once the table passes 256 values.
+
+    Every chunk is verified after coding: ``table[codes] == data`` elementwise, so the coded
+    probabilities are the very same doubles (nothing is rounded to a nearby table value).
+
+    Parameters
+    ----------
+    data : (nnz,) float64 array
+    chunk : int
+        Entries coded per step.
+    max_codes : int
+        Table size beyond which coding gives up (at most 65536: uint16 codes).
+
+    Returns
+    -------
+    table : float64 array or None
+        The distinct values in order of first appearance; None when there are more than
+        ``max_codes`` of them (the caller then keeps ``data`` uncoded).
+    codes : uint8/uint16 array of len(data), or None with ``table``
+
+    Raises
+    ------
+    SolverError
+        ``data`` holds a NaN (which equals no table entry, so it cannot be coded exactly), or a
+        coded chunk does not reproduce its doubles exactly (an internal error: never silent).
+    """
+    data = np.asarray(data, dtype=np.float64)
+    max_codes = min(int(max_codes), 1 << 16)
+    chunk = max(int(chunk), 1)
+    nnz = data.size
+    codes = np.empty(nnz, dtype=np.uint8)
+    table = np.empty(0)
+    srt = np.empty(0)  # the table sorted ...
+    srt_code = np.empty(0, dtype=np.int64)  # ... and the code of each sorted value
+    for a in range(0, nnz, chunk):
+        x = data[a:a + chunk]
+        pos = np.searchsorted(srt, x)
+        if srt.size:
+            np.minimum(pos, srt.size - 1, out=pos)
+            miss = srt[pos] != x
+        else:
+            miss = np.ones(x.size, dtype=bool)
+        if miss.any():
+            new = np.unique(x[miss])
+            if np.isnan(new).any():
+                raise SolverError("transition probabilities contain NaN: they cannot be coded exactly "
+                                  "(expected finite probabilities; validate the MDP)")
+            if table.size + new.size > max_codes:
+                return None, None
+            table = np.concatenate([table, new])
+            if table.size > 256 and codes.dtype == np.uint8:
+                codes = codes.astype(np.uint16)
+            order = np.argsort(table, kind="stable")
+            srt, srt_code = table[order], order
+            pos = np.searchsorted(srt, x)
+        codes[a:a + x.size] = srt_code[pos]
+        if not np.array_equal(table[codes[a:a + x.size]], x):
+            raise SolverError(f"internal error: the probability code table does not reproduce entries "
+                              f"{a}..{a + x.size - 1} exactly")
+    return table, codes
 
 
 def prepare(mdp: MDP) -> SweepData:
-    """The compact sweep arrays of an MDP (cached per MDP object)."""
+    """The compact sweep arrays of an MDP (cached per MDP object).
+
+    Memory: the codes take one byte per transition (:func:`code_table`, no sort of all the
+    entries), and the row pointer and column indices are P's own arrays when they are already
+    int32 (no copy), so the compact form adds ~1 byte per transition to the MDP instead of the
+    5 bytes of copies plus the 24 bytes per transition of ``np.unique`` temporaries it took
+    before (``benchmarks/dp_memory.py``).
+    """
     hit = _CACHE.get(mdp)
     if hit is not None:
         return hit
     P = mdp.P
     n, L = mdp.n_states, mdp.n_pairs
-    table, inv = np.unique(P.data, return_inverse=True)
-    if table.size <= 256:
-        codes = inv.astype(np.uint8)
-    elif table.size <= 65536:
-        codes = inv.astype(np.uint16)
-    else:
-        table, codes = np.asarray(P.data, float), np.arange(P.nnz, dtype=np.int64)
+    table, codes = code_table(P.data)
+    if table is None:  # too many distinct values: P's data itself, entry k coded k
+        table, codes = np.asarray(P.data, float), np.arange(P.nnz, dtype=np.int32 if P.nnz < 2**31 else np.int64)
     sc = mdp.cost[mdp.pair_ptr[:-1]]
     per_state = bool(np.array_equal(mdp.cost, np.repeat(sc, mdp.n_actions)))
     cost = np.ascontiguousarray(sc if per_state else mdp.cost, dtype=float)
