@@ -12,8 +12,9 @@ code              meaning
 ================  ===============================================================================
 ``OPTIMAL``       the certificate closed: ``gain_lower <= g* <= gain_upper`` within the tolerance
 ``INACCURATE``    the method finished, but something is short of the tolerance (the reason after
-                  the colon: ``certificate``, ``polish_max_iter``, ``cross_check``, the LP
-                  solver's own status...); the bracket still holds
+                  the colon: ``certificate``, ``polish_max_iter``, ``cross_check``,
+                  ``precision`` (tolerance below attainable precision: value iteration stopped at
+                  the round-off floor), the LP solver's own status...); the bracket still holds
 ``MAX_ITER``      the iteration budget ran out first; the bracket of the last iterate still holds
 ``INTERRUPTED``   stopped by Ctrl-C; the bracket of the last iterate still holds
 ``INFEASIBLE``    (constrained problems) no stationary policy meets the bounds
@@ -58,6 +59,9 @@ _REASON_MESSAGES = {
                    "certificates (stats['cross_check_rel_diff'])",
     "infeasible_policy": "the returned policy does not meet every bound within the feasibility tolerance",
     "multichain": "the returned policy's chain has several recurrent classes: its averages depend on the start",
+    "precision": "tolerance below attainable precision: value iteration reached the round-off floor of its "
+                 "sweeps (stats['stop'] says the width reached and the floor) and stopped; the bracket, widened "
+                 "by the round-off bound, still holds",
 }
 
 

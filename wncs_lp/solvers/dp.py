@@ -27,6 +27,8 @@ __all__ = [
     "relative_value_iteration",
     "value_iteration",
     "policy_iteration",
+    "greedy_policy",
+    "roundoff_bound",
 ]
 
 #: Relative residual above which an exact evaluation is rejected.
@@ -248,7 +250,11 @@ def relative_value_iteration(
     the certificate lo = min d_k <= g* <= hi = max d_k of the *original* operator comes for
     free every sweep; iteration stops when
 
-    ``hi - lo <= tol * |(lo + hi) / 2|``  or  ``hi - lo <= atol``.
+    ``hi - lo <= tol * |(lo + hi) / 2|``  or  ``hi - lo <= atol``,
+
+    or, when the tolerance is below what floating point can certify, once the width sits in
+    the round-off band ``2 delta`` and has stopped halving (:class:`_RoundoffFloor`: status
+    ``"inaccurate:precision"``, the bracket widened by delta).
 
     Parameters
     ----------
@@ -281,8 +287,11 @@ def relative_value_iteration(
     Solution
         ``method="rvi"``; ``gain = (lo + hi)/2``; ``bias`` = the last h_k (on which the
         certificate was computed) with h[0] = 0; ``policy`` = greedy pairs of that h
-        (ties to the first pair); status ``"optimal"`` or ``"max_iter"``. ``stats`` holds
-        ``tau``, ``span`` (hi - lo), ``rel_gap``, ``converged``.
+        (ties to the first pair); status ``"optimal"``, ``"max_iter"`` or
+        ``"inaccurate:precision"`` (tolerance below attainable precision). ``stats`` holds
+        ``tau``, ``span`` (hi - lo), ``rel_gap``, ``converged``, ``roundoff_delta`` (the
+        round-off bound delta of the last certificate), ``span_computed`` (the width before any
+        widening) and ``stop`` (None, or what the precision stop reached).
     """
     t0 = time.perf_counter()
     n = mdp.n_states
@@ -302,6 +311,8 @@ def relative_value_iteration(
         raise SolverError(str(exc)) from exc
     prog = as_progress(progress)
     converged = False
+    floor = _RoundoffFloor(mdp)
+    at_floor = False
     lo = hi = np.nan
     h_next = np.empty(n)
     it = 0
@@ -312,13 +323,45 @@ def relative_value_iteration(
         if width <= tol * abs(0.5 * (lo + hi)) or width <= atol:
             converged = True
             break
+        if floor.stalled(width, h, it):
+            at_floor = True
+            break
         if prog.enabled and prog.due():
             prog.tick(_cert_line("rvi", it, lo, hi, tol))
         h_next -= h_next[ref_state]
         h, h_next = h_next, h
-    prog.done(_cert_line("rvi", it, lo, hi, tol))
-    return _iteration_solution(mdp, "rvi", h, lo, hi, converged, it, t0,
-                               {"tau": tau, "tol": tol, "kernel": K.name, "threads": K.threads})
+    return _finish(mdp, "rvi", h, lo, hi, converged, at_floor, floor, it, t0, tol, prog,
+                   {"tau": tau, "tol": tol, "kernel": K.name, "threads": K.threads}, atol)
+
+
+def _finish(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: float, converged: bool, at_floor: bool,
+            floor: "_RoundoffFloor", iterations: int, t0: float, tol: float, prog: Progress,
+            stats: dict, atol: float = 0.0) -> Solution:
+    """The Solution of a value-iteration run, stopped at the round-off floor or not.
+
+    At the floor the status is ``"inaccurate:precision"`` and the bracket is widened by the
+    round-off bound delta on each side (:class:`_RoundoffFloor`), so that it holds for the exact
+    arithmetic too; ``stats["stop"]`` says the width reached, the floor and the tolerance asked.
+    A run whose computed width met the tolerance but whose width plus the band 2 delta does not
+    is at the floor too: it is never reported ``"optimal"`` below the attainable precision.
+    """
+    delta = floor.bound(h)
+    extra = {"roundoff_delta": delta, "span_computed": hi - lo, "stop": None}
+    status = None
+    mid = abs(0.5 * (lo + hi))
+    if converged and (hi - lo) + 2.0 * delta > max(tol * mid, atol):
+        # the computed width met the tolerance, but the round-off band does not: the tolerance is
+        # below the attainable precision, so "optimal" would claim more than the arithmetic shows
+        at_floor, converged = True, False
+    if at_floor:
+        extra["stop"] = floor.stop_line(lo, hi, tol)
+        prog.done(f"[{method}] sweep {iterations:,}: {extra['stop']}")
+        lo, hi = lo - delta, hi + delta
+        status = "inaccurate:precision"
+    else:
+        prog.done(_cert_line(f"{method}:{stats['final_scheme']}" if "final_scheme" in stats else method,
+                             iterations, lo, hi, tol))
+    return _iteration_solution(mdp, method, h, lo, hi, converged, iterations, t0, {**stats, **extra}, status)
 
 
 def _cert_line(name: str, sweeps: int, lo: float, hi: float, tol: float) -> str:
@@ -328,16 +371,16 @@ def _cert_line(name: str, sweeps: int, lo: float, hi: float, tol: float) -> str:
 
 
 def _iteration_solution(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: float, converged: bool,
-                        iterations: int, t0: float, stats: dict) -> Solution:
+                        iterations: int, t0: float, stats: dict, status: str | None = None) -> Solution:
     """The Solution of a value-iteration run: the certificate [lo, hi] computed on ``h``, its
     midpoint as the gain, ``h - h[0]`` as the bias and h's greedy policy (first minimiser);
-    ``stats`` gains ``span``, ``rel_gap`` and ``converged``."""
-    q = q_values(mdp, h)
-    policy = greedy_first(mdp, q, np.minimum.reduceat(q, mdp.pair_ptr[:-1]))
+    ``stats`` gains ``span``, ``rel_gap`` and ``converged``. ``status`` overrides the default
+    ``"optimal"`` / ``"max_iter"``."""
+    policy = greedy_policy(mdp, h)
     gain = 0.5 * (lo + hi)
     return Solution(
         method=method,
-        status="optimal" if converged else "max_iter",
+        status=status or ("optimal" if converged else "max_iter"),
         gain=gain,
         gain_lower=lo,
         gain_upper=hi,
@@ -349,6 +392,113 @@ def _iteration_solution(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: flo
         stats={**stats, "span": hi - lo, "rel_gap": (hi - lo) / max(abs(gain), 1e-300), "converged": converged},
         pair_actions=mdp.a_indices,
     )
+
+
+#: Pairs per block of :func:`greedy_policy`.
+GREEDY_BLOCK_PAIRS = 1 << 20
+
+
+def greedy_policy(mdp: MDP, h: np.ndarray, block: int = GREEDY_BLOCK_PAIRS) -> np.ndarray:
+    """The greedy pairs of ``h`` (first minimiser of ``c + P h`` per state), block by block.
+
+    The same pairs as ``greedy_first(mdp, q_values(mdp, h))``, bit for bit: scipy's CSR mat-vec
+    sums each row on its own, in stored order, so a block of rows gives the very same q. Whole
+    they take ~5 length-L arrays (q, q's row minimum gathered per pair, candidate indices...),
+    about 9 bytes per transition on these models, which was the peak of a stored-matrix value
+    iteration once its sweep arrays were compact; by blocks of ``block`` pairs the temporaries
+    are O(block).
+    """
+    h = np.asarray(h, dtype=float)
+    n, ptr, P = mdp.n_states, mdp.pair_ptr, mdp.P
+    out = np.empty(n, dtype=np.int64)
+    s0 = 0
+    while s0 < n:
+        s1 = int(np.searchsorted(ptr, ptr[s0] + block, side="right")) - 1
+        s1 = min(max(s1, s0 + 1), n)
+        p0, p1 = int(ptr[s0]), int(ptr[s1])
+        a, b = int(P.indptr[p0]), int(P.indptr[p1])
+        rows = sp.csr_matrix((P.data[a:b], P.indices[a:b], P.indptr[p0:p1 + 1] - a), shape=(p1 - p0, P.shape[1]),
+                             copy=False)
+        q = mdp.cost[p0:p1] + rows @ h
+        starts = ptr[s0:s1] - p0
+        qmin = np.minimum.reduceat(q, starts)
+        cand = np.where(q == np.repeat(qmin, np.diff(ptr[s0:s1 + 1])), np.arange(p0, p1, dtype=np.int64),
+                        np.int64(mdp.n_pairs))
+        out[s0:s1] = np.minimum.reduceat(cand, starts)
+        s0 = s1
+    return out
+
+
+# ---------------------------------------------------------------------------- round-off floor
+#: Sweeps without the certificate width halving, at a width inside the round-off band, after
+#: which value iteration stops with status ``"inaccurate:precision"``.
+PRECISION_STALL_SWEEPS = 50
+
+
+def roundoff_bound(mdp: MDP, h: np.ndarray) -> float:
+    """delta: a bound on the floating-point error of each computed ``d(s) = (T h - h)(s)``, so of
+    the computed certificate ends ``lo``, ``hi`` (see :class:`_RoundoffFloor`)."""
+    return _RoundoffFloor(mdp).bound(np.asarray(h, dtype=float))
+
+
+class _RoundoffFloor:
+    r"""The round-off band of a computed certificate, and the stall test at it.
+
+    Each d(s) = min_l (c_l + sum_k P_lk h(j_k)) - h(s) is computed with m_l <= m products and
+    additions after the cost (m = the longest row of P), a comparison (exact) and one
+    subtraction. The standard bound for a floating-point dot product (Higham, *Accuracy and
+    Stability of Numerical Algorithms*, 2nd ed., eq. 3.5) with the unit round-off u = 2^-53 gives
+
+    .. math::
+
+        |fl(d(s)) - d(s)| \le \delta := \gamma_{m+2}\,(\max|c| + 2\max|h|),
+        \qquad \gamma_k = \frac{k u}{1 - k u},
+
+    because sum_k P_lk = 1 bounds the sum of the magnitudes of the terms by |c_l| + max|h|, and
+    the subtraction adds u |d| <= u (max|c| + 2 max|h|). So the computed ``lo``, ``hi`` are
+    each within delta of the exact ones: the exact certificate is contained in
+    ``[lo - delta, hi + delta]``, and a computed width below ``2 delta`` says nothing more about
+    the exact one. That is the attainable precision: ``2 delta / |g|``. (The width sweeps
+    actually reach is smaller, a few ulps of max|h|, because round-off errors do not all add
+    up; e.g. processes 1, 2 at cap 40: max|h| = 3.3e6, max|c| = 4.1e5, m = 8,
+    2 delta / g = 1.7e-11, widths reached ~1e-12.)
+
+    The stop: the width is at most ``2 delta`` **and** it has not halved over the last
+    :data:`PRECISION_STALL_SWEEPS` sweeps. The first condition never holds on a solve whose
+    tolerance is above the floor until the tolerance is met (then it stops ``"optimal"`` as
+    before); the second keeps a width that still falls going.
+    """
+
+    def __init__(self, mdp: MDP):
+        ptr = mdp.P.indptr  # the longest row, by blocks: a whole np.diff would be a length-L temporary
+        self.m = max((int(np.diff(ptr[a:a + (1 << 20) + 1]).max()) for a in range(0, ptr.size - 1, 1 << 20)),
+                     default=0)
+        self.cmax = float(np.max(np.abs(mdp.cost))) if mdp.n_pairs else 0.0
+        self.best = np.inf
+        self.best_at = 0
+        self.delta = 0.0
+
+    def bound(self, h: np.ndarray) -> float:
+        """delta (see the class docstring) for the bias ``h`` the certificate was computed on."""
+        k = (self.m + 2) * (np.finfo(float).eps / 2)
+        self.delta = k / (1.0 - k) * (self.cmax + 2.0 * float(np.max(np.abs(h))))
+        return self.delta
+
+    def stalled(self, width: float, h: np.ndarray, sweeps: int) -> bool:
+        """Record a certificate width computed on ``h`` after ``sweeps`` sweeps; True when it sits
+        in the round-off band and has not halved for :data:`PRECISION_STALL_SWEEPS` sweeps."""
+        if width < 0.5 * self.best:
+            self.best, self.best_at = width, sweeps
+            return False
+        if sweeps - self.best_at < PRECISION_STALL_SWEEPS:
+            return False
+        return width <= 2.0 * self.bound(h)
+
+    def stop_line(self, lo: float, hi: float, tol: float) -> str:
+        mid = max(abs(0.5 * (lo + hi)), 1e-300)
+        return (f"tolerance below attainable precision: reached {(hi - lo) / mid:.3g} "
+                f"(round-off floor 2 delta / |g| = {2 * self.delta / mid:.3g}; asked {tol:.3g}); "
+                f"bracket widened by delta = {self.delta:.3g} to cover the round-off")
 
 
 # ---------------------------------------------------------------------------- VI / MPI
@@ -397,6 +547,16 @@ def value_iteration(
     ``stall_checks`` checks the iteration switches to the Jacobi scheme, whose convergence is
     guaranteed for unichain MDPs (``stats["fallback"]``).
 
+    A tolerance below the attainable precision cannot be met by any number of sweeps: each
+    computed d(s) carries a round-off error of up to delta = gamma_{m+2} (max|c| + 2 max|h|)
+    (:class:`_RoundoffFloor`), so widths under 2 delta certify nothing more. When the width is
+    inside that band and has not halved for :data:`PRECISION_STALL_SWEEPS` sweeps, the
+    iteration stops with status ``"inaccurate:precision"`` ("tolerance below attainable
+    precision: reached X", ``stats["stop"]``) and the bracket widened by delta on each side,
+    so that it still holds for the exact arithmetic. (Before, it fell back to Jacobi and swept to
+    ``max_iter``: processes 1, 2 at cap 40 with ``tol=1e-12``, 5,000 sweeps; now 247.) A solve
+    whose tolerance is above the floor meets it before the band is reached and is unaffected.
+
     Parameters
     ----------
     mdp : MDP
@@ -429,7 +589,9 @@ def value_iteration(
         computed on (h[0] = 0); ``policy`` = its greedy pairs (first minimiser). ``stats``:
         ``scheme``, ``kernel``, ``threads``, ``sweeps`` (improvement + certificate sweeps),
         ``eval_sweeps``, ``checks``, ``relax``, ``rel_gap``, ``bytes_per_sweep``,
-        ``fallback`` (None or why the Jacobi scheme took over).
+        ``fallback`` (None or why the Jacobi scheme took over), ``roundoff_delta``,
+        ``span_computed`` and ``stop`` (as :func:`relative_value_iteration`). Status
+        ``"optimal"``, ``"max_iter"`` or ``"inaccurate:precision"``.
     """
     from .kernels import get_kernel
 
@@ -460,6 +622,8 @@ def value_iteration(
     shift = 0.0
     lo = hi = np.nan
     converged = False
+    floor = _RoundoffFloor(mdp)
+    at_floor = False
     fallback = None
     best_w, best_at = np.inf, 0
     tau_j = 0.5
@@ -487,6 +651,9 @@ def value_iteration(
         if width <= tol * abs(mid) or width <= atol:
             converged = True
             break
+        if floor.stalled(width, h, used):
+            at_floor = True
+            break
         if width < 0.5 * best_w:
             best_w, best_at = width, checks
         elif cur != "jacobi" and checks - best_at >= stall_checks:
@@ -498,8 +665,7 @@ def value_iteration(
         h, h_next = h_next, h
     from .kernels import prepare
 
-    prog.done(_cert_line(f"vi:{cur}", used, lo, hi, tol))
-    return _iteration_solution(mdp, "vi", h, lo, hi, converged, used, t0, {
+    return _finish(mdp, "vi", h, lo, hi, converged, at_floor, floor, used, t0, tol, prog, {
         "scheme": scheme,
         "kernel": K.name,
         "threads": K.threads,
@@ -511,7 +677,7 @@ def value_iteration(
         "bytes_per_sweep": prepare(mdp).bytes_per_sweep,
         "fallback": fallback,
         "final_scheme": cur,
-    })
+    }, atol)
 
 
 # ---------------------------------------------------------------------------- PI
@@ -682,7 +848,7 @@ def _vi_as_pi(mdp: MDP, vi: Solution, t0: float, it: int, changes: list, fallbac
     closed = vi.status == "optimal" and certificate_closed(mdp, vi.gain_lower, vi.gain_upper, vi.gain, cert_rtol)
     return Solution(
         method="pi",
-        status="optimal" if closed else ("max_iter" if vi.status != "optimal" else "inaccurate"),
+        status="optimal" if closed else (vi.status if vi.status != "optimal" else "inaccurate"),
         gain=vi.gain,
         gain_lower=vi.gain_lower,
         gain_upper=vi.gain_upper,
