@@ -58,7 +58,10 @@ def test_numbers_agree_with_the_stored_matrix(tiny, cap, p):
     cm = policy_cap_mass(ctx.mdp(sc), ref.policy)
     m = sum(cm.per_process)
     assert opt["at_cap_lower"] - 1e-12 <= m <= opt["at_cap_upper"] + 1e-12
-    assert opt["at_cap_upper"] - opt["at_cap_lower"] <= 1.01e-7
+    assert opt["at_cap_upper"] - opt["at_cap_lower"] <= 4 * 1.01e-6
+    assert opt["at_cap_per_process"] == pytest.approx(list(cm.per_process), abs=1.01e-6)
+    # process 4 is scalar (A = 1.02, R = 1): q_4(tau) = sum_{i < tau} 1.02^(2 i) in closed form
+    assert opt["q_at_cap"][3] == pytest.approx((1.02 ** (2 * cap) - 1) / (1.02 ** 2 - 1), rel=1e-12)
     for name in fullscale.POLICIES:
         ev = ctx.evaluate(sc, name)  # exact sparse evaluation on the stored matrix
         assert inst[name]["gain"] == pytest.approx(ev["gain"], rel=1e-8), name
