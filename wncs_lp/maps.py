@@ -348,6 +348,18 @@ def _check_axes(N: int, axes: Sequence[int], need: int) -> tuple[int, ...]:
     return axes
 
 
+def _given_fixed(fixed_tau: Mapping[int, int] | None, caps: Sequence[int], axes: Sequence[int]) -> dict[int, int]:
+    """The AoIs given off the axes, checked: 1-based processes not on the axes, values in 1..cap."""
+    N = len(caps)
+    fixed = {int(k): int(v) for k, v in (fixed_tau or {}).items()}
+    for k, v in fixed.items():
+        if not 1 <= k <= N or k in axes:
+            raise ModelError(f"fixed_tau: process {k} must be in 1..{N} and not on the axes {tuple(axes)}")
+        if not 1 <= v <= caps[k - 1]:
+            raise ModelError(f"fixed_tau: tau_{k} = {v} outside 1..{caps[k - 1]}")
+    return fixed
+
+
 def _fixed(mdp: MDP, config: int, axes: Sequence[int], fixed_tau: Mapping[int, int] | None,
            weights: np.ndarray | None = None) -> dict[int, int]:
     """Values of the AoIs not on the axes: given, or else the value carrying the most weight
@@ -356,12 +368,7 @@ def _fixed(mdp: MDP, config: int, axes: Sequence[int], fixed_tau: Mapping[int, i
     space = mdp.states
     caps = space.caps
     N = len(caps)
-    fixed = {int(k): int(v) for k, v in (fixed_tau or {}).items()}
-    for k, v in fixed.items():
-        if not 1 <= k <= N or k in axes:
-            raise ModelError(f"fixed_tau: process {k} must be in 1..{N} and not on the axes {tuple(axes)}")
-        if not 1 <= v <= caps[k - 1]:
-            raise ModelError(f"fixed_tau: tau_{k} = {v} outside 1..{caps[k - 1]}")
+    fixed = _given_fixed(fixed_tau, caps, axes)
     ids = space.lookup_grid(config)
     G = ids >= 0
     W = np.zeros(G.shape) if weights is None else np.where(G, np.asarray(weights, float)[np.maximum(ids, 0)], 0.0)
@@ -611,12 +618,8 @@ def matrix_free_grid(policy: Any, config: Any, axes: Sequence[int] = (1, 2),
     axes = _check_axes(N, axes, 2)
     c = system_config(system, config)
     lo, dims = layout.lo[c], layout.dims[c]
-    fixed = {int(k): int(v) for k, v in (fixed_tau or {}).items()}
+    fixed = _given_fixed(fixed_tau, caps, axes)
     for k, v in fixed.items():
-        if not 1 <= k <= N or k in axes:
-            raise ModelError(f"fixed_tau: process {k} must be in 1..{N} and not on the axes {tuple(axes)}")
-        if not 1 <= v <= caps[k - 1]:
-            raise ModelError(f"fixed_tau: tau_{k} = {v} outside 1..{caps[k - 1]}")
         if not lo[k - 1] + 1 <= v <= lo[k - 1] + dims[k - 1]:
             raise ModelError(f"fixed_tau: tau_{k} = {v} is not reachable with this configuration "
                              f"(it holds tau_{k} in {lo[k - 1] + 1}..{lo[k - 1] + dims[k - 1]})")

@@ -139,6 +139,16 @@ def _ticks(ax, cap_x: int, cap_y: int) -> None:
     ax.set_yticks(range(1, cap_y + 1, step(cap_y)))
 
 
+def _grid_axes(ax, info: dict, i: int, j: int, ci: int, cj: int) -> None:
+    """Labels, limits and ticks of a map over (tau_i, tau_j) with ci x cj cells."""
+    pn = info["processes"]
+    ax.set_xlabel(f"{_tau(i, info)}  (AoI of process {pn[i - 1]})")
+    ax.set_ylabel(f"{_tau(j, info)}  (AoI of process {pn[j - 1]})")
+    ax.set_xlim(0.5, ci + 0.5)
+    ax.set_ylim(0.5, cj + 0.5)
+    _ticks(ax, ci, cj)
+
+
 def plot_policy_map(
     mdp: MDP,
     policy_or_solution: Any,
@@ -227,12 +237,7 @@ def plot_policy_map(
         handles.append(Patch(facecolor=_TRANSIENT_BG, edgecolor="0.5", label="zero stationary probability"))
     if (~reach).any():
         handles.append(Patch(facecolor=_UNREACHABLE_BG, edgecolor="0.3", label="unreachable state"))
-    pn = info["processes"]
-    ax.set_xlabel(f"{_tau(i, info)}  (AoI of process {pn[i - 1]})")
-    ax.set_ylabel(f"{_tau(j, info)}  (AoI of process {pn[j - 1]})")
-    ax.set_xlim(0.5, ci + 0.5)
-    ax.set_ylim(0.5, cj + 0.5)
-    _ticks(ax, ci, cj)
+    _grid_axes(ax, info, i, j, ci, cj)
     extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(fixed.items()))
     ax.set_title(title or _title(info, mdp, cid, (extra + ", ") if extra else ""), fontsize=10)
     if legend:
@@ -451,12 +456,7 @@ def plot_matrix_free_map(
     if (~reach).any():
         handles.append(Patch(facecolor=_UNREACHABLE_BG, edgecolor="0.3", label="outside this configuration's box"))
     i, j = axes
-    pn = info["processes"]
-    ax.set_xlabel(f"{_tau(i, info)}  (AoI of process {pn[i - 1]})")
-    ax.set_ylabel(f"{_tau(j, info)}  (AoI of process {pn[j - 1]})")
-    ax.set_xlim(0.5, ci + 0.5)
-    ax.set_ylim(0.5, cj + 0.5)
-    _ticks(ax, ci, cj)
+    _grid_axes(ax, info, i, j, ci, cj)
     caps = [int(c) for c in system.caps]
     par = [f"p = {info['p']:g}", f"cap {caps[0]}" if len(set(caps)) == 1 else "caps " + ",".join(map(str, caps))]
     extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(fixed.items()))
