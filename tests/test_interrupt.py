@@ -18,6 +18,14 @@ SWEEP = [sys.executable, "-m", "wncs_lp", "sweep", str(ROOT / "formulations" / "
          "--policies", "optimal,static,greedy", "--no-plot"]
 
 
+
+def _ctrl_c_default() -> None:
+    """In the child before exec: Ctrl-C's default action. A test run started in the background by
+    a non-interactive shell (``cmd &``) inherits SIGINT ignored, and Python then installs no
+    KeyboardInterrupt handler: the child would never see the Ctrl-C these tests send."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def rows(folder: Path) -> dict[tuple[str, str], float]:
     with open(folder / "sweep.csv", newline="") as f:
         return {(r["value"], r["policy"]): float(r["gain"]) for r in csv.DictReader(f)}
@@ -36,7 +44,8 @@ def test_interrupted_sweep_resumes_to_the_same_table(tmp_path):
     reference = rows(full)
     assert len(reference) == 41 * 3
 
-    proc = subprocess.Popen(SWEEP + ["--out", str(cut)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(SWEEP + ["--out", str(cut)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            preexec_fn=_ctrl_c_default)
     deadline = time.time() + 300
     while data_rows(cut / "sweep.csv") < 6 and time.time() < deadline and proc.poll() is None:
         time.sleep(0.05)
@@ -74,7 +83,7 @@ def test_two_sweeps_into_one_folder(tmp_path):
 def test_interrupted_reproduction_resumes(tmp_path):
     out = tmp_path / "repro"
     cmd = [sys.executable, "-m", "wncs_lp", "reproduce", "--out", str(out), "--profile", "quick"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=_ctrl_c_default)
     cache = out / "cache"
     deadline = time.time() + 300
     while (not cache.exists() or len(list(cache.glob("*.json"))) < 3) and time.time() < deadline:
