@@ -45,7 +45,7 @@ METHODS = ("auto", "lp", "lp-highs", "lp-cvxpy", "vi", "rvi", "pi")
 #: The default of every command and library function that solves.
 DEFAULT_METHOD = "auto"
 #: The methods of a constrained solve (a scenario with ``[[constraint]]`` tables).
-CONSTRAINED_METHODS = ("auto", "lp", "lp-cvxpy", "lagrangian")
+CONSTRAINED_METHODS = ("auto", "lp", "lp-highs", "lp-cvxpy", "lagrangian")
 #: The methods that solve an interior-point LP (their memory need is the size guard's LP estimate).
 LP_METHODS = ("lp", "lp-highs", "lp-cvxpy")
 

@@ -39,7 +39,7 @@ def two_state_mdp() -> wncs_lp.MDP:
 GO = np.array([0.0, 1.0, 0.0])  # pairs: (0, stay), (0, go), (1, back)
 
 
-@pytest.mark.parametrize("method", ["lp", "lp-cvxpy"])
+@pytest.mark.parametrize("method", ["lp", "lp-highs", "lp-cvxpy"])
 @pytest.mark.parametrize("b", [0.1, 0.2, 0.4])
 def test_closed_form_two_state_mix(method, b):
     mdp = two_state_mdp()
@@ -78,7 +78,8 @@ def test_strong_duality_and_backends_agree(p12):
     spec = ConstraintSpec("send_rate", server=0, max=0.15, label="send_rate[remote] <= 0.15")
     a = solve_constrained(mdp, [spec], "lp")
     b = solve_constrained(mdp, [spec], "lp-cvxpy")
-    for s in (a, b):
+    c = solve_constrained(mdp, [spec], "lp-highs")
+    for s in (a, b, c):
         assert s.ok, s
         # LP value = Lagrangian lower bound = exact cost of the returned policy
         assert s.solver_gain == pytest.approx(s.gain, rel=1e-7)
@@ -86,8 +87,9 @@ def test_strong_duality_and_backends_agree(p12):
         assert s.constraints[0].value <= 0.15 + 1e-9 and s.constraints[0].active
         assert s.n_randomized <= 1
         assert s.gain > opt.gain_upper  # the bound binds
-    assert a.gain == pytest.approx(b.gain, rel=1e-7)
+    assert a.gain == pytest.approx(b.gain, rel=1e-7) and a.gain == pytest.approx(c.gain, rel=1e-9)
     assert a.multipliers[0] == pytest.approx(b.multipliers[0], rel=1e-5)
+    assert a.multipliers[0] == pytest.approx(c.multipliers[0], rel=1e-5)
 
 
 def test_policy_values_agree_with_independent_evaluation(p12):

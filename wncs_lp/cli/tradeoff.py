@@ -58,10 +58,10 @@ def _configure_tradeoff(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="output folder: tradeoff.csv/.json/.png (resumed when it holds points)")
     p.add_argument("--side", choices=["max", "min"], default=None,
                    help="which bound to sweep (default: max if the table has one, else min)")
-    p.add_argument("--method", default="auto", choices=["auto", "lp", "lp-cvxpy", "lagrangian"],
+    p.add_argument("--method", default="auto", choices=["auto", "lp", "lp-highs", "lp-cvxpy", "lagrangian"],
                    help="constrained solver at every bound (default auto: the LP up to its size, the "
                         "Lagrangian route beyond)")
-    p.add_argument("--fallback", default=None, choices=["lp", "lp-cvxpy", "lagrangian"],
+    p.add_argument("--fallback", default=None, choices=["lp", "lp-highs", "lp-cvxpy", "lagrangian"],
                    help="solve again with this method the points the first one does not certify as optimal")
     p.add_argument("--max-workers", type=int, default=1,
                    help="bounds solved in parallel processes (default 1; more than 1 solves every point cold)")

@@ -4,8 +4,8 @@ Minimise the average cost while bounding other long-run averages (a server's sen
 process's AoI or MSE, ...). The optimum is a *randomised* stationary policy, certified by
 ``[L(lambda), exact cost of the returned policy]``.
 
-* :func:`solve_constrained` -- the entry point: ``method="lp"`` (Clarabel), ``"lp-cvxpy"``,
-  ``"lagrangian"`` (one constraint, beyond the LP's size) or ``"auto"``;
+* :func:`solve_constrained` -- the entry point: ``method="lp"`` (Clarabel), ``"lp-highs"``,
+  ``"lp-cvxpy"``, ``"lagrangian"`` (one constraint, beyond the LP's size) or ``"auto"``;
 * :class:`OccupationProgram` -- convex programs over the occupation measure (cvxpy + Clarabel):
   the variable, the balance constraints and the quantities as expressions;
 * :func:`tradeoff` -- the optimal cost against one bound (a trade-off curve), resumable;
@@ -47,7 +47,7 @@ __all__ = [
     "CONSTRAINED_METHODS",
 ]
 
-CONSTRAINED_METHODS = ("auto", "lp", "lp-cvxpy", "lagrangian")
+from ..methods import CONSTRAINED_METHODS  # noqa: E402  (one vocabulary: wncs_lp.methods)
 
 
 def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = "auto", **kw: Any) -> ConstrainedSolution:
@@ -58,11 +58,14 @@ def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = "auto"
     mdp : MDP
     constraints : iterable of ConstraintSpec or LinearConstraint
         ``scenario.constraints`` or your own :class:`LinearConstraint` objects.
-    method : {"auto", "lp", "lp-cvxpy", "lagrangian"}
-        ``"lp"``: the occupation-measure LP on Clarabel; ``"lp-cvxpy"``: the same through
-        cvxpy; ``"lagrangian"``: search on the multiplier with certified value iteration and a
-        one-state mix (one constraint); ``"auto"``: the LP up to ``LP_MAX_PAIRS`` pairs, the
-        Lagrangian route beyond (one constraint only).
+    method : {"auto", "lp", "lp-highs", "lp-cvxpy", "lagrangian"}
+        ``"lp"``: the occupation-measure LP on Clarabel, then a crossover to a basic solution;
+        ``"lp-highs"``: the same LP on HiGHS (interior point + crossover, ending on a basis:
+        :class:`~wncs_lp.constrained.warm.WarmConstrainedLP`); ``"lp-cvxpy"``: the Clarabel LP
+        through cvxpy; ``"lagrangian"``: search on the multiplier with certified value iteration
+        and a one-state mix (one constraint); ``"auto"``: ``"lp-highs"`` up to ``LP_MAX_PAIRS``
+        pairs or with several constraints, the Lagrangian route beyond (one constraint only).
+        Every route ends with the same certificate.
     **kw
         Passed to :func:`solve_constrained_lp` or :func:`~wncs_lp.constrained.lagrangian.solve_lagrangian`.
     """
@@ -80,6 +83,10 @@ def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = "auto"
         return sol
     if method == "lp":
         return solve_constrained_lp(mdp, cons, backend="clarabel", **kw)
+    if method == "lp-highs":
+        from .warm import WarmConstrainedLP
+
+        return WarmConstrainedLP(mdp, cons, **kw).solve(cons, warm=False)
     if method == "lp-cvxpy":
         return solve_constrained_lp(mdp, cons, backend="cvxpy", **kw)
     if method == "lagrangian":

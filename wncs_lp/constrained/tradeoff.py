@@ -408,7 +408,7 @@ def _lp_route(mdp: MDP, cons: Sequence[LinearConstraint], method: str) -> bool:
     """Whether :func:`~wncs_lp.constrained.solve_constrained` would solve these with Clarabel's LP."""
     from .lagrangian import auto_method
 
-    return method == "lp" or (method == "auto" and auto_method(mdp, cons) == "lp")
+    return method in ("lp", "lp-highs") or (method == "auto" and auto_method(mdp, cons) != "lagrangian")
 
 
 def _width(p: TradeoffPoint) -> float:
@@ -500,7 +500,7 @@ def tradeoff(
         Duplicates are dropped; the points come out in increasing order.
     side : {"max", "min"}
         Which bound of the constraint is swept (its other bound, if any, is kept).
-    method : {"auto", "lp", "lp-cvxpy", "lagrangian"}
+    method : {"auto", "lp", "lp-highs", "lp-cvxpy", "lagrangian"}
         Passed to :func:`~wncs_lp.constrained.solve_constrained` at every point.
     out : path, optional
         Output folder (see the module docstring): written after every point and resumed.
