@@ -48,3 +48,28 @@ def test_matrix_free_solves_the_preemption_model_too(capsys):
     assert main(["solve", path, "--set", "tau_cap=8", "--method", "vi", "--json"]) == 0
     vi = _json(capsys)
     assert vi["gain_lower"] - 1e-9 * vi["gain"] <= mf["gain"] <= vi["gain_upper"] + 1e-9 * vi["gain"]
+
+
+def test_out_writes_the_compact_policy_that_loads_back(tmp_path, capsys):
+    import os
+
+    import numpy as np
+
+    from wncs_lp.policies import MatrixFreePolicy
+    from wncs_lp.solvers.matrix_free import load_solution, matrix_free_evaluate
+
+    path = str(wncs_lp.scenario_path("paper_p12"))
+    out = tmp_path / "p12.npz"
+    old = os.umask(0o022)
+    try:
+        assert main(["solve", path, "--set", "tau_cap=9", "--method", "matrix-free", "--out", str(out), "--json"]) == 0
+    finally:
+        os.umask(old)
+    got = _json(capsys)
+    assert (out.stat().st_mode & 0o777) == 0o644  # readable by others, as the umask says
+    sc = wncs_lp.load_scenario(path, ["tau_cap=9"])
+    back = load_solution(out, sc)
+    assert back.policy.dtype == np.uint8 and back.gain == got["gain"]
+    # the stored policy, evaluated exactly again, has the optimal gain (within both certificates)
+    ev = matrix_free_evaluate(sc, MatrixFreePolicy.from_solution(back), tol=1e-10)
+    assert got["gain_lower"] - 1e-9 * got["gain"] <= ev.gain <= got["gain_upper"] + 1e-9 * got["gain"]

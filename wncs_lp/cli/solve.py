@@ -27,14 +27,13 @@ def build_with_progress(args: argparse.Namespace, scenario, prog, *, need_lp: bo
 
 def _matrix_free(args: argparse.Namespace, scenario, t0: float, prog, why: str) -> int:
     """Certified value iteration without building the MDP (:mod:`wncs_lp.solvers.matrix_free`)."""
-    from ..errors import SolverError
     from ..solvers import solve_scenario
 
-    if args.out is not None:
-        raise SolverError("--out is not available with the matrix-free method (its policy is one small integer "
-                          "per state of the AoI box; save it from the library: MatrixFreeSolution.save)")
     prog.phase(f"solving without a stored matrix ({why})")
     sol = solve_scenario(scenario, "matrix-free", progress=bool(getattr(prog, "enabled", False)))
+    if args.out is not None:  # one byte a state: wncs_lp.solvers.matrix_free.load_solution reads it back
+        prog.phase(f"writing the policy to {args.out}")
+        sol.save(args.out)
     payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)), **sol.summary(),
                "matrix_free_reason": why, "seconds": time.perf_counter() - t0}
     if args.json:
@@ -180,7 +179,8 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None, metavar="FILE.npz",
                    help="also write the optimal policy and the bias (and the action per state, the state decoding "
                         "and the certificate) to this .npz file, in an existing folder; numpy.load reads it "
-                        "(format: wncs_lp.export.save_solution_npz)")
+                        "(format: wncs_lp.export.save_solution_npz); with the matrix-free method, its policy (one "
+                        "byte a state) and certificate, read back by wncs_lp.solvers.matrix_free.load_solution")
     add_progress_arg(p)
 
 

@@ -551,14 +551,21 @@ class MatrixFreeSolution(Solution):
         return self.on_mdp(mdp).actions(mdp)
 
     def save(self, path, *, bias: bool = False) -> None:
-        """Store the policy (and the bias with ``bias=True``: 8 bytes a state) as ``.npz``."""
+        """Store the policy (and the bias with ``bias=True``: 8 bytes a state) as ``.npz``,
+        atomically, readable by others (the umask's mode); :func:`load_solution` reads it back."""
         arrays = dict(policy=self.policy, lo=self.layout.lo, dims=self.layout.dims, caps=self.layout.caps)
         if bias:
             arrays["bias"] = self.bias
         meta = dict(method=self.method, status=self.status, gain=self.gain, gain_lower=self.gain_lower,
                     gain_upper=self.gain_upper, iterations=self.iterations, seconds=self.seconds,
                     domain=self.layout.domain, fingerprint=self.system.scenario.fingerprint())
-        np.savez(path, meta=np.array(json.dumps(meta)), **arrays)
+        import io
+
+        from ..files import atomic_write_bytes
+
+        buf = io.BytesIO()  # written whole or not at all (an interrupt leaves no half file)
+        np.savez(buf, meta=np.array(json.dumps(meta)), **arrays)
+        atomic_write_bytes(path, buf.getvalue())
 
 
 def load_solution(path, system_or_scenario: System | Scenario) -> MatrixFreeSolution:
