@@ -26,7 +26,7 @@ import numpy as np
 
 from ..mdp import MDP
 
-__all__ = ["q_values", "bellman_step", "bracket", "greedy_first", "certificate_closed"]
+__all__ = ["q_values", "bellman_step", "bracket", "greedy_first", "certificate_closed", "width_closed"]
 
 
 def q_values(mdp: MDP, h: np.ndarray) -> np.ndarray:
@@ -124,14 +124,19 @@ def bracket(mdp: MDP, h: np.ndarray) -> tuple[float, float]:
     return float(d.min()), float(d.max())
 
 
-def certificate_closed(mdp: MDP, lo: float, hi: float, gain: float, rtol: float) -> bool:
-    """Whether the bracket is tight: ``hi - lo <= rtol * |gain|``.
-
-    An absolute floor ``hi - lo <= 1e-13 * max|c|`` (round-off level) is also accepted so
-    that MDPs with g* = 0 can be certified.
-    """
+def width_closed(lo: float, hi: float, gain: float, rtol: float, *, atol: float = 0.0,
+                 cost_scale: float = 0.0) -> bool:
+    """The one rule for a tight bracket: ``hi - lo <= rtol * |gain|``, or ``<= atol``, or below
+    the round-off level ``1e-13 * cost_scale`` (``cost_scale`` ~ max|c|), so that MDPs with
+    g* = 0 can be certified. A non-finite width is never closed."""
     width = hi - lo
     if not np.isfinite(width):
         return False
-    floor = 1e-13 * float(np.max(np.abs(mdp.cost))) if mdp.n_pairs else 0.0
-    return width <= rtol * abs(gain) or width <= floor
+    return width <= rtol * abs(gain) or width <= atol or width <= 1e-13 * cost_scale
+
+
+def certificate_closed(mdp: MDP, lo: float, hi: float, gain: float, rtol: float) -> bool:
+    """Whether the bracket is tight: :func:`width_closed` with the MDP's max|c| as the scale of
+    its round-off floor ``hi - lo <= 1e-13 * max|c|``."""
+    scale = float(np.max(np.abs(mdp.cost))) if mdp.n_pairs else 0.0
+    return width_closed(lo, hi, gain, rtol, cost_scale=scale)

@@ -65,7 +65,8 @@ import numpy as np
 from ..errors import PolicyError, SolverError
 from ..models.system import System
 from ..scenario import Scenario
-from .dp import initial_bias
+from .certify import width_closed
+from .dp import VI_TOL, initial_bias
 from .result import Solution
 
 __all__ = [
@@ -688,14 +689,6 @@ def _initial_h(h0: Any, n: int) -> np.ndarray:
     return initial_bias(h0, n, 0)
 
 
-def _closed(lo: float, hi: float, tol: float, atol: float, scale: float) -> bool:
-    width = hi - lo
-    if not np.isfinite(width):
-        return False
-    mid = 0.5 * (lo + hi)
-    return width <= tol * abs(mid) or width <= atol or width <= 1e-13 * scale
-
-
 class _Extrapolator:
     """One-mode (Lyusternik / Aitken) extrapolation of a geometrically converging iteration.
 
@@ -824,7 +817,7 @@ def _mb(nbytes: float) -> str:
 def matrix_free_value_iteration(
     scenario_or_system: Scenario | System,
     *,
-    tol: float = 1e-9,
+    tol: float = VI_TOL,
     atol: float = 0.0,
     max_iter: int = 100_000,
     scheme: str = "auto",
@@ -995,7 +988,7 @@ def matrix_free_value_iteration(
             history.append((used, evals, time.perf_counter() - t0, lo, hi))
             _say(progress, f"[matrix-free:{cur}] sweeps={used} evals={evals} lo={lo:.12g} hi={hi:.12g} "
                  f"rel={width / max(abs(mid), 1e-300):.3g} t={time.perf_counter() - t0:.1f}s")
-            if _closed(lo, hi, tol, atol, op.cost_scale):
+            if width_closed(lo, hi, 0.5 * (lo + hi), tol, atol=atol, cost_scale=op.cost_scale):
                 converged = True
                 break
             if cur != "jacobi":
@@ -1028,7 +1021,7 @@ def matrix_free_value_iteration(
         ex.pending = None
         lo, hi = sw.all_actions(h, None, pol, None, 0, 0, True, relax, shift)
         checks += 1
-        converged = _closed(lo, hi, tol, atol, op.cost_scale)
+        converged = width_closed(lo, hi, 0.5 * (lo + hi), tol, atol=atol, cost_scale=op.cost_scale)
     ex.settle(h)
     h -= h[0]
     gain = 0.5 * (lo + hi)
@@ -1092,7 +1085,7 @@ def matrix_free_evaluate(
     scenario_or_system: Scenario | System,
     policy: Any,
     *,
-    tol: float = 1e-9,
+    tol: float = VI_TOL,
     atol: float = 0.0,
     max_iter: int = 100_000,
     relax: float = 0.8,
@@ -1244,7 +1237,7 @@ def matrix_free_evaluate(
             history.append((used, 0, time.perf_counter() - t0, lo, hi))
             _say(progress, f"[matrix-free eval {pname}:{cur}] sweeps={used} lo={lo:.12g} hi={hi:.12g} "
                  f"rel={width / max(abs(mid), 1e-300):.3g} t={time.perf_counter() - t0:.1f}s")
-            if _closed(lo, hi, tol, atol, op.cost_scale):
+            if width_closed(lo, hi, 0.5 * (lo + hi), tol, atol=atol, cost_scale=op.cost_scale):
                 converged = True
                 break
             if cur == "gs":
@@ -1277,7 +1270,7 @@ def matrix_free_evaluate(
         interrupted = True
         ex.pending = None
         lo, hi = sweep(h, None, 0, relax, shift)
-        converged = _closed(lo, hi, tol, atol, op.cost_scale)
+        converged = width_closed(lo, hi, 0.5 * (lo + hi), tol, atol=atol, cost_scale=op.cost_scale)
     ex.settle(h)
     h -= h[0]
     gain = 0.5 * (lo + hi)
