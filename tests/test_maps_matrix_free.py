@@ -98,6 +98,11 @@ def test_cli_map_matrix_free_and_auto_fallback(tmp_path, capsys, monkeypatch):
                  "--out", str(tmp_path / "r.png"), "--json"]) == 0
     ref = json.loads(capsys.readouterr().out)
     assert ref["gain"] == pytest.approx(got["gain"], rel=1e-8)
+    # three axes without --slice: refused before any solve, for both routes
+    for method in ("matrix-free", "vi"):
+        assert main(["map", path, "--set", "tau_cap=9", "--method", method, "--servers", "idle", "--axes", "1,2,3",
+                     "--out", str(tmp_path / "x.png")]) == 2
+        assert "a map takes two processes" in capsys.readouterr().err
     # the slice needs the MDP: refused with one line
     assert main(["map", path, "--set", "tau_cap=9", "--method", "matrix-free", "--servers", "idle", "--slice", "12",
                  "--out", str(tmp_path / "s.png")]) == 2

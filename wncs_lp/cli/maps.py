@@ -47,9 +47,9 @@ def _matrix_free_map(args: argparse.Namespace, scenario, axes, fixed, prog, why:
     sol = solve_scenario(scenario, "matrix-free", progress=bool(getattr(prog, "enabled", False)))
     pol = MatrixFreePolicy.from_solution(sol)
     prog.phase(f"drawing the map and writing {args.out}")
-    ax = plot_matrix_free_map(pol, args.servers, axes=axes if len(axes) == 2 else (1, 2), fixed_tau=fixed)
+    ax = plot_matrix_free_map(pol, args.servers, axes=axes, fixed_tau=fixed)
     save_figure(ax.figure, args.out, dpi=args.dpi, bbox_inches="tight")
-    stats = matrix_free_region_stats(pol, args.servers, axes if len(axes) == 2 else (1, 2), fixed)
+    stats = matrix_free_region_stats(pol, args.servers, axes, fixed)
     payload = {"scenario": scenario.source, "overrides": args.overrides, "out": args.out,
                "configuration": stats["configuration"], "configuration_id": stats["configuration_id"],
                "axes": list(axes), "gain": sol.gain, "gain_lower": sol.gain_lower, "gain_upper": sol.gain_upper,
@@ -77,6 +77,10 @@ def cmd_map(args: argparse.Namespace) -> int:
 
     scenario = load(args)
     axes = _parse_axes(args.axes)
+    if args.slice is None and len(axes) != 2:  # before the solve, for the stored-matrix and matrix-free maps alike
+        from ..errors import ModelError
+
+        raise ModelError(f"--axes {args.axes!r}: a map takes two processes (three with --slice)")
     fixed = _parse_fix(args.fix)
     prog = progress_for(args)
     constrained = bool(scenario.constraints) and not args.ignore_constraints
