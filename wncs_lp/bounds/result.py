@@ -1,0 +1,90 @@
+"""The result of a relaxation: a certified lower bound on g* and the value tables it gives."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ValueTables", "BoundResult"]
+
+
+@dataclass(frozen=True, eq=False)
+class ValueTables:
+    """Per-process value tables h_k(tau_k, c) of a separable value function
+    h(tau, C) ~ sum_k h_k(tau_k, column_k(C)).
+
+    Attributes
+    ----------
+    h : tuple of arrays
+        ``h[k][col, tau - 1]``, shape (n_cols_k, tau_hat_k): process k's value table (the layout
+        of :class:`wncs_lp.policies.suboptimal.ProcessPoisson`'s ``h``).
+    column : tuple of int arrays
+        ``column[k][c]``, shape (|C|,): the column of ``h[k]`` that joint configuration ``c`` (an
+        id of the system's automaton) reads. The identity for a relaxation over the joint
+        configuration; process k's projection of ``c`` for a relaxation over private servers.
+    """
+
+    h: tuple
+    column: tuple
+
+    @property
+    def n_processes(self) -> int:
+        return len(self.h)
+
+    def value(self, tau: np.ndarray, config_ids: np.ndarray) -> np.ndarray:
+        """sum_k h_k(tau_k, column_k(C)) for an (R, N) array of AoI vectors and (R,) configuration ids."""
+        tau = np.asarray(tau, dtype=np.int64)
+        c = np.asarray(config_ids, dtype=np.int64)
+        out = np.zeros(tau.shape[0])
+        for k, (hk, col) in enumerate(zip(self.h, self.column)):
+            out += hk[col[c], tau[:, k] - 1]
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class BoundResult:
+    """A certified lower bound on the optimal gain g* of a scenario, from one relaxation.
+
+    Attributes
+    ----------
+    relaxation : str
+        ``"private-servers"`` (relaxation 1) or ``"joint-configuration"`` (relaxation 2).
+    lower_bound : float
+        The certified bound: ``lower_bound <= g*``. It holds whatever ``status`` says.
+    relaxation_upper : float
+        An upper bound on the relaxation's own optimum where the method gives one (else +inf):
+        ``relaxation_upper - lower_bound`` says how much more this relaxation could give.
+    status : str
+        A code of :mod:`wncs_lp.status`: ``"optimal"`` when the relaxation was solved to its
+        tolerance, else ``"inaccurate"`` / ``"max_iter"`` / ``"interrupted"``.
+    certified_by : str
+        How the bound was certified, in words (e.g. the priced per-process chains solved to a
+        Bellman certificate, or a feasible (g, h) checked constraint by constraint). Never an LP
+        solver's status alone.
+    multipliers : numpy array
+        The prices / dual solution at which the bound was certified.
+    process_gains : (N,) array
+        Each process's part of the bound (its certified gain at the multipliers).
+    tables : ValueTables
+        The value tables of the relaxation, for the greedy policy of the bound.
+    seconds : float
+    iterations : int
+    stats : dict
+    """
+
+    relaxation: str
+    lower_bound: float
+    relaxation_upper: float
+    status: str
+    certified_by: str
+    multipliers: np.ndarray
+    process_gains: np.ndarray
+    tables: ValueTables
+    seconds: float
+    iterations: int
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    def gap_of(self, gain: float) -> float:
+        """The certified relative optimality gap of a policy of gain ``gain``: (gain - LB) / LB."""
+        return (float(gain) - self.lower_bound) / self.lower_bound
