@@ -11,9 +11,9 @@ import pytest
 from wncs_lp.cli import main
 from wncs_lp.errors import WncsError
 from wncs_lp.scenario import load_scenario
-from wncs_lp.sweep import COLUMNS, parse_values, read_rows, run_sweep
+from wncs_lp.studies import COLUMNS, parse_values, read_rows, run_sweep
 
-FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
+FORMULATIONS = Path(__file__).resolve().parents[2] / "formulations"
 P12 = str(FORMULATIONS / "paper_p12.toml")
 
 
