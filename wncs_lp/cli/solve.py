@@ -5,8 +5,8 @@ import argparse
 import time
 
 from ..methods import DEFAULT_METHOD, METHOD_HELP
-from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_threads_arg, emit_json, head, load,
-                     output_file, progress_for)
+from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_threads_arg, emit_json, head,
+                     load, output_file, progress_for)
 
 
 def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:

@@ -43,10 +43,11 @@ __all__ = [
     "CONSTRAINED_METHODS",
 ]
 
-from ..methods import CONSTRAINED_METHODS, resolve  # noqa: E402  (one vocabulary: wncs_lp.methods)
+from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD, resolve  # noqa: E402  (one vocabulary: wncs_lp.methods)
 
 
-def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = "auto", **kw: Any) -> ConstrainedSolution:
+def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = DEFAULT_METHOD,
+                      **kw: Any) -> ConstrainedSolution:
     """Solve ``min g`` subject to the constraints' bounds.
 
     Parameters

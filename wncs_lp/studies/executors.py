@@ -32,6 +32,8 @@ __all__ = ["EXECUTORS", "parallel", "check_executor"]
 
 #: The executors named by a string (besides a scheduler address).
 EXECUTORS = ("process", "dask")
+#: Seconds a scheduler address has to answer.
+CONNECT_TIMEOUT = 30
 
 
 def _is_client(obj: Any) -> bool:
@@ -78,7 +80,7 @@ def _scheduler(address: str) -> Iterator[Executor]:
     """A client of the cluster at ``address`` for one run (the cluster stays up)."""
     distributed = _distributed()
     try:
-        client = distributed.Client(address, timeout=30)
+        client = distributed.Client(address, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError) as exc:
         raise WncsError(f"no Dask scheduler answers at {address}: {exc}") from None
     try:

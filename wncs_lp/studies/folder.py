@@ -29,10 +29,22 @@ from typing import Any, Callable, Iterable, Sequence
 from ..errors import WncsError
 from ..files import atomic_write_text, csv_records, dumps
 
-__all__ = ["StudyFolder", "FINGERPRINT"]
+__all__ = ["StudyFolder", "FINGERPRINT", "read_table"]
 
 #: The column of a row's seal (last in every study's CSV).
 FINGERPRINT = "fingerprint"
+
+
+def read_table(path: str | Path, columns: Sequence[str], parse: Callable[[dict[str, str]], Any]) -> list[Any]:
+    """The complete, well-formed rows of a study's CSV, parsed (a truncated or malformed line is
+    skipped; the fingerprints are checked only by a resumed run, which knows its settings)."""
+    out = []
+    for rec in csv_records(path, tuple(columns)):
+        try:
+            out.append(parse(rec))
+        except (ValueError, KeyError, TypeError):
+            continue
+    return out
 
 
 def _digest(text: str, n: int = 20) -> str:

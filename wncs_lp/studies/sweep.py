@@ -47,7 +47,6 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..errors import WncsError
-from ..files import csv_records
 from ..methods import DEFAULT_METHOD, check_method
 from ..models.system import System
 from ..policies import POLICY_NAMES, make_policy, parse_policy_names
@@ -55,7 +54,7 @@ from ..policies.factory import NEED_MDP, OPTIMAL
 from ..scenario import Scenario
 from ..solvers.route import build_scenario, solve_scenario
 from .executors import check_executor
-from .folder import FINGERPRINT, StudyFolder
+from .folder import FINGERPRINT, StudyFolder, read_table
 from .grid import parse_values, value_key
 from .runner import run_grid
 
@@ -161,13 +160,7 @@ def _row_key(row: SweepRow) -> str:
 def read_rows(path: str | Path) -> list[SweepRow]:
     """Complete, well-formed rows of a sweep CSV (a truncated or malformed line is skipped; the
     fingerprints are checked only by a resumed sweep, which knows its settings)."""
-    rows = []
-    for rec in csv_records(path, COLUMNS):
-        try:
-            rows.append(SweepRow.from_csv(rec))
-        except (ValueError, KeyError):
-            continue
-    return rows
+    return read_table(path, COLUMNS, SweepRow.from_csv)
 
 
 # ----------------------------------------------------------------------------- one grid point
@@ -198,7 +191,8 @@ def _policy_row(name: str, sc: Scenario, system: System, mdp: Any, opts: dict[st
             ev = evaluate(mdp, pol, multichain="initial")
             out["gain"] = ev.gain
             if ev.recurrent_classes > 1 and out["status"] == "ok":
-                out["status"] = f"ok (multichain: {ev.recurrent_classes} recurrent classes; gain from the initial state)"
+                out["status"] = (f"ok (multichain: {ev.recurrent_classes} recurrent classes; "
+                                 "gain from the initial state)")
         if opts["simulate_slots"] > 0:
             res = simulate(pol, slots=opts["simulate_slots"], reps=opts["reps"], seed=opts["seed"],
                            burn_in=opts["burn_in"], progress=opts.get("progress", False))

@@ -59,11 +59,11 @@ import numpy as np
 
 from ..constrained.problem import LinearConstraint
 from ..errors import InfeasibleConstraintsError, PolicyError, WncsError
-from ..files import csv_records, dumps
+from ..files import dumps
 from ..mdp import MDP
-from ..methods import BASIS, CONSTRAINED, resolve
+from ..methods import BASIS, CONSTRAINED, DEFAULT_METHOD, resolve
 from ..methods import method as method_row
-from .folder import FINGERPRINT, StudyFolder
+from .folder import FINGERPRINT, StudyFolder, read_table
 from .grid import parse_values, value_key
 from .runner import run_grid
 
@@ -182,13 +182,7 @@ class TradeoffPoint:
 
 def read_points(path: str | Path) -> list[TradeoffPoint]:
     """Complete rows of a ``tradeoff.csv`` (a truncated or malformed line is skipped)."""
-    out = []
-    for rec in csv_records(path, COLUMNS):
-        try:
-            out.append(TradeoffPoint.from_record(rec))
-        except (ValueError, KeyError):
-            continue
-    return out
+    return read_table(path, COLUMNS, TradeoffPoint.from_record)
 
 
 # ----------------------------------------------------------------------------- the curve
@@ -241,7 +235,7 @@ class TradeoffResult:
     threshold: float
     reachable: float
     others: tuple[str, ...] = ()
-    method: str = "auto"
+    method: str = DEFAULT_METHOD
     out_dir: Path | None = None
     files: dict[str, str] = field(default_factory=dict)
     computed: int = 0
@@ -568,9 +562,9 @@ class _Curve:
         except (OSError, ValueError):
             return None
         ref = saved.get(self.REFERENCE) if isinstance(saved, dict) else None
-        if not isinstance(ref, dict) or saved.get("reference_fingerprint") != self.folder.seal_json(self.REFERENCE, ref):
+        if not isinstance(ref, dict):
             return None
-        return ref
+        return ref if saved.get("reference_fingerprint") == self.folder.seal_json(self.REFERENCE, ref) else None
 
     def todo(self) -> list[float]:
         return sorted(b for k, b in self.grid.items() if k not in self.done)
@@ -619,7 +613,7 @@ def tradeoff(
     values: Sequence[float] | str,
     *,
     side: str = "max",
-    method: str = "auto",
+    method: str = DEFAULT_METHOD,
     out: str | Path | None = None,
     progress: Callable[[str], None] | bool | None = None,
     plot: bool = True,
