@@ -359,7 +359,7 @@ class Context:
 
         def compute():
             t0 = time.perf_counter()
-            sol = solve_scenario(scenario, exact_method(mdp.n_states), mdp=mdp).solution
+            sol = solve_scenario(scenario, exact_method(mdp.n_states), constrained=False, mdp=mdp).solution
             P_pi = mdp.P[sol.policy]
             classes = recurrent_classes(P_pi)
             stationary, _ = stationary_law(P_pi, classes)  # equal weights on several classes
