@@ -224,7 +224,7 @@ def method(name: str, constrained: bool = False, allowed: tuple[str, ...] | None
         from .errors import SolverError
 
         what = "constrained method" if constrained else "method"
-        raise SolverError(f"unknown {what} {name!r}; expected one of {', '.join(names)}")
+        raise SolverError(f"unknown {what} {name!r}; expected one of {', '.join(map(repr, names))}")
     return table[name]
 
 

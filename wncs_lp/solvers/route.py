@@ -166,12 +166,23 @@ def build_scenario(scenario: Any, method: str | None = None, *, constrained: boo
     ``offer``: the methods a refusal may suggest instead (default: those of the table that
     solve a built MDP, the constrained ones for ``constrained``).
 
+    Warns
+    -----
+    ScenarioWarning
+        A degenerate scenario (as :func:`wncs_lp.build` does).
+
     Raises
     ------
     SizeLimitError
         The estimate exceeds the limit and ``force`` is False.
     """
+    import warnings
+
+    from ..errors import ScenarioWarning
     from ..models import guard
+
+    for text in scenario.degenerate_warnings():
+        warnings.warn(text, ScenarioWarning, stacklevel=3)
 
     prog = as_progress(progress)
     need_lp = method is not None and _row(method, constrained).memory == STORED_LP

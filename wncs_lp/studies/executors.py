@@ -63,10 +63,15 @@ def _distributed():
 
 @contextlib.contextmanager
 def _own_cluster(max_workers: int) -> Iterator[Executor]:
-    """A local cluster for one run: closed client first, then the cluster, so no worker is cut off mid-message."""
+    """A local cluster for one run, closed client first, then cluster. Its scheduler's and workers'
+    own log lines are silenced: on a loaded machine a worker's last heartbeat can meet the closing
+    scheduler and log a ``CommClosedError`` traceback that says nothing about the run (a worker's
+    real failure still reaches the run, as its task's exception)."""
+    import logging
+
     distributed = _distributed()
     cluster = distributed.LocalCluster(n_workers=max_workers, threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=40)
+                                       dashboard_address=None, silence_logs=logging.CRITICAL)
     client = distributed.Client(cluster)
     try:
         yield client.get_executor()
