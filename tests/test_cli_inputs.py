@@ -15,12 +15,12 @@ P12 = str(wncs_lp.scenario_path("paper_p12"))
 
 
 def test_map_with_an_unknown_image_format_fails_before_the_solve(tmp_path, monkeypatch, capsys):
-    import wncs_lp.cli.solve as cli_solve
+    import wncs_lp.models.guard as guard
 
     def no_build(*a, **k):
         raise AssertionError("the MDP was built before --out was checked")
 
-    monkeypatch.setattr(cli_solve, "build_with_progress", no_build)
+    monkeypatch.setattr(guard, "build_checked", no_build)
     rc = main(["map", P12, "--servers", "idle", "--out", str(tmp_path / "x.xyz"), "--json"])
     cap = capsys.readouterr()
     assert rc == 2 and "Traceback" not in cap.err

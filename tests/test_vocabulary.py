@@ -45,13 +45,33 @@ def test_every_command_has_the_same_methods_and_default_auto(command):
 
 def test_library_defaults_are_auto_and_the_vocabulary_is_the_solvers():
     from wncs_lp import solvers
-    from wncs_lp.capstudy import cap_study
+    from wncs_lp.studies import cap_study
     from wncs_lp.policies import OptimalPolicy, make_policy, policy_for
-    from wncs_lp.sweep import run_sweep
+    from wncs_lp.studies import run_sweep, tradeoff
 
     assert set(solvers.METHODS) == set(methods.METHODS)
-    for fn in (wncs_lp.solve, make_policy, policy_for, OptimalPolicy.from_scenario, run_sweep, cap_study):
+    for fn in (wncs_lp.solve, make_policy, policy_for, OptimalPolicy.from_scenario, run_sweep, cap_study, tradeoff,
+               solvers.solve, solvers.solve_scenario):
         assert inspect.signature(fn).parameters["method"].default == "auto", fn.__qualname__
+
+
+def test_one_registry_feeds_every_list_of_methods():
+    """The help, the parser's choices and the library's tuples all come from the registry's rows."""
+    assert methods.METHODS == ("auto", "lp", "lp-highs", "lp-cvxpy", "vi", "rvi", "pi")
+    assert methods.SCENARIO_METHODS == methods.METHODS + ("matrix-free",)
+    assert methods.CONSTRAINED_METHODS == ("auto", "lp", "lp-highs", "lp-cvxpy", "lagrangian")
+    assert methods.LP_METHODS == ("lp", "lp-highs", "lp-cvxpy")
+    for m in methods.METHODS:
+        assert f"{m} (" in methods.METHOD_HELP
+    sub = _subparsers()
+    assert set(next(a for a in sub["tradeoff"]._actions if a.dest == "method").choices) == \
+        set(methods.CONSTRAINED_METHODS)
+    assert set(next(a for a in sub["solve"]._actions if a.dest == "method").choices) == \
+        set(methods.SCENARIO_METHODS) | set(methods.CONSTRAINED_METHODS)
+    with pytest.raises(SolverError, match="unknown method 'simplex'; expected one of 'auto', 'lp'"):
+        methods.method("simplex")
+    with pytest.raises(SolverError, match="unknown constrained method 'vi'"):
+        methods.method("vi", constrained=True)
 
 
 @pytest.mark.parametrize("method", methods.METHODS)

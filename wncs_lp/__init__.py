@@ -52,68 +52,51 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_LAZY))
 
 
-#: The solver function behind each method name (for the keyword check of :func:`solve`).
-_SOLVER_FUNCTIONS = {
-    "lp": ("wncs_lp.solvers.lp", "solve_lp"),
-    "lp-cvxpy": ("wncs_lp.solvers.lp", "solve_lp"),
-    "lp-highs": ("wncs_lp.solvers.lp", "solve_lp"),
-    "rvi": ("wncs_lp.solvers.dp", "relative_value_iteration"),
-    "vi": ("wncs_lp.solvers.dp", "value_iteration"),
-    "pi": ("wncs_lp.solvers.dp", "policy_iteration"),
-    "auto": ("wncs_lp.solvers.auto", "solve_auto"),
-}
-
-
-def _check_keywords(method: str, kwargs: dict) -> None:
-    """One clear :class:`SolverError` for a keyword the method does not take (instead of a TypeError)."""
-    target = _SOLVER_FUNCTIONS.get(method)
-    if target is None or not kwargs:
-        return
-    import importlib
-    import inspect
-
-    fn = getattr(importlib.import_module(target[0]), target[1])
-    params = inspect.signature(fn).parameters
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
-        return
-    taken = [p for p, v in params.items() if v.kind is inspect.Parameter.KEYWORD_ONLY and p != "backend"]
-    bad = [k for k in kwargs if k not in taken]
-    if bad:
-        raise SolverError(f"method {method!r} takes no keyword {bad[0]!r}; it takes {', '.join(taken)}")
-
-
-def solve(mdp: "MDP", method: str = DEFAULT_METHOD, **kwargs) -> "Solution":
-    """Solve an MDP to average-cost optimality (see :func:`wncs_lp.solvers.solve`).
+def solve(problem: "MDP | Scenario | str", method: str = DEFAULT_METHOD, **kwargs) -> "Solution":
+    """Solve an MDP, or a scenario, to average-cost optimality.
 
     Parameters
     ----------
-    mdp : MDP
-    method : {"auto", "lp", "lp-cvxpy", "vi", "rvi", "pi"}
-        The vocabulary of every command and library function (:mod:`wncs_lp.methods`). The
-        default ``"auto"`` is the command line's: the LP on small models, certified value
-        iteration above, cross-checked when both are cheap (``stats["auto_choice"]`` says which).
+    problem : MDP, Scenario, path or str
+        An MDP (:func:`wncs_lp.solvers.solve`), or a scenario, its TOML file or a shipped
+        scenario's name (``"paper_p12"``), solved by the one route of the command line
+        (:func:`wncs_lp.solvers.route.solve_scenario`: size guard, build, solve; ``auto``
+        solves without a stored matrix when that matrix would not fit; a scenario's
+        ``[[constraint]]`` tables are solved, as ``wncs-lp solve`` does).
+    method : str
+        A name of the registry (:mod:`wncs_lp.methods`), default ``"auto"``: the LP on small
+        models, certified value iteration above, cross-checked when both are cheap
+        (``stats["auto_choice"]`` says which).
     **kwargs
-        The method's keywords. Every method takes ``tol`` (the accuracy asked for: the relative
+        The method's keywords (and, for a scenario, the route's: ``force``, ``threads``,
+        ``constrained``). Every method takes ``tol`` (the accuracy asked for: the relative
         certificate width; for ``lp``/``lp-cvxpy`` the solver's tolerance, the certificate being
         checked at ``cert_rtol``) and ``progress`` (show progress on stderr); see the method's
-        function for the rest. A keyword the method does not take raises a :class:`SolverError`
-        naming the ones it does.
+        function for the rest. A keyword the method does not take raises a
+        :class:`SolverError` naming the ones it does.
 
     Returns
     -------
     Solution
-        With ``sigma`` (the action per state) and ``chain(mdp)`` (the induced Markov chain).
+        With ``sigma`` (the action per state) and ``chain(mdp)`` (the induced Markov chain); for
+        a scenario solved without a stored matrix a ``MatrixFreeSolution``, for a constrained
+        one a ``ConstrainedSolution``.
+
+    Raises
+    ------
+    SolverError
+        ``problem`` is none of the above (the message names its type), an unknown method or
+        keyword, or a solver failure.
     """
-    from .solvers import solve as _solve
-    from .solvers.result import Solution as _Solution
+    from .mdp import MDP as _MDP
 
-    _check_keywords(method, kwargs)
-    sol = _solve(mdp, method=method, **kwargs)
-    if type(sol) is _Solution and sol.pair_actions is None:  # e.g. a matrix-free solve mapped onto the MDP
-        import dataclasses
+    if isinstance(problem, _MDP):
+        from .solvers import solve as _solve
 
-        sol = dataclasses.replace(sol, pair_actions=mdp.a_indices)
-    return sol
+        return _solve(problem, method, **kwargs)
+    from .solvers.route import solve_scenario
+
+    return solve_scenario(problem, method, **kwargs).solution
 
 
 __version__ = "0.1.0"

@@ -1,65 +1,256 @@
-"""The solver vocabulary: one set of method names and one default for every entry point.
+"""The method registry: every solve method in one table (like cvxpy's solver map).
 
-Every command that solves (``solve``, ``evaluate``, ``simulate``, ``sweep``, ``verify``, ``map``,
-``capstudy``) and every library function that takes a ``method`` (:func:`wncs_lp.solve`,
-:meth:`wncs_lp.policies.OptimalPolicy.from_scenario`, :func:`wncs_lp.policies.make_policy`,
-:func:`wncs_lp.policies.policy_for`, :func:`wncs_lp.sweep.run_sweep`,
-:func:`wncs_lp.capstudy.cap_study`) accepts the names of :data:`METHODS` and defaults to
-:data:`DEFAULT_METHOD`, ``"auto"``:
+One row per method: its name, the function that runs it (``"module:function"``, imported on
+first use, so the command line builds its parser from this module without loading numpy), what
+it takes (an MDP or a scenario), the keywords it fixes, the warm start it takes from a previous
+solution, what the size guard counts for it (its memory model), the method it falls back to when
+the guard refuses the stored matrix, and its help text. Every command (``solve``, ``evaluate``,
+``simulate``, ``sweep``, ``verify``, ``map``, ``capstudy``, ``tradeoff``) and every library entry
+point that takes a ``method`` (:func:`wncs_lp.solve`, :func:`wncs_lp.solvers.solve`,
+:func:`wncs_lp.solvers.route.solve_scenario`, :func:`wncs_lp.constrained.solve_constrained`,
+:func:`wncs_lp.policies.make_policy`, :func:`wncs_lp.policies.policy_for`,
+:func:`wncs_lp.studies.run_sweep`, :func:`wncs_lp.studies.cap_study`,
+:func:`wncs_lp.studies.tradeoff`) reads its vocabulary and default (``"auto"``) from here:
 
-=============  ==========================================================================
-``auto``       the LP on small models (at most 6,000 pairs), certified value iteration
-               above; both run and are compared when both are cheap (at most 30,000
-               pairs). ``stats["auto_choice"]`` says whose answer it is.
-``lp``         the occupation-measure LP on Clarabel (direct), its policy polished and
-               exactly evaluated.
-``lp-highs``   the same LP on HiGHS (simplex or interior point + crossover, by the LP's
-               shape). The library's ``solve_lp`` (and ``auto``'s LP) picks Clarabel or
-               HiGHS by a measured rule; ``stats["lp_choice"]`` says why.
-``lp-cvxpy``   the same LP built with cvxpy.
-``vi``         certified value iteration (Gauss-Seidel modified policy iteration on the
-               numba kernel, Jacobi relative value iteration without numba).
-``rvi``        relative value iteration with the aperiodicity transform.
-``pi``         Howard policy iteration with exact (sparse) evaluation.
-=============  ==========================================================================
+=================  ==========================================================================
+``auto``           the LP on small models (at most 6,000 pairs), certified value iteration
+                   above; both run and are compared when both are cheap (at most 30,000
+                   pairs). ``stats["auto_choice"]`` says whose answer it is. On a scenario
+                   whose stored matrix would not fit in memory: ``matrix-free``.
+``lp``             the occupation-measure LP on Clarabel (direct), its policy polished and
+                   exactly evaluated.
+``lp-highs``       the same LP on HiGHS (simplex or interior point + crossover, by the LP's
+                   shape).
+``lp-cvxpy``       the same LP built with cvxpy.
+``vi``             certified value iteration (Gauss-Seidel modified policy iteration on the
+                   numba kernel, Jacobi relative value iteration without numba).
+``rvi``            relative value iteration with the aperiodicity transform.
+``pi``             Howard policy iteration with exact (sparse) evaluation.
+``matrix-free``    certified value iteration over the AoI box without a stored matrix (a
+                   scenario, or an MDP built from one).
+=================  ==========================================================================
 
-Every method returns the same certificate ``gain_lower <= g* <= gain_upper`` and takes the same
-keywords ``tol`` (the accuracy asked for: the relative certificate width; for ``lp``/``lp-cvxpy``
-the solver's tolerance, the certificate being checked at ``cert_rtol``) and ``progress`` (show
-the work on stderr); all but ``auto`` take ``max_iter``, and ``auto``, ``vi``, ``rvi`` and ``pi``
-a warm start ``h0`` (a bias). :func:`wncs_lp.solve` answers a keyword a method does not take with
-one :class:`~wncs_lp.errors.SolverError` naming those it does.
+Every method returns the same certificate ``gain_lower <= g* <= gain_upper`` and takes ``tol``
+(the accuracy asked for) and ``progress``; a keyword a method does not take is one
+:class:`~wncs_lp.errors.SolverError` naming those it does (:meth:`Method.check_keywords`).
 
-A scenario with ``[[constraint]]`` tables is solved by :data:`CONSTRAINED_METHODS` instead
-(:func:`wncs_lp.constrained.solve_constrained`).
-
-This module imports nothing heavy, so the command line can build its parser from it.
+A scenario with ``[[constraint]]`` tables is solved by the methods of :data:`CONSTRAINED`
+(``auto``, ``lp``, ``lp-highs``, ``lp-cvxpy``, ``lagrangian``): the same names where they mean
+the same LP, one table of their own because their functions take the constraints too.
 """
 from __future__ import annotations
 
-__all__ = ["METHODS", "DEFAULT_METHOD", "CONSTRAINED_METHODS", "LP_METHODS", "METHOD_HELP", "check_method"]
+from dataclasses import dataclass
+from typing import Any, Callable
 
-#: The methods of an unconstrained solve, in the order the help lists them
-#: (the same names as :data:`wncs_lp.solvers.METHODS`).
-METHODS = ("auto", "lp", "lp-highs", "lp-cvxpy", "vi", "rvi", "pi")
+__all__ = [
+    "Method", "TABLE", "CONSTRAINED", "METHODS", "SCENARIO_METHODS", "CONSTRAINED_METHODS", "DEFAULT_METHOD",
+    "LP_METHODS", "METHOD_HELP", "STORED", "STORED_LP", "BOX", "BIAS", "POLICY", "BASIS", "MDP_INPUT",
+    "SCENARIO_INPUT", "method", "check_method", "memory_of", "resolve", "exact_method",
+    "EXACT_METHOD_MAX_STATES", "SOLVE", "SOLVE_CONSTRAINED",
+]
+
+# ------------------------------------------------------------------ what the size guard counts
+#: The stored transition matrix: the build's peak and the iteration's value vectors.
+STORED = "stored"
+#: The stored matrix and an interior-point LP's KKT factorisation.
+STORED_LP = "stored+lp"
+#: No matrix: one float64 value, one policy byte and one mask byte per state of the AoI box.
+BOX = "box"
+
+# ------------------------------------------------------------------ warm starts
+#: ``h0`` = the previous solution's bias (value iteration, auto).
+BIAS = "bias"
+#: ``policy0`` = the previous solution's policy (policy iteration).
+POLICY = "policy"
+#: The previous LP's basis (a constrained LP kept in one HiGHS model, re-solved by dual simplex).
+BASIS = "basis"
+
+# ------------------------------------------------------------------ what a method takes
+MDP_INPUT = "mdp"
+SCENARIO_INPUT = "scenario"
+
+#: The two dispatchers (``"module:function"``): an MDP by method name, an MDP and its constraints.
+SOLVE = "wncs_lp.solvers:solve"
+SOLVE_CONSTRAINED = "wncs_lp.constrained:solve_constrained"
+
+
+def resolve(target: str) -> Callable[..., Any]:
+    """The function named by ``"module:function"`` (imported now)."""
+    import importlib
+
+    module, _, name = target.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+@dataclass(frozen=True)
+class Method:
+    """One solve method.
+
+    Attributes
+    ----------
+    name : str
+        As ``--method`` and ``method=`` spell it.
+    target : str
+        ``"module:function"`` of the function that runs it: ``fn(mdp, **preset, **kw)`` (an MDP
+        method), ``fn(scenario_or_system, **kw)`` (a scenario method) or
+        ``fn(mdp, constraints, **preset, **kw)`` (a constrained one). Empty for a constrained
+        ``auto``, which runs the method its ``chooser`` names.
+    help : str
+        One line for ``--help``.
+    takes : {"mdp", "scenario"}
+        A scenario method runs without building the MDP; on an MDP built from a scenario it runs
+        ``mdp_target``.
+    preset : tuple of (str, object)
+        Keywords the name fixes (``lp-highs``: ``backend="highs"``).
+    warm_start : {None, "bias", "policy", "basis"}
+        What it takes from a previous solution on the same state space.
+    memory : {"stored", "stored+lp", "box"}
+        What the size guard counts (:func:`wncs_lp.models.guard.check_size`).
+    fallback : str or None
+        The method a scenario is solved by when the guard refuses this one's stored matrix.
+    chooser : str or None
+        ``"module:function"`` of ``(mdp, constraints) -> method name`` (a constrained ``auto``).
+    mdp_target : str or None
+        A scenario method's function on an MDP built from a scenario.
+    constrained : bool
+    hint : str
+        How the size guard's message names the method when it suggests it as a cheaper route
+        (empty: never suggested).
+    """
+
+    name: str
+    target: str
+    help: str
+    takes: str = MDP_INPUT
+    preset: tuple[tuple[str, Any], ...] = ()
+    warm_start: str | None = None
+    memory: str = STORED
+    fallback: str | None = None
+    chooser: str | None = None
+    mdp_target: str | None = None
+    constrained: bool = False
+    hint: str = ""
+
+    def function(self, on_mdp: bool = False) -> Callable[..., Any]:
+        """The function that runs the method (``on_mdp``: a scenario method's MDP form)."""
+        return resolve(self.mdp_target if on_mdp and self.mdp_target else self.target)
+
+    def keywords(self, on_mdp: bool = False) -> tuple[str, ...] | None:
+        """The keywords the method takes (None: any, its function takes ``**kw``)."""
+        import inspect
+
+        params = inspect.signature(self.function(on_mdp)).parameters.values()
+        if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+            return None
+        fixed = {k for k, _ in self.preset}
+        return tuple(p.name for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in fixed)
+
+    def takes_keyword(self, name: str, on_mdp: bool = False) -> bool:
+        taken = self.keywords(on_mdp)
+        return taken is None or name in taken
+
+    def check_keywords(self, kw: dict[str, Any], on_mdp: bool = False) -> None:
+        """One clear :class:`~wncs_lp.errors.SolverError` for a keyword the method does not take."""
+        taken = self.keywords(on_mdp) if kw else None
+        bad = [k for k in kw if taken is not None and k not in taken]
+        if bad:
+            from .errors import SolverError
+
+            raise SolverError(f"method {self.name!r} takes no keyword {bad[0]!r}; it takes {', '.join(taken)}")
+
+    def call(self, subject: Any, *args: Any, on_mdp: bool = False, **kw: Any) -> Any:
+        """Run the method on ``subject`` (after the keyword check)."""
+        self.check_keywords(kw, on_mdp)
+        return self.function(on_mdp)(subject, *args, **dict(self.preset), **kw)
+
+
+_LP = "wncs_lp.solvers.lp:solve_lp"
+_CLP = "wncs_lp.constrained.lp:solve_constrained_lp"
+
+#: The methods of an unconstrained solve, in the order the help lists them.
+TABLE: dict[str, Method] = {m.name: m for m in (
+    Method("auto", "wncs_lp.solvers.auto:solve_auto",
+           "default: the LP on small models, certified value iteration above, cross-checked when both are cheap; "
+           "it says which it chose", warm_start=BIAS, fallback="matrix-free"),
+    Method("lp", _LP, "occupation-measure LP on Clarabel", preset=(("backend", "clarabel"),), memory=STORED_LP),
+    Method("lp-highs", _LP, "the same LP on HiGHS", preset=(("backend", "highs"),), memory=STORED_LP),
+    Method("lp-cvxpy", _LP, "the same LP through cvxpy", preset=(("backend", "cvxpy"),), memory=STORED_LP),
+    Method("vi", "wncs_lp.solvers.dp:value_iteration", "certified value iteration", warm_start=BIAS),
+    Method("rvi", "wncs_lp.solvers.dp:relative_value_iteration", "relative value iteration", warm_start=BIAS,
+           hint="value iteration"),
+    Method("pi", "wncs_lp.solvers.dp:policy_iteration", "policy iteration", warm_start=POLICY),
+    Method("matrix-free", "wncs_lp.solvers.matrix_free:matrix_free_value_iteration",
+           "certified value iteration without building the MDP", takes=SCENARIO_INPUT, memory=BOX,
+           mdp_target="wncs_lp.solvers.matrix_free:solve_mdp", hint="the matrix-free solver"),
+)}
+
+#: The methods of a constrained solve (a scenario with ``[[constraint]]`` tables).
+CONSTRAINED: dict[str, Method] = {m.name: m for m in (
+    Method("auto", "", "the LP on HiGHS up to its size or with several bounds, the Lagrangian route beyond",
+           chooser="wncs_lp.constrained.lagrangian:auto_method", constrained=True),
+    Method("lp", _CLP, "the occupation-measure LP on Clarabel, then a crossover", preset=(("backend", "clarabel"),),
+           memory=STORED_LP, warm_start=BASIS, constrained=True),
+    Method("lp-highs", "wncs_lp.constrained:solve_constrained_highs", "the same LP on HiGHS",
+           memory=STORED_LP, warm_start=BASIS, constrained=True),
+    Method("lp-cvxpy", _CLP, "the same LP through cvxpy", preset=(("backend", "cvxpy"),), memory=STORED_LP,
+           constrained=True),
+    Method("lagrangian", "wncs_lp.constrained.lagrangian:solve_lagrangian",
+           "one bound: multiplier search with certified value iteration", constrained=True,
+           hint="the Lagrangian route"),
+)}
+
+#: The methods every command and library function that solves an MDP takes, in help order.
+METHODS = tuple(name for name, m in TABLE.items() if m.takes == MDP_INPUT)
+#: The methods of a command that takes a scenario: :data:`METHODS` and the matrix-free solver.
+SCENARIO_METHODS = tuple(TABLE)
+#: The methods of a constrained solve.
+CONSTRAINED_METHODS = tuple(CONSTRAINED)
 #: The default of every command and library function that solves.
 DEFAULT_METHOD = "auto"
-#: The methods of a constrained solve (a scenario with ``[[constraint]]`` tables).
-CONSTRAINED_METHODS = ("auto", "lp", "lp-highs", "lp-cvxpy", "lagrangian")
-#: The methods that solve an interior-point LP (their memory need is the size guard's LP estimate).
-LP_METHODS = ("lp", "lp-highs", "lp-cvxpy")
+#: The methods that solve an interior-point LP (the size guard counts the LP's memory for them).
+LP_METHODS = tuple(name for name, m in TABLE.items() if m.memory == STORED_LP)
 
 #: One help text for ``--method``, shared by every command.
-METHOD_HELP = ("solver: auto (default: the LP on small models, certified value iteration above, "
-               "cross-checked when both are cheap; it says which it chose), lp (occupation-measure LP on "
-               "Clarabel), lp-highs (the same LP on HiGHS), lp-cvxpy (the same LP through cvxpy), vi "
-               "(certified value iteration), rvi (relative value iteration), pi (policy iteration)")
+METHOD_HELP = "solver: " + ", ".join(f"{m.name} ({m.help})" for m in TABLE.values() if m.takes == MDP_INPUT)
 
 
-def check_method(method: str, allowed: tuple[str, ...] = METHODS, what: str = "method") -> str:
-    """``method`` if it is one of ``allowed``, else a :class:`~wncs_lp.errors.SolverError` listing them."""
-    if method not in allowed:
+def method(name: str, constrained: bool = False, allowed: tuple[str, ...] | None = None) -> Method:
+    """The registry row of ``name`` (of :data:`CONSTRAINED` with ``constrained``), else one
+    :class:`~wncs_lp.errors.SolverError` listing the names allowed (``allowed``, default all)."""
+    table = CONSTRAINED if constrained else TABLE
+    names = tuple(table) if allowed is None else allowed
+    if name not in names or name not in table:
         from .errors import SolverError
 
-        raise SolverError(f"unknown {what} {method!r}; expected one of {', '.join(allowed)}")
-    return method
+        what = "constrained method" if constrained else "method"
+        raise SolverError(f"unknown {what} {name!r}; expected one of {', '.join(map(repr, names))}")
+    return table[name]
+
+
+def check_method(name: str, allowed: tuple[str, ...] = METHODS, what: str = "method") -> str:
+    """``name`` if it is one of ``allowed``, else a :class:`~wncs_lp.errors.SolverError` listing them."""
+    if name not in allowed:
+        from .errors import SolverError
+
+        raise SolverError(f"unknown {what} {name!r}; expected one of {', '.join(allowed)}")
+    return name
+
+
+def memory_of(name: str | None, constrained: bool = False) -> str:
+    """The memory model the size guard counts for ``name`` (:data:`STORED` for None or an unknown name)."""
+    table = CONSTRAINED if constrained else TABLE
+    row = table.get(name) if name is not None else None
+    return row.memory if row is not None else STORED
+
+
+#: The reproduction solves by policy iteration up to this many states, by relative value
+#: iteration above (:func:`exact_method`).
+EXACT_METHOD_MAX_STATES = 60_000
+
+
+def exact_method(n_states: int) -> str:
+    """The reproduction's method: policy iteration (its gain exact to round-off, its policy a
+    vertex the structural checks read) up to :data:`EXACT_METHOD_MAX_STATES` states, relative
+    value iteration above (where a sparse factorisation per iteration no longer pays)."""
+    return "pi" if n_states <= EXACT_METHOD_MAX_STATES else "rvi"

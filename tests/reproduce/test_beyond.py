@@ -11,7 +11,7 @@ import math
 
 import pytest
 
-from wncs_lp.constrained.tradeoff import TradeoffPoint, TradeoffResult
+from wncs_lp.studies.tradeoff import TradeoffPoint, TradeoffResult
 from wncs_lp.reproduce import beyond
 from wncs_lp.reproduce.context import PROFILES, Context
 from wncs_lp.reproduce.report import write_report

@@ -4,15 +4,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import Command, add_method_arg, add_scenario_args, emit_json, head, load
+from .common import Command, add_method_arg, add_scenario_args, add_threads_arg, emit_json, head, load
 
 
 def cmd_capstudy(args: argparse.Namespace) -> int:
-    from ..capstudy import cap_study
-    from ..sweep import parse_values
+    from ..studies import cap_study, parse_values
 
     scenario = load(args)
-    caps = [int(v) for v in parse_values(args.caps)]
+    caps = [int(v) for v in parse_values(args.caps, "--caps")]
 
     def show(row) -> None:
         if not args.json:
@@ -27,7 +26,7 @@ def cmd_capstudy(args: argparse.Namespace) -> int:
         print(f"{'cap':>5} {'states':>10} {'optimal gain':>16} {'bracket':>10} {'at cap':>10} {'change':>10} "
               f"{'cap-' + str(caps[0]) + ' policy':>16} {'seconds':>7}")
     study = cap_study(scenario, caps, mass_tol=args.mass_tol, gain_rtol=args.gain_rtol, method=args.method,
-                      force=args.force, on_row=show)
+                      force=args.force, threads=args.threads, on_row=show)
     if args.json:
         emit_json({**head(args, scenario), "converged": study.converged, "mass_tol": study.mass_tol,
                    "gain_rtol": study.gain_rtol, "rows": study.table()})
@@ -50,6 +49,7 @@ def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gain-rtol", type=float, default=1e-3,
                    help="... and the relative change of the gain from the previous cap at most this (default 1e-3)")
     add_method_arg(p, "solver of each cap")
+    add_threads_arg(p)
 
 
 COMMANDS = [

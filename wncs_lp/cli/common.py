@@ -6,10 +6,16 @@ import sys
 from pathlib import Path
 from typing import Callable, NamedTuple, Sequence
 
-from ..methods import DEFAULT_METHOD, METHOD_HELP, METHODS
+from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD, METHOD_HELP, METHODS, SCENARIO_METHODS
 
-__all__ = ["Command", "add_scenario_args", "add_method_arg", "add_progress_arg", "progress_for", "load",
-           "emit_json", "head", "output_file", "warn"]
+__all__ = ["Command", "add_scenario_args", "add_method_arg", "add_progress_arg", "add_threads_arg",
+           "add_parallel_args", "executor_of", "progress_for", "load", "emit_json", "head", "output_file", "warn",
+           "SOLVE_METHODS", "MATRIX_FREE_METHODS"]
+
+#: The methods of a command that takes a scenario beyond :data:`METHODS` (the matrix-free solver),
+#: and those of ``solve``: every unconstrained method and every constrained one.
+MATRIX_FREE_METHODS = tuple(m for m in SCENARIO_METHODS if m not in METHODS)
+SOLVE_METHODS = METHODS + tuple(m for m in CONSTRAINED_METHODS if m not in METHODS) + MATRIX_FREE_METHODS
 
 
 class Command(NamedTuple):
@@ -54,6 +60,47 @@ def add_method_arg(p: argparse.ArgumentParser, what: str = "", extra: tuple[str,
     methods a command takes beyond it (e.g. ``matrix-free``), described by ``extra_help``."""
     p.add_argument("--method", default=DEFAULT_METHOD, choices=METHODS + tuple(extra),
                    help=(f"{what}: " if what else "") + METHOD_HELP + (f"; {extra_help}" if extra_help else ""))
+
+
+def _threads(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of threads >= 1, got {text!r}")
+    return n
+
+
+def add_threads_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--threads", type=_threads, default=None, metavar="N",
+                   help="threads of the solvers' compiled kernels (value iteration, the matrix-free solver; default: "
+                        "the machine's cores)")
+
+
+def add_parallel_args(p: argparse.ArgumentParser, what: str, executor: bool = True) -> None:
+    """``--max-workers`` (and ``--executor``) and ``--scheduler``: where a study's points run."""
+    p.add_argument("--max-workers", type=int, default=1,
+                   help=f"{what} in parallel worker processes (default 1: in order, with warm start)")
+    if executor:
+        p.add_argument("--executor", default="process", choices=["process", "dask"],
+                       help="parallel backend with --max-workers > 1: worker processes, or a Dask cluster of that "
+                            "many workers on this machine")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help=f"run the {what} on the Dask cluster whose scheduler is at ADDRESS (e.g. tcp://host:8786; "
+                        "docs/dask.md)")
+
+
+def executor_of(args: argparse.Namespace):
+    """The executor a study's arguments name (:mod:`wncs_lp.studies.executors`)."""
+    if args.scheduler is not None:
+        if "://" not in args.scheduler:
+            from ..errors import WncsError
+
+            raise WncsError(f"--scheduler {args.scheduler!r}: expected a Dask scheduler address such as "
+                            "tcp://host:8786")
+        return args.scheduler
+    return getattr(args, "executor", None)
 
 
 def add_progress_arg(p: argparse.ArgumentParser) -> None:

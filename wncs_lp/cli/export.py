@@ -18,7 +18,7 @@ def _format_of(args: argparse.Namespace) -> str:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from ..models.guard import build_checked
+    from ..solvers.route import build_scenario
 
     fmt = _format_of(args)
     output_file(args.out, "--out")  # before any work: the folder must exist (nothing is created)
@@ -28,8 +28,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise WncsError("--compress applies to --format npz only (a .drn file is plain text)")
     scenario = load(args)
     t0 = time.perf_counter()
-    mdp = build_checked(scenario, force=args.force)
-    t_build = time.perf_counter() - t0
+    mdp, t_build = build_scenario(scenario, force=args.force)
     if fmt == "drn":
         from ..export import save_drn
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 import argparse
 from typing import Sequence
 
-from .common import (Command, add_method_arg, add_progress_arg, add_scenario_args, emit_json, load, output_file,
-                     progress_for)
+from .common import (MATRIX_FREE_METHODS, Command, add_method_arg, add_progress_arg, add_scenario_args,
+                     add_threads_arg, emit_json, load, output_file, progress_for)
 
 
 def _parse_axes(text: str) -> tuple[int, ...]:
@@ -29,22 +29,13 @@ def _parse_fix(items: Sequence[str]) -> dict[int, int]:
     return out
 
 
-def _matrix_free_map(args: argparse.Namespace, scenario, axes, fixed, prog, why: str) -> int:
-    """Solve without a stored matrix and draw the policy (:func:`wncs_lp.viz.plot_matrix_free_map`)."""
-    from ..errors import SolverError
-    from ..policies import MatrixFreePolicy
-    from ..solvers import solve_scenario
+def _matrix_free_map(args: argparse.Namespace, scenario, run, axes, fixed, prog) -> int:
+    """Draw the policy of a solve without a stored matrix (:func:`wncs_lp.viz.plot_matrix_free_map`)."""
     from ..maps import matrix_free_region_stats
+    from ..policies import MatrixFreePolicy
     from ..viz import plot_matrix_free_map, save_figure
 
-    if args.slice is not None:
-        raise SolverError("--slice is not available with the matrix-free method; draw a map over two AoIs with "
-                          "the others fixed (--axes I,J --fix K=TAU)")
-    if scenario.constraints and not args.ignore_constraints:
-        raise SolverError("the matrix-free method solves unconstrained scenarios only; pass --ignore-constraints "
-                          "to map the unconstrained optimum")
-    prog.phase(f"solving without a stored matrix ({why})")
-    sol = solve_scenario(scenario, "matrix-free", progress=bool(getattr(prog, "enabled", False)))
+    sol = run.solution
     pol = MatrixFreePolicy.from_solution(sol)
     prog.phase(f"drawing the map and writing {args.out}")
     ax = plot_matrix_free_map(pol, args.servers, axes=axes, fixed_tau=fixed)
@@ -53,23 +44,35 @@ def _matrix_free_map(args: argparse.Namespace, scenario, axes, fixed, prog, why:
     payload = {"scenario": scenario.source, "overrides": args.overrides, "out": args.out,
                "configuration": stats["configuration"], "configuration_id": stats["configuration_id"],
                "axes": list(axes), "gain": sol.gain, "gain_lower": sol.gain_lower, "gain_upper": sol.gain_upper,
-               "status": sol.status, "method": "matrix-free", "matrix_free_reason": why, "regions": stats}
+               "status": sol.status, "method": run.method, "matrix_free_reason": run.route, "regions": stats}
     if args.json:
         emit_json(payload)
     else:
-        print(f"map of [{payload['configuration']}] written to {args.out} (matrix-free, {why}; "
+        print(f"map of [{payload['configuration']}] written to {args.out} ({run.method}, {run.route}; "
               f"g* in [{sol.gain_lower:.10g}, {sol.gain_upper:.10g}])")
         _print_regions(stats)
     return 0 if sol.ok else 1
 
 
-def cmd_map(args: argparse.Namespace) -> int:
+def _check_route(args: argparse.Namespace, scenario) -> None:
+    """What a map without a stored matrix cannot draw, refused before the solve."""
     from ..errors import SolverError
+    from ..methods import SCENARIO_INPUT, method
+
+    if method(args.method).takes != SCENARIO_INPUT:
+        return
+    if args.slice is not None:
+        raise SolverError(f"--slice is not available with the {args.method} method; draw a map over two AoIs with "
+                          "the others fixed (--axes I,J --fix K=TAU)")
+    if scenario.constraints and not args.ignore_constraints:
+        raise SolverError(f"the {args.method} method solves unconstrained scenarios only; pass --ignore-constraints "
+                          "to map the unconstrained optimum")
+
+
+def cmd_map(args: argparse.Namespace) -> int:
     from ..maps import parse_config_spec, region_stats
-    from ..methods import CONSTRAINED_METHODS, LP_METHODS
-    from ..models.guard import SizeLimitError
+    from ..solvers.route import solve_scenario
     from ..viz import file_backend, image_formats, plot_policy_map, plot_policy_slice, save_figure
-    from .solve import build_with_progress
 
     file_backend()
     # before any work: an image format matplotlib writes, in an existing folder
@@ -82,33 +85,15 @@ def cmd_map(args: argparse.Namespace) -> int:
 
         raise ModelError(f"--axes {args.axes!r}: a map takes two processes (three with --slice)")
     fixed = _parse_fix(args.fix)
+    _check_route(args, scenario)
     prog = progress_for(args)
-    constrained = bool(scenario.constraints) and not args.ignore_constraints
-    if args.method == "matrix-free":
-        return _matrix_free_map(args, scenario, axes, fixed, prog, "asked for")
-    try:
-        mdp, _ = build_with_progress(args, scenario, prog, need_lp=args.method in LP_METHODS)
-    except SizeLimitError as refused:
-        # auto: a model whose stored matrix would not fit is solved and drawn without one, where it can be
-        if args.method != "auto" or constrained or args.slice is not None:
-            raise
-        try:
-            return _matrix_free_map(args, scenario, axes, fixed, prog, "auto: the stored matrix would not fit in memory")
-        except SolverError:
-            raise refused from None
-    config = parse_config_spec(mdp, args.servers)
-    if constrained:
-        from ..constrained import solve_constrained
-
-        # the constrained optimum (randomised states are starred on the map)
-        method = args.method if args.method in CONSTRAINED_METHODS else "auto"
-        prog.phase(f"solving the constrained problem with method {method}")
-        sol = solve_constrained(mdp, scenario.constraints, method)
-    else:
-        from ..solvers import solve
-
-        prog.phase(f"solving with method {args.method}")
-        sol = solve(mdp, method=args.method, progress=prog)
+    config = []  # the configuration, read off the MDP before the solve (a bad --servers fails early)
+    run = solve_scenario(scenario, args.method, constrained=False if args.ignore_constraints else None,
+                         force=args.force, threads=args.threads, progress=prog, need_mdp=args.slice is not None,
+                         check=lambda mdp: config.append(parse_config_spec(mdp, args.servers)))
+    if not run.built:
+        return _matrix_free_map(args, scenario, run, axes, fixed, prog)
+    mdp, sol, config = run.mdp, run.solution, config[0]
     prog.phase(f"drawing the map and writing {args.out}")
     if args.slice is not None:
         axes = axes if len(axes) == 3 else (1, 2, 3)
@@ -127,7 +112,7 @@ def cmd_map(args: argparse.Namespace) -> int:
         "axes": list(axes),
         "slice_total": args.slice,
         "gain": sol.gain,
-        "constrained": bool(scenario.constraints) and not args.ignore_constraints,
+        "constrained": run.constrained,
         "regions": stats,
     }
     if args.json:
@@ -160,7 +145,7 @@ def _configure_map(p: argparse.ArgumentParser) -> None:
                         "most reachable states)")
     p.add_argument("--slice", type=int, default=None, metavar="TOTAL",
                    help="draw the plane tau_i + tau_j + tau_k = TOTAL as a triangle (three processes)")
-    add_method_arg(p, "solver of the optimal policy (constrained scenarios: auto, lp or lp-cvxpy)", ("matrix-free",),
+    add_method_arg(p, "solver of the optimal policy (constrained scenarios: auto, lp or lp-cvxpy)", MATRIX_FREE_METHODS,
                    "matrix-free: certified value iteration without building the MDP, for models too large to "
                    "store (auto switches to it when the stored matrix would not fit; two-AoI maps only, the "
                    "AoIs off the axes default to the lower end of the configuration's box)")
@@ -168,6 +153,7 @@ def _configure_map(p: argparse.ArgumentParser) -> None:
                    help="map the unconstrained optimum even if the scenario has [[constraint]] tables (by default "
                         "the constrained optimum is drawn, with its randomised states starred)")
     p.add_argument("--dpi", type=int, default=120, help="resolution of raster output (default 120)")
+    add_threads_arg(p)
     add_progress_arg(p)
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import (Command, add_method_arg, add_progress_arg, add_scenario_args, emit_json, head, load,
-                     progress_for)
+from .common import (Command, add_method_arg, add_parallel_args, add_progress_arg, add_scenario_args,
+                     add_threads_arg, emit_json, executor_of, head, load, progress_for)
 
 
 def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
@@ -26,6 +26,7 @@ def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
         "(default: the paper's: the largest process to the server with its shortest loop U + T + D, every "
         "other process to the other server(s); docs/policies.md)",
     )
+    add_threads_arg(p)
     add_progress_arg(p)
 
 
@@ -33,7 +34,7 @@ def _policy(args: argparse.Namespace, scenario, *, need_mdp: bool, prog=False):
     from ..policies import policy_for
 
     return policy_for(scenario, args.policy, method=args.method, assignment=args.assignment,
-                      need_mdp=need_mdp, force=args.force, progress=prog)
+                      need_mdp=need_mdp, force=args.force, threads=args.threads, progress=prog)
 
 
 # ----------------------------------------------------------------------------- evaluate
@@ -122,7 +123,7 @@ def _configure_simulate(p: argparse.ArgumentParser) -> None:
 
 # ----------------------------------------------------------------------------- sweep
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from ..sweep import run_sweep
+    from ..studies import run_sweep
 
     scenario = load(args)
     log = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
@@ -140,10 +141,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         seed=args.seed,
         burn_in=args.burn_in,
         max_workers=args.max_workers,
-        executor=args.executor,
+        executor=executor_of(args),
+        threads=args.threads,
         plot=not args.no_plot,
         log=log,
     )
+    if res.dropped and args.json:  # without --json the log said so
+        from .common import warn
+
+        warn(f"{res.dropped} row(s) of {args.out}/sweep.csv were not this sweep's (fingerprint): not reused")
     payload = {
         "scenario": scenario.source,
         "overrides": args.overrides,
@@ -181,8 +187,8 @@ def _configure_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="simulation seed (default 0)")
     p.add_argument("--burn-in", type=int, default=1000, help="simulation burn-in (default 1000)")
     p.add_argument("--no-exact", action="store_true", help="no exact evaluation (simulate only; needs --simulate-slots)")
-    p.add_argument("--max-workers", type=int, default=1, help="grid values in parallel (default 1, with warm start)")
-    p.add_argument("--executor", default="process", choices=["process", "dask"], help="parallel backend")
+    add_parallel_args(p, "grid values")
+    add_threads_arg(p)
     p.add_argument("--no-plot", action="store_true", help="do not write sweep.png / sweep.svg")
 
 

@@ -4,85 +4,50 @@ from __future__ import annotations
 import argparse
 import time
 
-from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD, LP_METHODS, METHOD_HELP, METHODS
-from .common import Command, add_progress_arg, add_scenario_args, emit_json, head, load, output_file, progress_for
-
-#: Methods of an unconstrained solve (:data:`wncs_lp.methods.METHODS`), and of a constrained one.
-UNCONSTRAINED_METHODS = METHODS
+from ..methods import DEFAULT_METHOD, METHOD_HELP
+from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_threads_arg, emit_json, head,
+                     load, output_file, progress_for)
 
 
-def build_with_progress(args: argparse.Namespace, scenario, prog, *, need_lp: bool = False):
-    """The scenario's MDP after the size guard (with ``need_lp``: the LP's memory counted too),
-    with the phases on ``prog``; returns ``(mdp, build seconds)``."""
-    from ..models.guard import build_checked
-
-    t0 = time.perf_counter()
-    prog.phase(f"building the MDP of {scenario.source} (size guard first{', LP memory included' if need_lp else ''})")
-    mdp = build_checked(scenario, force=args.force, need_lp=need_lp)
-    t_build = time.perf_counter() - t0
-    prog.phase(f"built: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs, {mdp.P.nnz:,} transitions "
-               f"in {t_build:.2f} s")
-    return mdp, t_build
-
-
-def _matrix_free(args: argparse.Namespace, scenario, t0: float, prog, why: str) -> int:
-    """Certified value iteration without building the MDP (:mod:`wncs_lp.solvers.matrix_free`)."""
-    from ..solvers import solve_scenario
-
-    prog.phase(f"solving without a stored matrix ({why})")
-    sol = solve_scenario(scenario, "matrix-free", progress=bool(getattr(prog, "enabled", False)))
+def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
+    """A solve without a stored matrix (:mod:`wncs_lp.solvers.matrix_free`): asked for, or auto's fallback."""
+    sol = run.solution
     if args.out is not None:  # one byte a state: wncs_lp.solvers.matrix_free.load_solution reads it back
-        prog.phase(f"writing the policy to {args.out}")
+        progress_for(args).phase(f"writing the policy to {args.out}")
         sol.save(args.out)
     payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)), **sol.summary(),
-               "matrix_free_reason": why, "seconds": time.perf_counter() - t0}
+               "matrix_free_reason": run.route, "seconds": time.perf_counter() - t0}
     if args.json:
         emit_json(payload)
     else:
         print(scenario.describe())
-        print(f"method matrix-free ({why}): status {sol.status}, {sol.iterations} sweeps, {sol.seconds:.2f} s")
+        print(f"method matrix-free ({run.route}): status {sol.status}, {sol.iterations} sweeps, {sol.seconds:.2f} s")
         print(f"optimal average cost (gain): {sol.gain:.10g}")
         print(f"certificate: {sol.gain_lower:.12g} <= g* <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e})")
     return 0 if sol.ok else 1
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
-    from ..errors import SolverError
-    from ..models.guard import SizeLimitError
+    from ..solvers.route import solve_scenario
 
     if args.out is not None:
         output_file(args.out, "--out")  # before any work: its folder must exist
     scenario = load(args)
-    constrained = bool(scenario.constraints) and not args.ignore_constraints
-    allowed = CONSTRAINED_METHODS if constrained else UNCONSTRAINED_METHODS + ("matrix-free",)
-    if args.method not in allowed:
-        what = "a scenario with [[constraint]] tables" if constrained else "an unconstrained scenario"
-        raise SolverError(f"--method {args.method} does not solve {what}; expected one of {', '.join(allowed)}")
     prog = progress_for(args)
     t0 = time.perf_counter()
-    if args.method == "matrix-free":
-        return _matrix_free(args, scenario, t0, prog, "asked for")
-    try:
-        mdp, t_build = build_with_progress(args, scenario, prog, need_lp=args.method in LP_METHODS)
-    except SizeLimitError as refused:
-        # auto: a model whose stored matrix would not fit is solved without one, where the model allows
-        if args.method != "auto" or constrained:
-            raise
-        try:
-            return _matrix_free(args, scenario, t0, prog, "auto: the stored matrix would not fit in memory")
-        except SolverError:  # not a model the matrix-free solver takes: the guard's refusal stands
-            raise refused from None
-    if constrained:
-        return _constrained(args, scenario, mdp, t0, t_build, prog)
-    from ..solvers import solve
+    run = solve_scenario(scenario, args.method, constrained=False if args.ignore_constraints else None,
+                         force=args.force, threads=args.threads, progress=prog)
+    if not run.built:
+        return _matrix_free(args, scenario, run, t0)
+    if run.constrained:
+        return _constrained(args, scenario, run, t0, prog)
+    return _unconstrained(args, scenario, run, t0, prog)
+
+
+def _unconstrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> int:
     from ..truncation import policy_cap_mass
 
-    prog.phase(f"solving with method {args.method}")
-    sol = solve(mdp, method=args.method, progress=prog)
-    if sol.pair_actions is None:
-        import dataclasses
-
-        sol = dataclasses.replace(sol, pair_actions=mdp.a_indices)
+    mdp, sol, t_build = run.mdp, run.solution, run.build_seconds
     prog.phase("measuring the optimal policy's time at the AoI cap")
     cap = policy_cap_mass(mdp, sol.policy)
     extra = {}
@@ -90,25 +55,28 @@ def cmd_solve(args: argparse.Namespace) -> int:
         extra["out"] = str(_save(args, scenario, mdp, sol, prog))
     if args.json:
         emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, **extra))
-    else:
-        _header(scenario, mdp, t_build)
-        used = f"{sol.method} -> {sol.stats['auto_choice']}" if "auto_choice" in sol.stats else sol.method
-        print(f"method {used}: status {sol.status}, {sol.iterations} iterations, {sol.seconds:.2f} s")
-        if not sol.ok:
-            print(f"  ({sol.message})")
-        print(f"optimal average cost (gain): {sol.gain:.10g}")
-        print(f"certificate: {sol.gain_lower:.12g} <= g* <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e})")
-        if "auto_choice" in sol.stats:
-            st = sol.stats
-            print(f"auto: chose {st['auto_choice']} ({st['auto_reason']})")
-            if st.get("cross_check_method"):
-                verdict = {True: "agrees", False: "DISAGREES", None: "failed"}[st.get("cross_check_agree")]
-                diff = f", relative difference {st['cross_check_rel_diff']:.2e}" if "cross_check_rel_diff" in st else ""
-                print(f"cross-check with {st['cross_check_method']}: {verdict}{diff}")
-        print(f"truncation: under the optimal policy {cap.message()}")
-        if "out" in extra:
-            print(f"policy and bias written to {extra['out']} (format: see wncs_lp.export)")
+        return 0 if sol.ok else 1
+    _header(scenario, mdp, t_build)
+    used = f"{sol.method} -> {sol.stats['auto_choice']}" if "auto_choice" in sol.stats else sol.method
+    print(f"method {used}: status {sol.status}, {sol.iterations} iterations, {sol.seconds:.2f} s")
+    if not sol.ok:
+        print(f"  ({sol.message})")
+    print(f"optimal average cost (gain): {sol.gain:.10g}")
+    print(f"certificate: {sol.gain_lower:.12g} <= g* <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e})")
+    if "auto_choice" in sol.stats:
+        _print_auto(sol.stats)
+    print(f"truncation: under the optimal policy {cap.message()}")
+    if "out" in extra:
+        print(f"policy and bias written to {extra['out']} (format: see wncs_lp.export)")
     return 0 if sol.ok else 1
+
+
+def _print_auto(st: dict) -> None:
+    print(f"auto: chose {st['auto_choice']} ({st['auto_reason']})")
+    if st.get("cross_check_method"):
+        verdict = {True: "agrees", False: "DISAGREES", None: "failed"}[st.get("cross_check_agree")]
+        diff = f", relative difference {st['cross_check_rel_diff']:.2e}" if "cross_check_rel_diff" in st else ""
+        print(f"cross-check with {st['cross_check_method']}: {verdict}{diff}")
 
 
 def _save(args: argparse.Namespace, scenario, mdp, sol, prog):
@@ -129,12 +97,10 @@ def _header(scenario, mdp, t_build: float) -> None:
     print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs, built in {t_build:.2f} s")
 
 
-def _constrained(args: argparse.Namespace, scenario, mdp, t0: float, t_build: float, prog) -> int:
-    from ..constrained import solve_constrained
+def _constrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> int:
     from ..truncation import cap_mass
 
-    prog.phase(f"solving the constrained problem ({len(scenario.constraints)} bound(s)) with method {args.method}")
-    sol = solve_constrained(mdp, scenario.constraints, args.method)
+    mdp, sol, t_build = run.mdp, run.solution, run.build_seconds
     cap = cap_mass(mdp, sol.occupation)
     extra = {}
     if args.out is not None:
@@ -168,7 +134,7 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--method",
         default=DEFAULT_METHOD,
-        choices=METHODS + ("lagrangian", "matrix-free"),
+        choices=SOLVE_METHODS,
         help=METHOD_HELP + "; matrix-free: certified value iteration without building the MDP (Section II "
         "model; auto switches to it when the stored matrix would not fit in memory); and for a scenario with "
         "[[constraint]] tables: auto, lp, lp-cvxpy or lagrangian (one bound: multiplier search with certified "
@@ -181,6 +147,7 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
                         "and the certificate) to this .npz file, in an existing folder; numpy.load reads it "
                         "(format: wncs_lp.export.save_solution_npz); with the matrix-free method, its policy (one "
                         "byte a state) and certificate, read back by wncs_lp.solvers.matrix_free.load_solution")
+    add_threads_arg(p)
     add_progress_arg(p)
 
 

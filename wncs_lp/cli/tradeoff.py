@@ -5,14 +5,15 @@ import argparse
 import math
 import sys
 
-from .common import Command, add_scenario_args, emit_json, head, load
+from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD
+from .common import (Command, add_parallel_args, add_scenario_args, add_threads_arg, emit_json, executor_of, head,
+                     load)
 
 
 def cmd_tradeoff(args: argparse.Namespace) -> int:
-    from ..constrained.tradeoff import tradeoff
     from ..errors import WncsError
-    from ..models.guard import build_checked
-    from ..sweep import parse_values
+    from ..solvers.route import build_scenario
+    from ..studies import parse_values, tradeoff
 
     scenario = load(args)
     n = len(scenario.constraints)
@@ -22,11 +23,11 @@ def cmd_tradeoff(args: argparse.Namespace) -> int:
     values = parse_values(args.values)
     spec = scenario.constraints[args.constraint - 1]
     side = args.side or ("max" if spec.max is not None else "min")
-    mdp = build_checked(scenario, force=args.force)
+    mdp, _ = build_scenario(scenario, args.method, constrained=True, force=args.force)
     log = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
     res = tradeoff(mdp, scenario.constraints, args.constraint - 1, values, side=side, method=args.method,
                    out=args.out, progress=log, plot=not args.no_plot, max_workers=args.max_workers,
-                   fallback=args.fallback, warm=not args.cold)
+                   executor=executor_of(args), threads=args.threads, fallback=args.fallback, warm=not args.cold)
     payload = {**head(args, scenario, mdp), "constraint_number": args.constraint, **res.summary()}
     if args.json:
         emit_json(payload)
@@ -58,13 +59,13 @@ def _configure_tradeoff(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="output folder: tradeoff.csv/.json/.png (resumed when it holds points)")
     p.add_argument("--side", choices=["max", "min"], default=None,
                    help="which bound to sweep (default: max if the table has one, else min)")
-    p.add_argument("--method", default="auto", choices=["auto", "lp", "lp-highs", "lp-cvxpy", "lagrangian"],
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=CONSTRAINED_METHODS,
                    help="constrained solver at every bound (default auto: the LP up to its size, the "
                         "Lagrangian route beyond)")
-    p.add_argument("--fallback", default=None, choices=["lp", "lp-highs", "lp-cvxpy", "lagrangian"],
+    p.add_argument("--fallback", default=None, choices=tuple(m for m in CONSTRAINED_METHODS if m != DEFAULT_METHOD),
                    help="solve again with this method the points the first one does not certify as optimal")
-    p.add_argument("--max-workers", type=int, default=1,
-                   help="bounds solved in parallel processes (default 1; more than 1 solves every point cold)")
+    add_parallel_args(p, "bounds", executor=False)
+    add_threads_arg(p)
     p.add_argument("--cold", action="store_true",
                    help="solve every LP point from scratch (Clarabel) instead of re-solving it from the previous "
                         "point's basis (HiGHS dual simplex, the default when the LP solves the points)")

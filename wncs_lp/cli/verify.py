@@ -10,19 +10,19 @@ from __future__ import annotations
 import argparse
 import time
 
-from .common import Command, add_method_arg, add_scenario_args, emit_json, head, load
+from .common import Command, add_method_arg, add_scenario_args, add_threads_arg, emit_json, head, load
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    from ..models.guard import build_checked
-    from ..solvers import solve
+    from ..solvers.route import solve_scenario
     from ..verify import Tolerance, verify_all
     from ..verify.verdict import FAILS, RULE, combine
 
     scenario = load(args)
     t0 = time.perf_counter()
-    mdp = build_checked(scenario, force=args.force)
-    sol = solve(mdp, method=args.method)
+    run = solve_scenario(scenario, args.method, constrained=False, force=args.force, threads=args.threads,
+                         need_mdp=True)
+    mdp, sol = run.mdp, run.solution
     reports = verify_all(mdp, sol, tolerance=Tolerance(args.atol, args.rtol), examples=args.examples)
     verdicts = [r.verdict for r in reports]
     payload = {
@@ -77,6 +77,7 @@ def _configure_verify(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rtol", type=float, default=1e-9,
                    help="part of the tie tolerance relative to span(V) = max V - min V (default 1e-9)")
     p.add_argument("--examples", type=int, default=10, help="example violations kept per check (default 10)")
+    add_threads_arg(p)
 
 
 COMMANDS = [

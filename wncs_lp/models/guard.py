@@ -188,16 +188,21 @@ def check_size(
     limit_bytes: int | None = None,
     model=None,
     method: str | None = None,
+    offer: tuple | None = None,
 ) -> SizeEstimate:
     """Refuse (raise :class:`SizeLimitError`) a build whose estimate exceeds the memory limit.
 
     The limit is ``MEMORY_FRACTION`` of :func:`available_memory` unless ``limit_bytes`` is given.
     With ``need_lp`` the LP's memory counts too. ``force=True`` only returns the estimate.
     The message gives the estimate and the cheaper routes that exist.
-    With ``method="matrix-free"`` the need is the matrix-free solver's (``matrix_free_bytes``:
-    nothing is built), against the whole available memory (the estimate is exact up to the
-    fixed overhead, not an upper bound with slack).
+    With a method whose memory model is the AoI box (:data:`wncs_lp.methods.BOX`: the
+    matrix-free solver) the need is that solver's (``matrix_free_bytes``: nothing is built),
+    against the whole available memory (the estimate is exact up to the fixed overhead, not an
+    upper bound with slack). ``offer``: the methods (:class:`wncs_lp.methods.Method` rows) the
+    caller takes, of which the message suggests those that fit (default: the unconstrained ones).
     """
+    from ..methods import BOX, STORED, TABLE, memory_of
+
     if model is None:
         from . import model_for
 
@@ -205,7 +210,7 @@ def check_size(
     est = estimate_size(scenario, model)
     if force:
         return est
-    if method == "matrix-free":
+    if memory_of(method) == BOX:
         limit = int(0.9 * available_memory()) if limit_bytes is None else int(limit_bytes)
         if est.matrix_free_bytes <= limit:
             return est
@@ -222,10 +227,13 @@ def check_size(
     if need <= limit:
         return est
     routes = []
-    if need_lp and est.build_bytes <= limit:
-        routes.append("value iteration (--method rvi) instead of the LP, which fits")
-    if est.matrix_free_bytes <= limit:
-        routes.append(f"the matrix-free solver (--method matrix-free, about {_gib(est.matrix_free_bytes)}: "
+    rows = tuple(TABLE.values()) if offer is None else tuple(offer)
+    lean = next((m for m in rows if m.hint and m.memory == STORED), None)
+    if need_lp and est.build_bytes <= limit and lean is not None:
+        routes.append(f"{lean.hint} (--method {lean.name}) instead of the LP, which fits")
+    box = next((m for m in rows if m.hint and m.memory == BOX), None)
+    if est.matrix_free_bytes <= limit and box is not None:
+        routes.append(f"{box.hint} (--method {box.name}, about {_gib(est.matrix_free_bytes)}: "
                       "no matrix is built), which fits")
     routes += model.cheaper_routes()
     routes.append(f"a smaller cap (--set tau_cap=...; the box is {est.box:,} AoI vectors per configuration)")
@@ -241,7 +249,7 @@ def check_size(
 
 
 def build_checked(scenario: Scenario, *, force: bool = False, need_lp: bool = False,
-                  limit_bytes: int | None = None):
+                  limit_bytes: int | None = None, offer: tuple | None = None):
     """Build a scenario's MDP after the size guard (:func:`check_size`), exploring its automaton once.
 
     Raises
@@ -253,5 +261,5 @@ def build_checked(scenario: Scenario, *, force: bool = False, need_lp: bool = Fa
     from . import model_for
 
     model = model_for(scenario)
-    check_size(scenario, force=force, need_lp=need_lp, limit_bytes=limit_bytes, model=model)
+    check_size(scenario, force=force, need_lp=need_lp, limit_bytes=limit_bytes, model=model, offer=offer)
     return model.build()

@@ -7,9 +7,10 @@ from typing import Any, Sequence
 
 from ..errors import PolicyError
 from ..mdp import MDP
-from ..methods import DEFAULT_METHOD, LP_METHODS
+from ..methods import DEFAULT_METHOD
 from ..models.system import System
 from ..solvers import solve
+from ..solvers.route import build_scenario, solve_scenario
 from .base import Policy
 from .optimal import OptimalPolicy
 from .rules import GreedyPolicy, RandomPolicy, StaticPolicy, default_assignment
@@ -20,6 +21,9 @@ __all__ = ["POLICY_NAMES", "PolicySetup", "make_policy", "parse_assignment", "pa
 
 #: Policy names understood by :func:`make_policy` and the command line.
 POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random")
+#: The policy a solve makes, and those that need the enumerated MDP.
+OPTIMAL = "optimal"
+NEED_MDP = ("optimal", "best_static")
 
 
 def make_policy(
@@ -57,9 +61,9 @@ def make_policy(
     """
     if name not in POLICY_NAMES:
         raise PolicyError(f"unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
-    if name in ("optimal", "best_static") and mdp is None:
+    if name in NEED_MDP and mdp is None:
         raise PolicyError(f"policy {name!r} needs the enumerated MDP")
-    if name == "optimal":
+    if name == OPTIMAL:
         if solution is None:
             solution = solve(mdp, method=method, progress=progress)
         return OptimalPolicy(mdp, solution, system)
@@ -132,12 +136,14 @@ def policy_for(
     assignment: str | Sequence[int] | None = None,
     need_mdp: bool = False,
     force: bool = False,
+    threads: int | None = None,
     progress: Any = False,
 ) -> PolicySetup:
     """Build a scenario's system, its MDP when needed, and the policy ``name`` on them.
 
-    The MDP is built (after the size guard, :func:`wncs_lp.models.guard.build_checked`) when the
-    policy needs it (``optimal``, ``best_static``) or ``need_mdp`` is true.
+    The MDP is built (after the size guard) when the policy needs it (``optimal``,
+    ``best_static``) or ``need_mdp`` is true; ``optimal`` is solved by the one route
+    (:func:`wncs_lp.solvers.route.solve_scenario`).
 
     Parameters
     ----------
@@ -146,13 +152,15 @@ def policy_for(
         One of :data:`POLICY_NAMES`.
     method : str
         Solver method of ``optimal`` (:data:`wncs_lp.methods.METHODS`, default ``"auto"``); with
-        ``"lp"``/``"lp-cvxpy"`` the size guard counts the LP's memory too.
+        an LP method the size guard counts the LP's memory too.
     assignment : str or sequence of int, optional
         For ``static``: text for :func:`parse_assignment` or 0-based server indices.
     need_mdp : bool
         Build the MDP even when the policy does not need it (for an exact evaluation).
     force : bool
         Build even when the size guard refuses.
+    threads : int, optional
+        Kernel threads of the solver of ``optimal`` (default: the solver's).
     progress : bool or Progress
         Phases and the solver's progress on stderr.
 
@@ -163,7 +171,6 @@ def policy_for(
     SizeLimitError
         The MDP is too large and ``force`` is False.
     """
-    from ..models.guard import build_checked
     from ..progress import as_progress
 
     if name not in POLICY_NAMES:
@@ -173,15 +180,14 @@ def policy_for(
     if isinstance(assignment, str):
         assignment = parse_assignment(assignment, scenario)
     system = System.from_scenario(scenario)
-    mdp = None
-    if name in ("optimal", "best_static") or need_mdp:
-        need_lp = name == "optimal" and method in LP_METHODS
-        prog.phase(f"building the MDP of {scenario.source} (size guard first{', LP memory included' if need_lp else ''})")
-        mdp = build_checked(scenario, force=force, need_lp=need_lp)
-        prog.phase(f"built: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs")
-    if name == "optimal":
-        prog.phase(f"solving for the optimal policy with method {method}")
-    elif name == "best_static":
+    mdp = solution = None
+    if name == OPTIMAL:
+        run = solve_scenario(scenario, method, constrained=False, force=force, threads=threads, progress=prog,
+                             need_mdp=True)
+        mdp, solution = run.mdp, run.solution
+    elif name in NEED_MDP or need_mdp:
+        mdp, _ = build_scenario(scenario, force=force, progress=prog)
+    if name == "best_static":
         prog.phase("evaluating every static assignment exactly")
-    policy = make_policy(name, system, mdp, method=method, assignment=assignment, progress=prog)
+    policy = make_policy(name, system, mdp, method=method, solution=solution, assignment=assignment, progress=prog)
     return PolicySetup(system, mdp, policy, time.perf_counter() - t0)

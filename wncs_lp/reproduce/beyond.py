@@ -24,7 +24,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..constrained.tradeoff import TradeoffResult, tradeoff
+from ..studies.tradeoff import TradeoffResult, tradeoff
 from ..scenario import ConstraintSpec
 from ..viz import plot_tradeoff, subplots
 from .context import Context, ExtraResult, Profile

@@ -17,8 +17,9 @@ from ..formulations import scenario_path
 from ..mdp import MDP
 from ..models import build
 from ..scenario import Scenario, load_scenario
-from ..solvers import solve
+from ..methods import EXACT_METHOD_MAX_STATES, exact_method
 from ..solvers.result import Solution
+from ..solvers.route import solve_scenario
 from ..truncation import CAP_MASS_WARN, CapMass, cap_mass
 from ..viz import save_figure
 from .cache import StepCache
@@ -27,8 +28,9 @@ __all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "Table", "
            "short_name"]
 
 #: The reproduction solves by policy iteration up to this many states, by relative value
-#: iteration above (policy iteration's own multichain fallback is the only fallback).
-PI_MAX_STATES = 60_000
+#: iteration above (:func:`wncs_lp.methods.exact_method`; policy iteration's own multichain
+#: fallback is the only fallback).
+PI_MAX_STATES = EXACT_METHOD_MAX_STATES
 
 
 @dataclass(frozen=True)
@@ -357,7 +359,7 @@ class Context:
 
         def compute():
             t0 = time.perf_counter()
-            sol = solve(mdp, method="pi" if mdp.n_states <= PI_MAX_STATES else "rvi")
+            sol = solve_scenario(scenario, exact_method(mdp.n_states), constrained=False, mdp=mdp).solution
             P_pi = mdp.P[sol.policy]
             classes = recurrent_classes(P_pi)
             stationary, _ = stationary_law(P_pi, classes)  # equal weights on several classes

@@ -17,12 +17,13 @@ import numpy as np
 
 from ..chain import PolicyChain, class_stationary
 from ..evaluate import evaluate
+from ..methods import exact_method
 from ..models.guard import estimate_size
 from ..models.system import System
 from ..policies import RandomPolicy, StaticPolicy, SuboptimalPolicy
 from ..sweep import run_sweep
 from ..viz import subplots
-from .context import (PI_MAX_STATES, ClaimResult, Context, Table, assignment_label, cap_basis, evidence,
+from .context import (ClaimResult, Context, Table, assignment_label, cap_basis, evidence,
                       subclaims_verdict)
 from .structural import pct
 
@@ -63,7 +64,7 @@ def mc_agrees(exact: float, mean: float, stderr: float) -> bool | None:
 
 
 def _method(ctx: Context, sc) -> str:
-    return "pi" if ctx.mdp(sc).n_states <= PI_MAX_STATES else "rvi"
+    return exact_method(ctx.mdp(sc).n_states)
 
 
 def _monte_carlo(ctx: Context, name: str, file: str, cap: int, policies: list[str], slots: int, reps: int):

@@ -2,6 +2,8 @@
 
 ``solve(mdp, method)`` dispatches to
 
+Every method is a row of the one registry, :data:`wncs_lp.methods.TABLE`:
+
 * ``"lp"``       -- occupation-measure LP, Clarabel called directly (:func:`solve_lp`);
 * ``"lp-highs"`` -- the same LP on HiGHS (:mod:`wncs_lp.solvers.highs`);
 * ``"lp-cvxpy"`` -- the same LP built with cvxpy and solved by Clarabel;
@@ -13,19 +15,24 @@
 * ``"auto"``     -- picks LP or value iteration by size and cross-checks them when both are
   cheap (:func:`solve_auto`);
 * ``"matrix-free"`` -- certified value iteration without the transition matrix, on the MDP's
-  scenario (:mod:`wncs_lp.solvers.matrix_free`; the answer is returned on the MDP). For systems
-  too large to build, call :func:`solve_scenario` (``method="matrix-free"``) or
-  :func:`wncs_lp.solvers.matrix_free.matrix_free_value_iteration` on the scenario.
+  scenario (:mod:`wncs_lp.solvers.matrix_free`; the answer is returned on the MDP).
+
+From a scenario, :func:`solve_scenario` (:mod:`wncs_lp.solvers.route`) is the one route: size
+guard, build, solve, and ``auto``'s switch to the matrix-free solver when the stored matrix
+would not fit.
 
 Every solution carries the bracket ``gain_lower <= g* <= gain_upper`` from one Bellman
 step on its bias (:func:`bracket`).
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 from ..errors import SolverError
 from ..mdp import MDP
+from ..methods import DEFAULT_METHOD, METHODS, SCENARIO_METHODS
+from ..methods import method as method_row
 from .certify import bellman_step, bracket, certificate_closed, greedy_first, q_values
 from .auto import solve_auto
 from .dp import (
@@ -38,6 +45,7 @@ from .dp import (
 )
 from .lp import LPData, build_lp, extract_policy, solve_lp
 from .result import Solution
+from .route import ScenarioSolve, WarmStart, build_scenario, solve_scenario
 
 __all__ = [
     "METHODS",
@@ -59,60 +67,43 @@ __all__ = [
     "build_lp",
     "extract_policy",
     "solve_lp",
-    "MATRIX_FREE",
     "solve_scenario",
+    "ScenarioSolve",
+    "WarmStart",
+    "build_scenario",
 ]
 
-#: The method names accepted by :func:`solve` (and :data:`MATRIX_FREE`, which needs an MDP built
-#: from a scenario, so it is not in this tuple of methods for any MDP).
-METHODS = ("lp", "lp-highs", "lp-cvxpy", "rvi", "vi", "pi", "auto")
-#: The matrix-free method (:mod:`wncs_lp.solvers.matrix_free`).
-MATRIX_FREE = "matrix-free"
 
-
-def solve(mdp: MDP, method: str = "auto", **kw: Any) -> Solution:
-    """Solve an average-cost MDP with the named method.
+def solve(mdp: MDP, method: str = DEFAULT_METHOD, **kw: Any) -> Solution:
+    """Solve an average-cost MDP with the named method (a row of :data:`wncs_lp.methods.TABLE`).
 
     Parameters
     ----------
     mdp : MDP
-    method : {"lp", "lp-highs", "lp-cvxpy", "rvi", "vi", "pi", "auto", "matrix-free"}
+    method : {"auto", "lp", "lp-highs", "lp-cvxpy", "vi", "rvi", "pi", "matrix-free"}
     **kw
-        Passed to :func:`solve_lp` (``backend`` is set by the method name),
-        :func:`relative_value_iteration`, :func:`value_iteration`, :func:`policy_iteration`
-        or :func:`solve_auto`.
+        The method's keywords: :func:`solve_auto`, :func:`solve_lp` (``backend`` is set by the
+        method name), :func:`value_iteration`, :func:`relative_value_iteration`,
+        :func:`policy_iteration`, or the matrix-free solver's. A keyword the method does not take
+        raises a :class:`SolverError` naming the ones it does.
+
+    Returns
+    -------
+    Solution
+        With ``pair_actions`` (so ``sigma`` and ``chain(mdp)`` work whichever solver ran).
 
     Raises
     ------
     SolverError
-        Unknown method (the message lists the allowed ones), or a solver failure.
+        Unknown method (the message lists the allowed ones), a keyword it does not take, or a
+        solver failure.
     """
-    if method == "lp":
-        return solve_lp(mdp, backend="clarabel", **kw)
-    if method == "lp-highs":
-        return solve_lp(mdp, backend="highs", **kw)
-    if method == "lp-cvxpy":
-        return solve_lp(mdp, backend="cvxpy", **kw)
-    if method == "rvi":
-        return relative_value_iteration(mdp, **kw)
-    if method == "vi":
-        return value_iteration(mdp, **kw)
-    if method == "pi":
-        return policy_iteration(mdp, **kw)
-    if method == "auto":
-        return solve_auto(mdp, **kw)
-    if method == MATRIX_FREE:
-        from .matrix_free import solve_mdp
+    if not isinstance(mdp, MDP):
+        raise SolverError(f"solve takes an MDP (wncs_lp.build(scenario)); got {type(mdp).__name__} "
+                          "(wncs_lp.solve and wncs_lp.solvers.route.solve_scenario take a scenario)")
+    row = method_row(method, allowed=SCENARIO_METHODS)
+    sol = row.call(mdp, on_mdp=True, **kw)
+    if isinstance(sol, Solution) and sol.pair_actions is None:  # e.g. a matrix-free solve mapped onto the MDP
+        sol = replace(sol, pair_actions=mdp.a_indices)
+    return sol
 
-        return solve_mdp(mdp, **kw)
-    raise SolverError(f"unknown solver method {method!r}; expected one of "
-                      f"{', '.join(map(repr, METHODS + (MATRIX_FREE,)))}")
-
-
-def solve_scenario(scenario: Any, method: str = MATRIX_FREE, **kw: Any) -> Solution:
-    """Solve a scenario: ``"matrix-free"`` without building the MDP (a
-    :class:`~wncs_lp.solvers.matrix_free.MatrixFreeSolution`); any other method builds the MDP
-    after the size guard (``force=True`` skips it) and calls :func:`solve`."""
-    from .matrix_free import solve_scenario as _solve_scenario
-
-    return _solve_scenario(scenario, method, **kw)

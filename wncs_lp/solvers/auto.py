@@ -23,7 +23,7 @@ is the chosen method alone).
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import Any, Callable
 
 from ..errors import SolverError
 from ..mdp import MDP
@@ -48,6 +48,54 @@ def _agree(a: Solution, b: Solution, rtol: float) -> tuple[bool, float]:
     return bool(ok), diff / scale
 
 
+def _choose(L: int, need: str | None, lp_small_pairs: int, lp_max_pairs: int) -> tuple[str, str]:
+    """Which method answers (``"lp"`` or ``"vi"``) and why, by size and ``need``."""
+    if need not in (None, "gain", "occupation", "lp"):
+        raise SolverError(f"unknown need {need!r}; expected None, 'gain', 'occupation' or 'lp'")
+    if need in ("occupation", "lp"):
+        if L <= lp_max_pairs:
+            return "lp", f"need={need} and {L} pairs <= {lp_max_pairs}"
+        return "vi", f"need={need} but {L} pairs > {lp_max_pairs}: LP too large, value iteration instead"
+    if L <= lp_small_pairs:
+        return "lp", f"{L} pairs <= {lp_small_pairs}: the LP is cheap and its policy is exactly evaluated"
+    return "vi", f"{L} pairs > {lp_small_pairs}: value iteration (certified) is faster than the LP"
+
+
+def _options(lp_options: dict | None, vi_options: dict | None, h0: Any, tol: float | None, threads: int | None,
+             prog: Progress) -> tuple[dict, dict]:
+    """The keywords of the LP and of value iteration: the caller's, then auto's own where unset."""
+    lp_kw = dict(lp_options or {})
+    vi_kw = dict(vi_options or {})
+    if h0 is not None:
+        vi_kw.setdefault("h0", h0)
+    if tol is not None:
+        vi_kw.setdefault("tol", tol)
+        lp_kw.setdefault("cert_rtol", tol)
+    if threads is not None:
+        vi_kw.setdefault("threads", threads)
+    if prog.enabled:
+        vi_kw.setdefault("progress", prog)
+        lp_kw.setdefault("progress", prog)
+    return lp_kw, vi_kw
+
+
+def _cross_check(sol: Solution, run: Callable[[str], Solution], choice: str, rtol: float) -> dict[str, Any]:
+    """Run the other method and compare the gains (a failure of the other one is reported, not raised)."""
+    other = "vi" if choice == "lp" else "lp"
+    try:
+        o = run(other)
+    except SolverError as exc:
+        return dict(cross_check_method=other, cross_check_error=str(exc), cross_check_agree=None)
+    ok, diff = _agree(sol, o, rtol)
+    return dict(cross_check_method=other, cross_check_status=o.status, cross_check_gain=float(o.gain),
+                cross_check_gain_lower=float(o.gain_lower), cross_check_gain_upper=float(o.gain_upper),
+                cross_check_seconds=float(o.seconds), cross_check_rel_diff=float(diff), cross_check_agree=ok)
+
+
+def _name(which: str) -> str:
+    return "the LP" if which == "lp" else "value iteration"
+
+
 def solve_auto(
     mdp: MDP,
     *,
@@ -60,6 +108,7 @@ def solve_auto(
     vi_options: dict | None = None,
     h0: Any = None,
     tol: float | None = None,
+    threads: int | None = None,
     progress: bool | Progress = False,
 ) -> Solution:
     """Solve with the LP or value iteration, chosen by size and ``need``; see the module doc.
@@ -82,6 +131,8 @@ def solve_auto(
     tol : float, optional
         The relative certificate width asked for: value iteration's ``tol`` and the LP's
         ``cert_rtol`` (unless ``vi_options`` / ``lp_options`` set them).
+    threads : int, optional
+        Value iteration's kernel threads (unless ``vi_options`` sets them; default: the solver's).
     progress : bool or Progress
         Show the choice, then the chosen method's progress and the cross-check's, on stderr.
     """
@@ -91,62 +142,26 @@ def solve_auto(
     from .lp import solve_lp
 
     t0 = time.perf_counter()
-
-    if need not in (None, "gain", "occupation", "lp"):
-        raise SolverError(f"unknown need {need!r}; expected None, 'gain', 'occupation' or 'lp'")
     L = mdp.n_pairs
-    lp_kw = dict(lp_options or {})
-    vi_kw = dict(vi_options or {})
-    if h0 is not None:
-        vi_kw.setdefault("h0", h0)
-    if tol is not None:
-        vi_kw.setdefault("tol", tol)
-        lp_kw.setdefault("cert_rtol", tol)
+    choice, reason = _choose(L, need, lp_small_pairs, lp_max_pairs)
     prog = as_progress(progress)
-    if prog.enabled:
-        vi_kw.setdefault("progress", prog)
-        lp_kw.setdefault("progress", prog)
-    if need in ("occupation", "lp"):
-        if L <= lp_max_pairs:
-            choice, reason = "lp", f"need={need} and {L} pairs <= {lp_max_pairs}"
-        else:
-            choice, reason = "vi", f"need={need} but {L} pairs > {lp_max_pairs}: LP too large, value iteration instead"
-    elif L <= lp_small_pairs:
-        choice, reason = "lp", f"{L} pairs <= {lp_small_pairs}: the LP is cheap and its policy is exactly evaluated"
-    else:
-        choice, reason = "vi", f"{L} pairs > {lp_small_pairs}: value iteration (certified) is faster than the LP"
+    lp_kw, vi_kw = _options(lp_options, vi_options, h0, tol, threads, prog)
 
     def run(which: str) -> Solution:
         return solve_lp(mdp, **lp_kw) if which == "lp" else value_iteration(mdp, **vi_kw)
 
-    prog.phase(f"[auto] {reason}: solving with {'the LP' if choice == 'lp' else 'value iteration'}")
+    prog.phase(f"[auto] {reason}: solving with {_name(choice)}")
     sol = run(choice)
     stats = dict(sol.stats)
     stats.update(method_requested="auto", auto_choice=choice, auto_reason=reason,
                  n_states=mdp.n_states, n_pairs=L)
     status = sol.status
     if L <= cross_check_max_pairs:
-        other = "vi" if choice == "lp" else "lp"
         prog.phase(f"[auto] {L} pairs <= {cross_check_max_pairs}: cross-checking with "
-                   f"{'the LP' if other == 'lp' else 'value iteration'}")
-        try:
-            o = run(other)
-        except SolverError as exc:  # the cross-check failing is reported, not raised
-            stats.update(cross_check_method=other, cross_check_error=str(exc), cross_check_agree=None)
-        else:
-            ok, diff = _agree(sol, o, cross_check_rtol)
-            stats.update(
-                cross_check_method=other,
-                cross_check_status=o.status,
-                cross_check_gain=float(o.gain),
-                cross_check_gain_lower=float(o.gain_lower),
-                cross_check_gain_upper=float(o.gain_upper),
-                cross_check_seconds=float(o.seconds),
-                cross_check_rel_diff=float(diff),
-                cross_check_agree=ok,
-            )
-            if not ok and status == "optimal":
-                status = "inaccurate:cross_check"
+                   f"{_name('vi' if choice == 'lp' else 'lp')}")
+        stats.update(_cross_check(sol, run, choice, cross_check_rtol))
+        if stats["cross_check_agree"] is False and status == "optimal":
+            status = "inaccurate:cross_check"
     else:
         stats.update(cross_check_method=None, cross_check_agree=None,
                      cross_check_skipped=f"{L} pairs > {cross_check_max_pairs}")

@@ -1,4 +1,4 @@
-r"""Trade-off curves: the constrained optimum as one constraint's bound is swept (spec section 6).
+r"""Trade-off curves: the constrained optimum as one constraint's bound is swept (a study).
 
 For every bound b of the grid, ``solve_constrained(mdp, constraints', method)`` where
 constraints' is the list with constraint ``index`` given the bound b on ``side`` (its other
@@ -21,7 +21,7 @@ point with status ``"infeasible"`` and ``reachable`` = the least (``max``) / lar
 value any policy reaches, not an exception; a solver failure is a point with status
 ``"error: ..."``.
 
-Files (with ``out``, a folder, created):
+Files (with ``out``, a folder, created; :class:`~wncs_lp.studies.folder.StudyFolder`):
 
 =========================== ===================================================================
 ``tradeoff.csv``            one row per point (:data:`COLUMNS`), rewritten atomically after each
@@ -30,9 +30,10 @@ Files (with ``out``, a folder, created):
 ``tradeoff.png``            the figure (``plot=True``)
 =========================== ===================================================================
 
-Resume. A rerun into the same folder keeps the points already in ``tradeoff.csv`` (complete,
-parseable rows whose status is not ``error``) and solves only the missing bounds; the grid may
-grow or shrink freely. The settings must match: the MDP (a digest of its arrays, and the
+Resume. A rerun into the same folder keeps the points already in ``tradeoff.csv`` (complete
+rows whose fingerprint checks out and whose status is not ``error``) and solves only the
+missing bounds; the grid may grow or shrink freely. A second run into the folder waits for the
+first. The settings must match: the MDP (a digest of its arrays, and the
 scenario fingerprint when it has one), the swept constraint (quantity, per-pair values, side,
 its other bound), every other constraint (values and bounds) and the method (warm or cold is not
 a setting: both solve the same LP to the same certificate, so a folder may hold ``lp``,
@@ -43,29 +44,35 @@ delete it).
 """
 from __future__ import annotations
 
-import csv
 import hashlib
-import io
 import json
 import math
+import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ..constrained.problem import LinearConstraint
 from ..errors import InfeasibleConstraintsError, PolicyError, WncsError
-from ..files import atomic_write_text, csv_records, dumps
+from ..files import dumps
 from ..mdp import MDP
-from .problem import LinearConstraint
+from ..methods import BASIS, CONSTRAINED, DEFAULT_METHOD, resolve
+from ..methods import method as method_row
+from .folder import FINGERPRINT, StudyFolder, read_table
+from .grid import parse_values, value_key
+from .runner import run_grid
 
 __all__ = ["tradeoff", "TradeoffPoint", "TradeoffResult", "read_points", "COLUMNS", "quantity_unit"]
 
-#: Columns of ``tradeoff.csv``.
+#: Columns of ``tradeoff.csv`` (the fingerprint last).
 COLUMNS = ("bound", "gain", "gain_lower", "gain_upper", "multiplier", "randomized_states", "value", "reachable",
-           "status", "method", "seconds")
+           "status", "method", "seconds", FINGERPRINT)
+_DATA = COLUMNS[:-1]
 
 #: Unit of each quantity's long-run average (axis labels).
 _UNITS = {"send_rate": "updates per slot", "aoi": "slots", "cost": "MSE, sum of traces",
@@ -79,8 +86,6 @@ def quantity_unit(quantity: str) -> str:
     return _UNITS.get(quantity, "")
 
 
-def _key(b: float) -> str:
-    return format(round(float(b), 12), ".12g")
 
 
 def _num(x: Any) -> float:
@@ -142,9 +147,10 @@ class TradeoffPoint:
 
     def to_dict(self) -> dict[str, Any]:
         return {c: (None if isinstance(getattr(self, c), float) and not math.isfinite(getattr(self, c))
-                    else getattr(self, c)) for c in COLUMNS}
+                    else getattr(self, c)) for c in _DATA}
 
     def to_csv(self) -> list[str]:
+        """The point's cells, without its fingerprint."""
         def f(x: float) -> str:
             return repr(float(x)) if math.isfinite(x) else ""
 
@@ -154,12 +160,16 @@ class TradeoffPoint:
 
     @classmethod
     def from_record(cls, rec: dict[str, Any]) -> "TradeoffPoint":
-        """From a CSV record or a :meth:`to_dict` dictionary."""
-        return cls(bound=float(rec["bound"]), gain=_num(rec["gain"]), gain_lower=_num(rec["gain_lower"]),
-                   gain_upper=_num(rec["gain_upper"]), multiplier=_num(rec["multiplier"]),
-                   randomized_states=int(rec["randomized_states"]), value=_num(rec["value"]),
-                   reachable=_num(rec["reachable"]), status=str(rec["status"]), method=str(rec["method"] or ""),
-                   seconds=float(rec["seconds"] or 0.0))
+        """From a CSV record or a :meth:`to_dict` dictionary (ValueError for values no curve
+        writes: a negative count, an empty status, a non-finite bound)."""
+        p = cls(bound=float(rec["bound"]), gain=_num(rec["gain"]), gain_lower=_num(rec["gain_lower"]),
+                gain_upper=_num(rec["gain_upper"]), multiplier=_num(rec["multiplier"]),
+                randomized_states=int(rec["randomized_states"]), value=_num(rec["value"]),
+                reachable=_num(rec["reachable"]), status=str(rec["status"]), method=str(rec["method"] or ""),
+                seconds=float(rec["seconds"] or 0.0))
+        if not math.isfinite(p.bound) or p.randomized_states < 0 or not p.status or not p.seconds >= 0:
+            raise ValueError(f"not a trade-off point: {rec}")
+        return p
 
     def __repr__(self) -> str:
         if not self.feasible:
@@ -172,13 +182,7 @@ class TradeoffPoint:
 
 def read_points(path: str | Path) -> list[TradeoffPoint]:
     """Complete rows of a ``tradeoff.csv`` (a truncated or malformed line is skipped)."""
-    out = []
-    for rec in csv_records(path, COLUMNS):
-        try:
-            out.append(TradeoffPoint.from_record(rec))
-        except (ValueError, KeyError):
-            continue
-    return out
+    return read_table(path, COLUMNS, TradeoffPoint.from_record)
 
 
 # ----------------------------------------------------------------------------- the curve
@@ -231,7 +235,7 @@ class TradeoffResult:
     threshold: float
     reachable: float
     others: tuple[str, ...] = ()
-    method: str = "auto"
+    method: str = DEFAULT_METHOD
     out_dir: Path | None = None
     files: dict[str, str] = field(default_factory=dict)
     computed: int = 0
@@ -271,7 +275,7 @@ class TradeoffResult:
     def point(self, bound: float) -> TradeoffPoint:
         """The point at ``bound`` (KeyError when it is not on the grid)."""
         for p in self.points:
-            if _key(p.bound) == _key(bound):
+            if value_key(p.bound) == value_key(bound):
                 return p
         raise KeyError(f"no point at bound {bound:g}")
 
@@ -404,11 +408,14 @@ def _solve_point(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side:
     return replace(best, seconds=time.perf_counter() - t0)
 
 
-def _lp_route(mdp: MDP, cons: Sequence[LinearConstraint], method: str) -> bool:
-    """Whether :func:`~wncs_lp.constrained.solve_constrained` would solve these with Clarabel's LP."""
-    from .lagrangian import auto_method
-
-    return method in ("lp", "lp-highs") or (method == "auto" and auto_method(mdp, cons) != "lagrangian")
+def _warm_route(mdp: MDP, cons: Sequence[LinearConstraint], method: str) -> bool:
+    """Whether :func:`~wncs_lp.constrained.solve_constrained` would solve these by an LP that a
+    warm HiGHS model can re-solve from the previous basis (the method's registry row, or the row
+    ``auto``'s rule picks)."""
+    row = method_row(method, constrained=True)
+    if row.chooser is not None:
+        row = CONSTRAINED[resolve(row.chooser)(mdp, cons)]
+    return row.warm_start == BASIS
 
 
 def _width(p: TradeoffPoint) -> float:
@@ -418,7 +425,7 @@ def _width(p: TradeoffPoint) -> float:
 
 def _one_solve(mdp: MDP, trial: tuple[LinearConstraint, ...], index: int, side: str, bound: float, label: str,
                method: str, warm: Any = None) -> TradeoffPoint:
-    from . import solve_constrained  # looked up at call time (tests count the solves)
+    from ..constrained import solve_constrained  # looked up at call time (tests count the solves)
 
     try:
         sol = warm.solve(trial) if warm is not None else solve_constrained(mdp, trial, method)
@@ -440,12 +447,11 @@ def _one_solve(mdp: MDP, trial: tuple[LinearConstraint, ...], index: int, side: 
 
 
 def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: str, method: str,
-               unconstrained: str) -> dict[str, Any]:
+               unconstrained: str, threads: int | None = None) -> dict[str, Any]:
     """The optimum without the swept constraint, the quantity's value under it, and its reachable end."""
+    from ..constrained import evaluate_rows, reachable_range, solve_constrained
+    from ..methods import method as unconstrained_row
     from ..solvers import solve
-    from . import solve_constrained
-    from .certify import evaluate_rows
-    from .lp import reachable_range
 
     c = cons[index]
     others = cons[:index] + cons[index + 1:]
@@ -457,7 +463,9 @@ def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: s
         probs = np.asarray(sol.policy, dtype=float)
         g, lo, hi, how = sol.gain, sol.gain_lower, sol.gain_upper, f"constrained ({sol.method}) without the swept one"
     else:
-        sol = solve(mdp, method=unconstrained)
+        row = unconstrained_row(unconstrained)
+        extra = {"threads": threads} if threads is not None and row.takes_keyword("threads", on_mdp=True) else {}
+        sol = solve(mdp, method=unconstrained, **extra)
         probs = np.zeros(mdp.n_pairs)
         probs[np.asarray(sol.policy, dtype=np.int64)] = 1.0
         g, lo, hi, how = sol.gain, sol.gain_lower, sol.gain_upper, f"unconstrained ({sol.method})"
@@ -469,7 +477,135 @@ def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: s
             "reachable": float(reachable_range(mdp, c, side)), "how": how, "seconds": time.perf_counter() - t0}
 
 
+def _point_task(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: str, method: str,
+                fallback: str | None, warm: bool, bound: float, solver: Any = None,
+                emit: Callable[[TradeoffPoint], None] | None = None) -> tuple[list[TradeoffPoint], Any]:
+    """One bound as a task of :func:`~wncs_lp.studies.runner.run_grid`: in order (``emit``
+    given) the points share one warm HiGHS model (the ``solver`` carried from point to point);
+    in worker processes each point is solved cold."""
+    if warm and emit is not None and solver is None:
+        from ..constrained.warm import WarmConstrainedLP
+
+        solver = WarmConstrainedLP(mdp, cons[:index] + (cons[index].with_bounds(**{side: float(bound)}),)
+                                   + cons[index + 1:])
+    point = _solve_point(mdp, cons, index, side, bound, method, fallback, solver)
+    if emit is not None:
+        emit(point)
+    return [point], solver
+
+
 # ----------------------------------------------------------------------------- the sweep
+def _checked(mdp: MDP, constraints: Sequence[Any], index: Any, side: str, method: str, fallback: str | None,
+             max_workers: int) -> tuple[tuple[LinearConstraint, ...], int]:
+    """The constraints as :class:`LinearConstraint` and the index, after checking every argument."""
+    from ..constrained import constraints_for
+
+    if side not in _SIDES:
+        raise WncsError(f"side must be 'max' or 'min', got {side!r}")
+    method_row(method, constrained=True)
+    if fallback is not None:
+        method_row(fallback, constrained=True)
+    if max_workers < 1:
+        raise WncsError(f"max_workers must be >= 1, got {max_workers}")
+    cons = constraints_for(mdp, constraints)
+    if not isinstance(index, (int, np.integer)) or not 0 <= int(index) < len(cons):
+        raise WncsError(f"no constraint at index {index} (0-based): there {'is' if len(cons) == 1 else 'are'} "
+                        f"{len(cons)} constraint{'' if len(cons) == 1 else 's'}")
+    return cons, int(index)
+
+
+def _bounds(values: Sequence[float] | str, c: LinearConstraint, side: str) -> dict[str, float]:
+    """The grid by key (duplicates dropped), none crossing the constraint's other bound."""
+    grid: dict[str, float] = {}
+    for v in parse_values(values):
+        grid.setdefault(value_key(v), float(v))
+    other = getattr(c, "min" if side == "max" else "max")
+    if other is not None:
+        bad = [b for b in grid.values() if (b < other if side == "max" else b > other)]
+        if bad:
+            raise WncsError(f"{_what(c.label)}: bound(s) {', '.join(f'{b:g}' for b in bad)} cross the constraint's "
+                            f"{'min' if side == 'max' else 'max'} = {other:g}")
+    return grid
+
+
+def _say(progress: Callable[[str], None] | bool | None) -> Callable[[str], None] | None:
+    if progress is True:
+        return lambda line: print(line, file=sys.stderr, flush=True)
+    return progress if callable(progress) else None
+
+
+class _Curve:
+    """The points of a trade-off run, in memory and (with a folder) on disk after each one."""
+
+    REFERENCE = "reference"
+
+    def __init__(self, mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: str, method: str,
+                 grid: dict[str, float], folder: StudyFolder | None, say: Callable[[str], None] | None):
+        self.cons, self.index, self.side, self.method, self.grid = cons, index, side, method, grid
+        self.folder, self.say = folder, say
+        self.c = cons[index]
+        self.what = _what(self.c.label)
+        self.t_start = time.perf_counter()
+        self.files: dict[str, str] = {}
+        self.computed = 0
+        self.done: dict[str, TradeoffPoint] = {}
+        self.reference: dict[str, Any] | None = None
+        if folder is not None:
+            rows = folder.rows(TradeoffPoint.from_record, lambda p: value_key(p.bound))
+            self.done = {k: p for k, p in rows.items() if not p.status.startswith("error")}
+            self.reference = self._saved_reference()
+        self.reused = sum(1 for k in grid if k in self.done)
+
+    def _saved_reference(self) -> dict[str, Any] | None:
+        try:
+            saved = json.loads(self.folder.json.read_text())
+        except (OSError, ValueError):
+            return None
+        ref = saved.get(self.REFERENCE) if isinstance(saved, dict) else None
+        if not isinstance(ref, dict):
+            return None
+        return ref if saved.get("reference_fingerprint") == self.folder.seal_json(self.REFERENCE, ref) else None
+
+    def todo(self) -> list[float]:
+        return sorted(b for k, b in self.grid.items() if k not in self.done)
+
+    def result(self) -> TradeoffResult:
+        ref = self.reference
+        pts = tuple(sorted((self.done[k] for k in self.grid if k in self.done), key=lambda p: p.bound))
+        return TradeoffResult(
+            constraint=self.what, quantity=self.c.quantity, index=self.index, side=self.side, points=pts,
+            unconstrained_gain=ref["gain"], unconstrained_lower=ref["gain_lower"],
+            unconstrained_upper=ref["gain_upper"], threshold=ref["threshold"], reachable=ref["reachable"],
+            others=tuple(o.label for j, o in enumerate(self.cons) if j != self.index), method=self.method,
+            out_dir=self.folder.path if self.folder is not None else None, files=dict(self.files),
+            computed=self.computed, reused=self.reused, seconds=time.perf_counter() - self.t_start)
+
+    def save(self) -> None:
+        if self.folder is None:
+            return
+        pts = sorted(self.done.values(), key=lambda p: p.bound)  # every point of the folder, on the grid or not
+        self.files.update(csv=str(self.folder.csv), json=str(self.folder.json))
+        doc = {"settings": self.folder.settings, self.REFERENCE: self.reference,
+               "reference_fingerprint": self.folder.seal_json(self.REFERENCE, self.reference),
+               **self.result().summary()}
+        self.files.update(self.folder.write(((value_key(p.bound), p.to_csv()) for p in pts), doc))
+
+    def record(self, p: TradeoffPoint) -> None:
+        self.done[value_key(p.bound)] = p
+        self.computed += 1
+        self.save()
+        if self.say is None:
+            return
+        op = "<=" if self.side == "max" else ">="
+        if p.feasible:
+            self.say(f"{self.what} {op} {p.bound:g}: gain {p.gain:.10g} [{p.gain_lower:.10g}, {p.gain_upper:.10g}], "
+                     f"multiplier {p.multiplier:.6g}, {p.randomized_states} randomised state(s) "
+                     f"({p.seconds:.2f} s) {p.status}")
+        else:
+            r = f" (reachable: {p.reachable:.10g})" if math.isfinite(p.reachable) else ""
+            self.say(f"{self.what} {op} {p.bound:g}: {p.status}{r} ({p.seconds:.2f} s)")
+
+
 def tradeoff(
     mdp: MDP,
     constraints: Sequence[Any],
@@ -477,11 +613,13 @@ def tradeoff(
     values: Sequence[float] | str,
     *,
     side: str = "max",
-    method: str = "auto",
+    method: str = DEFAULT_METHOD,
     out: str | Path | None = None,
     progress: Callable[[str], None] | bool | None = None,
     plot: bool = True,
     max_workers: int = 1,
+    executor: Any = None,
+    threads: int | None = None,
     unconstrained: str = "vi",
     fallback: str | None = None,
     warm: bool = True,
@@ -496,7 +634,7 @@ def tradeoff(
     index : int
         0-based position of the constraint to sweep.
     values : sequence of float or str
-        The bounds: a list or ``"A:B:STEP"`` / ``"a,b,c"`` (:func:`wncs_lp.sweep.parse_values`).
+        The bounds: a list or ``"A:B:STEP"`` / ``"a,b,c"`` (:func:`wncs_lp.studies.parse_values`).
         Duplicates are dropped; the points come out in increasing order.
     side : {"max", "min"}
         Which bound of the constraint is swept (its other bound, if any, is kept).
@@ -510,6 +648,12 @@ def tradeoff(
         With ``out``, also save ``tradeoff.png`` (:func:`wncs_lp.viz.save_tradeoff_figure`).
     max_workers : int
         Bounds solved in parallel worker processes (default 1: in order, in this process).
+    executor : None, "process", "dask", str, Client or Executor
+        Where the bounds run when not in order (:mod:`wncs_lp.studies.executors`): worker
+        processes, a local Dask cluster, the Dask scheduler at an address (``"tcp://..."``),
+        your own ``dask.distributed.Client`` or a ``concurrent.futures.Executor``.
+    threads : int, optional
+        Kernel threads of the reference's unconstrained solve (default: the solver's).
     unconstrained : str
         Method of :func:`wncs_lp.solve` for the reference optimum when the swept constraint is
         the only one (default ``"vi"``, certified value iteration).
@@ -520,8 +664,8 @@ def tradeoff(
         settings a resumed run must match.
     warm : bool
         When the points are solved by the LP (``method="lp"``, or ``"auto"`` choosing it) one
-        after another (``max_workers=1``): keep the LP in one HiGHS model and re-solve each
-        bound from the previous point's basis (dual simplex;
+        after another (in order): keep the LP in one HiGHS model and re-solve each bound from
+        the previous point's basis (dual simplex;
         :class:`~wncs_lp.constrained.warm.WarmConstrainedLP`), instead of a cold Clarabel
         solve per point. The points are certified the same way; their ``method`` column reads
         ``"lp-warm"`` (``"lp-highs"`` for a cold HiGHS start). False: every point cold. Not
@@ -538,148 +682,25 @@ def tradeoff(
         bound, an output folder holding another curve, or a reference optimum that cannot be
         computed (e.g. the other constraints are infeasible).
     """
-    from ..sweep import parse_values
-    from . import CONSTRAINED_METHODS, constraints_for
-
-    t_start = time.perf_counter()
-    if side not in _SIDES:
-        raise WncsError(f"side must be 'max' or 'min', got {side!r}")
-    if method not in CONSTRAINED_METHODS:
-        raise WncsError(f"unknown constrained method {method!r}; expected one of "
-                        f"{', '.join(map(repr, CONSTRAINED_METHODS))}")
-    if fallback is not None and fallback not in CONSTRAINED_METHODS:
-        raise WncsError(f"unknown fallback method {fallback!r}; expected one of "
-                        f"{', '.join(map(repr, CONSTRAINED_METHODS))}")
-    if max_workers < 1:
-        raise WncsError(f"max_workers must be >= 1, got {max_workers}")
-    cons = constraints_for(mdp, constraints)
-    if not isinstance(index, (int, np.integer)) or not 0 <= int(index) < len(cons):
-        raise WncsError(f"no constraint at index {index} (0-based): there {'is' if len(cons) == 1 else 'are'} "
-                        f"{len(cons)} constraint{'' if len(cons) == 1 else 's'}")
-    index = int(index)
-    grid: dict[str, float] = {}
-    for v in parse_values(values):
-        if not math.isfinite(v):
-            raise WncsError(f"bounds must be finite numbers, got {v!r}")
-        grid.setdefault(_key(v), float(v))
-    c = cons[index]
-    what = _what(c.label)
-    other = getattr(c, "min" if side == "max" else "max")
-    if other is not None:
-        bad = [b for b in grid.values() if (b < other if side == "max" else b > other)]
-        if bad:
-            raise WncsError(f"{what}: bound(s) {', '.join(f'{b:g}' for b in bad)} cross the constraint's "
-                            f"{'min' if side == 'max' else 'max'} = {other:g}")
-    say: Callable[[str], None] | None
-    if progress is True:
-        import sys
-
-        def say(line: str) -> None:
-            print(line, file=sys.stderr, flush=True)
-    else:
-        say = progress if callable(progress) else None
-
-    meta = _meta(mdp, cons, index, side, method)
-    files: dict[str, str] = {}
-    done: dict[str, TradeoffPoint] = {}
-    reference: dict[str, Any] | None = None
-    folder = Path(out) if out is not None else None
-    if folder is not None:
-        folder.mkdir(parents=True, exist_ok=True)
-        meta_path = folder / "tradeoff_meta.json"
-        fresh = json.loads(json.dumps(meta))
-        if meta_path.exists():
+    cons, index = _checked(mdp, constraints, index, side, method, fallback, max_workers)
+    grid = _bounds(values, cons[index], side)
+    folder = StudyFolder(out, "tradeoff", _meta(mdp, cons, index, side, method), COLUMNS,
+                         "a trade-off curve") if out is not None else None
+    with folder if folder is not None else nullcontext():
+        curve = _Curve(mdp, cons, index, side, method, grid, folder, _say(progress))
+        if curve.reference is None:
             try:
-                old = json.loads(meta_path.read_text())
-            except (OSError, ValueError):
-                old = None
-            if old is not None and old != fresh:
-                diff = sorted(k for k in set(old) | set(fresh) if old.get(k) != fresh.get(k))
-                raise WncsError(f"{folder} holds a trade-off curve with other settings ({', '.join(diff)} differ); "
-                                "use another --out folder or delete it")
-        atomic_write_text(meta_path, json.dumps(meta, indent=2) + "\n")
-        files["meta"] = str(meta_path)
-        for p in read_points(folder / "tradeoff.csv"):
-            if not p.status.startswith("error"):
-                done[_key(p.bound)] = p
-        try:
-            saved = json.loads((folder / "tradeoff.json").read_text())
-            if saved.get("settings") == fresh and isinstance(saved.get("reference"), dict):
-                reference = saved["reference"]
-        except (OSError, ValueError):
-            pass
-    reused = sum(1 for k in grid if k in done)
-    if reference is None:
-        try:
-            reference = _reference(mdp, cons, index, side, method, unconstrained)
-        except InfeasibleConstraintsError as exc:
-            raise WncsError(f"the other constraints are infeasible without {what}: {exc}") from None
+                curve.reference = _reference(mdp, cons, index, side, method, unconstrained, threads)
+            except InfeasibleConstraintsError as exc:
+                raise WncsError(f"the other constraints are infeasible without {curve.what}: {exc}") from None
+        todo = curve.todo()
+        task = partial(_point_task, mdp, cons, index, side, method, fallback,
+                       bool(warm and todo and _warm_route(mdp, cons, method)))
+        run_grid(todo, task, curve.record, executor=executor, max_workers=max_workers)
+        curve.save()
+        if folder is not None and plot:
+            from ..viz import save_tradeoff_figure
 
-    def result(seconds: float) -> TradeoffResult:
-        pts = tuple(sorted((done[k] for k in grid if k in done), key=lambda p: p.bound))
-        return TradeoffResult(
-            constraint=what, quantity=c.quantity, index=index, side=side, points=pts,
-            unconstrained_gain=reference["gain"], unconstrained_lower=reference["gain_lower"],
-            unconstrained_upper=reference["gain_upper"], threshold=reference["threshold"],
-            reachable=reference["reachable"], others=tuple(o.label for j, o in enumerate(cons) if j != index),
-            method=method, out_dir=folder, files=dict(files), computed=computed, reused=reused, seconds=seconds)
-
-    def save() -> None:
-        if folder is None:
-            return
-        pts = sorted(done.values(), key=lambda p: p.bound)  # every point of the folder, on the grid or not
-        buf = io.StringIO()
-        w = csv.writer(buf, lineterminator="\n")
-        w.writerow(COLUMNS)
-        for p in pts:
-            w.writerow(p.to_csv())
-        atomic_write_text(folder / "tradeoff.csv", buf.getvalue())
-        files["csv"] = str(folder / "tradeoff.csv")
-        files["json"] = str(folder / "tradeoff.json")
-        doc = {"settings": meta, "reference": reference, **result(time.perf_counter() - t_start).summary()}
-        atomic_write_text(folder / "tradeoff.json", dumps(doc, indent=2) + "\n")
-
-    computed = 0
-
-    def record(p: TradeoffPoint) -> None:
-        nonlocal computed
-        done[_key(p.bound)] = p
-        computed += 1
-        save()
-        if say is not None:
-            op = "<=" if side == "max" else ">="
-            if p.feasible:
-                say(f"{what} {op} {p.bound:g}: gain {p.gain:.10g} [{p.gain_lower:.10g}, {p.gain_upper:.10g}], "
-                    f"multiplier {p.multiplier:.6g}, {p.randomized_states} randomised state(s) "
-                    f"({p.seconds:.2f} s) {p.status}")
-            else:
-                r = f" (reachable: {p.reachable:.10g})" if math.isfinite(p.reachable) else ""
-                say(f"{what} {op} {p.bound:g}: {p.status}{r} ({p.seconds:.2f} s)")
-
-    todo = sorted((b for k, b in grid.items() if k not in done))
-    if max_workers == 1 or len(todo) <= 1:
-        solver = None
-        if warm and todo and _lp_route(mdp, cons, method):
-            from .warm import WarmConstrainedLP
-
-            first = cons[index].with_bounds(**{side: float(todo[0])})
-            solver = WarmConstrainedLP(mdp, cons[:index] + (first,) + cons[index + 1:])
-        for b in todo:
-            record(_solve_point(mdp, cons, index, side, b, method, fallback, solver))
-    else:
-        ex = ProcessPoolExecutor(max_workers=max_workers)
-        try:
-            futs = [ex.submit(_solve_point, mdp, cons, index, side, b, method, fallback) for b in todo]
-            for fut in as_completed(futs):
-                record(fut.result())
-        finally:
-            ex.shutdown(wait=True, cancel_futures=True)
-    save()
-    res = result(time.perf_counter() - t_start)
-    if folder is not None and plot:
-        from ..viz import save_tradeoff_figure
-
-        files.update(save_tradeoff_figure(res, folder / "tradeoff.png"))
-        res = result(time.perf_counter() - t_start)
-        save()  # the JSON lists the figure too
-    return res
+            curve.files.update(save_tradeoff_figure(curve.result(), folder.path / "tradeoff.png"))
+            curve.save()  # the JSON lists the figure too
+    return curve.result()

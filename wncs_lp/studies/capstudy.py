@@ -14,15 +14,22 @@ cap; the study stops at the first cap where both the mass and the relative chang
 the tolerances (or at the last cap given). Beside each gain, the policy optimal at the first cap
 is evaluated at that cap (:class:`~wncs_lp.policies.CappedPolicy`): what the small model's
 answer is worth in the larger one.
+
+The caps are walked in order by the studies' grid runner (:func:`~wncs_lp.studies.runner.run_grid`,
+each cap handing the first cap's policy and its gain to the next), every solve through the one
+route (:func:`wncs_lp.solvers.route.solve_scenario`).
 """
 from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
+from functools import partial
 from typing import Any, Callable, Sequence
 
-from .errors import WncsError
-from .scenario import Scenario
+from ..errors import WncsError
+from ..methods import DEFAULT_METHOD
+from ..scenario import Scenario
+from .runner import run_grid
 
 __all__ = ["CapRow", "CapStudy", "cap_study"]
 
@@ -85,14 +92,48 @@ class CapStudy:
         return f"CapStudy({len(self.rows)} caps, converged={self.converged}{tail})"
 
 
+def _cap_row(scenario: Scenario, opts: dict[str, Any], cap: int, carry: dict[str, Any] | None,
+             emit: Callable[[CapRow], None] | None = None) -> tuple[list[CapRow], dict[str, Any]]:
+    """Solve at one cap (a task of :func:`~wncs_lp.studies.runner.run_grid`, walked in order):
+    the carry holds the first cap's MDP and solution, and the previous gain."""
+    from ..evaluate import evaluate
+    from ..models.system import System
+    from ..policies import CappedPolicy
+    from ..solvers.route import solve_scenario
+    from ..truncation import policy_cap_mass
+
+    t0 = time.perf_counter()
+    sc = scenario.with_overrides({"tau_cap": cap})
+    run = solve_scenario(sc, opts["method"], constrained=False, force=opts["force"], threads=opts["threads"],
+                         need_mdp=True)
+    mdp, sol = run.mdp, run.solution
+    mass = policy_cap_mass(mdp, sol.policy).total
+    if carry is None:
+        carry = {"first": (mdp, sol), "prev": None}
+        fp = float(sol.gain)
+    else:
+        try:
+            fp = evaluate(mdp, CappedPolicy(*carry["first"], System.from_scenario(sc))).gain
+        except WncsError:
+            fp = float("nan")
+    prev = carry["prev"]
+    change = float("nan") if prev is None else (sol.gain - prev) / abs(sol.gain)
+    row = CapRow(cap, mdp.n_states, mdp.n_pairs, float(sol.gain), float(sol.gain_lower), float(sol.gain_upper),
+                 float(mass), float(change), float(fp), time.perf_counter() - t0)
+    if emit is not None:
+        emit(row)
+    return [row], {**carry, "prev": float(sol.gain)}
+
+
 def cap_study(
     scenario: Scenario,
     caps: Sequence[int],
     *,
     mass_tol: float = 0.01,
     gain_rtol: float = 1e-3,
-    method: str = "auto",
+    method: str = DEFAULT_METHOD,
     force: bool = False,
+    threads: int | None = None,
     on_row: Callable[[CapRow], None] | None = None,
 ) -> CapStudy:
     """Solve the scenario at each cap in ``caps`` (increasing) until the truncation stops mattering.
@@ -108,18 +149,16 @@ def cap_study(
         Stop at the first cap whose mass at the cap is at most ``mass_tol`` and whose relative
         change from the previous cap is at most ``gain_rtol``.
     method : str
-        Solver method (:func:`wncs_lp.solvers.solve`).
+        Solver method (:data:`wncs_lp.methods.METHODS`), through the one route
+        (:func:`wncs_lp.solvers.route.solve_scenario`).
     force : bool
         Build past the size guard.
+    threads : int, optional
+        Kernel threads of the solver (default: the solver's).
     on_row : callable, optional
         Called with each row as soon as it is computed (progress, incremental output).
     """
-    from .evaluate import evaluate
-    from .models.guard import build_checked
-    from .models.system import System
-    from .policies import CappedPolicy
-    from .solvers import solve
-    from .truncation import policy_cap_mass
+    from ..methods import check_method
 
     caps = [int(c) for c in caps]
     if not caps or any(b <= a for a, b in zip(caps, caps[1:])):
@@ -128,30 +167,18 @@ def cap_study(
     if caps[0] < longest:
         raise WncsError(f"cap study: the first cap {caps[0]} is below the longest loop length {longest} "
                         "(U + T + D); g*(C) is a lower bound on larger caps only from there on")
+    check_method(method)
     rows: list[CapRow] = []
-    first = None
-    for cap in caps:
-        t0 = time.perf_counter()
-        sc = scenario.with_overrides({"tau_cap": cap})
-        mdp = build_checked(sc, force=force)
-        sol = solve(mdp, method=method)
-        mass = policy_cap_mass(mdp, sol.policy).total
-        system = System.from_scenario(sc)
-        if first is None:
-            first = (mdp, sol)
-            fp = float(sol.gain)
-        else:
-            try:
-                fp = evaluate(mdp, CappedPolicy(first[0], first[1], system)).gain
-            except WncsError:
-                fp = float("nan")
-        prev = rows[-1].gain if rows else None
-        change = float("nan") if prev is None else (sol.gain - prev) / abs(sol.gain)
-        row = CapRow(cap, mdp.n_states, mdp.n_pairs, float(sol.gain), float(sol.gain_lower), float(sol.gain_upper),
-                     float(mass), float(change), float(fp), time.perf_counter() - t0)
+
+    def record(row: CapRow) -> None:
         rows.append(row)
         if on_row is not None:
             on_row(row)
-        if prev is not None and mass <= mass_tol and abs(change) <= gain_rtol:
-            return CapStudy(tuple(rows), True, mass_tol, gain_rtol)
-    return CapStudy(tuple(rows), False, mass_tol, gain_rtol)
+
+    def converged(results: list[CapRow], carry: Any) -> bool:
+        r = results[-1]
+        return len(rows) > 1 and r.cap_mass <= mass_tol and abs(r.rel_change) <= gain_rtol
+
+    opts = {"method": method, "force": force, "threads": threads}
+    run_grid(caps, partial(_cap_row, scenario, opts), record, stop=converged)
+    return CapStudy(tuple(rows), bool(rows) and converged(rows[-1:], None), mass_tol, gain_rtol)

@@ -1,4 +1,4 @@
-"""Trade-off curves (docs/constraints.md section 6): wncs_lp.constrained.tradeoff, its figure and CLI.
+"""Trade-off curves (docs/constraints.md section 6): wncs_lp.studies.tradeoff, its figure and CLI.
 
 Expectations come from elsewhere than the numbers under test: the multiplier of a point against
 the finite-difference slope of the curve built from *other* solves; convexity and monotonicity
@@ -19,7 +19,7 @@ import pytest
 
 import wncs_lp
 import wncs_lp.constrained as constrained
-from wncs_lp.constrained.tradeoff import TradeoffResult, read_points, tradeoff
+from wncs_lp.studies.tradeoff import TradeoffResult, read_points, tradeoff
 from wncs_lp.errors import WncsError
 from wncs_lp.scenario import ConstraintSpec
 

@@ -17,7 +17,7 @@ import pytest
 import wncs_lp
 from wncs_lp.constrained import LinearConstraint, constraints_for
 from wncs_lp.constrained import warm as warm_mod
-from wncs_lp.constrained.tradeoff import read_points, tradeoff
+from wncs_lp.studies.tradeoff import read_points, tradeoff
 from wncs_lp.constrained.warm import WarmConstrainedLP
 from wncs_lp.errors import InfeasibleConstraintsError, SolverError
 from wncs_lp.scenario import ConstraintSpec

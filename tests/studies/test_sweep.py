@@ -11,9 +11,9 @@ import pytest
 from wncs_lp.cli import main
 from wncs_lp.errors import WncsError
 from wncs_lp.scenario import load_scenario
-from wncs_lp.sweep import COLUMNS, parse_values, read_rows, run_sweep
+from wncs_lp.studies import COLUMNS, parse_values, read_rows, run_sweep
 
-FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
+FORMULATIONS = Path(__file__).resolve().parents[2] / "formulations"
 P12 = str(FORMULATIONS / "paper_p12.toml")
 
 
@@ -85,13 +85,25 @@ def test_sweep_p_one_and_parallel(tmp_path):
     np.testing.assert_allclose([r.gain for r in seq.rows], [r.gain for r in res.rows], rtol=1e-9)
 
 
-def test_sweep_on_dask_matches_sequential(tmp_path):
-    """The Dask executor (local cluster, 2 worker processes) gives the sequential table."""
-    import dask.distributed  # noqa: F401  (in the test extra: a missing Dask fails, it does not skip)
+def test_sweep_on_dask_matches_sequential(tmp_path, monkeypatch, capfd):
+    """The Dask executor (a local cluster of its own, 2 worker processes) gives the sequential table;
+    its cluster takes no dashboard port (one may be running already) and closes without a traceback."""
+    import distributed  # in the test extra: a missing Dask fails, it does not skip
 
+    made = {}
+    real = distributed.LocalCluster
+
+    def spy(*a, **kw):
+        made.update(kw)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(distributed, "LocalCluster", spy)
     sc = load_scenario(P12, ["tau_cap=6"])
     pols = ["optimal", "suboptimal"]
     res = run_sweep(sc, "p", [0.85, 0.95], pols, tmp_path / "d", max_workers=2, executor="dask", plot=False)
+    assert made["dashboard_address"] is None and made["n_workers"] == 2
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "CommClosedError" not in err and "8787" not in err
     assert res.computed == 4 and all(r.status.startswith("ok") for r in res.rows)
     seq = run_sweep(sc, "p", [0.85, 0.95], pols, None, plot=False)
     key = lambda r: (r.value, r.policy)  # noqa: E731

@@ -6,7 +6,7 @@ import math
 import pytest
 
 import wncs_lp
-from wncs_lp.capstudy import cap_study
+from wncs_lp.studies import cap_study
 from wncs_lp.errors import WncsError
 
 
