@@ -181,9 +181,9 @@ def test_solve_registers_the_method_on_a_built_mdp():
 
 
 def test_threads_give_the_same_certified_gain(monkeypatch):
-    from wncs_lp.solvers import matrix_free as mf_mod
+    from wncs_lp.solvers.matrix_free import sweeper
 
-    monkeypatch.setattr(mf_mod, "PARALLEL_MIN_STATES", 0)
+    monkeypatch.setattr(sweeper, "PARALLEL_MIN_STATES", 0)
     sc = paper("paper_p1234", "tau_cap=7")
     one = matrix_free_value_iteration(sc, threads=1)
     two = matrix_free_value_iteration(sc, threads=2)
@@ -240,11 +240,11 @@ def test_save_and_load_round_trip(tmp_path):
 
 
 def test_interrupt_returns_a_certified_iterate(monkeypatch):
-    from wncs_lp.solvers import matrix_free as mf_mod
+    from wncs_lp.solvers.matrix_free.sweeper import Sweeper
 
     sc = paper("paper_p12", "tau_cap=8")
     calls = {"n": 0}
-    real = mf_mod._Sweeper.all_actions
+    real = Sweeper.all_actions
 
     def flaky(self, *args):
         calls["n"] += 1
@@ -252,7 +252,7 @@ def test_interrupt_returns_a_certified_iterate(monkeypatch):
             raise KeyboardInterrupt
         return real(self, *args)
 
-    monkeypatch.setattr(mf_mod._Sweeper, "all_actions", flaky)
+    monkeypatch.setattr(Sweeper, "all_actions", flaky)
     sol = matrix_free_value_iteration(sc)
     assert sol.status == "interrupted" and sol.gain_lower <= sol.gain <= sol.gain_upper
     ref = wncs_lp.solve(wncs_lp.build(sc), "vi")

@@ -306,7 +306,7 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
 # tile_cfg[x0:x1] in that tile. Chunk ci does items[ip[ci]:ip[ci + 1]] in order, and the chunks
 # run on numba's threads in one parallel region per sweep (a region per tile was measured 10x
 # slower on a loaded machine: every region waits for both threads to be scheduled). The chunks
-# are contiguous ranges of tiles (matrix_free._work_items), so each thread's in-place sweep
+# are contiguous ranges of tiles (:func:`.operator.work_items`), so each thread's in-place sweep
 # runs in the serial order over its part of the AoI box.
 
 
