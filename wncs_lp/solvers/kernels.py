@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import SolverError
 from ..mdp import MDP
+from .threads import resolve_threads, run_parallel
 
 __all__ = ["SweepData", "prepare", "code_table", "get_kernel", "numba_available", "ScipyKernel", "KERNELS"]
 
@@ -222,26 +223,11 @@ class NumbaKernel:
     def __init__(self, mdp: MDP, threads: int | None = None):
         self.mod = _load_numba()
         self.d = prepare(mdp)
-        import numba
-
-        # serial by default: numba's OpenMP layer (GNU libgomp) does not survive a fork, and
-        # parameter sweeps fork worker processes; threads >= 2 opts in to the parallel sweep
-        self.threads = max(1, min(int(threads or 1), numba.config.NUMBA_NUM_THREADS))
+        # the usable cores on large MDPs, one in a fork of a process that ran OpenMP (.threads)
+        self.threads = resolve_threads(threads, self.d.n)
         self.nchunk = max(1, min(8 * self.threads, self.d.n)) if self.threads > 1 else 1
         self._lo = np.empty(self.nchunk)
         self._hi = np.empty(self.nchunk)
-
-    def _with_threads(self, fn, *args):
-        import numba
-
-        old = numba.get_num_threads()
-        if old != self.threads:
-            numba.set_num_threads(self.threads)
-        try:
-            return fn(*args)
-        finally:
-            if old != self.threads:
-                numba.set_num_threads(old)
 
     def jacobi(self, h: np.ndarray, h_out: np.ndarray, tau: float, shift: float) -> tuple[float, float]:
         """d = T h - h; h_out = h + tau (d - shift); returns (min d, max d)."""
@@ -249,7 +235,7 @@ class NumbaKernel:
         args = (d.indptr, d.indices, d.codes, d.table, d.cost, d.cost_per_state, d.pair_ptr, h, h_out,
                 float(tau), float(shift), self.nchunk, self._lo, self._hi)
         if self.threads > 1:
-            self._with_threads(self.mod.jacobi_sweep, *args)
+            run_parallel(self.mod.jacobi_sweep, self.threads, *args)
         else:
             self.mod.jacobi_sweep_serial(*args)
         return float(self._lo.min()), float(self._hi.max())

@@ -53,21 +53,22 @@ operator T_pi to the bracket min_S (T_pi h - h) <= g_pi <= max_S (T_pi h - h).
 
 Rooms: :mod:`.layout` (the states), :mod:`.operator` (the tables a sweep reads, tiles and
 thread split), :mod:`.kernels` (numba), :mod:`.sweeper` (kernel calls, reachability),
-:mod:`.extrapolate`, :mod:`.iterate` (value iteration and evaluation), :mod:`.result` (result
+:mod:`.extrapolate`, :mod:`.options`, :mod:`.iterate` (value iteration and evaluation), :mod:`.result` (result
 types, save / load), :mod:`.capmass` (time at the cap), :mod:`.solve` (entry points by method).
 """
 from __future__ import annotations
 
 from .capmass import cap_cost, matrix_free_cap_mass, matrix_free_cap_masses
-from .iterate import (BYTES_PER_STATE, SCHEMES, matrix_free_bytes, matrix_free_evaluate, matrix_free_value_iteration,
-                      policy_table)
+from .iterate import BYTES_PER_STATE, matrix_free_bytes, matrix_free_evaluate, matrix_free_value_iteration, policy_table
 from .layout import DOMAINS, BoxLayout, drains_to_initial
+from .options import SCHEMES, MatrixFreeOptions
 from .result import MatrixFreeEvaluation, MatrixFreeSolution, load_solution
 from .solve import solve_mdp, solve_scenario
 from .sweeper import reachable_mask
 
 __all__ = [
     "BoxLayout",
+    "MatrixFreeOptions",
     "MatrixFreeSolution",
     "MatrixFreeEvaluation",
     "matrix_free_value_iteration",

@@ -60,16 +60,16 @@ class Extrapolator:
         self.saved_at = iters
 
     def _axpy(self, h: np.ndarray, f: float, undo: bool) -> None:
+        """h += f (h - h_prev), or undo it: h -= f / (1 + f) (h - h_prev), by blocks (a block-sized
+        temporary). Written as a correction of h, never as (1 + f) h, which overflows before the
+        result does when h is near float64's limit."""
         step = 1 << 20
+        k = -f / (1.0 + f) if undo else f
         for a in range(0, h.size, step):
             hb = h[a:a + step]
-            pb = self.prev[a:a + step]
-            if undo:  # h_k = (h + f h_prev) / (1 + f)
-                hb += f * pb
-                hb /= 1.0 + f
-            else:  # h + f (h - h_prev)
-                hb *= 1.0 + f
-                hb -= f * pb
+            d = hb - self.prev[a:a + step]
+            d *= k
+            hb += d
 
     def settle(self, h: np.ndarray) -> None:
         """At the end of a run: undo an extrapolation that no pass has certified yet, so that h

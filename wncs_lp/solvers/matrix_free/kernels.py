@@ -24,16 +24,19 @@ signed ones, and LLVM then turned the contiguous loads into AVX-512 gathers), an
 whole chunk of planes is one function (a call per plane passes ~30 arrays, and numba's atomic
 reference counting of them cost ~10%).
 
-Kernels (each with a serial driver and a ``prange`` one over chunks of work items):
+Kernels (each a ``prange`` driver over chunks of work items, compiled for numba's threads and,
+as ``*_serial``, for one: :func:`wncs_lp.solvers.threads.twins`):
 
-* :func:`all_actions_ser` / ``_par`` -- every action's value on a row (``acc``), then the
-  minimum over actions (``mode = 0``: the Bellman operator T, first minimiser kept, ``arg``)
-  or the weighted sum with per-configuration action weights ``W[c, j]`` (``mode = 1``: a
-  tau-independent randomised policy). ``write = 0`` only computes min / max of (T h - h)
-  (over the states with ``mask`` set when ``use_mask``), ``1`` updates h in place
-  (Gauss-Seidel: ``h += relax (T h - h - shift)``), ``2`` writes ``h_out`` (Jacobi);
-  ``write_pol`` stores the minimiser in ``pol`` (uint8).
-* :func:`fixed_policy_ser` / ``_par`` -- the same for one action per state (``pol``).
+* :func:`all_actions` -- every action's value on a row (``acc``), then the minimum over actions
+  (``mode`` :attr:`Reduce.MIN <.operator.Reduce.MIN>`: the Bellman operator T, first minimiser
+  kept, ``arg``) or the weighted sum with per-configuration action weights ``W[c, j]``
+  (:attr:`Reduce.WEIGHTED <.operator.Reduce.WEIGHTED>`: a tau-independent randomised policy).
+  ``write`` (:class:`.operator.Write`) ``NONE`` only computes min / max of (T h - h) (over the
+  states with ``mask`` set when ``use_mask``), ``IN_PLACE`` updates h in place (Gauss-Seidel:
+  ``h += relax (T h - h - shift)``), ``OUT`` writes ``h_out`` (Jacobi); ``write_pol`` stores
+  the minimiser in ``pol`` (uint8).
+* :func:`fixed_policy` -- the same for one action per state (``pol``), which must be in range
+  for its configuration (checked by the callers: :func:`.layout.check_local_actions`).
 * :func:`reach_all` -- marks the successors of the marked states to a fixed point.
 
 With threads, a Gauss-Seidel sweep is asynchronous across the chunks (a plane may
@@ -48,6 +51,9 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit, prange, uint64
+
+from ..threads import twins
+from .operator import Reduce, Write
 
 
 @njit(cache=True, nogil=True, boundscheck=False, fastmath={"contract"})
@@ -117,7 +123,7 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
             first = True
             for j in range(na):
                 w = 1.0
-                if mode == 1:
+                if mode == Reduce.WEIGHTED:
                     w = W[c, j]
                     if w == 0.0:
                         continue
@@ -138,7 +144,7 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                             acc[i] += p * h[b + uint64(i)]
                         for i in range(sp, L):
                             acc[i] += v
-                if mode == 0:
+                if mode == Reduce.MIN:
                     if first:
                         for i in range(L):
                             best[i] = acc[i]
@@ -170,10 +176,10 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                 for i in range(L):
                     lo = min(lo, dd[i])
                     hi = max(hi, dd[i])
-            if write == 1:
+            if write == Write.IN_PLACE:
                 for i in range(L):
                     h[su + uint64(i)] += relax * (dd[i] - shift)
-            elif write == 2:
+            elif write == Write.OUT:
                 for i in range(L):
                     h_out[su + uint64(i)] = h[su + uint64(i)] + relax * (dd[i] - shift)
             if write_pol:
@@ -287,10 +293,10 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
                 for i in range(L):
                     lo = min(lo, dd[i])
                     hi = max(hi, dd[i])
-            if write == 1:
+            if write == Write.IN_PLACE:
                 for i in range(L):
                     h[su + uint64(i)] += relax * (dd[i] - shift)
-            elif write == 2:
+            elif write == Write.OUT:
                 for i in range(L):
                     h_out[su + uint64(i)] = h[su + uint64(i)] + relax * (dd[i] - shift)
             s0 += L
@@ -310,10 +316,9 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
 # runs in the serial order over its part of the AoI box.
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def all_actions_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
-                    e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
-                    maxO, maxL, los, his):
+def _all_actions_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
+                      e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
+                      maxO, maxL, los, his):
     for ci in prange(ip.size - 1):
         los[ci] = np.inf
         his[ci] = -np.inf
@@ -325,24 +330,8 @@ def all_actions_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, ac
                        write_pol, relax, shift, mask, use_mask, iscr, fscr, los, his)
 
 
-@njit(cache=True, nogil=True)
-def all_actions_ser(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
-                    e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
-                    maxO, maxL, los, his):
-    for ci in range(ip.size - 1):
-        los[ci] = np.inf
-        his[ci] = -np.inf
-        iscr = np.zeros((7, max(maxO, maxL)), np.int64)
-        fscr = np.zeros((3, maxL))
-        for it in range(ip[ci], ip[ci + 1]):
-            _all_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
-                       off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, W, mode, write,
-                       write_pol, relax, shift, mask, use_mask, iscr, fscr, los, his)
-
-
-@njit(cache=True, nogil=True, parallel=True)
-def fixed_policy_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
-                     e_base, e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, maxO, maxL, los, his):
+def _fixed_policy_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
+                       e_base, e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, maxO, maxL, los, his):
     for ci in prange(ip.size - 1):
         los[ci] = np.inf
         his[ci] = -np.inf
@@ -354,18 +343,10 @@ def fixed_policy_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, a
                          shift, mask, use_mask, iscr, fscr, los, his)
 
 
-@njit(cache=True, nogil=True)
-def fixed_policy_ser(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
-                     e_base, e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, maxO, maxL, los, his):
-    for ci in range(ip.size - 1):
-        los[ci] = np.inf
-        his[ci] = -np.inf
-        iscr = np.zeros((7, max(maxO, maxL)), np.int64)
-        fscr = np.zeros((3, maxL))
-        for it in range(ip[ci], ip[ci + 1]):
-            _fixed_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
-                         off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, write, relax,
-                         shift, mask, use_mask, iscr, fscr, los, his)
+#: Every action's value on each state (the Bellman operator or a weighted policy), by chunks.
+all_actions, all_actions_serial = twins(_all_actions_body, "all_actions")
+#: One fixed action per state, by chunks.
+fixed_policy, fixed_policy_serial = twins(_fixed_policy_body, "fixed_policy")
 
 
 # ----------------------------------------------------------------------------- reachability

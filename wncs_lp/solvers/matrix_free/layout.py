@@ -4,16 +4,20 @@ whether the hull's certificate closes on the reachable MDP's gain (:func:`drains
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ...errors import PolicyError, SolverError
 from ...models.system import System
 
-__all__ = ["BoxLayout", "drains_to_initial", "resolve_domain", "saturation", "DOMAINS"]
+__all__ = ["BoxLayout", "drains_to_initial", "resolve_domain", "saturation", "check_local_actions", "DOMAINS",
+           "DOMAINS_OF_LAYOUT"]
 
 #: ``domain`` values of the solvers (see :mod:`wncs_lp.solvers.matrix_free`).
 DOMAINS = ("auto", "hull", "reachable")
+#: ``domain`` values of a :class:`BoxLayout`.
+DOMAINS_OF_LAYOUT = ("hull", "box")
 
 
 def drains_to_initial(system: System) -> bool:
@@ -184,3 +188,34 @@ def resolve_domain(system: System, domain: str) -> tuple[bool, bool]:
         return False, drains
     return (not drains), drains
 
+
+
+def check_local_actions(table: Any, layout: BoxLayout, n_actions: np.ndarray, what: str) -> np.ndarray:
+    """``table`` as the (n,) uint8 local actions of a layout, after checking it.
+
+    One integer per layout state, and at a state of configuration c an index
+    ``0 <= j < n_actions[c]``: a kernel reads the outcome tables of action j of c without bounds
+    checks, so an index out of range would read another configuration's tables and give a wrong
+    (certified!) number. Raises one :class:`PolicyError` naming ``what`` and the first bad state.
+    """
+    a = np.asarray(table)
+    n = layout.n_states
+    if a.shape != (n,):
+        raise PolicyError(f"{what}: expected one local action index per layout state ({n:,}), got shape {a.shape}")
+    if not np.issubdtype(a.dtype, np.integer):
+        raise PolicyError(f"{what}: local action indices must be integers, got dtype {a.dtype}")
+    nact = np.asarray(n_actions, dtype=np.int64)
+    starts = layout.off[:-1]
+    lo_c, hi_c = np.minimum.reduceat(a, starts), np.maximum.reduceat(a, starts)
+    bad = np.flatnonzero((lo_c < 0) | (hi_c >= nact))
+    if bad.size:
+        c = int(bad[0])
+        seg = a[layout.off[c]:layout.off[c + 1]].astype(np.int64)
+        i = int(np.flatnonzero((seg < 0) | (seg >= nact[c]))[0])
+        s = int(layout.off[c]) + i
+        tau = tuple(int(t) for t in layout.tau_of(np.array([s]))[0])
+        raise PolicyError(f"{what}: state {s:,} (configuration {c}, tau = {tau}) has local action {int(seg[i])}, "
+                          f"but configuration {c} has {int(nact[c])} action(s) (0..{int(nact[c]) - 1})")
+    if int(nact.max(initial=1)) > 256:  # pragma: no cover - the paper's models have <= 12
+        raise PolicyError(f"{what}: a configuration has more than 256 actions; a uint8 table cannot hold them")
+    return a if a.dtype == np.uint8 else a.astype(np.uint8)

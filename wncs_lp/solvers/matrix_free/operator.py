@@ -5,6 +5,7 @@ threads (:func:`work_items`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from enum import IntEnum
 from typing import Any
 
 import numpy as np
@@ -13,7 +14,28 @@ from ...errors import SolverError
 from ...models.system import System
 from .layout import BoxLayout, saturation
 
-__all__ = ["Operator", "tiles", "work_items", "with_cost"]
+__all__ = ["Operator", "Reduce", "Write", "tiles", "work_items", "with_cost", "check_costs"]
+
+
+class Reduce(IntEnum):
+    """How a kernel combines the actions of a state (its ``mode``)."""
+
+    #: the minimum over actions (the Bellman operator T), its first minimiser kept
+    MIN = 0
+    #: the sum weighted by the per-configuration action probabilities ``W[c, j]`` (a
+    #: tau-independent randomised policy)
+    WEIGHTED = 1
+
+
+class Write(IntEnum):
+    """What a kernel pass writes (its ``write``)."""
+
+    #: nothing: only min / max of (T h - h), a certificate on a fixed h
+    NONE = 0
+    #: h in place, Gauss-Seidel: ``h += relax (T h - h - shift)``
+    IN_PLACE = 1
+    #: the next iterate into ``h_out`` (Jacobi): ``h_out = h + relax (T h - h - shift)``
+    OUT = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,7 +78,7 @@ class Operator:
         q = np.zeros((N, qmax))
         for k in range(N):
             q[k, : caps[k]] = system.q[k]
-        scale = float(sum(float(np.max(np.abs(system.q[k]))) for k in range(N)))
+        scale = check_costs(q, caps, [p.name for p in system.scenario.processes])
         tile_tc, tile_ptr, tile_cfg = tiles(layout)
         n_out = np.diff(flat.out_ptr[flat.act_ptr])
         return cls(
@@ -80,6 +102,13 @@ class Operator:
             max_row=int(layout.dims[:, N - 1].max()),
             cost_scale=scale,
         )
+
+    @property
+    def roundoff_terms(self) -> int:
+        """The most floating-point operations behind one (T h - h)(s) after its first term: the
+        outcomes of a configuration (every action's, for a weighted sum), the N cost terms and the
+        final subtraction (the m of Higham's gamma_m, :class:`wncs_lp.solvers.dp.RoundoffBound`)."""
+        return self.max_out + self.N + 2
 
 
 def tiles(layout: BoxLayout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -156,6 +185,22 @@ def with_cost(op: Operator, cost: Any) -> Operator:
     q = np.zeros_like(op.q)
     for k in range(op.N):
         q[k, : op.caps[k]] = c[k, : op.caps[k]]
-    scale = float(sum(float(np.max(np.abs(q[k]))) for k in range(op.N)))
+    scale = check_costs(q, op.caps, [f"row {k}" for k in range(op.N)])
     return replace(op, q=q, cost_scale=max(scale, 1e-300))
+
+
+def check_costs(q: np.ndarray, caps: np.ndarray, names: list[str]) -> float:
+    """The cost scale sum_k max_tau |q_k(tau)| (the largest cost of a slot), after checking that every
+    cost and that sum are finite: a SolverError naming the process and the AoI where a cost overflows."""
+    for k, name in enumerate(names):
+        row = q[k, : int(caps[k])]
+        bad = np.flatnonzero(~np.isfinite(row))
+        if bad.size:
+            raise SolverError(f"process {name!r}: its cost q(tau) overflows float64 from tau = {int(bad[0]) + 1} on "
+                              f"(tau_cap {int(caps[k])}); lower the cap or rescale the process (A, weight)")
+    scale = float(sum(float(np.max(np.abs(q[k, : int(caps[k])]))) for k in range(len(names))))
+    if not np.isfinite(scale):
+        raise SolverError(f"the largest cost of a slot, sum_k max q_k = {scale}, overflows float64; lower the caps "
+                          "or rescale the processes")
+    return scale
 

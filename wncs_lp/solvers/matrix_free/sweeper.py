@@ -3,21 +3,21 @@ the reachability marking (:func:`reachable_mask`)."""
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import numpy as np
 
 from ...errors import SolverError
 from ...models.system import System
+from ..threads import resolve_threads, run_parallel
 from .layout import BoxLayout
-from .operator import Operator, work_items
+from .operator import Operator, Reduce, Write, work_items
 
-__all__ = ["Sweeper", "load_kernels", "reachable_mask", "PARALLEL_MIN_STATES"]
-
-#: Below this many layout states the solvers use one thread whatever ``threads`` says.
-PARALLEL_MIN_STATES = 1_000_000
+__all__ = ["Sweeper", "load_kernels", "reachable_mask"]
 
 
-def load_kernels():
+def load_kernels() -> Any:
+    """The numba kernels (:mod:`.kernels`); a SolverError when numba is missing or disabled."""
     if os.environ.get("WNCS_LP_NO_NUMBA"):
         raise SolverError("the matrix-free solver needs numba, disabled here by WNCS_LP_NO_NUMBA")
     try:
@@ -29,21 +29,19 @@ def load_kernels():
     return K
 
 
-
 class Sweeper:
-    """Calls the kernels with the right driver (serial or numba threads) and reductions."""
+    """One kind of pass over the layout, on the serial or the threaded kernel.
+
+    ``threads`` as :func:`wncs_lp.solvers.threads.resolve_threads` (default: the usable cores
+    from :data:`~wncs_lp.solvers.threads.PARALLEL_MIN_STATES` states on, else one; explicit
+    counts are kept). The chunks of a threaded pass are contiguous ranges of tiles
+    (:func:`.operator.work_items`).
+    """
 
     def __init__(self, op: Operator, threads: int | None, mask: np.ndarray | None, reverse: bool = False):
         self.K = load_kernels()
-        import numba
-
-        self.numba = numba
         self.op = op
-        self.threads = max(1, min(int(threads or 1), numba.config.NUMBA_NUM_THREADS))
-        if op.off[-1] < PARALLEL_MIN_STATES:
-            # a parallel region per sweep costs ~5 ms on a loaded machine (both threads must be
-            # scheduled): below this size one thread is faster
-            self.threads = 1
+        self.threads = resolve_threads(threads, int(op.off[-1]))
         self.nchunk = self.threads
         self.items, self.ip, self.tile_cfg = work_items(op, self.nchunk, reverse)
         self.los = np.empty(self.nchunk)
@@ -53,35 +51,33 @@ class Sweeper:
         self._dummy_h = np.zeros(1)
         self._dummy_W = np.zeros((1, 1))
 
-    def _run(self, fn_par, fn_ser, *args):
+    def _run(self, fn_par, fn_ser, *args) -> tuple[float, float]:
         if self.threads > 1:
-            nb = self.numba
-            old = nb.get_num_threads()
-            nb.set_num_threads(self.threads)
-            try:
-                with nb.parallel_chunksize(1):
-                    fn_par(*args)
-            finally:
-                nb.set_num_threads(old)
+            run_parallel(fn_par, self.threads, *args, chunksize=1)
         else:
             fn_ser(*args)
         return float(self.los.min()), float(self.his.max())
 
-    def all_actions(self, h, h_out, pol, W, mode, write, write_pol, relax, shift):
+    def all_actions(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, W: np.ndarray | None,
+                    reduce: Reduce, write: Write, write_pol: bool, relax: float, shift: float) -> tuple[float, float]:
+        """A pass of every action: the Bellman operator (``Reduce.MIN``, its minimiser into ``pol``
+        with ``write_pol``) or the weights ``W`` (``Reduce.WEIGHTED``); returns min / max of T h - h."""
         o = self.op
         return self._run(
-            self.K.all_actions_par, self.K.all_actions_ser,
+            self.K.all_actions, self.K.all_actions_serial,
             self.items, self.ip, o.tile_tc, self.tile_cfg, o.N, o.lo, o.dims, o.strides, o.off,
             o.act_ptr, o.out_ptr, o.e_prob, o.e_m, o.e_base, o.e_stride, o.q, h,
-            self._dummy_h if h_out is None else h_out, pol, self._dummy_W if W is None else W, int(mode),
+            self._dummy_h if h_out is None else h_out, pol, self._dummy_W if W is None else W, int(reduce),
             int(write), bool(write_pol), float(relax), float(shift), self.mask, self.use_mask, o.max_out,
             o.max_row, self.los, self.his,
         )
 
-    def fixed(self, h, h_out, pol, write, relax, shift):
+    def fixed(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, write: Write, relax: float,
+              shift: float) -> tuple[float, float]:
+        """A pass of the fixed policy ``pol`` (one local action per state); min / max of T_pol h - h."""
         o = self.op
         return self._run(
-            self.K.fixed_policy_par, self.K.fixed_policy_ser,
+            self.K.fixed_policy, self.K.fixed_policy_serial,
             self.items, self.ip, o.tile_tc, self.tile_cfg, o.N, o.lo, o.dims, o.strides, o.off,
             o.act_ptr, o.out_ptr, o.e_prob, o.e_m, o.e_base, o.e_stride, o.q, h,
             self._dummy_h if h_out is None else h_out, pol, int(write), float(relax), float(shift), self.mask,
@@ -102,4 +98,3 @@ def reachable_mask(system: System, layout: BoxLayout, max_passes: int = 100_000)
     if passes > max_passes:  # pragma: no cover - monotone marking settles in finitely many passes
         raise SolverError("reachability marking did not settle")
     return mask
-
