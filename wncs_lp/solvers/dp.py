@@ -19,7 +19,7 @@ from ..mdp import MDP
 from ..progress import Progress, as_progress
 from .certify import bracket, certificate_closed, greedy_first, q_values
 from .iteration import (PRECISION_STALL_SWEEPS, VI_TOL, IterationOptions, IterationOutcome, IterationScheme,
-                        cert_line, certified_iteration, gamma, max_abs)
+                        cert_line, certified_iteration, gamma, is_int, max_abs)
 from .result import Solution
 
 __all__ = [
@@ -144,52 +144,73 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: n
     n = mdp.n_states
     classes = recurrent_classes(P_pi)
     if len(classes) != 1:
-        a, b = classes[0], classes[1]
-        raise MultichainPolicyError(
-            f"the policy induces a multichain Markov chain with {len(classes)} recurrent classes "
-            f"(e.g. state {mdp.state_label(int(a[0]))} in a class of {a.size} state(s) and "
-            f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost "
-            "depends on the start state and a single gain/bias is undefined"
-        )
+        raise _multichain_error(mdp, classes)
     r = int(classes[0][0])
-    M = (sp.identity(n, format="csc") - P_pi).tocsc()
-    M.data[M.indptr[r]:M.indptr[r + 1]] = 0.0
-    M.eliminate_zeros()
-    M = (M + sp.csc_matrix((np.ones(n), (np.arange(n), np.full(n, r))), shape=(n, n))).tocsc()
-    solver = "splu"
-    z = None
+    M = _poisson_matrix(P_pi, r)
     z0 = None if h0 is None else initial_bias(h0, n, r)  # checked whichever path runs
-    if method == "iterative" or (method == "auto" and n >= EVAL_ITERATIVE_MIN_STATES):
-        if z0 is not None:
-            z0[r] = float(np.median(c_pi + P_pi @ z0 - z0))  # a gain estimate for the unknown g
-        its = int(maxiter) if maxiter is not None else max(1000, int(2 * np.sqrt(n)))
-        z = _bicgstab(M.tocsr(), c_pi, z0, its)
-        solver = "bicgstab" if z is not None else "bicgstab->splu"
-    if z is None:
-        try:
-            lu = spla.splu(M)
-        except RuntimeError as exc:  # exactly singular: should not happen for a unichain policy
-            raise PolicyError(f"policy evaluation system is singular ({exc})") from exc
-
-        z = lu.solve(c_pi)
-        z = z + lu.solve(c_pi - M @ z)
+    z, solver = _solve_poisson(M, P_pi, c_pi, r, z0, method, maxiter)
     g = float(z[r])
     h = z.copy()
     h[r] = 0.0
     pi = np.zeros(n)
     pi[classes[0]] = class_stationary(P_pi, classes[0])[0]
+    residual = _check_poisson(P_pi, c_pi, g, h, pi)
+    return PolicyEvaluation(gain=g, bias=h - h[0], stationary=pi, residual=residual, solver=solver)
 
+
+def _multichain_error(mdp: MDP, classes: list) -> MultichainPolicyError:
+    a, b = classes[0], classes[1]
+    return MultichainPolicyError(
+        f"the policy induces a multichain Markov chain with {len(classes)} recurrent classes "
+        f"(e.g. state {mdp.state_label(int(a[0]))} in a class of {a.size} state(s) and "
+        f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost "
+        "depends on the start state and a single gain/bias is undefined"
+    )
+
+
+def _poisson_matrix(P_pi: sp.csr_matrix, r: int) -> sp.csc_matrix:
+    """M = I - P_pi with column r replaced by ones (z[r] is then the gain g)."""
+    n = P_pi.shape[0]
+    M = (sp.identity(n, format="csc") - P_pi).tocsc()
+    M.data[M.indptr[r]:M.indptr[r + 1]] = 0.0
+    M.eliminate_zeros()
+    return (M + sp.csc_matrix((np.ones(n), (np.arange(n), np.full(n, r))), shape=(n, n))).tocsc()
+
+
+def _solve_poisson(M: sp.csc_matrix, P_pi: sp.csr_matrix, c_pi: np.ndarray, r: int, z0: np.ndarray | None,
+                   method: str, maxiter: int | None) -> tuple[np.ndarray, str]:
+    """z with M z = c_pi: BiCGSTAB on large chains (or when asked), else (or when it misses) a
+    sparse LU with one refinement step; and which solver answered."""
+    n = M.shape[0]
+    if method == "iterative" or (method == "auto" and n >= EVAL_ITERATIVE_MIN_STATES):
+        if z0 is not None:
+            z0[r] = float(np.median(c_pi + P_pi @ z0 - z0))  # a gain estimate for the unknown g
+        its = int(maxiter) if maxiter is not None else max(1000, int(2 * np.sqrt(n)))
+        z = _bicgstab(M.tocsr(), c_pi, z0, its)
+        if z is not None:
+            return z, "bicgstab"
+        solver = "bicgstab->splu"
+    else:
+        solver = "splu"
+    try:
+        lu = spla.splu(M)
+    except RuntimeError as exc:  # exactly singular: should not happen for a unichain policy
+        raise PolicyError(f"policy evaluation system is singular ({exc})") from exc
+    z = lu.solve(c_pi)
+    return z + lu.solve(c_pi - M @ z), solver
+
+
+def _check_poisson(P_pi: sp.csr_matrix, c_pi: np.ndarray, g: float, h: np.ndarray, pi: np.ndarray) -> float:
+    """The residual of g + h = c_pi + P_pi h and of pi P_pi = pi, sum pi = 1; PolicyError if too large."""
     res_bias = float(np.max(np.abs(g + h - c_pi - P_pi @ h)))
     res_pi = float(np.max(np.abs(P_pi.T @ pi - pi)) + abs(pi.sum() - 1.0))
-    residual = max(res_bias, res_pi)
     scale = max(float(np.max(np.abs(c_pi))), float(np.max(np.abs(h))), 1e-300)
     if not (res_bias <= EVAL_RESIDUAL_TOL * scale and res_pi <= EVAL_RESIDUAL_TOL):  # NaN fails too
         raise PolicyError(
             f"policy evaluation is inaccurate: bias residual {res_bias:.3g} (scale {scale:.3g}), "
             f"stationary residual {res_pi:.3g}"
         )
-    h = h - h[0]
-    return PolicyEvaluation(gain=g, bias=h, stationary=pi, residual=residual, solver=solver)
+    return max(res_bias, res_pi)
 
 
 def _bicgstab(A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray | None, maxiter: int,
@@ -529,23 +550,16 @@ def value_iteration(
     * ``"gs"``  -- the same without the evaluation sweeps;
     * ``"jacobi"`` -- relative value iteration with the aperiodicity transform
       (``tau = 0.5``), exactly :func:`relative_value_iteration`'s iteration;
-    * ``"auto"`` -- ``"mpi"`` with the numba kernel, ``"jacobi"`` with the scipy one (which
-      has no in-place sweep). MPI needs 2-3x fewer sweeps than Jacobi on the paper's
-      instances at their benchmark sizes, but not everywhere: on the small preemption model
-      (cap 12) Jacobi's error dies out after a few cap-lengths (70 sweeps vs ~550); pass
-      ``scheme="jacobi"`` there.
+    * ``"auto"`` -- ``"mpi"`` with the numba kernel, ``"jacobi"`` with the scipy one (no
+      in-place sweep). MPI needs 2-3x fewer sweeps than Jacobi on the paper's instances, but
+      not on the small preemption model (cap 12: 70 Jacobi sweeps vs ~550).
 
-    Every ``check_every`` improvement sweeps, one Jacobi sweep computes ``d = T h - h`` on the
-    current h and the certificate ``lo = min d <= g* <= hi = max d`` (valid for any h, so the
-    in-place sweeps need no convergence theory to be trusted). The loop is
-    :func:`wncs_lp.solvers.iteration.certified_iteration`: it stops when the bracket widened by
-    its round-off bound (:class:`RoundoffBound`) meets ``tol`` (relative) or ``atol``; if the
-    width has not halved in ``stall_checks`` checks the Jacobi scheme takes over, whose
-    convergence is guaranteed when the optimal gain does not depend on the start state
-    (``stats["fallback"]``); a tolerance below the attainable precision ends with status
-    ``"inaccurate:precision"`` and the bracket widened by delta; a bracket that settles without
-    closing in the Jacobi scheme ends ``"inaccurate:start_dependent"`` (several closed classes
-    with different gains).
+    Every ``check_every`` improvement sweeps, one Jacobi sweep computes the certificate
+    ``lo = min (T h - h) <= g* <= max (T h - h) = hi`` on the current h (valid for any h, so the
+    in-place sweeps need no convergence theory to be trusted). The loop -- closing rule with the
+    round-off band (:class:`RoundoffBound`), precision stop, Jacobi fallback after
+    ``stall_checks`` checks without the width halving, start-dependent stop -- is
+    :func:`wncs_lp.solvers.iteration.certified_iteration`.
 
     Parameters
     ----------
@@ -605,18 +619,9 @@ def value_iteration(
     from .kernels import prepare
 
     return _finish(mdp, "vi", sweeps, out, t0, opts, prog, {
-        "scheme": scheme,
-        "kernel": K.name,
-        "threads": K.threads,
-        "sweeps": out.used,
-        "eval_sweeps": out.evals,
-        "checks": out.checks,
-        "relax": relax,
-        "tol": tol,
-        "bytes_per_sweep": prepare(mdp).bytes_per_sweep,
-        "fallback": out.fallback,
-        "final_scheme": sweeps.name,
-    })
+        "scheme": scheme, "kernel": K.name, "threads": K.threads, "sweeps": out.used, "eval_sweeps": out.evals,
+        "checks": out.checks, "relax": relax, "tol": tol, "bytes_per_sweep": prepare(mdp).bytes_per_sweep,
+        "fallback": out.fallback, "final_scheme": sweeps.name})
 
 
 # ---------------------------------------------------------------------------- PI
@@ -701,84 +706,115 @@ def policy_iteration(
         or a bad ``h0``.
     """
     t0 = time.perf_counter()
+    cert_rtol = _pi_tolerance(tol, cert_rtol)
+    if not (is_int(max_iter) and max_iter >= 1):
+        raise SolverError(f"max_iter must be an integer >= 1, got {max_iter!r}")
+    if multichain not in ("fallback", "raise"):
+        raise SolverError(f"multichain must be 'fallback' or 'raise', got {multichain!r}")
+    prog = as_progress(progress)
+    run = _HowardRun(mdp, _pi_start(mdp, policy0, h0), rtol, multichain, kernel, prog)
+    run.iterate(max_iter)
+    if run.ev is None or run.vi_stands:  # every iterate multichain: value iteration's certificate stands
+        return _vi_as_pi(mdp, run.vi, t0, run.it, run.changes, run.fallback, cert_rtol)
+    return _pi_solution(mdp, run, t0, cert_rtol, prog)
+
+
+def _pi_tolerance(tol: float | None, cert_rtol: float | None) -> float:
+    """The certificate's relative width asked for (``tol``, or its older name ``cert_rtol``)."""
     if tol is not None and cert_rtol is not None and tol != cert_rtol:
         raise SolverError(f"policy iteration: give tol or its older name cert_rtol, not both ({tol} and {cert_rtol})")
-    cert_rtol = float(tol if tol is not None else cert_rtol if cert_rtol is not None else 1e-6)
-    if not cert_rtol >= 0:
-        raise SolverError(f"tol must be >= 0, got {cert_rtol}")
-    prog = as_progress(progress)
+    out = float(tol if tol is not None else cert_rtol if cert_rtol is not None else 1e-6)
+    if not out >= 0:
+        raise SolverError(f"tol must be >= 0, got {out}")
+    return out
+
+
+def _pi_start(mdp: MDP, policy0: np.ndarray | None, h0: np.ndarray | None) -> np.ndarray:
+    """The first policy: ``policy0``, the greedy policy of ``h0``, or the cheapest pair of each state."""
     if policy0 is not None and h0 is not None:
         raise SolverError("policy iteration starts from policy0 or from the greedy policy of h0, not both")
     if h0 is not None:
-        d = greedy_first(mdp, q_values(mdp, initial_bias(h0, mdp.n_states, 0)))
-    elif policy0 is None:
-        d = greedy_first(mdp, mdp.cost)
-    else:
-        d = np.asarray(policy0)
-        if not np.issubdtype(d.dtype, np.integer):
-            raise PolicyError(f"policy0 must be an integer array of pair indices, got dtype {d.dtype}")
-        d = d.astype(np.int64)
-    if multichain not in ("fallback", "raise"):
-        raise SolverError(f"multichain must be 'fallback' or 'raise', got {multichain!r}")
-    stable = False
-    ev = None
-    it = 0
-    changes = []
-    vi = None
-    fallback = None
-    for it in range(1, max_iter + 1):
-        try:
-            ev_k = evaluate_policy(mdp, d, h0=None if ev is None else ev.bias)
-        except MultichainPolicyError as exc:
-            if multichain == "raise":
-                raise
-            if vi is not None:  # the value-iteration policy is multichain too: its certificate stands
-                fallback = f"value iteration (its greedy policy is multichain too: {exc})"
-                return _vi_as_pi(mdp, vi, t0, it, changes, fallback, cert_rtol)
-            prog.phase(f"[pi] iterate {it} is multichain: value iteration, then policy iteration from its policy")
-            vi = value_iteration(mdp, h0=None if ev is None else ev.bias, kernel=kernel, progress=prog)
-            fallback = f"iterate {it} multichain; restarted from the value-iteration policy ({vi.iterations} sweeps)"
-            d = vi.policy.astype(np.int64)
-            changes.append(-1)
-            continue
-        ev = ev_k
-        q = q_values(mdp, ev.bias)
-        d_new = _improve(mdp, q, d, rtol)
-        nchg = int(np.count_nonzero(d_new != d))
-        changes.append(nchg)
-        prog.tick(f"[pi] iteration {it}: gain of the evaluated policy {ev.gain:.10g}, {nchg:,} states improve",
-                  force=True)
-        if nchg == 0:
-            stable = True
-            break
-        d = d_new
-    if ev is None:  # every evaluation so far was multichain and the budget ran out
-        assert vi is not None
-        return _vi_as_pi(mdp, vi, t0, it, changes, fallback, cert_rtol)
+        return greedy_first(mdp, q_values(mdp, initial_bias(h0, mdp.n_states, 0)))
+    if policy0 is None:
+        return greedy_first(mdp, mdp.cost)
+    d = np.asarray(policy0)
+    if not np.issubdtype(d.dtype, np.integer):
+        raise PolicyError(f"policy0 must be an integer array of pair indices, got dtype {d.dtype}")
+    return d.astype(np.int64)
+
+
+class _HowardRun:
+    """The evaluate -> improve loop of policy iteration, with its multichain fallback."""
+
+    def __init__(self, mdp: MDP, d: np.ndarray, rtol: float, multichain: str, kernel: str, prog: Progress):
+        self.mdp, self.d, self.rtol, self.multichain, self.kernel, self.prog = mdp, d, rtol, multichain, kernel, prog
+        self.ev: PolicyEvaluation | None = None
+        self.vi: Solution | None = None
+        self.vi_stands = False
+        self.stable = False
+        self.it = 0
+        self.changes: list[int] = []
+        self.fallback: str | None = None
+
+    def iterate(self, max_iter: int) -> None:
+        for self.it in range(1, max_iter + 1):
+            try:
+                ev = evaluate_policy(self.mdp, self.d, h0=None if self.ev is None else self.ev.bias)
+            except MultichainPolicyError as exc:
+                if self.multichain == "raise":
+                    raise
+                if not self._restart(exc):
+                    return
+                continue
+            self.ev = ev
+            d_new = _improve(self.mdp, q_values(self.mdp, ev.bias), self.d, self.rtol)
+            nchg = int(np.count_nonzero(d_new != self.d))
+            self.changes.append(nchg)
+            self.prog.tick(f"[pi] iteration {self.it}: gain of the evaluated policy {ev.gain:.10g}, {nchg:,} states "
+                           "improve", force=True)
+            if nchg == 0:
+                self.stable = True
+                return
+            self.d = d_new
+
+    def _restart(self, exc: MultichainPolicyError) -> bool:
+        """A multichain iterate: value iteration, then policy iteration from its greedy policy. False
+        when value iteration's policy was multichain already (its certificate then stands)."""
+        if self.vi is not None:
+            self.fallback = f"value iteration (its greedy policy is multichain too: {exc})"
+            self.vi_stands = True
+            return False
+        self.prog.phase(f"[pi] iterate {self.it} is multichain: value iteration, then policy iteration from its policy")
+        self.vi = value_iteration(self.mdp, h0=None if self.ev is None else self.ev.bias, kernel=self.kernel,
+                                  progress=self.prog)
+        self.fallback = (f"iterate {self.it} multichain; restarted from the value-iteration policy "
+                         f"({self.vi.iterations} sweeps)")
+        self.d = self.vi.policy.astype(np.int64)
+        self.changes.append(-1)
+        return True
+
+
+def _pi_solution(mdp: MDP, run: _HowardRun, t0: float, cert_rtol: float, prog: Progress) -> Solution:
+    """The Solution of a policy-iteration run: the exact gain of its last policy, the certificate
+    on that policy's bias, its stationary pair frequencies."""
+    ev = run.ev
     lo, hi = bracket(mdp, ev.bias)
     rel = (hi - lo) / max(abs(ev.gain), 1e-300)
-    if not stable:
+    if not run.stable:
         status = "max_iter"
     elif certificate_closed(mdp, lo, hi, ev.gain, cert_rtol):
         status = "optimal"
     else:
         status = "inaccurate"
     occ = np.zeros(mdp.n_pairs)
-    occ[d] = ev.stationary
-    prog.done(f"[pi] {it} evaluation(s): {lo:.10g} <= g* <= {hi:.10g}, gap {rel:.2e} ({status})")
+    occ[run.d] = ev.stationary
+    prog.done(f"[pi] {run.it} evaluation(s): {lo:.10g} <= g* <= {hi:.10g}, gap {rel:.2e} ({status})")
     return Solution(
-        method="pi",
-        status=status,
-        gain=ev.gain,
-        gain_lower=lo,
-        gain_upper=hi,
-        bias=ev.bias,
-        policy=d.copy(),
-        occupation=occ,
-        iterations=it,
-        seconds=time.perf_counter() - t0,
-        stats={"stable": stable, "changes": changes, "rel_gap": rel, "eval_residual": ev.residual,
-               "fallback": fallback, "vi_sweeps": None if vi is None else vi.iterations, "tol": cert_rtol},
+        method="pi", status=status, gain=ev.gain, gain_lower=lo, gain_upper=hi, bias=ev.bias, policy=run.d.copy(),
+        occupation=occ, iterations=run.it, seconds=time.perf_counter() - t0,
+        stats={"stable": run.stable, "changes": run.changes, "rel_gap": rel, "eval_residual": ev.residual,
+               "fallback": run.fallback, "vi_sweeps": None if run.vi is None else run.vi.iterations,
+               "tol": cert_rtol},
         pair_actions=mdp.a_indices,
     )
 
