@@ -56,59 +56,65 @@ from ..threads import twins
 from .operator import Reduce, Write
 
 
+# The plane setup is inlined into both chunk kernels by numba (``inline="always"``, at the level of
+# numba's IR: no call, no reference counting of its arrays). The row loops are written out in each
+# kernel on purpose: inlined helpers for them (the values of an action along a row, the end of a
+# row) were measured 20-30% slower on processes 1-4 at cap 8 (the all-actions pass, CPU time per
+# state, five alternating runs), so those kernels stay long.
+@njit(inline="always")
+def _plane(c, tc, N, lo_, dims, strides, off, act_ptr, out_ptr, e_m, e_base, e_stride, q, split, sat, A, rs, rm):
+    """Set up the plane of configuration c in tile ``tc``: per outcome o, the last axis' split /
+    saturation, the offset due to the tile's axes (A) and the stride / saturation of the row axis
+    N - 2. Returns the row length L, the row's first AoI index loN, the first outcome o0, the
+    plane's first state s0, the tile axes' cost qo0, and the rows (count, first AoI index)."""
+    L = dims[c, N - 1]
+    loN = lo_[c, N - 1]
+    o0 = out_ptr[act_ptr[c]]
+    nO = out_ptr[act_ptr[c + 1]] - o0
+    for o in range(nO):
+        e = o0 + o
+        mN = e_m[e, N - 1]
+        sat[o] = mN
+        split[o] = min(max(mN - loN, 0), L)
+        v = e_base[e]
+        for k in range(N - 2):
+            tk = tc[k] + 1
+            mk = e_m[e, k]
+            v += e_stride[e, k] * (tk if tk < mk else mk)
+        A[o] = v
+        if N >= 2:
+            rs[o] = e_stride[e, N - 2]
+            rm[o] = e_m[e, N - 2]
+        else:
+            rs[o] = 0
+            rm[o] = 0
+    s0 = off[c]
+    qo0 = 0.0
+    for k in range(N - 2):
+        s0 += (tc[k] - lo_[c, k]) * strides[c, k]
+        qo0 += q[k, tc[k]]
+    nrows = 1
+    tr = 0
+    if N >= 2:
+        nrows = dims[c, N - 2]
+        tr = lo_[c, N - 2]
+    return L, loN, o0, nO, s0, qo0, nrows, tr
+
+
 @njit(cache=True, nogil=True, boundscheck=False, fastmath={"contract"})
 def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m, e_base,
                e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask, iscr, fscr,
                los, his):
-    P = iscr[0]
-    split = iscr[1]
-    sat = iscr[2]
-    A = iscr[3]
-    rs = iscr[4]
-    rm = iscr[5]
-    arg = iscr[6]
-    acc = fscr[0]
-    best = fscr[1]
-    dd = fscr[2]
+    P, split, sat, A, rs, rm, arg = iscr[0], iscr[1], iscr[2], iscr[3], iscr[4], iscr[5], iscr[6]
+    acc, best, dd = fscr[0], fscr[1], fscr[2]
     lo = np.inf
     hi = -np.inf
     for x in range(x0, x1):
         c = tile_cfg[x]
-        L = dims[c, N - 1]
-        loN = lo_[c, N - 1]
+        L, loN, o0, nO, s0, qo0, nrows, tr = _plane(c, tc, N, lo_, dims, strides, off, act_ptr, out_ptr, e_m,
+                                                    e_base, e_stride, q, split, sat, A, rs, rm)
         a0 = act_ptr[c]
         na = act_ptr[c + 1] - a0
-        o0 = out_ptr[a0]
-        nO = out_ptr[a0 + na] - o0
-        # ---- plane setup: per outcome, the last axis' split / saturation, the offset due
-        # to the tile's axes (A) and the stride / saturation of the row axis N - 2
-        for o in range(nO):
-            e = o0 + o
-            mN = e_m[e, N - 1]
-            sat[o] = mN
-            split[o] = min(max(mN - loN, 0), L)
-            v = e_base[e]
-            for k in range(N - 2):
-                tk = tc[k] + 1
-                mk = e_m[e, k]
-                v += e_stride[e, k] * (tk if tk < mk else mk)
-            A[o] = v
-            if N >= 2:
-                rs[o] = e_stride[e, N - 2]
-                rm[o] = e_m[e, N - 2]
-            else:
-                rs[o] = 0
-                rm[o] = 0
-        s0 = off[c]
-        qo0 = 0.0
-        for k in range(N - 2):
-            s0 += (tc[k] - lo_[c, k]) * strides[c, k]
-            qo0 += q[k, tc[k]]
-        nrows = 1
-        tr = 0
-        if N >= 2:
-            nrows = dims[c, N - 2]
-            tr = lo_[c, N - 2]
         qN = q[N - 1]
         qu = uint64(loN)
         # ---- rows
@@ -196,52 +202,16 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
 @njit(cache=True, nogil=True, boundscheck=False, fastmath={"contract"})
 def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m, e_base,
                  e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, iscr, fscr, los, his):
-    split = iscr[1]
-    sat = iscr[2]
-    A = iscr[3]
-    rs = iscr[4]
-    rm = iscr[5]
-    arg = iscr[6]
-    acc = fscr[0]
-    best = fscr[1]
-    dd = fscr[2]
+    split, sat, A, rs, rm, arg = iscr[1], iscr[2], iscr[3], iscr[4], iscr[5], iscr[6]
+    acc, best, dd = fscr[0], fscr[1], fscr[2]
     lo = np.inf
     hi = -np.inf
     for x in range(x0, x1):
         c = tile_cfg[x]
-        L = dims[c, N - 1]
-        loN = lo_[c, N - 1]
+        L, loN, o0, nO, s0, qo0, nrows, tr = _plane(c, tc, N, lo_, dims, strides, off, act_ptr, out_ptr, e_m,
+                                                    e_base, e_stride, q, split, sat, A, rs, rm)
         a0 = act_ptr[c]
         na = act_ptr[c + 1] - a0
-        o0 = out_ptr[a0]
-        nO = out_ptr[act_ptr[c + 1]] - o0
-        for o in range(nO):
-            e = o0 + o
-            mN = e_m[e, N - 1]
-            sat[o] = mN
-            split[o] = min(max(mN - loN, 0), L)
-            v = e_base[e]
-            for k in range(N - 2):
-                tk = tc[k] + 1
-                mk = e_m[e, k]
-                v += e_stride[e, k] * (tk if tk < mk else mk)
-            A[o] = v
-            if N >= 2:
-                rs[o] = e_stride[e, N - 2]
-                rm[o] = e_m[e, N - 2]
-            else:
-                rs[o] = 0
-                rm[o] = 0
-        s0 = off[c]
-        qo0 = 0.0
-        for k in range(N - 2):
-            s0 += (tc[k] - lo_[c, k]) * strides[c, k]
-            qo0 += q[k, tc[k]]
-        nrows = 1
-        tr = 0
-        if N >= 2:
-            nrows = dims[c, N - 2]
-            tr = lo_[c, N - 2]
         qN = q[N - 1]
         qu = uint64(loN)
         for r in range(nrows):
