@@ -14,7 +14,8 @@ holds the very same doubles), the cost as one number per state when it does not 
 the action, and the pointers as int32 when they fit.
 
 numba is optional (the ``fast`` extra): :func:`get_kernel` returns the numba kernel when it
-imports and the scipy kernel otherwise; both give the same sweeps up to summation order
+imports and the MDP is large enough for its load to pay (:data:`NUMBA_MIN_STATES`), and the
+scipy kernel otherwise; both give the same sweeps up to summation order
 (``tests/solvers/test_perf_dp.py``). The numba kernels also offer in-place (Gauss-Seidel) sweeps and
 fixed-policy sweeps for modified policy iteration, which the scipy kernel emulates with
 Jacobi sweeps.
@@ -31,7 +32,8 @@ from ..errors import SolverError
 from ..mdp import MDP
 from .threads import resolve_threads, run_parallel
 
-__all__ = ["SweepData", "prepare", "code_table", "get_kernel", "numba_available", "ScipyKernel", "KERNELS"]
+__all__ = ["SweepData", "prepare", "code_table", "get_kernel", "numba_available", "ScipyKernel", "KERNELS",
+           "NUMBA_MIN_STATES"]
 
 #: kernel names accepted by :func:`get_kernel`
 KERNELS = ("auto", "numba", "scipy")
@@ -290,17 +292,33 @@ class ScipyKernel:
         h += tau * (v - shift)
 
 
+#: ``kernel="auto"`` takes numba from this many states on, scipy below. numba's fixed cost in a
+#: fresh process (its import and the load of three compiled kernels from its cache) was measured
+#: at 1.9-2.1 s on a loaded 2-core machine, the scipy kernel's Jacobi value iteration at about
+#: 3.6-5.4e-5 s a state against numba's 1e-5 (processes 1, 2 at caps 4-30, 1-3 at caps 6-10, to
+#: 1e-9): they cross at 50k-80k states. (270 states: numba 2.3 s, scipy 0.04 s; 110k states:
+#: numba 2.9 s, scipy 4.0 s.)
+NUMBA_MIN_STATES = 50_000
+
+
 def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None):
-    """A sweep kernel for ``mdp``: ``"numba"``, ``"scipy"`` or ``"auto"`` (numba when importable).
+    """A sweep kernel for ``mdp``: ``"numba"``, ``"scipy"`` or ``"auto"`` (numba when importable
+    and the MDP has at least :data:`NUMBA_MIN_STATES` states, where its load pays).
+
+    ``threads`` (numba only): None for the default of :func:`wncs_lp.solvers.threads.resolve_threads`
+    (the usable cores from 1M states on, one below), else an integer >= 1.
 
     Raises
     ------
     ValueError
-        Unknown name, or ``"numba"`` requested but numba is not importable.
+        Unknown name, a bad ``threads``, or ``"numba"`` requested but numba is not importable.
     """
     if kernel not in KERNELS:
         raise ValueError(f"unknown kernel {kernel!r}; expected one of {', '.join(KERNELS)}")
-    if kernel == "scipy" or (kernel == "auto" and not numba_available()):
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
+        raise ValueError(f"threads must be an integer >= 1 (or None: the default), got {threads!r}")
+    small = mdp.n_states < NUMBA_MIN_STATES
+    if kernel == "scipy" or (kernel == "auto" and (small or not numba_available())):
         return ScipyKernel(mdp, threads)
     if not numba_available():
         raise ValueError("kernel 'numba' requested but numba is not importable (pip install 'wncs_lp[fast]')")
