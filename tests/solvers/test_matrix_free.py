@@ -293,12 +293,12 @@ def test_size_guard_knows_the_matrix_free_memory():
         check_size(big, limit_bytes=est.matrix_free_bytes)
 
 
-@pytest.mark.parametrize("scheme", ["mpi", "jacobi"])
-def test_an_unfinished_run_returns_the_iterate_of_its_certificate(scheme):
+@pytest.mark.parametrize("options", [dict(scheme="mpi"), dict(scheme="jacobi"), dict(scheme="mpi", warm_start=True)])
+def test_an_unfinished_run_returns_the_iterate_of_its_certificate(options):
     sc = paper("paper_p1234", "tau_cap=7")
     mdp = wncs_lp.build(sc)
-    for budget in (7, 23, 61):
-        sol = matrix_free_value_iteration(sc, max_iter=budget, scheme=scheme)
+    for budget in (1, 2, 7, 23, 61):
+        sol = matrix_free_value_iteration(sc, max_iter=budget, **options)
         assert sol.status == "max_iter" and sol.iterations <= budget
         lo, hi = bracket(mdp, sol.on_mdp(mdp).bias)
         tol = 1e-9 * abs(sol.gain)

@@ -346,11 +346,11 @@ class _PairSweeps(IterationScheme):
         return f"the costs (max |c| = {self.bound.cmax:.3g}) are too large for float64 arithmetic: rescale them"
 
 
-def _kernel(mdp: MDP, kernel: str, threads: int | None):
+def _kernel(mdp: MDP, kernel: str, threads: int | None, in_place: bool = False):
     from .kernels import get_kernel
 
     try:
-        return get_kernel(mdp, kernel, threads)
+        return get_kernel(mdp, kernel, threads, in_place=in_place)
     except ValueError as exc:
         raise SolverError(str(exc)) from exc
 
@@ -610,7 +610,7 @@ def value_iteration(
         raise SolverError(f"eval_sweeps must be an integer >= 0, got {eval_sweeps!r}")
     opts = IterationOptions(tol=tol, atol=atol, max_iter=max_iter, check_every=check_every,
                             stall_checks=stall_checks)
-    K = _kernel(mdp, kernel, threads)
+    K = _kernel(mdp, kernel, threads, in_place=scheme in ("mpi", "gs"))
     if scheme == "auto":
         scheme = "mpi" if K.supports_gauss_seidel else "jacobi"
     if scheme in ("mpi", "gs") and not K.supports_gauss_seidel:

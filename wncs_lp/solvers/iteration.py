@@ -67,7 +67,8 @@ from ..progress import Progress
 from .certify import width_closed
 
 __all__ = ["IterationOptions", "IterationScheme", "IterationOutcome", "certified_iteration", "check_options",
-           "options_from", "cert_line", "is_int", "is_real", "gamma", "max_abs", "VI_TOL", "PRECISION_STALL_SWEEPS", "SETTLED_RTOL", "ON_INTERRUPT"]
+           "options_from", "cert_line", "is_int", "is_real", "gamma", "max_abs", "VI_TOL", "PRECISION_STALL_SWEEPS",
+           "SETTLED_RTOL", "ROUNDOFF_FLOOR", "ON_INTERRUPT"]
 
 #: Default relative certificate width of value iteration.
 VI_TOL = 1e-9
@@ -315,6 +316,7 @@ class _Judge:
         self.best, self.best_at = math.inf, 0  # the precision stall: sweeps since the width halved
         self.ends: list[tuple[float, float]] = []  # Jacobi (lo, hi) since it took over
         self.delta = 0.0
+        self._delta_at = 0
         self.stop: str | None = None
 
     def _closed(self, lo: float, hi: float) -> bool:
@@ -337,11 +339,18 @@ class _Judge:
                 return self._precision(lo, hi)
         if width < 0.5 * self.best:
             self.best, self.best_at = width, used
-        elif used - self.best_at >= PRECISION_STALL_SWEEPS:
-            self.delta = self.scheme.roundoff()
-            if width <= 2.0 * self.delta:
-                return self._precision(lo, hi)
+        elif used - self.best_at >= PRECISION_STALL_SWEEPS and self._in_band(width, used):
+            return self._precision(lo, hi)
         return self._settled(lo, hi)
+
+    def _in_band(self, width: float, used: int) -> bool:
+        """width <= 2 delta on the current h. delta costs a pass over h (two at the matrix-free
+        scale), so a width far above the last delta computed (3x, within 1,000 sweeps) is let go
+        without one."""
+        if self.delta > 0 and width > 6.0 * self.delta and used - self._delta_at < 1_000:
+            return False
+        self.delta, self._delta_at = self.scheme.roundoff(), used
+        return width <= 2.0 * self.delta
 
     def _precision(self, lo: float, hi: float) -> str:
         mid = max(abs(0.5 * (lo + hi)), 1e-300)
@@ -457,7 +466,8 @@ def _loop(scheme: IterationScheme, opts: IterationOptions, judge: _Judge, out: I
         width, mid = hi - lo, 0.5 * (lo + hi)
         if scheme.warming:
             shift = mid
-            scheme.advance()
+            if out.used < opts.max_iter:
+                scheme.advance()
             first = scheme.leave_warm(width, mid, out.used, opts.max_iter)
             continue
         if scheme.after_check(width, progress):

@@ -301,9 +301,10 @@ class ScipyKernel:
 NUMBA_MIN_STATES = 50_000
 
 
-def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None):
+def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None, *, in_place: bool = False):
     """A sweep kernel for ``mdp``: ``"numba"``, ``"scipy"`` or ``"auto"`` (numba when importable
-    and the MDP has at least :data:`NUMBA_MIN_STATES` states, where its load pays).
+    and the MDP has at least :data:`NUMBA_MIN_STATES` states, where its load pays, or when the
+    caller needs ``in_place`` sweeps, which only numba has).
 
     ``threads`` (numba only): None for the default of :func:`wncs_lp.solvers.threads.resolve_threads`
     (the usable cores from 1M states on, one below), else an integer >= 1.
@@ -317,7 +318,7 @@ def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None):
         raise ValueError(f"unknown kernel {kernel!r}; expected one of {', '.join(KERNELS)}")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
         raise ValueError(f"threads must be an integer >= 1 (or None: the default), got {threads!r}")
-    small = mdp.n_states < NUMBA_MIN_STATES
+    small = mdp.n_states < NUMBA_MIN_STATES and not in_place
     if kernel == "scipy" or (kernel == "auto" and (small or not numba_available())):
         return ScipyKernel(mdp, threads)
     if not numba_available():
