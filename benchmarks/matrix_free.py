@@ -84,20 +84,13 @@ def warm_up(threads):
     """Load (or compile) the kernels of both solvers before anything is timed."""
     import warnings
 
-    from wncs_lp.solvers import matrix_free as mf_mod
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sc = scenario("paper_p12", 8)
         wncs_lp.solve(wncs_lp.build(sc), "vi", threads=threads)
-        old = mf_mod.PARALLEL_MIN_STATES
-        mf_mod.PARALLEL_MIN_STATES = 0
-        try:
-            for th in sorted({1, threads}):
-                matrix_free_value_iteration(sc, threads=th)
-                matrix_free_evaluate(sc, make_policy("greedy", System.from_scenario(sc)), threads=th)
-        finally:
-            mf_mod.PARALLEL_MIN_STATES = old
+        for th in sorted({1, threads}):  # a thread count given is used at any size
+            matrix_free_value_iteration(sc, threads=th)
+            matrix_free_evaluate(sc, make_policy("greedy", System.from_scenario(sc)), threads=th)
 
 
 def compare(instances, threads, tol):
@@ -122,8 +115,6 @@ def compare(instances, threads, tol):
         for th in sorted({1, threads}):
             ld = load1()
             mf = matrix_free_value_iteration(sc, tol=tol, threads=th)
-            if mf.stats["threads"] != th:  # below PARALLEL_MIN_STATES the solver uses one thread
-                continue
             slack = 1e-12 * abs(mf.gain)
             inside = (vi.gain_lower - slack <= mf.gain <= vi.gain_upper + slack
                       and mf.gain_lower - slack <= vi.gain <= mf.gain_upper + slack)

@@ -14,7 +14,8 @@ code              meaning
 ``INACCURATE``    the method finished, but something is short of the tolerance (the reason after
                   the colon: ``certificate``, ``polish_max_iter``, ``cross_check``,
                   ``precision`` (tolerance below attainable precision: value iteration stopped at
-                  the round-off floor), the LP solver's own status...); the bracket still holds
+                  the round-off floor), ``start_dependent`` (the optimal gain depends on the start
+                  state: several closed classes), the LP solver's own status...); the bracket still holds
 ``MAX_ITER``      the iteration budget ran out first; the bracket of the last iterate still holds
 ``INTERRUPTED``   stopped by Ctrl-C; the bracket of the last iterate still holds
 ``INFEASIBLE``    (constrained problems) no stationary policy meets the bounds
@@ -62,6 +63,10 @@ _REASON_MESSAGES = {
     "precision": "tolerance below attainable precision: value iteration reached the round-off floor of its "
                  "sweeps (stats['stop'] says the width reached and the floor) and stopped; the bracket, widened "
                  "by the round-off bound, still holds",
+    "start_dependent": "value iteration's certificate stopped shrinking: the optimal gain depends on the start "
+                       "state (the MDP has several closed classes with different gains; stats['stop']), so no "
+                       "single gain can be certified; the bracket gain_lower <= g*(s) <= gain_upper holds for "
+                       "every start state s",
 }
 
 

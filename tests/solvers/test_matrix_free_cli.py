@@ -69,7 +69,7 @@ def test_out_writes_the_compact_policy_that_loads_back(tmp_path, capsys):
     assert (out.stat().st_mode & 0o777) == 0o644  # readable by others, as the umask says
     sc = wncs_lp.load_scenario(path, ["tau_cap=9"])
     back = load_solution(out, sc)
-    assert back.policy.dtype == np.uint8 and back.gain == got["gain"]
+    assert back.local_actions.dtype == np.uint8 and back.gain == got["gain"]
     # the stored policy, evaluated exactly again, has the optimal gain (within both certificates)
     ev = matrix_free_evaluate(sc, MatrixFreePolicy.from_solution(back), tol=1e-10)
     assert got["gain_lower"] - 1e-9 * got["gain"] <= ev.gain <= got["gain_upper"] + 1e-9 * got["gain"]

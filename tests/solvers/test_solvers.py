@@ -22,6 +22,7 @@ from wncs_lp.solvers import (
     relative_value_iteration,
     solve,
     solve_lp,
+    value_iteration,
 )
 
 # ------------------------------------------------------------------------- references
@@ -228,6 +229,56 @@ def test_rvi_warm_start_and_max_iter_status():
 
 
 # ------------------------------------------------------------------------- multichain
+
+
+def two_closed_classes():
+    """States 0 and 1 absorbing with costs 1 and 5, state 2 (cost 3) splits between them: the
+    optimal gain is 1 from state 0 and 5 from state 1 (by hand), so no single gain exists."""
+    return MDP.from_arrays([0, 1, 2], [0, 0, 0], [1.0, 5.0, 3.0], [[1, 0, 0], [0, 1, 0], [0.5, 0.5, 0]])
+
+
+@pytest.mark.parametrize("method", ["vi", "rvi", "pi"])
+def test_a_start_dependent_gain_is_said_so(method):
+    sol = solve(two_closed_classes(), method)
+    assert sol.status == "inaccurate:start_dependent" and sol.status_code == "inaccurate" and not sol.ok
+    assert sol.gain_lower <= 1.0 and 5.0 <= sol.gain_upper  # every start's gain is inside
+    assert "depends on the start state" in sol.message and "several closed classes" in sol.message
+    assert "max_iter" not in sol.message
+    assert "depends on the start state" in sol.stats["stop"]
+    if method != "pi":
+        assert sol.iterations < 1_000  # stopped when the bracket settled, not by the budget (100,000)
+
+
+def test_a_slowly_converging_unichain_mdp_is_not_called_start_dependent():
+    # two near-absorbing states that leak into each other with probability 1e-3: one class, g* = 3
+    # (by symmetry the stationary law is uniform over states 0 and 1)
+    eps = 1e-3
+    mdp = MDP.from_arrays([0, 1], [0, 0], [1.0, 5.0], [[1 - eps, eps], [eps, 1 - eps]])
+    for method in ("vi", "rvi"):
+        sol = solve(mdp, method, max_iter=200_000)
+        assert sol.status == "optimal" and sol.gain == pytest.approx(3.0, rel=1e-8), sol.stats
+
+
+def test_values_that_overflow_are_an_error_not_an_optimal_inf():
+    P = np.array([[[0.5, 0.5], [0.2, 0.8]], [[0.9, 0.1], [0.3, 0.7]]])
+    mdp = MDP.from_dense(P, 1.7e308 * np.array([[1.0, 0.5], [0.6, 1.0]]))
+    for fn in (value_iteration, relative_value_iteration):
+        with pytest.raises(SolverError, match=r"values overflow .* the costs \(max \|c\| = 1.7e\+308\)"):
+            fn(mdp)
+
+
+@pytest.mark.parametrize("bad", [dict(tol=-1.0), dict(tol=float("nan")), dict(tol=0.0), dict(tol=float("inf")),
+                                 dict(atol=float("nan")), dict(max_iter=0), dict(check_every=0),
+                                 dict(stall_checks=0), dict(eval_sweeps=-1)])
+def test_value_iteration_options_out_of_range(bad):
+    (field, _), = bad.items()
+    mdp = random_mdp(0)
+    with pytest.raises(SolverError, match=field):
+        value_iteration(mdp, **bad)
+    if field in ("tol", "atol", "max_iter"):
+        with pytest.raises(SolverError, match=field):
+            relative_value_iteration(mdp, **bad)
+
 
 
 def test_evaluate_policy_rejects_multichain():

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..errors import PolicyError
 from ..models.system import System
+from ..solvers.matrix_free.layout import check_local_actions
 from .base import Policy
 
 __all__ = ["MatrixFreePolicy"]
@@ -23,10 +24,10 @@ class MatrixFreePolicy(Policy):
     def __init__(self, system: System, layout: Any, table: np.ndarray, name: str = "optimal",
                  solution: Any = None):
         super().__init__(system)
-        if table.shape != (layout.n_states,):
-            raise PolicyError(f"the policy table must have one entry per layout state ({layout.n_states})")
+        # one local action per layout state, each within its configuration's actions (the kernels
+        # and act() index the action tables by it)
+        self.table = check_local_actions(table, layout, system.n_actions, f"policy {name!r}")
         self.layout = layout
-        self.table = table
         self.name = name
         self.solution = solution
 
@@ -40,5 +41,5 @@ class MatrixFreePolicy(Policy):
 
     @classmethod
     def from_solution(cls, solution: Any, name: str = "optimal") -> "MatrixFreePolicy":
-        """The policy of a :class:`~wncs_lp.solvers.matrix_free.MatrixFreeSolution`."""
-        return cls(solution.system, solution.layout, solution.policy, name=name, solution=solution)
+        """The policy of a :class:`~wncs_lp.solvers.matrix_free.MatrixFreeSolution` (its ``local_actions``)."""
+        return cls(solution.system, solution.layout, solution.local_actions, name=name, solution=solution)

@@ -106,7 +106,7 @@ def _instance(ctx: Context, cap: int, p: float, st: FullScaleSettings) -> dict[s
     def optimal():
         t0 = time.perf_counter()
         sol = matrix_free_value_iteration(system, tol=st.tol, on_interrupt="raise")
-        n = int(sol.stats.get("n_states", sol.policy.size))
+        n = int(sol.stats.get("n_states", sol.local_actions.size))
         ctx.log(f"{where}: optimal g* = {sol.gain:.10g} ({n:,} states, {time.perf_counter() - t0:.1f} s)")
         res = {"gain": float(sol.gain), "gain_lower": float(sol.gain_lower), "gain_upper": float(sol.gain_upper),
                "status": sol.status, "states": n, "sweeps": int(sol.iterations),

@@ -7,16 +7,18 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..chain import class_stationary, policy_matrices, recurrent_classes
 from ..errors import PolicyError, SolverError
 from ..mdp import MDP
 from ..progress import Progress, as_progress
 from .certify import bracket, certificate_closed, greedy_first, q_values
+from .iteration import (PRECISION_STALL_SWEEPS, VI_TOL, IterationOptions, IterationOutcome, IterationScheme,
+                        cert_line, certified_iteration, gamma, is_int, max_abs)
 from .result import Solution
 
 __all__ = [
@@ -29,6 +31,9 @@ __all__ = [
     "policy_iteration",
     "greedy_policy",
     "roundoff_bound",
+    "RoundoffBound",
+    "VI_TOL",
+    "PRECISION_STALL_SWEEPS",
 ]
 
 #: Relative residual above which an exact evaluation is rejected.
@@ -138,52 +143,75 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: n
     n = mdp.n_states
     classes = recurrent_classes(P_pi)
     if len(classes) != 1:
-        a, b = classes[0], classes[1]
-        raise MultichainPolicyError(
-            f"the policy induces a multichain Markov chain with {len(classes)} recurrent classes "
-            f"(e.g. state {mdp.state_label(int(a[0]))} in a class of {a.size} state(s) and "
-            f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost "
-            "depends on the start state and a single gain/bias is undefined"
-        )
+        raise _multichain_error(mdp, classes)
     r = int(classes[0][0])
-    M = (sp.identity(n, format="csc") - P_pi).tocsc()
-    M.data[M.indptr[r]:M.indptr[r + 1]] = 0.0
-    M.eliminate_zeros()
-    M = (M + sp.csc_matrix((np.ones(n), (np.arange(n), np.full(n, r))), shape=(n, n))).tocsc()
-    solver = "splu"
-    z = None
+    M = _poisson_matrix(P_pi, r)
     z0 = None if h0 is None else initial_bias(h0, n, r)  # checked whichever path runs
-    if method == "iterative" or (method == "auto" and n >= EVAL_ITERATIVE_MIN_STATES):
-        if z0 is not None:
-            z0[r] = float(np.median(c_pi + P_pi @ z0 - z0))  # a gain estimate for the unknown g
-        its = int(maxiter) if maxiter is not None else max(1000, int(2 * np.sqrt(n)))
-        z = _bicgstab(M.tocsr(), c_pi, z0, its)
-        solver = "bicgstab" if z is not None else "bicgstab->splu"
-    if z is None:
-        try:
-            lu = spla.splu(M)
-        except RuntimeError as exc:  # exactly singular: should not happen for a unichain policy
-            raise PolicyError(f"policy evaluation system is singular ({exc})") from exc
-
-        z = lu.solve(c_pi)
-        z = z + lu.solve(c_pi - M @ z)
+    z, solver = _solve_poisson(M, P_pi, c_pi, r, z0, method, maxiter)
     g = float(z[r])
     h = z.copy()
     h[r] = 0.0
     pi = np.zeros(n)
     pi[classes[0]] = class_stationary(P_pi, classes[0])[0]
+    residual = _check_poisson(P_pi, c_pi, g, h, pi)
+    return PolicyEvaluation(gain=g, bias=h - h[0], stationary=pi, residual=residual, solver=solver)
 
+
+def _multichain_error(mdp: MDP, classes: list) -> MultichainPolicyError:
+    a, b = classes[0], classes[1]
+    return MultichainPolicyError(
+        f"the policy induces a multichain Markov chain with {len(classes)} recurrent classes "
+        f"(e.g. state {mdp.state_label(int(a[0]))} in a class of {a.size} state(s) and "
+        f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost "
+        "depends on the start state and a single gain/bias is undefined"
+    )
+
+
+def _poisson_matrix(P_pi: sp.csr_matrix, r: int) -> sp.csc_matrix:
+    """M = I - P_pi with column r replaced by ones (z[r] is then the gain g)."""
+    n = P_pi.shape[0]
+    M = (sp.identity(n, format="csc") - P_pi).tocsc()
+    M.data[M.indptr[r]:M.indptr[r + 1]] = 0.0
+    M.eliminate_zeros()
+    return (M + sp.csc_matrix((np.ones(n), (np.arange(n), np.full(n, r))), shape=(n, n))).tocsc()
+
+
+def _solve_poisson(M: sp.csc_matrix, P_pi: sp.csr_matrix, c_pi: np.ndarray, r: int, z0: np.ndarray | None,
+                   method: str, maxiter: int | None) -> tuple[np.ndarray, str]:
+    """z with M z = c_pi: BiCGSTAB on large chains (or when asked), else (or when it misses) a
+    sparse LU with one refinement step; and which solver answered."""
+    n = M.shape[0]
+    if method == "iterative" or (method == "auto" and n >= EVAL_ITERATIVE_MIN_STATES):
+        if z0 is not None:
+            z0[r] = float(np.median(c_pi + P_pi @ z0 - z0))  # a gain estimate for the unknown g
+        its = int(maxiter) if maxiter is not None else max(1000, int(2 * np.sqrt(n)))
+        z = _bicgstab(M.tocsr(), c_pi, z0, its)
+        if z is not None:
+            return z, "bicgstab"
+        solver = "bicgstab->splu"
+    else:
+        solver = "splu"
+    import scipy.sparse.linalg as spla  # imported where used: 0.3-0.5 s that value iteration never needs
+
+    try:
+        lu = spla.splu(M)
+    except RuntimeError as exc:  # exactly singular: should not happen for a unichain policy
+        raise PolicyError(f"policy evaluation system is singular ({exc})") from exc
+    z = lu.solve(c_pi)
+    return z + lu.solve(c_pi - M @ z), solver
+
+
+def _check_poisson(P_pi: sp.csr_matrix, c_pi: np.ndarray, g: float, h: np.ndarray, pi: np.ndarray) -> float:
+    """The residual of g + h = c_pi + P_pi h and of pi P_pi = pi, sum pi = 1; PolicyError if too large."""
     res_bias = float(np.max(np.abs(g + h - c_pi - P_pi @ h)))
     res_pi = float(np.max(np.abs(P_pi.T @ pi - pi)) + abs(pi.sum() - 1.0))
-    residual = max(res_bias, res_pi)
     scale = max(float(np.max(np.abs(c_pi))), float(np.max(np.abs(h))), 1e-300)
     if not (res_bias <= EVAL_RESIDUAL_TOL * scale and res_pi <= EVAL_RESIDUAL_TOL):  # NaN fails too
         raise PolicyError(
             f"policy evaluation is inaccurate: bias residual {res_bias:.3g} (scale {scale:.3g}), "
             f"stationary residual {res_pi:.3g}"
         )
-    h = h - h[0]
-    return PolicyEvaluation(gain=g, bias=h, stationary=pi, residual=residual, solver=solver)
+    return max(res_bias, res_pi)
 
 
 def _bicgstab(A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray | None, maxiter: int,
@@ -194,6 +222,8 @@ def _bicgstab(A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray | None, maxiter: i
     (measured: 1e-13 reported, 1e-12 true), so the true residual is checked and the solve
     restarted from its own answer, at most ``restarts`` times.
     """
+    import scipy.sparse.linalg as spla
+
     target = 10 * EVAL_ITERATIVE_RTOL * max(float(np.linalg.norm(b)), 1e-300)
     x = x0
     for _ in range(restarts + 1):
@@ -207,7 +237,7 @@ def _bicgstab(A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray | None, maxiter: i
     return None
 
 
-# ---------------------------------------------------------------------------- RVI
+# ---------------------------------------------------------------------------- value iteration
 def initial_bias(h0: np.ndarray | None, n: int, ref: int) -> np.ndarray:
     """A warm-start bias (zeros by default), checked and normalised so that h[ref] = 0."""
     if h0 is None:
@@ -219,6 +249,110 @@ def initial_bias(h0: np.ndarray | None, n: int, ref: int) -> np.ndarray:
     if h is None or h.shape != (n,) or not np.all(np.isfinite(h)):
         raise SolverError(f"h0 must be a finite array of shape ({n},)")
     return h - h[ref]
+
+
+class RoundoffBound:
+    r"""The round-off bound delta of a certificate computed on the stored matrix.
+
+    Each d(s) = min_l (c_l + sum_k P_lk h(j_k)) - h(s) is computed with m_l <= m products and
+    additions after the cost (m = the longest row of P), a comparison (exact) and one
+    subtraction. The standard bound for a floating-point dot product (Higham, *Accuracy and
+    Stability of Numerical Algorithms*, 2nd ed., eq. 3.5) with the unit round-off u = 2^-53 gives
+
+    .. math::
+
+        |fl(d(s)) - d(s)| \le \delta := \gamma_{m+2}\,(\max|c| + 2\max|h|),
+        \qquad \gamma_k = \frac{k u}{1 - k u},
+
+    because sum_k P_lk = 1 bounds the sum of the magnitudes of the terms by |c_l| + max|h|, and
+    the subtraction adds u |d| <= u (max|c| + 2 max|h|). So the computed ``lo``, ``hi`` are
+    each within delta of the exact ones: the exact certificate is contained in
+    ``[lo - delta, hi + delta]``, and a computed width below ``2 delta`` says nothing more about
+    the exact one. That is the attainable precision: ``2 delta / |g|``. (The width sweeps
+    actually reach is smaller, a few ulps of max|h|, because round-off errors do not all add
+    up; e.g. processes 1, 2 at cap 40: max|h| = 3.3e6, max|c| = 4.1e5, m = 8,
+    2 delta / g = 1.7e-11, widths reached ~1e-12.) How the iteration uses it:
+    :mod:`wncs_lp.solvers.iteration`.
+    """
+
+    def __init__(self, mdp: MDP):
+        ptr = mdp.P.indptr  # the longest row, by blocks: a whole np.diff would be a length-L temporary
+        self.m = max((int(np.diff(ptr[a:a + (1 << 20) + 1]).max()) for a in range(0, ptr.size - 1, 1 << 20)),
+                     default=0)
+        self.cmax = float(np.max(np.abs(mdp.cost))) if mdp.n_pairs else 0.0
+
+    def __call__(self, h: np.ndarray) -> float:
+        """delta for the bias ``h`` the certificate was computed on."""
+        return gamma(self.m + 2) * (self.cmax + 2.0 * max_abs(h))
+
+
+def roundoff_bound(mdp: MDP, h: np.ndarray) -> float:
+    """delta: a bound on the floating-point error of each computed ``d(s) = (T h - h)(s)``, so of
+    the computed certificate ends ``lo``, ``hi`` (see :class:`RoundoffBound`)."""
+    return RoundoffBound(mdp)(np.asarray(h, dtype=float))
+
+
+class _PairSweeps(IterationScheme):
+    """The sweeps of value iteration on the stored matrix (:mod:`wncs_lp.solvers.kernels`).
+
+    ``"mpi"`` / ``"gs"``: in-place improvement sweeps (and ``n_eval`` fixed-policy sweeps after
+    each); the certificate pass is a Jacobi step relaxed by ``relax`` whose output becomes the next
+    iterate. ``"jacobi"``: the Jacobi step with the aperiodicity transform ``tau`` (RVI: shift 0,
+    h renormalised at ``ref``).
+    """
+
+    def __init__(self, mdp: MDP, K: Any, h: np.ndarray, scheme: str, *, relax: float = 0.8, n_eval: int = 0,
+                 tau: float = 0.5, ref: int = 0, use_shift: bool = True):
+        self.mdp, self.K, self.h, self.name = mdp, K, h, scheme
+        self.h_next = np.empty_like(h)
+        self.pol = mdp.pair_ptr[:-1].astype(np.int64)
+        self.relax, self.n_eval, self.tau, self.ref, self.use_shift = relax, n_eval, tau, ref, use_shift
+        self.bound = RoundoffBound(mdp)
+
+    @property
+    def in_place(self) -> bool:
+        return self.name != "jacobi"
+
+    @property
+    def aperiodic_jacobi(self) -> bool:
+        return self.name == "jacobi" and self.tau < 1.0
+
+    def improve(self, sweeps: int, shift: float) -> int:
+        K, h, pol = self.K, self.h, self.pol
+        for _ in range(sweeps):
+            K.gauss_seidel(h, self.relax, shift, pol)
+            for _ in range(self.n_eval):
+                K.evaluate(h, self.relax, shift, pol)
+        return sweeps * self.n_eval
+
+    def certify(self, shift: float) -> tuple[float, float]:
+        tau = self.tau if self.name == "jacobi" else self.relax
+        return self.K.jacobi(self.h, self.h_next, tau, shift if self.use_shift else 0.0)
+
+    def advance(self) -> None:
+        self.h_next -= self.h_next[self.ref]
+        self.h, self.h_next = self.h_next, self.h
+
+    def roundoff(self) -> float:
+        return self.bound(self.h)
+
+    def fall_back(self) -> str | None:
+        if self.name == "jacobi":
+            return None
+        self.name = "jacobi"
+        return ""
+
+    def cost_note(self) -> str:
+        return f"the costs (max |c| = {self.bound.cmax:.3g}) are too large for float64 arithmetic: rescale them"
+
+
+def _kernel(mdp: MDP, kernel: str, threads: int | None, in_place: bool = False):
+    from .kernels import get_kernel
+
+    try:
+        return get_kernel(mdp, kernel, threads, in_place=in_place)
+    except ValueError as exc:
+        raise SolverError(str(exc)) from exc
 
 
 def relative_value_iteration(
@@ -248,19 +382,14 @@ def relative_value_iteration(
     which is exactly RVI on the transformed MDP. Each sweep costs one CSR mat-vec and one
     ``np.minimum.reduceat``. Because :math:`\\tilde T \\tilde h - \\tilde h = T h - h`,
     the certificate lo = min d_k <= g* <= hi = max d_k of the *original* operator comes for
-    free every sweep; iteration stops when
-
-    ``hi - lo <= tol * |(lo + hi) / 2|``  or  ``hi - lo <= atol``,
-
-    or, when the tolerance is below what floating point can certify, once the width sits in
-    the round-off band ``2 delta`` and has stopped halving (:class:`_RoundoffFloor`: status
-    ``"inaccurate:precision"``, the bracket widened by delta).
+    free every sweep. The loop, its closing rule (the round-off band included), the precision
+    stop and the start-dependent stop are :mod:`wncs_lp.solvers.iteration`'s.
 
     Parameters
     ----------
     mdp : MDP
     tol : float
-        Relative certificate width (hi - lo) / |g| to reach.
+        Relative certificate width (hi - lo) / |g| to reach, finite and > 0.
     atol : float
         Absolute width accepted as well (useful when g* = 0); default 0.
     max_iter : int
@@ -276,22 +405,22 @@ def relative_value_iteration(
         rewritten on a terminal).
     kernel : {"auto", "numba", "scipy"}
         The sweep kernel (:mod:`wncs_lp.solvers.kernels`): numba's fused single pass when
-        importable (``"auto"``), else scipy's mat-vec + ``reduceat``. Same iterates up to
-        summation order.
+        importable and the MDP is large enough for numba to pay (``"auto"``), else scipy's
+        mat-vec + ``reduceat``. Same iterates up to summation order.
     threads : int, optional
-        numba threads for the sweep (default 1; >= 2 uses numba's parallel layer, which is
-        not fork-safe with GNU OpenMP -- do not fork worker processes afterwards).
+        numba threads of the sweep (default: the usable cores on large MDPs, see
+        :func:`wncs_lp.solvers.kernels.get_kernel`; one in a fork of a process that used them).
 
     Returns
     -------
     Solution
-        ``method="rvi"``; ``gain = (lo + hi)/2``; ``bias`` = the last h_k (on which the
-        certificate was computed) with h[0] = 0; ``policy`` = greedy pairs of that h
-        (ties to the first pair); status ``"optimal"``, ``"max_iter"`` or
-        ``"inaccurate:precision"`` (tolerance below attainable precision). ``stats`` holds
-        ``tau``, ``span`` (hi - lo), ``rel_gap``, ``converged``, ``roundoff_delta`` (the
-        round-off bound delta of the last certificate), ``span_computed`` (the width before any
-        widening) and ``stop`` (None, or what the precision stop reached).
+        ``method="rvi"``; ``gain = (lo + hi)/2``; ``bias`` = the h the last certificate was
+        computed on, with h[0] = 0; ``policy`` = greedy pairs of that h (ties to the first pair);
+        status ``"optimal"``, ``"max_iter"``, ``"inaccurate:precision"`` (tolerance below
+        attainable precision) or ``"inaccurate:start_dependent"`` (the optimal gain depends on the
+        start state). ``stats`` holds ``tau``, ``span`` (hi - lo), ``rel_gap``, ``converged``,
+        ``roundoff_delta`` (the round-off bound delta of the last certificate), ``span_computed``
+        (the width before any widening) and ``stop`` (None, or why the run stopped short).
     """
     t0 = time.perf_counter()
     n = mdp.n_states
@@ -300,74 +429,36 @@ def relative_value_iteration(
         raise SolverError(f"aperiodicity must be in (0, 1], got {aperiodicity}")
     if not (0 <= ref_state < n):
         raise SolverError(f"ref_state must be in 0..{n - 1}, got {ref_state}")
-    if max_iter < 1:
-        raise SolverError(f"max_iter must be >= 1, got {max_iter}")
+    opts = IterationOptions(tol=tol, atol=atol, max_iter=max_iter)
     h = initial_bias(h0, n, ref_state)
-    from .kernels import get_kernel
-
-    try:
-        K = get_kernel(mdp, kernel, threads)
-    except ValueError as exc:
-        raise SolverError(str(exc)) from exc
+    K = _kernel(mdp, kernel, threads)
     prog = as_progress(progress)
-    converged = False
-    floor = _RoundoffFloor(mdp)
-    at_floor = False
-    lo = hi = np.nan
-    h_next = np.empty(n)
-    it = 0
-    for it in range(1, max_iter + 1):
-        # one fused sweep: d = T h - h, its span, and h_next = h + tau (d - d(ref)) up to a constant
-        lo, hi = K.jacobi(h, h_next, tau, 0.0)
-        width = hi - lo
-        if width <= tol * abs(0.5 * (lo + hi)) or width <= atol:
-            converged = True
-            break
-        if floor.stalled(width, h, it):
-            at_floor = True
-            break
-        if prog.enabled and prog.due():
-            prog.tick(_cert_line("rvi", it, lo, hi, tol))
-        h_next -= h_next[ref_state]
-        h, h_next = h_next, h
-    return _finish(mdp, "rvi", h, lo, hi, converged, at_floor, floor, it, t0, tol, prog,
-                   {"tau": tau, "tol": tol, "kernel": K.name, "threads": K.threads}, atol)
+    sweeps = _PairSweeps(mdp, K, h, "jacobi", tau=tau, ref=ref_state, use_shift=False)
+    out = certified_iteration(sweeps, opts, cost_scale=sweeps.bound.cmax, progress=prog, label="rvi", t0=t0)
+    return _finish(mdp, "rvi", sweeps, out, t0, opts, prog,
+                   {"tau": tau, "tol": tol, "kernel": K.name, "threads": K.threads})
 
 
-def _finish(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: float, converged: bool, at_floor: bool,
-            floor: "_RoundoffFloor", iterations: int, t0: float, tol: float, prog: Progress,
-            stats: dict, atol: float = 0.0) -> Solution:
-    """The Solution of a value-iteration run, stopped at the round-off floor or not.
+def _finish(mdp: MDP, method: str, sweeps: _PairSweeps, out: IterationOutcome, t0: float,
+            opts: IterationOptions, prog: Progress, stats: dict) -> Solution:
+    """The Solution of a value-iteration run.
 
-    At the floor the status is ``"inaccurate:precision"`` and the bracket is widened by the
-    round-off bound delta on each side (:class:`_RoundoffFloor`), so that it holds for the exact
-    arithmetic too; ``stats["stop"]`` says the width reached, the floor and the tolerance asked.
-    A run whose computed width met the tolerance but whose width plus the band 2 delta does not
-    is at the floor too: it is never reported ``"optimal"`` below the attainable precision.
+    At the precision stop the bracket is widened by the round-off bound delta on each side
+    (:class:`RoundoffBound`), so that it holds for the exact arithmetic too; ``stats["stop"]``
+    says why the run stopped short of the tolerance (precision, start-dependent gain).
     """
-    delta = floor.bound(h)
-    extra = {"roundoff_delta": delta, "span_computed": hi - lo, "stop": None}
-    status = None
-    mid = abs(0.5 * (lo + hi))
-    if converged and (hi - lo) + 2.0 * delta > max(tol * mid, atol):
-        # the computed width met the tolerance, but the round-off band does not: the tolerance is
-        # below the attainable precision, so "optimal" would claim more than the arithmetic shows
-        at_floor, converged = True, False
-    if at_floor:
-        extra["stop"] = floor.stop_line(lo, hi, tol)
-        prog.done(f"[{method}] sweep {iterations:,}: {extra['stop']}")
-        lo, hi = lo - delta, hi + delta
-        status = "inaccurate:precision"
+    lo, hi = out.lo, out.hi
+    delta = sweeps.roundoff()
+    extra = {"roundoff_delta": delta, "span_computed": hi - lo, "stop": out.stop}
+    if out.stop is not None:
+        prog.done(f"[{method}] sweep {out.used:,}: {out.stop}")
     else:
-        prog.done(_cert_line(f"{method}:{stats['final_scheme']}" if "final_scheme" in stats else method,
-                             iterations, lo, hi, tol))
-    return _iteration_solution(mdp, method, h, lo, hi, converged, iterations, t0, {**stats, **extra}, status)
-
-
-def _cert_line(name: str, sweeps: int, lo: float, hi: float, tol: float) -> str:
-    """One progress line of a value iteration: the sweeps and the certificate gap against its target."""
-    rel = (hi - lo) / max(abs(0.5 * (lo + hi)), 1e-300)
-    return f"[{name}] sweep {sweeps:,}: {lo:.10g} <= g* <= {hi:.10g}, gap {rel:.2e} (target {tol:.0e})"
+        prog.done(cert_line(f"{method}:{stats['final_scheme']}" if "final_scheme" in stats else method,
+                            out.used, lo, hi, opts.tol))
+    if out.at_floor:
+        lo, hi = lo - delta, hi + delta
+    return _iteration_solution(mdp, method, sweeps.h, lo, hi, out.converged, out.used, t0, {**stats, **extra},
+                               out.status)
 
 
 def _iteration_solution(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: float, converged: bool,
@@ -396,6 +487,7 @@ def _iteration_solution(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: flo
 
 #: Pairs per block of :func:`greedy_policy`.
 GREEDY_BLOCK_PAIRS = 1 << 20
+
 
 
 def greedy_policy(mdp: MDP, h: np.ndarray, block: int = GREEDY_BLOCK_PAIRS) -> np.ndarray:
@@ -429,81 +521,9 @@ def greedy_policy(mdp: MDP, h: np.ndarray, block: int = GREEDY_BLOCK_PAIRS) -> n
     return out
 
 
-# ---------------------------------------------------------------------------- round-off floor
-#: Sweeps without the certificate width halving, at a width inside the round-off band, after
-#: which value iteration stops with status ``"inaccurate:precision"``.
-PRECISION_STALL_SWEEPS = 50
-
-
-def roundoff_bound(mdp: MDP, h: np.ndarray) -> float:
-    """delta: a bound on the floating-point error of each computed ``d(s) = (T h - h)(s)``, so of
-    the computed certificate ends ``lo``, ``hi`` (see :class:`_RoundoffFloor`)."""
-    return _RoundoffFloor(mdp).bound(np.asarray(h, dtype=float))
-
-
-class _RoundoffFloor:
-    r"""The round-off band of a computed certificate, and the stall test at it.
-
-    Each d(s) = min_l (c_l + sum_k P_lk h(j_k)) - h(s) is computed with m_l <= m products and
-    additions after the cost (m = the longest row of P), a comparison (exact) and one
-    subtraction. The standard bound for a floating-point dot product (Higham, *Accuracy and
-    Stability of Numerical Algorithms*, 2nd ed., eq. 3.5) with the unit round-off u = 2^-53 gives
-
-    .. math::
-
-        |fl(d(s)) - d(s)| \le \delta := \gamma_{m+2}\,(\max|c| + 2\max|h|),
-        \qquad \gamma_k = \frac{k u}{1 - k u},
-
-    because sum_k P_lk = 1 bounds the sum of the magnitudes of the terms by |c_l| + max|h|, and
-    the subtraction adds u |d| <= u (max|c| + 2 max|h|). So the computed ``lo``, ``hi`` are
-    each within delta of the exact ones: the exact certificate is contained in
-    ``[lo - delta, hi + delta]``, and a computed width below ``2 delta`` says nothing more about
-    the exact one. That is the attainable precision: ``2 delta / |g|``. (The width sweeps
-    actually reach is smaller, a few ulps of max|h|, because round-off errors do not all add
-    up; e.g. processes 1, 2 at cap 40: max|h| = 3.3e6, max|c| = 4.1e5, m = 8,
-    2 delta / g = 1.7e-11, widths reached ~1e-12.)
-
-    The stop: the width is at most ``2 delta`` **and** it has not halved over the last
-    :data:`PRECISION_STALL_SWEEPS` sweeps. The first condition never holds on a solve whose
-    tolerance is above the floor until the tolerance is met (then it stops ``"optimal"`` as
-    before); the second keeps a width that still falls going.
-    """
-
-    def __init__(self, mdp: MDP):
-        ptr = mdp.P.indptr  # the longest row, by blocks: a whole np.diff would be a length-L temporary
-        self.m = max((int(np.diff(ptr[a:a + (1 << 20) + 1]).max()) for a in range(0, ptr.size - 1, 1 << 20)),
-                     default=0)
-        self.cmax = float(np.max(np.abs(mdp.cost))) if mdp.n_pairs else 0.0
-        self.best = np.inf
-        self.best_at = 0
-        self.delta = 0.0
-
-    def bound(self, h: np.ndarray) -> float:
-        """delta (see the class docstring) for the bias ``h`` the certificate was computed on."""
-        k = (self.m + 2) * (np.finfo(float).eps / 2)
-        self.delta = k / (1.0 - k) * (self.cmax + 2.0 * float(np.max(np.abs(h))))
-        return self.delta
-
-    def stalled(self, width: float, h: np.ndarray, sweeps: int) -> bool:
-        """Record a certificate width computed on ``h`` after ``sweeps`` sweeps; True when it sits
-        in the round-off band and has not halved for :data:`PRECISION_STALL_SWEEPS` sweeps."""
-        if width < 0.5 * self.best:
-            self.best, self.best_at = width, sweeps
-            return False
-        if sweeps - self.best_at < PRECISION_STALL_SWEEPS:
-            return False
-        return width <= 2.0 * self.bound(h)
-
-    def stop_line(self, lo: float, hi: float, tol: float) -> str:
-        mid = max(abs(0.5 * (lo + hi)), 1e-300)
-        return (f"tolerance below attainable precision: reached {(hi - lo) / mid:.3g} "
-                f"(round-off floor 2 delta / |g| = {2 * self.delta / mid:.3g}; asked {tol:.3g}); "
-                f"bracket widened by delta = {self.delta:.3g} to cover the round-off")
-
-
 # ---------------------------------------------------------------------------- VI / MPI
-#: Default relative certificate width of :func:`value_iteration`.
-VI_TOL = 1e-9
+#: value-iteration schemes
+SCHEMES = ("auto", "mpi", "gs", "jacobi")
 
 
 def value_iteration(
@@ -533,35 +553,22 @@ def value_iteration(
     * ``"gs"``  -- the same without the evaluation sweeps;
     * ``"jacobi"`` -- relative value iteration with the aperiodicity transform
       (``tau = 0.5``), exactly :func:`relative_value_iteration`'s iteration;
-    * ``"auto"`` -- ``"mpi"`` with the numba kernel, ``"jacobi"`` with the scipy one (which
-      has no in-place sweep). MPI needs 2-3x fewer sweeps than Jacobi on the paper's
-      instances at their benchmark sizes, but not everywhere: on the small preemption model
-      (cap 12) Jacobi's error dies out after a few cap-lengths (70 sweeps vs ~550); pass
-      ``scheme="jacobi"`` there. (A one-window timing race between the two was tried and
-      mispredicted that case, so it is not used.)
+    * ``"auto"`` -- ``"mpi"`` with the numba kernel, ``"jacobi"`` with the scipy one (no
+      in-place sweep). MPI needs 2-3x fewer sweeps than Jacobi on the paper's instances, but
+      not on the small preemption model (cap 12: 70 Jacobi sweeps vs ~550).
 
-    Every ``check_every`` improvement sweeps, one Jacobi sweep computes ``d = T h - h`` on the
-    current h and the certificate ``lo = min d <= g* <= hi = max d`` (valid for any h, so the
-    in-place sweeps need no convergence theory to be trusted). It stops when
-    ``hi - lo <= tol * |(lo + hi)/2|`` or ``hi - lo <= atol``. If the width has not halved in
-    ``stall_checks`` checks the iteration switches to the Jacobi scheme, whose convergence is
-    guaranteed for unichain MDPs (``stats["fallback"]``).
-
-    A tolerance below the attainable precision cannot be met by any number of sweeps: each
-    computed d(s) carries a round-off error of up to delta = gamma_{m+2} (max|c| + 2 max|h|)
-    (:class:`_RoundoffFloor`), so widths under 2 delta certify nothing more. When the width is
-    inside that band and has not halved for :data:`PRECISION_STALL_SWEEPS` sweeps, the
-    iteration stops with status ``"inaccurate:precision"`` ("tolerance below attainable
-    precision: reached X", ``stats["stop"]``) and the bracket widened by delta on each side,
-    so that it still holds for the exact arithmetic. (Before, it fell back to Jacobi and swept to
-    ``max_iter``: processes 1, 2 at cap 40 with ``tol=1e-12``, 5,000 sweeps; now 247.) A solve
-    whose tolerance is above the floor meets it before the band is reached and is unaffected.
+    Every ``check_every`` improvement sweeps, one Jacobi sweep computes the certificate
+    ``lo = min (T h - h) <= g* <= max (T h - h) = hi`` on the current h (valid for any h, so the
+    in-place sweeps need no convergence theory to be trusted). The loop -- closing rule with the
+    round-off band (:class:`RoundoffBound`), precision stop, Jacobi fallback after
+    ``stall_checks`` checks without the width halving, start-dependent stop -- is
+    :func:`wncs_lp.solvers.iteration.certified_iteration`.
 
     Parameters
     ----------
     mdp : MDP
     tol, atol : float
-        Relative (default 1e-9) and absolute certificate widths.
+        Relative (default 1e-9; finite, > 0) and absolute (>= 0) certificate widths.
     max_iter : int
         Budget of sweeps of any kind.
     scheme : {"auto", "mpi", "gs", "jacobi"}
@@ -576,8 +583,8 @@ def value_iteration(
         Warm start (e.g. the bias of a neighbouring parameter value in a sweep).
     kernel : {"auto", "numba", "scipy"}
     threads : int, optional
-        numba threads of the Jacobi sweeps (default 1; the in-place sweeps are sequential;
-        >= 2 uses numba's parallel layer, not fork-safe with GNU OpenMP).
+        numba threads of the Jacobi sweeps (the in-place sweeps are sequential); default as
+        :func:`wncs_lp.solvers.kernels.get_kernel`.
     stall_checks : int
     progress : bool or Progress
         Show the sweeps and the certificate gap on stderr as it shrinks (:mod:`wncs_lp.progress`).
@@ -591,93 +598,33 @@ def value_iteration(
         ``eval_sweeps``, ``checks``, ``relax``, ``rel_gap``, ``bytes_per_sweep``,
         ``fallback`` (None or why the Jacobi scheme took over), ``roundoff_delta``,
         ``span_computed`` and ``stop`` (as :func:`relative_value_iteration`). Status
-        ``"optimal"``, ``"max_iter"`` or ``"inaccurate:precision"``.
+        ``"optimal"``, ``"max_iter"``, ``"inaccurate:precision"`` or
+        ``"inaccurate:start_dependent"``.
     """
-    from .kernels import get_kernel
-
     t0 = time.perf_counter()
-    n = mdp.n_states
-    if scheme not in ("auto", "mpi", "gs", "jacobi"):
+    if scheme not in SCHEMES:
         raise SolverError(f"unknown value-iteration scheme {scheme!r}; expected auto, mpi, gs or jacobi")
     if not (0.0 < relax <= 1.0):
         raise SolverError(f"relax must be in (0, 1], got {relax}")
-    if max_iter < 1 or check_every < 1 or eval_sweeps < 0:
-        raise SolverError("max_iter and check_every must be >= 1 and eval_sweeps >= 0")
-    try:
-        K = get_kernel(mdp, kernel, threads)
-    except ValueError as exc:
-        raise SolverError(str(exc)) from exc
+    if not (isinstance(eval_sweeps, (int, np.integer)) and eval_sweeps >= 0):
+        raise SolverError(f"eval_sweeps must be an integer >= 0, got {eval_sweeps!r}")
+    opts = IterationOptions(tol=tol, atol=atol, max_iter=max_iter, check_every=check_every,
+                            stall_checks=stall_checks)
+    K = _kernel(mdp, kernel, threads, in_place=scheme in ("mpi", "gs"))
     if scheme == "auto":
         scheme = "mpi" if K.supports_gauss_seidel else "jacobi"
     if scheme in ("mpi", "gs") and not K.supports_gauss_seidel:
         raise SolverError(f"scheme {scheme!r} needs in-place sweeps, which the {K.name} kernel does not have")
-    h = initial_bias(h0, n, 0)
+    h = initial_bias(h0, mdp.n_states, 0)
     prog = as_progress(progress)
-    h_next = np.empty(n)
-    pol = mdp.pair_ptr[:-1].astype(np.int64)
-    n_eval = eval_sweeps if scheme == "mpi" else 0
-    used = 0
-    evals = 0
-    checks = 0
-    shift = 0.0
-    lo = hi = np.nan
-    converged = False
-    floor = _RoundoffFloor(mdp)
-    at_floor = False
-    fallback = None
-    best_w, best_at = np.inf, 0
-    tau_j = 0.5
-    cur = scheme
-    first = True
-    while used < max_iter:
-        # the certificate comes first, so a warm start that is already good stops at once
-        # and the in-place sweeps start with shift ~ g (a wrong shift is not a constant
-        # offset for an in-place sweep: earlier states would see it and later ones not)
-        if cur != "jacobi" and not first:
-            for _ in range(min(check_every, max(max_iter - used - 1, 0))):
-                K.gauss_seidel(h, relax, shift, pol)
-                used += 1
-                for _ in range(n_eval):
-                    K.evaluate(h, relax, shift, pol)
-                    evals += 1
-        first = False
-        lo, hi = K.jacobi(h, h_next, tau_j if cur == "jacobi" else relax, shift)
-        used += 1
-        checks += 1
-        width = hi - lo
-        mid = 0.5 * (lo + hi)
-        if prog.enabled and prog.due():
-            prog.tick(_cert_line(f"vi:{cur}", used, lo, hi, tol))
-        if width <= tol * abs(mid) or width <= atol:
-            converged = True
-            break
-        if floor.stalled(width, h, used):
-            at_floor = True
-            break
-        if width < 0.5 * best_w:
-            best_w, best_at = width, checks
-        elif cur != "jacobi" and checks - best_at >= stall_checks:
-            fallback = f"{cur} stalled at relative width {width / max(abs(mid), 1e-300):.3g} after {used} sweeps"
-            cur = "jacobi"
-            best_at = checks
-        shift = mid
-        h_next -= h_next[0]
-        h, h_next = h_next, h
+    sweeps = _PairSweeps(mdp, K, h, scheme, relax=relax, n_eval=eval_sweeps if scheme == "mpi" else 0)
+    out = certified_iteration(sweeps, opts, cost_scale=sweeps.bound.cmax, progress=prog, label="vi", t0=t0)
     from .kernels import prepare
 
-    return _finish(mdp, "vi", h, lo, hi, converged, at_floor, floor, used, t0, tol, prog, {
-        "scheme": scheme,
-        "kernel": K.name,
-        "threads": K.threads,
-        "sweeps": used,
-        "eval_sweeps": evals,
-        "checks": checks,
-        "relax": relax,
-        "tol": tol,
-        "bytes_per_sweep": prepare(mdp).bytes_per_sweep,
-        "fallback": fallback,
-        "final_scheme": cur,
-    }, atol)
+    return _finish(mdp, "vi", sweeps, out, t0, opts, prog, {
+        "scheme": scheme, "kernel": K.name, "threads": K.threads, "sweeps": out.used, "eval_sweeps": out.evals,
+        "checks": out.checks, "relax": relax, "tol": tol, "bytes_per_sweep": prepare(mdp).bytes_per_sweep,
+        "fallback": out.fallback, "final_scheme": sweeps.name})
 
 
 # ---------------------------------------------------------------------------- PI
@@ -762,84 +709,115 @@ def policy_iteration(
         or a bad ``h0``.
     """
     t0 = time.perf_counter()
+    cert_rtol = _pi_tolerance(tol, cert_rtol)
+    if not (is_int(max_iter) and max_iter >= 1):
+        raise SolverError(f"max_iter must be an integer >= 1, got {max_iter!r}")
+    if multichain not in ("fallback", "raise"):
+        raise SolverError(f"multichain must be 'fallback' or 'raise', got {multichain!r}")
+    prog = as_progress(progress)
+    run = _HowardRun(mdp, _pi_start(mdp, policy0, h0), rtol, multichain, kernel, prog)
+    run.iterate(max_iter)
+    if run.ev is None or run.vi_stands:  # every iterate multichain: value iteration's certificate stands
+        return _vi_as_pi(mdp, run.vi, t0, run.it, run.changes, run.fallback, cert_rtol)
+    return _pi_solution(mdp, run, t0, cert_rtol, prog)
+
+
+def _pi_tolerance(tol: float | None, cert_rtol: float | None) -> float:
+    """The certificate's relative width asked for (``tol``, or its older name ``cert_rtol``)."""
     if tol is not None and cert_rtol is not None and tol != cert_rtol:
         raise SolverError(f"policy iteration: give tol or its older name cert_rtol, not both ({tol} and {cert_rtol})")
-    cert_rtol = float(tol if tol is not None else cert_rtol if cert_rtol is not None else 1e-6)
-    if not cert_rtol >= 0:
-        raise SolverError(f"tol must be >= 0, got {cert_rtol}")
-    prog = as_progress(progress)
+    out = float(tol if tol is not None else cert_rtol if cert_rtol is not None else 1e-6)
+    if not out >= 0:
+        raise SolverError(f"tol must be >= 0, got {out}")
+    return out
+
+
+def _pi_start(mdp: MDP, policy0: np.ndarray | None, h0: np.ndarray | None) -> np.ndarray:
+    """The first policy: ``policy0``, the greedy policy of ``h0``, or the cheapest pair of each state."""
     if policy0 is not None and h0 is not None:
         raise SolverError("policy iteration starts from policy0 or from the greedy policy of h0, not both")
     if h0 is not None:
-        d = greedy_first(mdp, q_values(mdp, initial_bias(h0, mdp.n_states, 0)))
-    elif policy0 is None:
-        d = greedy_first(mdp, mdp.cost)
-    else:
-        d = np.asarray(policy0)
-        if not np.issubdtype(d.dtype, np.integer):
-            raise PolicyError(f"policy0 must be an integer array of pair indices, got dtype {d.dtype}")
-        d = d.astype(np.int64)
-    if multichain not in ("fallback", "raise"):
-        raise SolverError(f"multichain must be 'fallback' or 'raise', got {multichain!r}")
-    stable = False
-    ev = None
-    it = 0
-    changes = []
-    vi = None
-    fallback = None
-    for it in range(1, max_iter + 1):
-        try:
-            ev_k = evaluate_policy(mdp, d, h0=None if ev is None else ev.bias)
-        except MultichainPolicyError as exc:
-            if multichain == "raise":
-                raise
-            if vi is not None:  # the value-iteration policy is multichain too: its certificate stands
-                fallback = f"value iteration (its greedy policy is multichain too: {exc})"
-                return _vi_as_pi(mdp, vi, t0, it, changes, fallback, cert_rtol)
-            prog.phase(f"[pi] iterate {it} is multichain: value iteration, then policy iteration from its policy")
-            vi = value_iteration(mdp, h0=None if ev is None else ev.bias, kernel=kernel, progress=prog)
-            fallback = f"iterate {it} multichain; restarted from the value-iteration policy ({vi.iterations} sweeps)"
-            d = vi.policy.astype(np.int64)
-            changes.append(-1)
-            continue
-        ev = ev_k
-        q = q_values(mdp, ev.bias)
-        d_new = _improve(mdp, q, d, rtol)
-        nchg = int(np.count_nonzero(d_new != d))
-        changes.append(nchg)
-        prog.tick(f"[pi] iteration {it}: gain of the evaluated policy {ev.gain:.10g}, {nchg:,} states improve",
-                  force=True)
-        if nchg == 0:
-            stable = True
-            break
-        d = d_new
-    if ev is None:  # every evaluation so far was multichain and the budget ran out
-        assert vi is not None
-        return _vi_as_pi(mdp, vi, t0, it, changes, fallback, cert_rtol)
+        return greedy_first(mdp, q_values(mdp, initial_bias(h0, mdp.n_states, 0)))
+    if policy0 is None:
+        return greedy_first(mdp, mdp.cost)
+    d = np.asarray(policy0)
+    if not np.issubdtype(d.dtype, np.integer):
+        raise PolicyError(f"policy0 must be an integer array of pair indices, got dtype {d.dtype}")
+    return d.astype(np.int64)
+
+
+class _HowardRun:
+    """The evaluate -> improve loop of policy iteration, with its multichain fallback."""
+
+    def __init__(self, mdp: MDP, d: np.ndarray, rtol: float, multichain: str, kernel: str, prog: Progress):
+        self.mdp, self.d, self.rtol, self.multichain, self.kernel, self.prog = mdp, d, rtol, multichain, kernel, prog
+        self.ev: PolicyEvaluation | None = None
+        self.vi: Solution | None = None
+        self.vi_stands = False
+        self.stable = False
+        self.it = 0
+        self.changes: list[int] = []
+        self.fallback: str | None = None
+
+    def iterate(self, max_iter: int) -> None:
+        for self.it in range(1, max_iter + 1):
+            try:
+                ev = evaluate_policy(self.mdp, self.d, h0=None if self.ev is None else self.ev.bias)
+            except MultichainPolicyError as exc:
+                if self.multichain == "raise":
+                    raise
+                if not self._restart(exc):
+                    return
+                continue
+            self.ev = ev
+            d_new = _improve(self.mdp, q_values(self.mdp, ev.bias), self.d, self.rtol)
+            nchg = int(np.count_nonzero(d_new != self.d))
+            self.changes.append(nchg)
+            self.prog.tick(f"[pi] iteration {self.it}: gain of the evaluated policy {ev.gain:.10g}, {nchg:,} states "
+                           "improve", force=True)
+            if nchg == 0:
+                self.stable = True
+                return
+            self.d = d_new
+
+    def _restart(self, exc: MultichainPolicyError) -> bool:
+        """A multichain iterate: value iteration, then policy iteration from its greedy policy. False
+        when value iteration's policy was multichain already (its certificate then stands)."""
+        if self.vi is not None:
+            self.fallback = f"value iteration (its greedy policy is multichain too: {exc})"
+            self.vi_stands = True
+            return False
+        self.prog.phase(f"[pi] iterate {self.it} is multichain: value iteration, then policy iteration from its policy")
+        self.vi = value_iteration(self.mdp, h0=None if self.ev is None else self.ev.bias, kernel=self.kernel,
+                                  progress=self.prog)
+        self.fallback = (f"iterate {self.it} multichain; restarted from the value-iteration policy "
+                         f"({self.vi.iterations} sweeps)")
+        self.d = self.vi.policy.astype(np.int64)
+        self.changes.append(-1)
+        return True
+
+
+def _pi_solution(mdp: MDP, run: _HowardRun, t0: float, cert_rtol: float, prog: Progress) -> Solution:
+    """The Solution of a policy-iteration run: the exact gain of its last policy, the certificate
+    on that policy's bias, its stationary pair frequencies."""
+    ev = run.ev
     lo, hi = bracket(mdp, ev.bias)
     rel = (hi - lo) / max(abs(ev.gain), 1e-300)
-    if not stable:
+    if not run.stable:
         status = "max_iter"
     elif certificate_closed(mdp, lo, hi, ev.gain, cert_rtol):
         status = "optimal"
     else:
         status = "inaccurate"
     occ = np.zeros(mdp.n_pairs)
-    occ[d] = ev.stationary
-    prog.done(f"[pi] {it} evaluation(s): {lo:.10g} <= g* <= {hi:.10g}, gap {rel:.2e} ({status})")
+    occ[run.d] = ev.stationary
+    prog.done(f"[pi] {run.it} evaluation(s): {lo:.10g} <= g* <= {hi:.10g}, gap {rel:.2e} ({status})")
     return Solution(
-        method="pi",
-        status=status,
-        gain=ev.gain,
-        gain_lower=lo,
-        gain_upper=hi,
-        bias=ev.bias,
-        policy=d.copy(),
-        occupation=occ,
-        iterations=it,
-        seconds=time.perf_counter() - t0,
-        stats={"stable": stable, "changes": changes, "rel_gap": rel, "eval_residual": ev.residual,
-               "fallback": fallback, "vi_sweeps": None if vi is None else vi.iterations, "tol": cert_rtol},
+        method="pi", status=status, gain=ev.gain, gain_lower=lo, gain_upper=hi, bias=ev.bias, policy=run.d.copy(),
+        occupation=occ, iterations=run.it, seconds=time.perf_counter() - t0,
+        stats={"stable": run.stable, "changes": run.changes, "rel_gap": rel, "eval_residual": ev.residual,
+               "fallback": run.fallback, "vi_sweeps": None if run.vi is None else run.vi.iterations,
+               "tol": cert_rtol},
         pair_actions=mdp.a_indices,
     )
 
@@ -858,6 +836,7 @@ def _vi_as_pi(mdp: MDP, vi: Solution, t0: float, it: int, changes: list, fallbac
         iterations=it,
         seconds=time.perf_counter() - t0,
         stats={"stable": False, "changes": changes, "rel_gap": vi.gap, "eval_residual": None,
-               "fallback": fallback, "vi_sweeps": vi.iterations, "multichain_policy": True},
+               "fallback": fallback, "vi_sweeps": vi.iterations, "multichain_policy": True,
+               "stop": vi.stats.get("stop")},
         pair_actions=mdp.a_indices,
     )

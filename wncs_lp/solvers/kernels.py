@@ -14,7 +14,8 @@ holds the very same doubles), the cost as one number per state when it does not 
 the action, and the pointers as int32 when they fit.
 
 numba is optional (the ``fast`` extra): :func:`get_kernel` returns the numba kernel when it
-imports and the scipy kernel otherwise; both give the same sweeps up to summation order
+imports and the MDP is large enough for its load to pay (:data:`NUMBA_MIN_STATES`), and the
+scipy kernel otherwise; both give the same sweeps up to summation order
 (``tests/solvers/test_perf_dp.py``). The numba kernels also offer in-place (Gauss-Seidel) sweeps and
 fixed-policy sweeps for modified policy iteration, which the scipy kernel emulates with
 Jacobi sweeps.
@@ -29,8 +30,10 @@ import numpy as np
 
 from ..errors import SolverError
 from ..mdp import MDP
+from .threads import resolve_threads, run_parallel
 
-__all__ = ["SweepData", "prepare", "code_table", "get_kernel", "numba_available", "ScipyKernel", "KERNELS"]
+__all__ = ["SweepData", "prepare", "code_table", "get_kernel", "numba_available", "ScipyKernel", "KERNELS",
+           "NUMBA_MIN_STATES"]
 
 #: kernel names accepted by :func:`get_kernel`
 KERNELS = ("auto", "numba", "scipy")
@@ -222,26 +225,11 @@ class NumbaKernel:
     def __init__(self, mdp: MDP, threads: int | None = None):
         self.mod = _load_numba()
         self.d = prepare(mdp)
-        import numba
-
-        # serial by default: numba's OpenMP layer (GNU libgomp) does not survive a fork, and
-        # parameter sweeps fork worker processes; threads >= 2 opts in to the parallel sweep
-        self.threads = max(1, min(int(threads or 1), numba.config.NUMBA_NUM_THREADS))
+        # the usable cores on large MDPs, one in a fork of a process that ran OpenMP (.threads)
+        self.threads = resolve_threads(threads, self.d.n)
         self.nchunk = max(1, min(8 * self.threads, self.d.n)) if self.threads > 1 else 1
         self._lo = np.empty(self.nchunk)
         self._hi = np.empty(self.nchunk)
-
-    def _with_threads(self, fn, *args):
-        import numba
-
-        old = numba.get_num_threads()
-        if old != self.threads:
-            numba.set_num_threads(self.threads)
-        try:
-            return fn(*args)
-        finally:
-            if old != self.threads:
-                numba.set_num_threads(old)
 
     def jacobi(self, h: np.ndarray, h_out: np.ndarray, tau: float, shift: float) -> tuple[float, float]:
         """d = T h - h; h_out = h + tau (d - shift); returns (min d, max d)."""
@@ -249,7 +237,7 @@ class NumbaKernel:
         args = (d.indptr, d.indices, d.codes, d.table, d.cost, d.cost_per_state, d.pair_ptr, h, h_out,
                 float(tau), float(shift), self.nchunk, self._lo, self._hi)
         if self.threads > 1:
-            self._with_threads(self.mod.jacobi_sweep, *args)
+            run_parallel(self.mod.jacobi_sweep, self.threads, *args)
         else:
             self.mod.jacobi_sweep_serial(*args)
         return float(self._lo.min()), float(self._hi.max())
@@ -304,17 +292,34 @@ class ScipyKernel:
         h += tau * (v - shift)
 
 
-def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None):
-    """A sweep kernel for ``mdp``: ``"numba"``, ``"scipy"`` or ``"auto"`` (numba when importable).
+#: ``kernel="auto"`` takes numba from this many states on, scipy below. numba's fixed cost in a
+#: fresh process (its import and the load of three compiled kernels from its cache) was measured
+#: at 1.9-2.1 s on a loaded 2-core machine, the scipy kernel's Jacobi value iteration at about
+#: 3.6-5.4e-5 s a state against numba's 1e-5 (processes 1, 2 at caps 4-30, 1-3 at caps 6-10, to
+#: 1e-9): they cross at 50k-80k states. (270 states: numba 2.3 s, scipy 0.04 s; 110k states:
+#: numba 2.9 s, scipy 4.0 s.)
+NUMBA_MIN_STATES = 50_000
+
+
+def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None, *, in_place: bool = False):
+    """A sweep kernel for ``mdp``: ``"numba"``, ``"scipy"`` or ``"auto"`` (numba when importable
+    and the MDP has at least :data:`NUMBA_MIN_STATES` states, where its load pays, or when the
+    caller needs ``in_place`` sweeps, which only numba has).
+
+    ``threads`` (numba only): None for the default of :func:`wncs_lp.solvers.threads.resolve_threads`
+    (the usable cores from 1M states on, one below), else an integer >= 1.
 
     Raises
     ------
     ValueError
-        Unknown name, or ``"numba"`` requested but numba is not importable.
+        Unknown name, a bad ``threads``, or ``"numba"`` requested but numba is not importable.
     """
     if kernel not in KERNELS:
         raise ValueError(f"unknown kernel {kernel!r}; expected one of {', '.join(KERNELS)}")
-    if kernel == "scipy" or (kernel == "auto" and not numba_available()):
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
+        raise ValueError(f"threads must be an integer >= 1 (or None: the default), got {threads!r}")
+    small = mdp.n_states < NUMBA_MIN_STATES and not in_place
+    if kernel == "scipy" or (kernel == "auto" and (small or not numba_available())):
         return ScipyKernel(mdp, threads)
     if not numba_available():
         raise ValueError("kernel 'numba' requested but numba is not importable (pip install 'wncs_lp[fast]')")

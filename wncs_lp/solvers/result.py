@@ -10,7 +10,8 @@ from ..files import scalars
 from ..status import (FAILED, INACCURATE, INFEASIBLE, INTERRUPTED, MAX_ITER, OPTIMAL, STATUS_CODES, status_code,
                       status_message)
 
-__all__ = ["Solution", "certificate_summary", "OPTIMAL", "INACCURATE", "MAX_ITER", "INTERRUPTED", "INFEASIBLE", "FAILED", "STATUS_CODES"]
+__all__ = ["Solution", "Certified", "certificate_summary", "describe_array", "result_repr", "certificate_rows",
+           "stats_row", "OPTIMAL", "INACCURATE", "MAX_ITER", "INTERRUPTED", "INFEASIBLE", "FAILED", "STATUS_CODES"]
 
 
 def certificate_summary(result: Any) -> dict[str, Any]:
@@ -29,8 +30,88 @@ def certificate_summary(result: Any) -> dict[str, Any]:
     }
 
 
+class Certified:
+    """What every result with a Bellman certificate offers: the certificate's relative width,
+    the status as a code and in words, and the JSON scalars (:meth:`summary`). A result class
+    mixes it in and has the fields ``method``, ``status``, ``gain``, ``gain_lower``,
+    ``gain_upper``, ``iterations``, ``seconds`` and ``stats``."""
+
+    method: str
+    status: str
+    gain: float
+    gain_lower: float
+    gain_upper: float
+    iterations: int
+    seconds: float
+    stats: dict[str, Any]
+
+    @property
+    def gap(self) -> float:
+        """Relative width of the certificate, (hi - lo) / max(|gain|, 1e-300)."""
+        return (self.gain_upper - self.gain_lower) / max(abs(self.gain), 1e-300)
+
+    @property
+    def ok(self) -> bool:
+        """``status_code == OPTIMAL``."""
+        return self.status == OPTIMAL
+
+    @property
+    def status_code(self) -> str:
+        """The status as one of :data:`wncs_lp.status.STATUS_CODES` (``"inaccurate:certificate"`` ->
+        ``INACCURATE``)."""
+        return status_code(self.status)
+
+    @property
+    def message(self) -> str:
+        """What the status means, in words (:func:`wncs_lp.status.status_message`)."""
+        return status_message(self.status)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready scalars (no arrays): :func:`certificate_summary`, ``iterations``, ``seconds``
+        and the scalar entries of ``stats``."""
+        out = {
+            **certificate_summary(self),
+            "iterations": int(self.iterations),
+            "seconds": float(self.seconds),
+        }
+        out.update(scalars(self.stats))
+        return out
+
+
+def describe_array(a: Any, what: str) -> str:
+    """``"array of 1,234 floats (float64)"``: an array in a result's printout, by size."""
+    if a is None:
+        return "None"
+    a = np.asarray(a)
+    return f"array of {a.size:,} {what} ({a.dtype})"
+
+
+def result_repr(head: str, rows: list[tuple[str, str]]) -> str:
+    """Multi-line, scipy ``OptimizeResult`` style: a head line, then names right-aligned."""
+    width = max(len(k) for k, _ in rows)
+    return "\n".join([head] + [f"{k:>{width + 2}}: {v}" for k, v in rows])
+
+
+def certificate_rows(res: Certified) -> list[tuple[str, str]]:
+    """The printout rows every certified result starts with (status ... seconds)."""
+    return [
+        ("status", f"{res.status}" + ("" if res.status == res.status_code else f" (code {res.status_code})")),
+        ("message", res.message),
+        ("gain", f"{res.gain:.12g}"),
+        ("gain_lower", f"{res.gain_lower:.12g}"),
+        ("gain_upper", f"{res.gain_upper:.12g}"),
+        ("gap", f"{res.gap:.3g} (relative certificate width)"),
+        ("iterations", f"{res.iterations}"),
+        ("seconds", f"{res.seconds:.3g}"),
+    ]
+
+
+def stats_row(stats: dict[str, Any]) -> tuple[str, str]:
+    return ("stats", f"{len(stats)} entries: " + ", ".join(list(stats)[:8]) + (", ..." if len(stats) > 8 else ""))
+
+
 @dataclass(frozen=True, eq=False)
-class Solution:
+class Solution(Certified):
     """An average-cost solution of an :class:`~wncs_lp.mdp.MDP`, with its certificate.
 
     Printing one shows its scalars, scipy ``OptimizeResult`` style (``print(sol)``)::
@@ -96,27 +177,6 @@ class Solution:
     pair_actions: np.ndarray | None = field(default=None, repr=False)
 
     @property
-    def gap(self) -> float:
-        """Relative width of the certificate, (hi - lo) / max(|gain|, 1e-300)."""
-        return (self.gain_upper - self.gain_lower) / max(abs(self.gain), 1e-300)
-
-    @property
-    def ok(self) -> bool:
-        """``status_code == OPTIMAL``."""
-        return self.status == OPTIMAL
-
-    @property
-    def status_code(self) -> str:
-        """The status as one of :data:`wncs_lp.status.STATUS_CODES` (``"inaccurate:certificate"`` ->
-        ``INACCURATE``)."""
-        return status_code(self.status)
-
-    @property
-    def message(self) -> str:
-        """What the status means, in words (:func:`wncs_lp.status.status_message`)."""
-        return status_message(self.status)
-
-    @property
     def sigma(self) -> np.ndarray | None:
         """The action index chosen in each state, (n,) int: QuantEcon's ``sigma``.
 
@@ -139,25 +199,8 @@ class Solution:
 
         return PolicyChain(mdp, np.asarray(self.policy, dtype=np.int64))
 
-    def summary(self) -> dict[str, Any]:
-        """JSON-ready scalars (no arrays)."""
-        out = {
-            **certificate_summary(self),
-            "iterations": int(self.iterations),
-            "seconds": float(self.seconds),
-        }
-        out.update(scalars(self.stats))
-        return out
-
     def __repr__(self) -> str:
         return _repr(self)
-
-
-def _describe_array(a: Any, what: str) -> str:
-    if a is None:
-        return "None"
-    a = np.asarray(a)
-    return f"array of {a.size:,} {what} ({a.dtype})"
 
 
 def _repr(sol: Solution) -> str:
@@ -166,23 +209,12 @@ def _repr(sol: Solution) -> str:
     used = sol.method
     if "auto_choice" in sol.stats:
         used = f"{sol.method} -> {sol.stats['auto_choice']}"
-    rows = [
-        ("status", f"{sol.status}" + ("" if sol.status == sol.status_code else f" (code {sol.status_code})")),
-        ("message", sol.message),
-        ("gain", f"{sol.gain:.12g}"),
-        ("gain_lower", f"{sol.gain_lower:.12g}"),
-        ("gain_upper", f"{sol.gain_upper:.12g}"),
-        ("gap", f"{sol.gap:.3g} (relative certificate width)"),
-        ("iterations", f"{sol.iterations}"),
-        ("seconds", f"{sol.seconds:.3g}"),
-        ("bias", _describe_array(sol.bias, "floats") + ", h[0] = 0"),
-        ("policy", _describe_array(sol.policy, "pair indices") + ", one per state"),
+    rows = certificate_rows(sol) + [
+        ("bias", describe_array(sol.bias, "floats") + ", h[0] = 0"),
+        ("policy", describe_array(sol.policy, "pair indices") + ", one per state"),
         ("sigma", "None (use actions(mdp))" if sol.pair_actions is None
-         else _describe_array(sol.sigma, "action indices") + ", one per state"),
-        ("occupation", _describe_array(sol.occupation, "pair frequencies")),
-        ("stats", f"{len(sol.stats)} entries: " + ", ".join(list(sol.stats)[:8])
-         + (", ..." if len(sol.stats) > 8 else "")),
+         else describe_array(sol.sigma, "action indices") + ", one per state"),
+        ("occupation", describe_array(sol.occupation, "pair frequencies")),
+        stats_row(sol.stats),
     ]
-    width = max(len(k) for k, _ in rows)
-    head = f"{type(sol).__name__} of {n:,} states by {used}"
-    return "\n".join([head] + [f"{k:>{width + 2}}: {v}" for k, v in rows])
+    return result_repr(f"{type(sol).__name__} of {n:,} states by {used}", rows)

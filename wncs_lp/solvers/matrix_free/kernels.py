@@ -24,16 +24,19 @@ signed ones, and LLVM then turned the contiguous loads into AVX-512 gathers), an
 whole chunk of planes is one function (a call per plane passes ~30 arrays, and numba's atomic
 reference counting of them cost ~10%).
 
-Kernels (each with a serial driver and a ``prange`` one over chunks of work items):
+Kernels (each a ``prange`` driver over chunks of work items, compiled for numba's threads and,
+as ``*_serial``, for one: :func:`wncs_lp.solvers.threads.twins`):
 
-* :func:`all_actions_ser` / ``_par`` -- every action's value on a row (``acc``), then the
-  minimum over actions (``mode = 0``: the Bellman operator T, first minimiser kept, ``arg``)
-  or the weighted sum with per-configuration action weights ``W[c, j]`` (``mode = 1``: a
-  tau-independent randomised policy). ``write = 0`` only computes min / max of (T h - h)
-  (over the states with ``mask`` set when ``use_mask``), ``1`` updates h in place
-  (Gauss-Seidel: ``h += relax (T h - h - shift)``), ``2`` writes ``h_out`` (Jacobi);
-  ``write_pol`` stores the minimiser in ``pol`` (uint8).
-* :func:`fixed_policy_ser` / ``_par`` -- the same for one action per state (``pol``).
+* :func:`all_actions` -- every action's value on a row (``acc``), then the minimum over actions
+  (``mode`` :attr:`Reduce.MIN <.operator.Reduce.MIN>`: the Bellman operator T, first minimiser
+  kept, ``arg``) or the weighted sum with per-configuration action weights ``W[c, j]``
+  (:attr:`Reduce.WEIGHTED <.operator.Reduce.WEIGHTED>`: a tau-independent randomised policy).
+  ``write`` (:class:`.operator.Write`) ``NONE`` only computes min / max of (T h - h) (over the
+  states with ``mask`` set when ``use_mask``), ``IN_PLACE`` updates h in place (Gauss-Seidel:
+  ``h += relax (T h - h - shift)``), ``OUT`` writes ``h_out`` (Jacobi); ``write_pol`` stores
+  the minimiser in ``pol`` (uint8).
+* :func:`fixed_policy` -- the same for one action per state (``pol``), which must be in range
+  for its configuration (checked by the callers: :func:`.layout.check_local_actions`).
 * :func:`reach_all` -- marks the successors of the marked states to a fixed point.
 
 With threads, a Gauss-Seidel sweep is asynchronous across the chunks (a plane may
@@ -49,60 +52,69 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange, uint64
 
+from ..threads import twins
+from .operator import Reduce, Write
+
+
+# The plane setup is inlined into both chunk kernels by numba (``inline="always"``, at the level of
+# numba's IR: no call, no reference counting of its arrays). The row loops are written out in each
+# kernel on purpose: inlined helpers for them (the values of an action along a row, the end of a
+# row) were measured 20-30% slower on processes 1-4 at cap 8 (the all-actions pass, CPU time per
+# state, five alternating runs), so those kernels stay long.
+@njit(inline="always")
+def _plane(c, tc, N, lo_, dims, strides, off, act_ptr, out_ptr, e_m, e_base, e_stride, q, split, sat, A, rs, rm):
+    """Set up the plane of configuration c in tile ``tc``: per outcome o, the last axis' split /
+    saturation, the offset due to the tile's axes (A) and the stride / saturation of the row axis
+    N - 2. Returns the row length L, the row's first AoI index loN, the first outcome o0, the
+    plane's first state s0, the tile axes' cost qo0, and the rows (count, first AoI index)."""
+    L = dims[c, N - 1]
+    loN = lo_[c, N - 1]
+    o0 = out_ptr[act_ptr[c]]
+    nO = out_ptr[act_ptr[c + 1]] - o0
+    for o in range(nO):
+        e = o0 + o
+        mN = e_m[e, N - 1]
+        sat[o] = mN
+        split[o] = min(max(mN - loN, 0), L)
+        v = e_base[e]
+        for k in range(N - 2):
+            tk = tc[k] + 1
+            mk = e_m[e, k]
+            v += e_stride[e, k] * (tk if tk < mk else mk)
+        A[o] = v
+        if N >= 2:
+            rs[o] = e_stride[e, N - 2]
+            rm[o] = e_m[e, N - 2]
+        else:
+            rs[o] = 0
+            rm[o] = 0
+    s0 = off[c]
+    qo0 = 0.0
+    for k in range(N - 2):
+        s0 += (tc[k] - lo_[c, k]) * strides[c, k]
+        qo0 += q[k, tc[k]]
+    nrows = 1
+    tr = 0
+    if N >= 2:
+        nrows = dims[c, N - 2]
+        tr = lo_[c, N - 2]
+    return L, loN, o0, nO, s0, qo0, nrows, tr
+
 
 @njit(cache=True, nogil=True, boundscheck=False, fastmath={"contract"})
 def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m, e_base,
                e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask, iscr, fscr,
                los, his):
-    P = iscr[0]
-    split = iscr[1]
-    sat = iscr[2]
-    A = iscr[3]
-    rs = iscr[4]
-    rm = iscr[5]
-    arg = iscr[6]
-    acc = fscr[0]
-    best = fscr[1]
-    dd = fscr[2]
+    P, split, sat, A, rs, rm, arg = iscr[0], iscr[1], iscr[2], iscr[3], iscr[4], iscr[5], iscr[6]
+    acc, best, dd = fscr[0], fscr[1], fscr[2]
     lo = np.inf
     hi = -np.inf
     for x in range(x0, x1):
         c = tile_cfg[x]
-        L = dims[c, N - 1]
-        loN = lo_[c, N - 1]
+        L, loN, o0, nO, s0, qo0, nrows, tr = _plane(c, tc, N, lo_, dims, strides, off, act_ptr, out_ptr, e_m,
+                                                    e_base, e_stride, q, split, sat, A, rs, rm)
         a0 = act_ptr[c]
         na = act_ptr[c + 1] - a0
-        o0 = out_ptr[a0]
-        nO = out_ptr[a0 + na] - o0
-        # ---- plane setup: per outcome, the last axis' split / saturation, the offset due
-        # to the tile's axes (A) and the stride / saturation of the row axis N - 2
-        for o in range(nO):
-            e = o0 + o
-            mN = e_m[e, N - 1]
-            sat[o] = mN
-            split[o] = min(max(mN - loN, 0), L)
-            v = e_base[e]
-            for k in range(N - 2):
-                tk = tc[k] + 1
-                mk = e_m[e, k]
-                v += e_stride[e, k] * (tk if tk < mk else mk)
-            A[o] = v
-            if N >= 2:
-                rs[o] = e_stride[e, N - 2]
-                rm[o] = e_m[e, N - 2]
-            else:
-                rs[o] = 0
-                rm[o] = 0
-        s0 = off[c]
-        qo0 = 0.0
-        for k in range(N - 2):
-            s0 += (tc[k] - lo_[c, k]) * strides[c, k]
-            qo0 += q[k, tc[k]]
-        nrows = 1
-        tr = 0
-        if N >= 2:
-            nrows = dims[c, N - 2]
-            tr = lo_[c, N - 2]
         qN = q[N - 1]
         qu = uint64(loN)
         # ---- rows
@@ -117,7 +129,7 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
             first = True
             for j in range(na):
                 w = 1.0
-                if mode == 1:
+                if mode == Reduce.WEIGHTED:
                     w = W[c, j]
                     if w == 0.0:
                         continue
@@ -138,7 +150,7 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                             acc[i] += p * h[b + uint64(i)]
                         for i in range(sp, L):
                             acc[i] += v
-                if mode == 0:
+                if mode == Reduce.MIN:
                     if first:
                         for i in range(L):
                             best[i] = acc[i]
@@ -170,10 +182,10 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                 for i in range(L):
                     lo = min(lo, dd[i])
                     hi = max(hi, dd[i])
-            if write == 1:
+            if write == Write.IN_PLACE:
                 for i in range(L):
                     h[su + uint64(i)] += relax * (dd[i] - shift)
-            elif write == 2:
+            elif write == Write.OUT:
                 for i in range(L):
                     h_out[su + uint64(i)] = h[su + uint64(i)] + relax * (dd[i] - shift)
             if write_pol:
@@ -190,52 +202,16 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
 @njit(cache=True, nogil=True, boundscheck=False, fastmath={"contract"})
 def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m, e_base,
                  e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, iscr, fscr, los, his):
-    split = iscr[1]
-    sat = iscr[2]
-    A = iscr[3]
-    rs = iscr[4]
-    rm = iscr[5]
-    arg = iscr[6]
-    acc = fscr[0]
-    best = fscr[1]
-    dd = fscr[2]
+    split, sat, A, rs, rm, arg = iscr[1], iscr[2], iscr[3], iscr[4], iscr[5], iscr[6]
+    acc, best, dd = fscr[0], fscr[1], fscr[2]
     lo = np.inf
     hi = -np.inf
     for x in range(x0, x1):
         c = tile_cfg[x]
-        L = dims[c, N - 1]
-        loN = lo_[c, N - 1]
+        L, loN, o0, nO, s0, qo0, nrows, tr = _plane(c, tc, N, lo_, dims, strides, off, act_ptr, out_ptr, e_m,
+                                                    e_base, e_stride, q, split, sat, A, rs, rm)
         a0 = act_ptr[c]
         na = act_ptr[c + 1] - a0
-        o0 = out_ptr[a0]
-        nO = out_ptr[act_ptr[c + 1]] - o0
-        for o in range(nO):
-            e = o0 + o
-            mN = e_m[e, N - 1]
-            sat[o] = mN
-            split[o] = min(max(mN - loN, 0), L)
-            v = e_base[e]
-            for k in range(N - 2):
-                tk = tc[k] + 1
-                mk = e_m[e, k]
-                v += e_stride[e, k] * (tk if tk < mk else mk)
-            A[o] = v
-            if N >= 2:
-                rs[o] = e_stride[e, N - 2]
-                rm[o] = e_m[e, N - 2]
-            else:
-                rs[o] = 0
-                rm[o] = 0
-        s0 = off[c]
-        qo0 = 0.0
-        for k in range(N - 2):
-            s0 += (tc[k] - lo_[c, k]) * strides[c, k]
-            qo0 += q[k, tc[k]]
-        nrows = 1
-        tr = 0
-        if N >= 2:
-            nrows = dims[c, N - 2]
-            tr = lo_[c, N - 2]
         qN = q[N - 1]
         qu = uint64(loN)
         for r in range(nrows):
@@ -287,10 +263,10 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
                 for i in range(L):
                     lo = min(lo, dd[i])
                     hi = max(hi, dd[i])
-            if write == 1:
+            if write == Write.IN_PLACE:
                 for i in range(L):
                     h[su + uint64(i)] += relax * (dd[i] - shift)
-            elif write == 2:
+            elif write == Write.OUT:
                 for i in range(L):
                     h_out[su + uint64(i)] = h[su + uint64(i)] + relax * (dd[i] - shift)
             s0 += L
@@ -306,14 +282,13 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
 # tile_cfg[x0:x1] in that tile. Chunk ci does items[ip[ci]:ip[ci + 1]] in order, and the chunks
 # run on numba's threads in one parallel region per sweep (a region per tile was measured 10x
 # slower on a loaded machine: every region waits for both threads to be scheduled). The chunks
-# are contiguous ranges of tiles (matrix_free._work_items), so each thread's in-place sweep
+# are contiguous ranges of tiles (:func:`.operator.work_items`), so each thread's in-place sweep
 # runs in the serial order over its part of the AoI box.
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def all_actions_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
-                    e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
-                    maxO, maxL, los, his):
+def _all_actions_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
+                      e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
+                      maxO, maxL, los, his):
     for ci in prange(ip.size - 1):
         los[ci] = np.inf
         his[ci] = -np.inf
@@ -325,24 +300,8 @@ def all_actions_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, ac
                        write_pol, relax, shift, mask, use_mask, iscr, fscr, los, his)
 
 
-@njit(cache=True, nogil=True)
-def all_actions_ser(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
-                    e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
-                    maxO, maxL, los, his):
-    for ci in range(ip.size - 1):
-        los[ci] = np.inf
-        his[ci] = -np.inf
-        iscr = np.zeros((7, max(maxO, maxL)), np.int64)
-        fscr = np.zeros((3, maxL))
-        for it in range(ip[ci], ip[ci + 1]):
-            _all_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
-                       off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, W, mode, write,
-                       write_pol, relax, shift, mask, use_mask, iscr, fscr, los, his)
-
-
-@njit(cache=True, nogil=True, parallel=True)
-def fixed_policy_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
-                     e_base, e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, maxO, maxL, los, his):
+def _fixed_policy_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
+                       e_base, e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, maxO, maxL, los, his):
     for ci in prange(ip.size - 1):
         los[ci] = np.inf
         his[ci] = -np.inf
@@ -354,18 +313,10 @@ def fixed_policy_par(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, a
                          shift, mask, use_mask, iscr, fscr, los, his)
 
 
-@njit(cache=True, nogil=True)
-def fixed_policy_ser(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
-                     e_base, e_stride, q, h, h_out, pol, write, relax, shift, mask, use_mask, maxO, maxL, los, his):
-    for ci in range(ip.size - 1):
-        los[ci] = np.inf
-        his[ci] = -np.inf
-        iscr = np.zeros((7, max(maxO, maxL)), np.int64)
-        fscr = np.zeros((3, maxL))
-        for it in range(ip[ci], ip[ci + 1]):
-            _fixed_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
-                         off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, write, relax,
-                         shift, mask, use_mask, iscr, fscr, los, his)
+#: Every action's value on each state (the Bellman operator or a weighted policy), by chunks.
+all_actions, all_actions_serial = twins(_all_actions_body, "all_actions")
+#: One fixed action per state, by chunks.
+fixed_policy, fixed_policy_serial = twins(_fixed_policy_body, "fixed_policy")
 
 
 # ----------------------------------------------------------------------------- reachability

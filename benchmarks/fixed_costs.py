@@ -1,0 +1,105 @@
+"""Issue 28: the fixed costs of a small solve, end to end, against a baseline tree in the same run.
+
+    python benchmarks/fixed_costs.py --baseline-rev d3dec86          # a commit, unpacked by git archive
+    python benchmarks/fixed_costs.py --baseline /tmp/wncs_base --caps 4,12,30 --repeat 5
+
+For each cap (default 4 and 30 of ``formulations/paper_p12.toml``) the command
+``wncs-lp solve formulations/paper_p12.toml --set tau_cap=CAP --json`` is timed as a whole process,
+this tree and the baseline in turn (A, B, A, B, ...: a change of the machine's load hits both
+alike), the best of ``--repeat`` runs after a warm-up (which also fills numba's on-disk cache);
+with the command's own account (build, solve), the kernel its value iteration used, and the heavy
+packages it imported. Beside them: ``python -c pass`` (the floor of any command),
+``python -c "import numba"`` (what a solve pays the first time it touches numba, before loading
+any kernel), and Storm's solve of the same model when ``stormpy`` imports
+(``benchmarks/startup.py`` does the measuring). The ratios of one run are steadier than its
+seconds: the machine is shared (the load average is printed).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+from startup import _best_interleaved, _env, _run, export_drn, measure_trees  # noqa: E402
+
+_KERNEL = """
+import json, sys, warnings
+warnings.simplefilter("ignore")
+import wncs_lp
+sc = wncs_lp.load_scenario(sys.argv[1], ["tau_cap=" + sys.argv[2]])
+sol = wncs_lp.solve(wncs_lp.build(sc), "auto")
+print(json.dumps({"kernel": sol.stats.get("kernel"), "choice": sol.stats.get("auto_choice"),
+                  "sweeps": sol.stats.get("sweeps"), "status": sol.status}))
+"""
+
+
+def unpack(rev: str, folder: Path) -> Path:
+    """The tree of commit ``rev`` of this repository, unpacked into ``folder`` (git archive)."""
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev], check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    return folder
+
+
+def one_cap(trees: dict[str, Path], cap: int, repeat: int, scenario: str) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        drn = export_drn(scenario, cap, Path(tmp))
+        rows = measure_trees(trees, scenario, cap, repeat, drn)
+    for name, tree in trees.items():
+        _, out = _run([sys.executable, "-c", _KERNEL, str(tree / "formulations" / f"{scenario}.toml"), str(cap)],
+                      tree, _env(tree))
+        rows[name].update(json.loads(out.strip().splitlines()[-1]))
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--baseline", type=Path, default=None, help="a tree to compare with")
+    ap.add_argument("--baseline-rev", default=None, help="or a commit of this repository (git archive)")
+    ap.add_argument("--caps", default="4,30")
+    ap.add_argument("--scenario", default="paper_p12")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
+    a = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        trees = {"this tree": ROOT}
+        if a.baseline is not None:
+            trees["baseline"] = a.baseline.resolve()
+        elif a.baseline_rev is not None:
+            trees["baseline"] = unpack(a.baseline_rev, Path(tmp))
+        py = sys.executable
+        floors = _best_interleaved({"pass": ([py, "-c", "pass"], ROOT, None),
+                                    "numba": ([py, "-c", "import numba"], ROOT, None)}, a.repeat)
+        print(f"load average {os.getloadavg()[0]:.2f} (2 cores); python -c pass {floors['pass'][0]:.3f} s, "
+              f"import numba {floors['numba'][0]:.3f} s")
+        result = {"floor": floors["pass"][0], "import_numba": floors["numba"][0], "caps": {}}
+        for cap in (int(c) for c in a.caps.split(",")):
+            rows = one_cap(trees, cap, a.repeat, a.scenario)
+            result["caps"][cap] = rows
+            storm = rows.pop("storm", None)
+            rows.pop("floor", None)
+            print(f"\n{a.scenario} at cap {cap} ({rows['this tree']['states']:,} states)")
+            print(f"{'tree':<10} {'whole':>7} {'build':>7} {'solve':>7} {'method':>6} {'kernel':>6}  heavy imports")
+            for name, r in rows.items():
+                print(f"{name:<10} {r['e2e']:>7.3f} {r['build_seconds']:>7.3f} {r['solve_seconds']:>7.3f} "
+                      f"{str(r['choice']):>6} {str(r['kernel']):>6}  {', '.join(r['heavy_imports'])}")
+            if "baseline" in rows:
+                b, t = rows["baseline"]["e2e"], rows["this tree"]["e2e"]
+                print(f"whole command: baseline / this tree = {b / t:.2f}x ({b - t:+.3f} s saved)")
+            if storm is not None:
+                print(f"Storm's LRA solve alone {storm['check']:.3f} s (whole process {storm['wall']:.3f} s): "
+                      f"our whole command / Storm's solve = {rows['this tree']['e2e'] / storm['check']:.2f}x")
+        if a.json is not None:
+            a.json.write_text(json.dumps(result, indent=2, default=str) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

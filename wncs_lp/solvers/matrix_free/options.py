@@ -1,0 +1,111 @@
+"""The options of the matrix-free solver (:class:`MatrixFreeOptions`), checked once, when made."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ...errors import SolverError
+from ..iteration import VI_TOL, IterationOptions, is_int, is_real
+from .layout import DOMAINS
+
+__all__ = ["MatrixFreeOptions", "SCHEMES", "TILE_ORDERS"]
+
+#: ``scheme`` values of :func:`~.iterate.matrix_free_value_iteration`.
+SCHEMES = ("auto", "mpi", "gs", "jacobi")
+#: ``tile_order`` values.
+TILE_ORDERS = ("forward", "reverse")
+
+
+@dataclass(frozen=True)
+class MatrixFreeOptions(IterationOptions):
+    """How :func:`~.iterate.matrix_free_value_iteration` and :func:`~.iterate.matrix_free_evaluate`
+    iterate. Every field can also be given to them as a keyword.
+
+    Attributes
+    ----------
+    tol, atol, max_iter, check_every, stall_checks
+        As :class:`~wncs_lp.solvers.iteration.IterationOptions` (relative width 1e-9, absolute
+        0, 100,000 sweeps, a certificate every 5 improvement sweeps, the Jacobi fallback after 40
+        certificates without the width halving).
+    on_interrupt : {"return", "raise"}
+        On Ctrl-C: certify the current h with one more pass and return it with status
+        ``"interrupted"`` (default), or re-raise.
+    scheme : {"auto", "mpi", "gs", "jacobi"}
+        Value iteration only. ``"auto"`` = ``"mpi"``: relaxed Gauss-Seidel improvement sweeps,
+        each followed by ``eval_sweeps`` sweeps of the policy it found; ``"gs"`` without them;
+        ``"jacobi"`` is relative value iteration with the aperiodicity transform (tau = 0.5),
+        which needs a second value vector.
+    relax : float
+        Relaxation of the in-place sweeps, in (0, 1].
+    eval_sweeps : int
+        Value iteration only: fixed-policy sweeps after each improvement sweep (``"mpi"``), >= 0.
+    threads : int or None
+        numba threads (:func:`wncs_lp.solvers.threads.resolve_threads`): by default the usable
+        cores from 1,000,000 layout states on, else one; a count given is used as it is (capped
+        at numba's maximum; one in a fork of a process that ran GNU OpenMP). With 2 or more the
+        in-place sweeps are asynchronous between the threads (iterates depend on timing; the
+        certificate does not).
+    domain : {"auto", "hull", "reachable"}
+        Over which states the certificate is taken (:mod:`wncs_lp.solvers.matrix_free`): the
+        interval hull (valid always, closes when :func:`~.layout.drains_to_initial`), or the
+        exact reachable set (a byte mask; ``"auto"`` uses it only when the hull's bracket might
+        not close).
+    tile_order : {"forward", "reverse"}
+        Order of the in-place sweeps over the AoI tiles (forward needed 1.5x fewer sweeps than
+        reverse on processes 1-4).
+    extrapolate : bool
+        One-mode extrapolation of the bias when the bracket shrinks at a steady rate
+        (:class:`~.extrapolate.Extrapolator`; needs a second value vector, used only if it fits).
+    warm_start : bool or None
+        Jacobi sweeps first, until the bracket is within ``warm_rel`` (at most ``warm_max``
+        sweeps); it shares the extrapolation's second vector. None: on for an evaluation, off for
+        value iteration.
+    warm_rel : float
+        > 0.
+    warm_max : int
+        >= 0.
+    force : bool
+        Value iteration only: skip the size guard (:func:`wncs_lp.models.guard.check_size` with
+        ``method="matrix-free"``, which refuses a layout whose vectors would not fit).
+    """
+
+    tol: float = VI_TOL
+    on_interrupt: str = "return"
+    scheme: str = "auto"
+    relax: float = 0.8
+    eval_sweeps: int = 1
+    threads: int | None = None
+    domain: str = "auto"
+    tile_order: str = "forward"
+    extrapolate: bool = True
+    warm_start: bool | None = None
+    warm_rel: float = 0.05
+    warm_max: int = 100
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _choice("scheme", self.scheme, SCHEMES)
+        _choice("domain", self.domain, DOMAINS)
+        _choice("tile_order", self.tile_order, TILE_ORDERS)
+        if not (is_real(self.relax) and 0.0 < self.relax <= 1.0):
+            raise SolverError(f"relax must be in (0, 1], got {self.relax!r}")
+        if not (is_real(self.warm_rel) and math.isfinite(self.warm_rel) and self.warm_rel > 0):
+            raise SolverError(f"warm_rel must be a finite number > 0, got {self.warm_rel!r}")
+        for name in ("eval_sweeps", "warm_max"):
+            v = getattr(self, name)
+            if not (is_int(v) and v >= 0):
+                raise SolverError(f"{name} must be an integer >= 0, got {v!r}")
+        if self.threads is not None and not (is_int(self.threads) and self.threads >= 1):
+            raise SolverError(f"threads must be an integer >= 1 (or None: the usable cores), got {self.threads!r}")
+        for name in ("extrapolate", "force"):
+            if not isinstance(getattr(self, name), bool):
+                raise SolverError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if self.warm_start is not None and not isinstance(self.warm_start, bool):
+            raise SolverError(f"warm_start must be True, False or None, got {self.warm_start!r}")
+
+
+def _choice(name: str, value: object, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise SolverError(f"unknown {name} {value!r}; expected one of {', '.join(allowed)}")
+

@@ -1,0 +1,100 @@
+"""Calls of the numba kernels (:mod:`.kernels`): the serial or threaded driver, its reductions, and
+the reachability marking (:func:`reachable_mask`)."""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from ...errors import SolverError
+from ...models.system import System
+from ..threads import resolve_threads, run_parallel
+from .layout import BoxLayout
+from .operator import Operator, Reduce, Write, work_items
+
+__all__ = ["Sweeper", "load_kernels", "reachable_mask"]
+
+
+def load_kernels() -> Any:
+    """The numba kernels (:mod:`.kernels`); a SolverError when numba is missing or disabled."""
+    if os.environ.get("WNCS_LP_NO_NUMBA"):
+        raise SolverError("the matrix-free solver needs numba, disabled here by WNCS_LP_NO_NUMBA")
+    try:
+        from . import kernels as K
+    except ImportError as exc:  # pragma: no cover - numba is installed in the test environment
+        raise SolverError(
+            f"the matrix-free solver needs numba (pip install 'wncs_lp[fast]'): {exc}"
+        ) from None
+    return K
+
+
+class Sweeper:
+    """One kind of pass over the layout, on the serial or the threaded kernel.
+
+    ``threads`` as :func:`wncs_lp.solvers.threads.resolve_threads` (default: the usable cores
+    from :data:`~wncs_lp.solvers.threads.PARALLEL_MIN_STATES` states on, else one; explicit
+    counts are kept). The chunks of a threaded pass are contiguous ranges of tiles
+    (:func:`.operator.work_items`).
+    """
+
+    def __init__(self, op: Operator, threads: int | None, mask: np.ndarray | None, reverse: bool = False):
+        self.K = load_kernels()
+        self.op = op
+        self.threads = resolve_threads(threads, int(op.off[-1]))
+        self.nchunk = self.threads
+        self.items, self.ip, self.tile_cfg = work_items(op, self.nchunk, reverse)
+        self.los = np.empty(self.nchunk)
+        self.his = np.empty(self.nchunk)
+        self.mask = mask if mask is not None else np.zeros(1, np.uint8)
+        self.use_mask = mask is not None
+        self._dummy_h = np.zeros(1)
+        self._dummy_W = np.zeros((1, 1))
+
+    def _run(self, fn_par, fn_ser, *args) -> tuple[float, float]:
+        if self.threads > 1:
+            run_parallel(fn_par, self.threads, *args, chunksize=1)
+        else:
+            fn_ser(*args)
+        return float(self.los.min()), float(self.his.max())
+
+    def all_actions(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, W: np.ndarray | None,
+                    reduce: Reduce, write: Write, write_pol: bool, relax: float, shift: float) -> tuple[float, float]:
+        """A pass of every action: the Bellman operator (``Reduce.MIN``, its minimiser into ``pol``
+        with ``write_pol``) or the weights ``W`` (``Reduce.WEIGHTED``); returns min / max of T h - h."""
+        o = self.op
+        return self._run(
+            self.K.all_actions, self.K.all_actions_serial,
+            self.items, self.ip, o.tile_tc, self.tile_cfg, o.N, o.lo, o.dims, o.strides, o.off,
+            o.act_ptr, o.out_ptr, o.e_prob, o.e_m, o.e_base, o.e_stride, o.q, h,
+            self._dummy_h if h_out is None else h_out, pol, self._dummy_W if W is None else W, int(reduce),
+            int(write), bool(write_pol), float(relax), float(shift), self.mask, self.use_mask, o.max_out,
+            o.max_row, self.los, self.his,
+        )
+
+    def fixed(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, write: Write, relax: float,
+              shift: float) -> tuple[float, float]:
+        """A pass of the fixed policy ``pol`` (one local action per state); min / max of T_pol h - h."""
+        o = self.op
+        return self._run(
+            self.K.fixed_policy, self.K.fixed_policy_serial,
+            self.items, self.ip, o.tile_tc, self.tile_cfg, o.N, o.lo, o.dims, o.strides, o.off,
+            o.act_ptr, o.out_ptr, o.e_prob, o.e_m, o.e_base, o.e_stride, o.q, h,
+            self._dummy_h if h_out is None else h_out, pol, int(write), float(relax), float(shift), self.mask,
+            self.use_mask, o.max_out, o.max_row, self.los, self.his,
+        )
+
+
+def reachable_mask(system: System, layout: BoxLayout, max_passes: int = 100_000) -> np.ndarray:
+    """(n,) uint8 mask of the layout states reachable from the initial configurations' boxes
+    (the state set of :func:`wncs_lp.models.build`), by marking passes to a fixed point."""
+    K = load_kernels()
+    op = Operator.build(system, layout)
+    mask = np.zeros(layout.n_states, np.uint8)
+    for c in set(int(i) for i in system.automaton.initial):
+        mask[layout.off[c]:layout.off[c + 1]] = 1
+    passes = K.reach_all(op.N, op.lo, op.dims, op.off, op.act_ptr, op.out_ptr, op.e_m, op.e_base, op.e_stride, mask,
+                         op.max_out, int(max_passes))
+    if passes > max_passes:  # pragma: no cover - monotone marking settles in finitely many passes
+        raise SolverError("reachability marking did not settle")
+    return mask
