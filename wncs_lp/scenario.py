@@ -396,10 +396,10 @@ def _as_overrides(overrides: Any, source: str) -> dict[str, Any]:
         return parse_overrides([overrides])
     if isinstance(overrides, Mapping):
         for key in overrides:
-            if not isinstance(key, str):
-                raise ScenarioError(source, _show(key), "expected a string key such as 'p', 'tau_cap' or "
-                                    "'process.1.weight'", what="override")
-        return dict(overrides)
+            if not isinstance(key, str) or not key.strip():
+                raise ScenarioError(source, _show(key) if key else "<empty key>", "expected a string key such as "
+                                    "'p', 'tau_cap' or 'process.1.weight'", what="override")
+        return {key.strip(): value for key, value in overrides.items()}
     try:
         items = list(overrides)
     except TypeError:

@@ -5,7 +5,7 @@ import argparse
 import sys
 
 from .common import (Command, add_method_arg, add_progress_arg, add_scenario_args, emit_json, head, load,
-                     progress_for)
+                     output_folder, progress_for)
 
 
 def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
@@ -124,6 +124,7 @@ def _configure_simulate(p: argparse.ArgumentParser) -> None:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from ..sweep import run_sweep
 
+    output_folder(args.out)  # before any work
     scenario = load(args)
     log = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
     res = run_sweep(

@@ -5,7 +5,8 @@ import argparse
 import time
 
 from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD, LP_METHODS, METHOD_HELP, METHODS
-from .common import Command, add_progress_arg, add_scenario_args, emit_json, head, load, output_file, progress_for
+from .common import (Command, add_progress_arg, add_scenario_args, emit_json, head, load, output_file, progress_for,
+                     write_after_work)
 
 #: Methods of an unconstrained solve (:data:`wncs_lp.methods.METHODS`), and of a constrained one.
 UNCONSTRAINED_METHODS = METHODS
@@ -31,9 +32,10 @@ def _matrix_free(args: argparse.Namespace, scenario, t0: float, prog, why: str) 
 
     prog.phase(f"solving without a stored matrix ({why})")
     sol = solve_scenario(scenario, "matrix-free", progress=bool(getattr(prog, "enabled", False)))
+    failed = None
     if args.out is not None:  # one byte a state: wncs_lp.solvers.matrix_free.load_solution reads it back
         prog.phase(f"writing the policy to {args.out}")
-        sol.save(args.out)
+        _, failed = write_after_work(lambda: sol.save(args.out), args.out)
     payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)), **sol.summary(),
                "matrix_free_reason": why, "seconds": time.perf_counter() - t0}
     if args.json:
@@ -43,7 +45,17 @@ def _matrix_free(args: argparse.Namespace, scenario, t0: float, prog, why: str) 
         print(f"method matrix-free ({why}): status {sol.status}, {sol.iterations} sweeps, {sol.seconds:.2f} s")
         print(f"optimal average cost (gain): {sol.gain:.10g}")
         print(f"certificate: {sol.gain_lower:.12g} <= g* <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e})")
-    return 0 if sol.ok else 1
+    return _write_failed(failed) or (0 if sol.ok else 1)
+
+
+def _write_failed(message: str | None) -> int:
+    """2 after printing ``error: message`` when writing the finished result failed, else 0."""
+    if message is None:
+        return 0
+    import sys
+
+    print(f"error: {message}", file=sys.stderr)
+    return 2
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
@@ -85,9 +97,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
         sol = dataclasses.replace(sol, pair_actions=mdp.a_indices)
     prog.phase("measuring the optimal policy's time at the AoI cap")
     cap = policy_cap_mass(mdp, sol.policy)
-    extra = {}
+    extra, failed = {}, None
     if args.out is not None:
-        extra["out"] = str(_save(args, scenario, mdp, sol, prog))
+        saved, failed = write_after_work(lambda: _save(args, scenario, mdp, sol, prog), args.out)
+        extra = {"out": str(saved)} if failed is None else {"out_error": failed}
     if args.json:
         emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, **extra))
     else:
@@ -108,7 +121,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
         print(f"truncation: under the optimal policy {cap.message()}")
         if "out" in extra:
             print(f"policy and bias written to {extra['out']} (format: see wncs_lp.export)")
-    return 0 if sol.ok else 1
+    return _write_failed(failed) or (0 if sol.ok else 1)
 
 
 def _save(args: argparse.Namespace, scenario, mdp, sol, prog):
@@ -136,12 +149,13 @@ def _constrained(args: argparse.Namespace, scenario, mdp, t0: float, t_build: fl
     prog.phase(f"solving the constrained problem ({len(scenario.constraints)} bound(s)) with method {args.method}")
     sol = solve_constrained(mdp, scenario.constraints, args.method)
     cap = cap_mass(mdp, sol.occupation)
-    extra = {}
+    extra, failed = {}, None
     if args.out is not None:
-        extra["out"] = str(_save(args, scenario, mdp, sol, prog))
+        saved, failed = write_after_work(lambda: _save(args, scenario, mdp, sol, prog), args.out)
+        extra = {"out": str(saved)} if failed is None else {"out_error": failed}
     if args.json:
         emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, mixes=sol.mixes(mdp), **extra))
-        return 0 if sol.ok else 1
+        return _write_failed(failed) or (0 if sol.ok else 1)
     _header(scenario, mdp, t_build)
     print(f"constrained solve ({sol.method}): status {sol.status}, {sol.seconds:.2f} s")
     print(f"optimal average cost under the constraints: {sol.gain:.10g}")
@@ -160,7 +174,7 @@ def _constrained(args: argparse.Namespace, scenario, mdp, t0: float, t_build: fl
     print(f"truncation: under the returned policy {cap.message()}")
     if "out" in extra:
         print(f"policy written to {extra['out']} (format: see wncs_lp.export)")
-    return 0 if sol.ok else 1
+    return _write_failed(failed) or (0 if sol.ok else 1)
 
 
 def _configure_solve(p: argparse.ArgumentParser) -> None:

@@ -5,7 +5,7 @@ import argparse
 import math
 import sys
 
-from .common import Command, add_scenario_args, emit_json, head, load
+from .common import Command, add_scenario_args, emit_json, head, load, output_folder
 
 
 def cmd_tradeoff(args: argparse.Namespace) -> int:
@@ -14,6 +14,7 @@ def cmd_tradeoff(args: argparse.Namespace) -> int:
     from ..models.guard import build_checked
     from ..sweep import parse_values
 
+    output_folder(args.out)  # before any work
     scenario = load(args)
     n = len(scenario.constraints)
     if not 1 <= args.constraint <= n:
