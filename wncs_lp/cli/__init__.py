@@ -6,7 +6,8 @@ commands that solve share one ``--method`` vocabulary (:mod:`wncs_lp.methods`, d
 ``auto``); ``--progress/--no-progress`` (default: on a terminal without ``--json``) shows the
 phases and the solver's iterations on stderr. Errors from bad
 input print one line ``error: ...`` on stderr and exit with status 2 (with ``--json`` also one
-object ``{"error", "type", "source", "field"}`` on stdout).
+object ``{"error", "type", "source", "field"}`` on stdout). Ctrl-C and SIGTERM stop a command
+with one line on stderr and status 130 / 143; what was written so far is complete (atomic writes).
 
 Each module of this package lists its subcommands in ``COMMANDS``; :func:`build_parser` adds
 the modules' commands in the order of :data:`MODULES` (the one place a new module is named).
