@@ -207,3 +207,12 @@ def test_automaton_bounds_hold(name, overrides):
     assert b.configs >= len(auto.configs) and b.initial == len(auto.initial)
     first = auto.initial[0]
     assert b.edges_initial <= sum(len(o) for o in auto.outcomes[first])
+
+
+def test_the_guard_counts_the_matrix_free_bytes_of_the_solver():
+    # the guard cannot import the solver (solvers import models): the two accountings must agree
+    from wncs_lp.solvers.matrix_free import matrix_free_bytes
+
+    sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=9"])
+    est = estimate_size(sc)
+    assert est.matrix_free_bytes - guard.MATRIX_FREE_OVERHEAD == matrix_free_bytes(est.matrix_free_states, mask=True)
