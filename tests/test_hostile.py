@@ -287,3 +287,15 @@ def test_sigterm_says_so_and_exits_143(tmp_path):
     assert proc.returncode == 143, err.decode()[-2000:]
     assert "terminated (SIGTERM)" in err.decode() and b"Traceback" not in err
     assert not list(out.glob(".*.tmp"))
+
+
+@pytest.mark.parametrize("damage", [b"param,value\xb3,policy\n", b"param,value\x00,policy\n", "folder"])
+def test_a_damaged_table_gives_no_records(tmp_path, damage):
+    from wncs_lp.files import csv_records
+
+    f = tmp_path / "sweep.csv"
+    if damage == "folder":
+        f.mkdir()
+    else:
+        f.write_bytes(damage)
+    assert csv_records(f, ("param", "value", "policy")) == []

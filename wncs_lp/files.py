@@ -134,19 +134,23 @@ def csv_records(path: str | Path, columns: tuple[str, ...]) -> list[dict[str, st
 
     A missing file, another header, or a truncated line (a run interrupted mid-write: missing
     fields, extra fields, or an empty ``status``) gives no record for it, so a rerun recomputes
-    what is not there.
+    what is not there; so does a damaged file (not a file, unreadable, not UTF-8, NUL bytes).
     """
     import csv
 
     path = Path(path)
-    if not path.exists():
+    if not path.is_file():
         return []
-    with open(path, encoding="utf-8", newline="") as fh:
-        reader = csv.DictReader(fh)
-        if reader.fieldnames is None or tuple(reader.fieldnames) != tuple(columns):
-            return []
-        return [rec for rec in reader
-                if None not in rec and all(rec.get(c) is not None for c in columns) and rec.get("status", "x") != ""]
+    try:
+        with open(path, encoding="utf-8", newline="") as fh:
+            reader = csv.DictReader(fh)
+            if reader.fieldnames is None or tuple(reader.fieldnames) != tuple(columns):
+                return []
+            return [rec for rec in reader
+                    if None not in rec and all(rec.get(c) is not None for c in columns)
+                    and rec.get("status", "x") != ""]
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return []
 
 
 def scalars(mapping: dict[str, Any]) -> dict[str, Any]:
