@@ -159,6 +159,8 @@ def test_column_indices_beyond_the_states_are_refused(exported, tmp_path):
     ("format_version", lambda m: np.array(7), "version 7 is not supported"),
     ("format_version", None, "without a format_version"),
     ("P_data", None, "without the entry P_data"),
+    ("P_data", lambda m: m.P.data[::-1].copy(), "sum to .*, expected 1"),
+    ("a_indices", lambda m: m.a_indices[::-1].copy(), "lists action .* more than once"),
 ])
 def test_every_entry_of_an_mdp_file_is_checked(exported, tmp_path, entry, value, words):
     mdp = exported["mdp"]

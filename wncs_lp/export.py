@@ -141,7 +141,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import PolicyError, WncsError
+from .errors import ModelError, PolicyError, WncsError
 from .files import atomic_write_bytes, json_ready, npz_array, npz_json, read_npz
 from .mdp import MAX_COST, MDP
 from .models.statespace import StateSpace
@@ -305,8 +305,11 @@ def load_npz(path: str | Path, *, validate: bool = True) -> MDP:
     at = d["action_table"]
     action_table = None if at.size == 0 else at
     states = _state_space(path, d, n) if d["tau"].shape[1] > 0 else None
-    return MDP.from_arrays(d["s_indices"], d["a_indices"], d["cost"], P, n, action_table=action_table,
-                           states=states, name=str(d["name"]), meta=meta, check=validate)
+    try:
+        return MDP.from_arrays(d["s_indices"], d["a_indices"], d["cost"], P, n, action_table=action_table,
+                               states=states, name=str(d["name"]), meta=meta, check=validate)
+    except ModelError as exc:  # the MDP's own checks (rows summing to one...): name the file
+        raise ExportError(f"{path}: {exc}") from None
 
 
 _MDP_KEYS = ("format", "format_version", "n_states", "s_indices", "a_indices", "cost", "pair_ptr", "P_data",
