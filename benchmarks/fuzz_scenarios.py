@@ -1,9 +1,22 @@
-"""Fuzz the scenario loader with >= 10,000 generated cases and report the counts.
+"""Fuzz the toolkit's inputs with generated hostile cases and report the counts.
 
-    python benchmarks/fuzz_scenarios.py [--cases 2000]   # cases per family (6 families)
+    python benchmarks/fuzz_scenarios.py [--cases 2000] [--npz-cases 400] [--cache-cases 2000] [--sweep-cases 60]
 
-Contract: every case either loads or raises ScenarioError whose message names a field; any other
-exception is a bug and is re-raised with the failing example (hypothesis shrinks it).
+Families and their contracts (any other outcome is a bug, re-raised with the failing example,
+which hypothesis shrinks):
+
+* scenarios (valid / mutated dicts and TOML files, random bytes, overrides, hostile overrides in
+  every form: list, one string, mapping): they load, or raise a ScenarioError naming a field;
+* npz files (an exported MDP, policy and solution with flipped bytes, truncated, or with one
+  entry replaced, shifted, permuted or deleted): they load, or raise one WncsError naming the
+  file; a loaded MDP is solved by value iteration and the LP, which agree when both certify;
+* reproduction cache entries (a number, key or value of the JSON edited, bytes flipped, the
+  arrays truncated or missing): the cache returns the true result, reused or recomputed;
+* sweep folders (``sweep.csv`` / ``sweep.json`` / ``sweep_meta.json`` deleted, truncated, edited,
+  garbled, replaced by a folder; rerun with the same or another scenario): the command ends with
+  an exit status and at most one ``error:`` line, never a traceback. Rows whose gain is not the
+  true one (trusted from a damaged or foreign folder: the resume logic of ``wncs_lp.sweep``) are
+  counted and reported.
 """
 from __future__ import annotations
 
@@ -19,52 +32,106 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from fuzz_strategies import (  # noqa: E402
+    apply_npz_mutation,
+    cache_base,
+    cache_mutation,
+    check_cache_case,
     check_case,
+    check_npz_case,
+    check_override_forms,
+    check_sweep_case,
+    hostile_key,
+    hostile_value,
     mutated_raw,
+    npz_bases,
+    npz_mutation,
     override_key,
     override_value,
     scratch_dir,
+    sweep_base,
+    sweep_mutation,
     to_toml,
     valid_raw,
 )
 
 
+def families(tmp: Path, args) -> dict:
+    """name -> (strategy, case function returning an outcome label, number of cases)."""
+    npz = {}
+    cache = {}
+    sweep = {}
+
+    def npz_case(m):
+        npz.setdefault("b", npz_bases(tmp))
+        which, how = m
+        return check_npz_case("mdp" if which == "mdp" else "policy",
+                              apply_npz_mutation(npz["b"][which], how, tmp / f"case_{which}.npz"))
+
+    def cache_case(m):
+        cache.setdefault("b", cache_base(tmp))
+        return check_cache_case(cache["b"], m, tmp)
+
+    def sweep_case(m):
+        sweep.setdefault("b", sweep_base(tmp))
+        outcome, wrong = check_sweep_case(sweep["b"], m, tmp)
+        sweep["wrong"] = sweep.get("wrong", 0) + wrong
+        sweep["cases with wrong rows"] = sweep.get("cases with wrong rows", 0) + bool(wrong)
+        return outcome
+
+    n = args.cases
+    return {
+        "valid dict": (valid_raw(), lambda raw: check_case("dict", raw), n),
+        "valid toml": (valid_raw(), lambda raw: check_case("toml", to_toml(raw), tmp), n),
+        "mutated dict": (mutated_raw(), lambda raw: check_case("dict", raw), n),
+        "mutated toml": (mutated_raw(), lambda raw: check_case("toml", to_toml(raw), tmp), n),
+        "random bytes": (st.binary(max_size=300), lambda b: check_case("bytes", b, tmp), n),
+        "overrides": (
+            st.tuples(valid_raw(), st.lists(st.tuples(override_key, override_value), max_size=3)),
+            lambda pr: check_case("override", (pr[0], [f"{k}={v}" for k, v in pr[1]])), n),
+        "hostile overrides": (
+            st.tuples(valid_raw(), st.lists(st.tuples(hostile_key, hostile_value), min_size=1, max_size=3)),
+            lambda pr: check_override_forms(pr[0], pr[1], tmp), n),
+        "npz files": (npz_mutation(), npz_case, args.npz_cases),
+        "cache entries": (cache_mutation(), cache_case, args.cache_cases),
+        "sweep folders": (sweep_mutation(), sweep_case, args.sweep_cases),
+    }, sweep
+
+
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--cases", type=int, default=2000, help="examples per family (default 2000; 6 families)")
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cases", type=int, default=2000, help="examples per scenario family (default 2000; 7 families)")
+    ap.add_argument("--npz-cases", type=int, default=400, help="mutated .npz files (default 400; each MDP is solved twice)")
+    ap.add_argument("--cache-cases", type=int, default=2000, help="mutated cache entries (default 2000)")
+    ap.add_argument("--sweep-cases", type=int, default=60, help="mutated sweep folders (default 60; each reruns a sweep)")
     args = ap.parse_args()
     tmp = scratch_dir()
     counts: collections.Counter = collections.Counter()
-    cfg = settings(max_examples=args.cases, deadline=None, database=None,
-                   suppress_health_check=list(HealthCheck))
+    fams, sweep = families(tmp, args)
 
-    families = {
-        "valid dict": (valid_raw(), lambda raw: check_case("dict", raw)),
-        "valid toml": (valid_raw(), lambda raw: check_case("toml", to_toml(raw), tmp)),
-        "mutated dict": (mutated_raw(), lambda raw: check_case("dict", raw)),
-        "mutated toml": (mutated_raw(), lambda raw: check_case("toml", to_toml(raw), tmp)),
-        "random bytes": (st.binary(max_size=300), lambda b: check_case("bytes", b, tmp)),
-        "overrides": (
-            st.tuples(valid_raw(), st.lists(st.tuples(override_key, override_value), max_size=3)),
-            lambda pr: check_case("override", (pr[0], [f"{k}={v}" for k, v in pr[1]])),
-        ),
-    }
-    t0 = time.perf_counter()
-    def make_runner(name, strategy, fn):
-        @cfg
+    def make_runner(name, strategy, fn, cases):
+        @settings(max_examples=cases, deadline=None, database=None, suppress_health_check=list(HealthCheck))
         @given(strategy)
         def run(x):
             counts[(name, fn(x))] += 1
 
         return run
 
-    for name, (strategy, fn) in families.items():
-        make_runner(name, strategy, fn)()
+    t0 = time.perf_counter()
+    seconds = {}
+    for name, (strategy, fn, cases) in fams.items():
+        t1 = time.perf_counter()
+        make_runner(name, strategy, fn, cases)()
+        seconds[name] = time.perf_counter() - t1
     total = sum(counts.values())
-    print(f"{'family':<14} {'loaded':>8} {'clear error':>12}")
-    for name in families:
-        print(f"{name:<14} {counts[(name, 'ok')]:>8} {counts[(name, 'error')]:>12}")
-    print(f"total cases: {total} in {time.perf_counter() - t0:.1f} s; other exceptions: 0")
+    print(f"{'family':<18} {'cases':>7}  outcomes{'':<40} {'seconds':>8}")
+    for name in fams:
+        got = {o: c for (f, o), c in counts.items() if f == name}
+        text = ", ".join(f"{o} {c}" for o, c in sorted(got.items()))
+        print(f"{name:<18} {sum(got.values()):>7}  {text:<48} {seconds[name]:>8.1f}")
+    print(f"total cases: {total} in {time.perf_counter() - t0:.1f} s; tracebacks, hangs and wrong answers "
+          f"trusted by the loaders and the cache: 0")
+    print(f"sweep folders: {sweep.get('wrong', 0)} rows with a gain other than the true one, in "
+          f"{sweep.get('cases with wrong rows', 0)} cases (resume of wncs_lp.sweep)")
     return 0
 
 

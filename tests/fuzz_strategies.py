@@ -210,3 +210,342 @@ def check_case(kind: str, payload: Any, tmpdir: Path | None = None) -> str:
 
 def scratch_dir() -> Path:
     return Path(tempfile.mkdtemp(prefix="wncs_fuzz_"))
+
+
+# ----------------------------------------------------------------------------- issue 27: hostile families
+#: Override values a hostile user types: huge integers, deep nests, strange digits, broken TOML.
+hostile_value = st.one_of(
+    override_value,
+    st.sampled_from(["9" * 400, "-" + "9" * 400, "9" * 5000, "[[" + "9" * 400 + "]]", "1e400", "-0", "0x10",
+                     "[" * 2000 + "]" * 2000, "[" * 30 + "]" * 30, "[[1e308, 1e308], [1e308, 1e308]]",
+                     "[[1e300]]", "[[3.0]]", '"²"', "١", "inf", "[[nan]]", "{a = 1}", "[[[1]]]"]),
+)
+#: Override keys: quoted selectors, non-ASCII digits, malformed quotes, empty parts.
+hostile_key = st.one_of(
+    override_key,
+    st.sampled_from(['process."1".weight', 'process."p0".weight', "process.².weight", "process.١.weight",
+                     'process."x.y".tau_cap', 'process."1.weight', "process..weight", "process.1.", ".p",
+                     'server."s0".p_up', "server.00.p_up", "process.99999999999999999999.weight",
+                     "constraint.1.max", 'constraint."1".max', "process.1.A", "process.1.tau_cap"]),
+    st.text(alphabet='abcdefghijklmnopqrstuvwxyz.0123456789_"²١', max_size=20),
+)
+
+
+def check_override_forms(raw: dict[str, Any], pairs: list[tuple[str, str]], tmpdir: Path) -> str:
+    """The same overrides as a list of strings, one string each (load_scenario) and a mapping of
+    parsed values: each either loads or raises a ScenarioError naming a field. Returns "ok"/"error"."""
+    items = [f"{k}={v}" for k, v in pairs]
+    outcome = check_case("override", (raw, items))
+    f = tmpdir / "base.toml"
+    f.write_text(to_toml(raw))
+    for one in items[:1]:
+        try:
+            load_scenario(f, one)
+        except ScenarioError as exc:
+            if not FIELD_RE.search(str(exc)):
+                raise AssertionError(f"error message names no field: {exc}") from exc
+    try:
+        load_scenario(f, {k: v for k, v in pairs})
+    except ScenarioError as exc:
+        if not FIELD_RE.search(str(exc)):
+            raise AssertionError(f"error message names no field: {exc}") from exc
+    return outcome
+
+
+# ----------------------------------------------------------------------------- npz files
+def npz_bases(tmpdir: Path) -> dict[str, bytes]:
+    """Small exported files to mutate: an MDP, a policy and a solve's solution (paper_p12, cap 7)."""
+    from wncs_lp import build, scenario_path
+    from wncs_lp.export import save_npz, save_policy_npz, save_solution_npz
+    from wncs_lp.solvers import solve
+
+    sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=7"])
+    mdp = build(sc)
+    sol = solve(mdp, "vi")
+    paths = {"mdp": save_npz(mdp, tmpdir / "base_mdp.npz", scenario=sc),
+             "policy": save_policy_npz(tmpdir / "base_policy.npz", mdp, sol, scenario=sc),
+             "solution": save_solution_npz(tmpdir / "base_solution.npz", mdp, sol, scenario=sc)}
+    return {k: p.read_bytes() for k, p in paths.items()}
+
+
+random_array = st.one_of(
+    st.builds(lambda n, v: __import__("numpy").full(n, v), st.integers(0, 400),
+              st.one_of(st.integers(-10**6, 10**6), st.floats(allow_nan=True, allow_infinity=True))),
+    st.builds(lambda s: __import__("numpy").array(s), st.text(max_size=20)),
+    st.builds(lambda x: __import__("numpy").array(x), st.one_of(st.integers(-10**9, 10**9), st.floats())),
+    st.builds(lambda r, c: __import__("numpy").zeros((r, c), dtype="int64"), st.integers(0, 30), st.integers(0, 4)),
+)
+
+
+@st.composite
+def npz_mutation(draw) -> tuple:
+    """(which file, how: ("bytes", positions/values) | ("truncate", n) | ("entry", key, array or None))."""
+    which = draw(st.sampled_from(["mdp", "policy", "solution"]))
+    how = draw(st.sampled_from(["bytes", "truncate", "entry", "entry", "scale"]))
+    if how == "bytes":
+        flips = draw(st.lists(st.tuples(st.integers(0, 10**6), st.integers(1, 255)), min_size=1, max_size=4))
+        return which, ("bytes", flips)
+    if how == "truncate":
+        return which, ("truncate", draw(st.floats(0, 1)))
+    key = draw(st.sampled_from(["n_states", "s_indices", "a_indices", "cost", "pair_ptr", "P_data", "P_indices",
+                                "P_indptr", "action_table", "tau", "config", "config_descriptions", "caps",
+                                "meta_json", "format", "format_version", "policy", "sigma", "bias",
+                                "scenario_fingerprint", "randomized_states", "name"]))
+    if how == "scale":  # a plausible edit: the same entry, shifted or permuted
+        return which, ("scale", key, draw(st.sampled_from(["+1", "-1", "*255", "reverse", "drop last", "nan"])))
+    return which, ("entry", key, draw(st.one_of(st.none(), random_array)))
+
+
+def apply_npz_mutation(base: bytes, mutation: tuple, dst: Path) -> Path:
+    import io
+
+    import numpy as np
+
+    how = mutation[0]
+    if how == "bytes":
+        data = bytearray(base)
+        for pos, val in mutation[1]:
+            data[pos % len(data)] ^= val
+        dst.write_bytes(bytes(data))
+        return dst
+    if how == "truncate":
+        dst.write_bytes(base[: int(mutation[1] * len(base))])
+        return dst
+    with np.load(io.BytesIO(base), allow_pickle=False) as z:
+        d = {k: z[k] for k in z.files}
+    key = mutation[1]
+    if how == "entry":
+        if mutation[2] is None:
+            d.pop(key, None)
+        else:
+            d[key] = mutation[2]
+    elif key in d:
+        a, op = d[key], mutation[2]
+        if op == "reverse" or a.dtype.kind not in "iuf":
+            d[key] = a[::-1].copy() if a.ndim else a
+        elif op == "drop last":
+            d[key] = a[:-1] if a.ndim else a
+        elif op == "nan":
+            d[key] = np.where(np.arange(a.size).reshape(a.shape) == 0, np.nan, a.astype(float)) if a.size else a
+        else:
+            d[key] = {"+1": a + 1, "-1": a - 1, "*255": a * 255}[op]
+    np.savez(dst, **d)
+    return dst
+
+
+def check_npz_case(kind: str, path: Path) -> str:
+    """Load a (mutated) exported file: it loads, or raises one WncsError naming the file. A loaded
+    MDP is solved by value iteration and by the LP: when both certify optimality they agree (an
+    independent check that nothing read out of bounds); a loaded policy is a distribution per state.
+    Returns "ok" or "error"; anything else propagates (a bug)."""
+    import numpy as np
+
+    from wncs_lp.errors import WncsError
+    from wncs_lp.export import load_npz, load_policy_npz
+    from wncs_lp.solvers import solve
+
+    try:
+        if kind == "mdp":
+            mdp = load_npz(path)
+            a, b = solve(mdp, "vi"), solve(mdp, "lp")
+            if a.ok and b.ok:
+                assert abs(a.gain - b.gain) <= 1e-6 * max(1.0, abs(a.gain)), (a.gain, b.gain)
+        else:
+            probs = load_policy_npz(path)
+            assert np.all(np.isfinite(probs)) and probs.min() >= 0 and probs.max() <= 1
+    except WncsError as exc:
+        msg = str(exc)
+        if str(path) not in msg or "\n" in msg:
+            raise AssertionError(f"error message does not name the file in one line: {msg!r}") from exc
+        return "error"
+    return "ok"
+
+
+# ----------------------------------------------------------------------------- reproduction caches
+CACHE_TRUTH = ({"gain": 1078.548921698, "name": "static", "assignment": [1, 2]},
+               {"policy": __import__("numpy").arange(12, dtype="int64"),
+                "bias": __import__("numpy").linspace(-1.0, 3.0, 12)})
+
+
+def cache_base(tmpdir: Path) -> tuple[bytes, bytes]:
+    """The JSON and .npz bytes of one cache entry of the true result."""
+    from wncs_lp.reproduce.cache import StepCache
+
+    cache = StepCache(tmpdir / "cache_base")
+    cache.store("evaluate", {"fingerprint": "f", "policy": "static"}, *CACHE_TRUTH)
+    j, n = cache._paths(cache.key("evaluate", {"fingerprint": "f", "policy": "static"}))
+    return j.read_bytes(), n.read_bytes()
+
+
+@st.composite
+def cache_mutation(draw) -> tuple:
+    """An edit of the JSON text (a number, a key, a value), of its bytes, or of the arrays' bytes."""
+    where = draw(st.sampled_from(["json-number", "json-key", "json-bytes", "npz-bytes", "npz-truncate",
+                                  "json-value", "npz-missing"]))
+    return where, draw(st.lists(st.tuples(st.integers(0, 10**6), st.integers(1, 255)), min_size=1, max_size=3)), \
+        draw(st.one_of(weird_number, st.none(), st.text(max_size=5)))
+
+
+def check_cache_case(base: tuple[bytes, bytes], mutation: tuple, tmpdir: Path) -> str:
+    """A mutated cache entry is used only when it is still the true result; otherwise recomputed.
+    Returns "reused" or "recomputed"; a wrong result or any exception is a bug."""
+    import json as _json
+    import shutil
+
+    import numpy as np
+
+    from wncs_lp.reproduce.cache import StepCache
+
+    folder = tmpdir / "cache_case"
+    shutil.rmtree(folder, ignore_errors=True)
+    cache = StepCache(folder)
+    params = {"fingerprint": "f", "policy": "static"}
+    jpath, npath = cache._paths(cache.key("evaluate", params))
+    jtext, nbytes = base
+    where, flips, value = mutation
+    if where == "json-number":
+        doc = _json.loads(jtext)
+        doc["result"]["gain"] = value if not isinstance(value, float) or math.isfinite(value) else 1.0
+        jtext = _json.dumps(doc).encode()
+    elif where == "json-key":
+        doc = _json.loads(jtext)
+        doc.pop(sorted(doc)[flips[0][0] % len(doc)])
+        jtext = _json.dumps(doc).encode()
+    elif where == "json-value":
+        doc = _json.loads(jtext)
+        doc[sorted(doc)[flips[0][0] % len(doc)]] = value
+        jtext = _json.dumps(doc, allow_nan=True).encode()
+    elif where in ("json-bytes", "npz-bytes"):
+        data = bytearray(jtext if where == "json-bytes" else nbytes)
+        for pos, val in flips:
+            data[pos % len(data)] ^= val
+        jtext, nbytes = (bytes(data), nbytes) if where == "json-bytes" else (jtext, bytes(data))
+    elif where == "npz-truncate":
+        nbytes = nbytes[: flips[0][0] % len(nbytes)]
+    jpath.write_bytes(jtext)
+    if where != "npz-missing":
+        npath.write_bytes(nbytes)
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return CACHE_TRUTH
+
+    res, arrays = cache.get_or_compute("evaluate", params, compute)
+    assert res == _json.loads(_json.dumps(CACHE_TRUTH[0])), res
+    for k, v in CACHE_TRUTH[1].items():
+        np.testing.assert_array_equal(arrays[k], v)
+    return "recomputed" if calls else "reused"
+
+
+# ----------------------------------------------------------------------------- sweep folders
+def sweep_argv(out: Path, foreign: bool = False) -> list[str]:
+    """A small sweep (paper_p12 at cap 7, two values, two policies); ``foreign``: another scenario."""
+    from wncs_lp import scenario_path
+
+    return ["sweep", str(scenario_path("paper_p12")), "--set", "tau_cap=7",
+            *(["--set", "process.1.weight=2"] if foreign else []),
+            "--values", "0.8,0.9", "--policies", "optimal,static", "--no-plot", "--out", str(out)]
+
+
+def run_cli(argv: list[str]) -> tuple[int, str, str]:
+    """``wncs_lp.cli.main`` in-process, its stdout and stderr captured; any exception propagates."""
+    import contextlib
+    import io
+
+    from wncs_lp.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(argv)
+    return code, out.getvalue(), err.getvalue()
+
+
+def sweep_rows(folder: Path) -> dict[tuple[str, str], float]:
+    import csv
+
+    try:
+        with open(folder / "sweep.csv", newline="", encoding="utf-8") as f:
+            return {(r["value"], r["policy"]): float(r["gain"]) for r in csv.DictReader(f)
+                    if r.get("gain") not in (None, "")}
+    except (OSError, ValueError, KeyError, csv.Error):
+        return {}
+
+
+def sweep_base(tmpdir: Path) -> tuple[dict[str, bytes], dict, dict]:
+    """The files of a finished sweep folder, and the true rows of the scenario and of a foreign one."""
+    base, foreign = tmpdir / "sweep_base", tmpdir / "sweep_foreign"
+    for folder, flag in ((base, False), (foreign, True)):
+        code, _, err = run_cli(sweep_argv(folder, flag))
+        assert code == 0, err
+    files = {f.name: f.read_bytes() for f in base.iterdir() if f.is_file()}
+    return files, sweep_rows(base), sweep_rows(foreign)
+
+
+@st.composite
+def sweep_mutation(draw) -> tuple:
+    """(file, edit, rerun with the foreign scenario?)."""
+    name = draw(st.sampled_from(["sweep.csv", "sweep.json", "sweep_meta.json"]))
+    edit = draw(st.sampled_from(["delete", "truncate", "bytes", "number", "phantom row", "duplicate row",
+                                 "negative states", "garble", "empty", "folder"]))
+    return name, edit, draw(st.integers(0, 10**6)), draw(st.booleans())
+
+
+def check_sweep_case(base: tuple[dict[str, bytes], dict, dict], mutation: tuple, tmpdir: Path) -> tuple[str, int]:
+    """Rerun the sweep on a mutated copy of its folder: the command returns an exit status (0, 1 or
+    2; no exception escapes). Returns (the outcome, the number of rows whose gain is not the true
+    one of the scenario run: rows trusted from a damaged or foreign folder)."""
+    import shutil
+
+    files, truth, truth_foreign = base
+    name, edit, seed, foreign = mutation
+    folder = tmpdir / "sweep_case"
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir()
+    for fname, data in files.items():
+        (folder / fname).write_bytes(data)
+    target = folder / name
+    data = bytearray(files.get(name, b""))
+    if edit == "delete":
+        target.unlink(missing_ok=True)
+    elif edit == "truncate":
+        target.write_bytes(bytes(data[: seed % max(len(data), 1)]))
+    elif edit == "bytes" and data:
+        data[seed % len(data)] ^= 1 + seed % 255
+        target.write_bytes(bytes(data))
+    elif edit == "number":
+        text = data.decode("utf-8", "replace")
+        digits = [i for i, ch in enumerate(text) if ch.isdigit()]
+        if digits:
+            i = digits[seed % len(digits)]
+            text = text[:i] + str((int(text[i]) + 1) % 10) + text[i + 1:]
+        target.write_text(text)
+    elif edit in ("phantom row", "duplicate row", "negative states") and name == "sweep.csv":
+        lines = data.decode().splitlines()
+        if edit == "phantom row":
+            lines.append(lines[-1].replace("0.9", "0.85"))
+        elif edit == "duplicate row":
+            lines.append(lines[1].replace(lines[1].split(",")[3], "1.0"))
+        else:
+            cols = lines[1].split(",")
+            cols[7] = "-5"
+            lines[1] = ",".join(cols)
+        target.write_text("\n".join(lines) + "\n")
+    elif edit == "garble":
+        target.write_bytes(b"\x00\xff{garbled" * 3)
+    elif edit == "empty":
+        target.write_bytes(b"")
+    elif edit == "folder":
+        target.unlink(missing_ok=True)
+        target.mkdir()
+    code, out, err = run_cli(sweep_argv(folder, foreign))
+    assert code in (0, 1, 2), (code, err[-2000:])
+    assert "Traceback" not in err, err[-2000:]
+    if code == 2:
+        assert err.count("error: ") == 1, err[-2000:]
+        return "error", 0
+    expected = truth_foreign if foreign else truth
+    got = sweep_rows(folder)
+    wrong = sum(1 for key, g in got.items() if key in expected and abs(g - expected[key]) > 1e-6 * abs(expected[key]))
+    wrong += sum(1 for key in got if key not in expected)
+    return ("ok" if code == 0 else "failed rows"), wrong

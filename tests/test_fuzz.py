@@ -57,3 +57,55 @@ def test_random_text(text):
 @given(valid_raw(), st.lists(st.tuples(override_key, override_value), max_size=3))
 def test_overrides(raw, pairs):
     check_case("override", (raw, [f"{k}={v}" for k, v in pairs]))
+
+
+# ----------------------------------------------------------------------------- issue 27: hostile families
+from fuzz_strategies import (  # noqa: E402
+    apply_npz_mutation,
+    cache_base,
+    cache_mutation,
+    check_cache_case,
+    check_npz_case,
+    check_override_forms,
+    check_sweep_case,
+    hostile_key,
+    hostile_value,
+    npz_bases,
+    npz_mutation,
+    sweep_base,
+    sweep_mutation,
+)
+
+_BASES: dict = {}
+
+
+def _base(name, make):
+    if name not in _BASES:
+        _BASES[name] = make(TMP)
+    return _BASES[name]
+
+
+@FAST
+@given(valid_raw(), st.lists(st.tuples(hostile_key, hostile_value), min_size=1, max_size=3))
+def test_hostile_overrides_in_every_form(raw, pairs):
+    check_override_forms(raw, pairs, TMP)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(npz_mutation())
+def test_mutated_npz_files_load_or_name_the_file(mutation):
+    which, how = mutation
+    path = apply_npz_mutation(_base("npz", npz_bases)[which], how, TMP / f"case_{which}.npz")
+    check_npz_case("mdp" if which == "mdp" else "policy", path)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(cache_mutation())
+def test_mutated_cache_entries_are_never_trusted_wrong(mutation):
+    check_cache_case(_base("cache", cache_base), mutation, TMP)
+
+
+@settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(sweep_mutation())
+def test_mutated_sweep_folders_end_in_a_status(mutation):
+    check_sweep_case(_base("sweep", sweep_base), mutation, TMP)

@@ -6,7 +6,7 @@ caller can catch one class and always get a message naming what was wrong.
 from __future__ import annotations
 
 __all__ = ["WncsError", "ScenarioError", "ModelError", "SolverError", "PolicyError", "InfeasibleConstraintsError",
-           "ScenarioWarning"]
+           "ScenarioWarning", "SizeLimitError"]
 
 
 class WncsError(ValueError):
@@ -35,6 +35,21 @@ class ScenarioWarning(UserWarning):
 
 class ModelError(WncsError):
     """An MDP is malformed (bad shapes, rows not summing to one, a state without action...)."""
+
+
+class SizeLimitError(WncsError):
+    """A computation would exceed the memory limit or the exploration budget (the size guard,
+    :mod:`wncs_lp.models.guard`); ``force`` runs it anyway.
+
+    Attributes
+    ----------
+    estimate : SizeEstimate or None
+        The guard's estimate (:class:`wncs_lp.models.guard.SizeEstimate`) when there is one.
+    """
+
+    def __init__(self, message: str, estimate=None):
+        self.estimate = estimate
+        super().__init__(message)
 
 
 class SolverError(WncsError):

@@ -134,15 +134,16 @@ from __future__ import annotations
 
 import io
 import json
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import PolicyError, WncsError
-from .files import atomic_write_bytes, json_ready
-from .mdp import MDP
+from .errors import ModelError, PolicyError, WncsError
+from .files import atomic_write_bytes, json_ready, npz_array, npz_json, read_npz
+from .mdp import MAX_COST, MDP
 from .models.statespace import StateSpace
 from .policies.mixed import pair_probabilities, randomised_states
 
@@ -283,46 +284,126 @@ def load_npz(path: str | Path, *, validate: bool = True) -> MDP:
     and ``lookup_grid`` work); ``meta`` holds the stored metadata plus ``fingerprint``,
     ``source`` and ``format_version``.
 
+    Every entry is checked against the layout of the module docstring (dtype, shape, range,
+    finiteness: a column index is a state, a pair's state and action exist, the AoI lies in
+    1..cap...), always; ``validate`` adds the MDP's own checks (rows of P summing to one, no
+    state without an action).
+
     Raises
     ------
     ExportError
-        Not an export of this format, or an unsupported version.
+        Not a readable export of this format (missing, empty, truncated or corrupted, an
+        unsupported version, a missing or malformed entry); the message names the file.
     """
     path = Path(path)
-    try:
-        z = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise ExportError(f"{path}: not a readable .npz file ({exc})") from exc
-    with z:
-        if "format" not in z.files or str(z["format"]) != FORMAT:
-            raise ExportError(f"{path}: not a {FORMAT} file (keys: {', '.join(sorted(z.files)[:8])} ...)")
-        version = int(z["format_version"])
-        if version != FORMAT_VERSION:
-            raise ExportError(f"{path}: format version {version} is not supported (this reader knows {FORMAT_VERSION})")
-        d = {k: z[k] for k in z.files}
-    n = int(d["n_states"])
+    d, n, meta = _read_mdp_arrays(path)
+    version = int(d["format_version"])
     L = int(d["s_indices"].size)
     P = sp.csr_matrix((d["P_data"], d["P_indices"], d["P_indptr"]), shape=(L, n))
-    meta = json.loads(str(d["meta_json"]))
     meta.update(fingerprint=str(d["scenario_fingerprint"]), source=str(d["scenario_source"]),
                 format_version=version, loaded_from=str(path))
     at = d["action_table"]
     action_table = None if at.size == 0 else at
-    states = None
-    tau = d["tau"]
-    if tau.shape[1] > 0:
-        caps = tuple(int(c) for c in d["caps"])
-        configs = [str(x) for x in d["config_descriptions"]]
-        config = d["config"].astype(np.int32)
-        box = int(np.prod(caps))
-        lookup = np.full((len(configs), box), -1, dtype=np.int64)
-        flat = np.ravel_multi_index(tuple((tau - 1).T.astype(np.int64)), caps)
-        lookup[config, flat] = np.arange(n, dtype=np.int64)
-        tau = tau.astype(np.int32)
-        tau.setflags(write=False)
-        states = StateSpace(tau, config, configs, caps, str, lookup)
-    return MDP.from_arrays(d["s_indices"], d["a_indices"], d["cost"], P, n, action_table=action_table,
-                           states=states, name=str(d["name"]), meta=meta, check=validate)
+    states = _state_space(path, d, n) if d["tau"].shape[1] > 0 else None
+    try:
+        return MDP.from_arrays(d["s_indices"], d["a_indices"], d["cost"], P, n, action_table=action_table,
+                               states=states, name=str(d["name"]), meta=meta, check=validate)
+    except ModelError as exc:  # the MDP's own checks (rows summing to one...): name the file
+        raise ExportError(f"{path}: {exc}") from None
+
+
+_MDP_KEYS = ("format", "format_version", "n_states", "s_indices", "a_indices", "cost", "pair_ptr", "P_data",
+             "P_indices", "P_indptr", "action_table", "tau", "config", "config_descriptions", "caps",
+             "process_names", "scenario_fingerprint", "scenario_source", "name", "meta_json")
+
+
+def _format_of(path: Path, d: dict, formats: tuple[str, ...]) -> tuple[str, int]:
+    """The file's ``format`` (one of ``formats``) and ``format_version``, checked."""
+    fmt = str(d["format"]) if "format" in d and np.issubdtype(d["format"].dtype, np.str_) and d["format"].ndim == 0 \
+        else None
+    if fmt not in formats:
+        raise ExportError(f"{path}: not a {' (or '.join(formats)}{')' if len(formats) > 1 else ''} file "
+                          f"(keys: {', '.join(sorted(d)[:8])} ...)")
+    if "format_version" not in d:
+        raise ExportError(f"{path}: {fmt} file without a format_version entry")
+    version = npz_array(d, "format_version", path, expect="i", shape=(), error=ExportError)
+    known = POLICY_FORMAT_VERSION if fmt == POLICY_FORMAT else FORMAT_VERSION
+    if int(version) != known:
+        raise ExportError(f"{path}: {fmt} version {int(version)} is not supported (this reader knows {known})")
+    return fmt, int(version)
+
+
+def _pair_layout(path: Path, d: dict, n: int, L: int) -> None:
+    """``pair_ptr`` (n + 1,) nondecreasing from 0 to L; ``a_indices`` (L,) integers >= 0."""
+    ptr = npz_array(d, "pair_ptr", path, expect="i", shape=(n + 1,), lo=0, hi=L, error=ExportError)
+    if ptr[0] != 0 or ptr[-1] != L or np.any(np.diff(ptr) < 0):
+        raise ExportError(f"{path}: entry 'pair_ptr': expected a nondecreasing pointer from 0 to {L} (the pairs)")
+    if np.any(np.diff(ptr) == 0):
+        raise ExportError(f"{path}: entry 'pair_ptr': state {int(np.flatnonzero(np.diff(ptr) == 0)[0])} has no pair")
+    npz_array(d, "a_indices", path, expect="i", shape=(L,), lo=0, error=ExportError)
+
+
+def _read_mdp_arrays(path: Path) -> tuple[dict, int, dict]:
+    """The arrays of a ``wncs_lp.mdp-npz`` file, every one checked; (arrays, n, meta)."""
+    d = read_npz(path, what=f"a {FORMAT} file", error=ExportError)
+    _format_of(path, d, (FORMAT,))
+    missing = [k for k in _MDP_KEYS if k not in d]
+    if missing:
+        raise ExportError(f"{path}: {FORMAT} file without the entr{'ies' if len(missing) > 1 else 'y'} "
+                          f"{', '.join(missing)}")
+    n = int(npz_array(d, "n_states", path, expect="i", shape=(), lo=1, error=ExportError))
+    s = npz_array(d, "s_indices", path, expect="i", ndim=1, lo=0, hi=n - 1, error=ExportError)
+    L = s.size
+    if np.any(np.diff(s) < 0):
+        raise ExportError(f"{path}: entry 's_indices': expected pairs sorted by state (nondecreasing)")
+    _pair_layout(path, d, n, L)
+    if not np.array_equal(d["pair_ptr"], np.searchsorted(s, np.arange(n + 1))):
+        raise ExportError(f"{path}: entries 'pair_ptr' and 's_indices' disagree on the pairs of each state")
+    npz_array(d, "cost", path, expect="f", shape=(L,), lo=-MAX_COST, hi=MAX_COST, error=ExportError)
+    indptr = npz_array(d, "P_indptr", path, expect="i", shape=(L + 1,), lo=0, error=ExportError)
+    nnz = int(indptr[-1])
+    if indptr[0] != 0 or np.any(np.diff(indptr) < 0):
+        raise ExportError(f"{path}: entry 'P_indptr': expected a nondecreasing row pointer from 0")
+    npz_array(d, "P_indices", path, expect="i", shape=(nnz,), lo=0, hi=n - 1, error=ExportError)
+    npz_array(d, "P_data", path, expect="f", shape=(nnz,), lo=0.0, hi=1.0, error=ExportError)
+    at = npz_array(d, "action_table", path, expect="i", ndim=2, error=ExportError)
+    if at.size and int(d["a_indices"].max(initial=0)) >= at.shape[0]:
+        raise ExportError(f"{path}: entry 'a_indices': action {int(d['a_indices'].max())} is not a row of "
+                          f"'action_table' ({at.shape[0]} rows)")
+    for key in ("scenario_fingerprint", "scenario_source", "name"):
+        npz_array(d, key, path, expect="U", shape=(), error=ExportError)
+    npz_array(d, "tau", path, expect="i", ndim=2, error=ExportError)
+    meta = npz_json(d, "meta_json", path, error=ExportError)
+    return d, n, meta
+
+
+def _state_space(path: Path, d: dict, n: int) -> StateSpace:
+    """The decoded states (tau, configuration) of an MDP file, checked."""
+    tau = npz_array(d, "tau", path, expect="i", ndim=2, error=ExportError)
+    N = tau.shape[1]
+    caps_arr = npz_array(d, "caps", path, expect="i", shape=(N,), lo=1, error=ExportError)
+    npz_array(d, "tau", path, expect="i", shape=(n, N), lo=1, error=ExportError)
+    if np.any(tau > caps_arr[None, :]):
+        raise ExportError(f"{path}: entry 'tau': an AoI beyond its cap (caps {caps_arr.tolist()})")
+    configs = [str(x) for x in npz_array(d, "config_descriptions", path, expect="U", ndim=1, error=ExportError)]
+    config = npz_array(d, "config", path, expect="i", shape=(n,), lo=0, hi=len(configs) - 1,
+                       error=ExportError).astype(np.int32)
+    npz_array(d, "process_names", path, expect="U", shape=(N,), error=ExportError)
+    caps = tuple(int(c) for c in caps_arr)
+    box = math.prod(caps)
+    from .models.guard import available_memory
+
+    if len(configs) * box * 8 > available_memory() // 2:
+        raise ExportError(f"{path}: its state decoding needs a lookup table of {len(configs):,} configurations x "
+                          f"{box:,} AoI vectors, more than half the memory available")
+    lookup = np.full((len(configs), box), -1, dtype=np.int64)
+    flat = np.ravel_multi_index(tuple((tau - 1).T.astype(np.int64)), caps)
+    lookup[config, flat] = np.arange(n, dtype=np.int64)
+    if np.count_nonzero(lookup >= 0) != n:
+        raise ExportError(f"{path}: entries 'tau' and 'config': two states share an AoI vector and configuration")
+    tau = tau.astype(np.int32)
+    tau.setflags(write=False)
+    return StateSpace(tau, config, configs, caps, str, lookup)
 
 
 def save_policy_npz(path: str | Path, mdp: MDP, policy: Any, *, name: str | None = None, scenario: Any = None,
@@ -550,30 +631,31 @@ def load_policy_npz(path: str | Path, mdp: MDP | None = None) -> np.ndarray:
     Raises
     ------
     ExportError
-        Not such a file, an unsupported version, an MDP file without a policy, or a policy
-        that does not belong to ``mdp``.
+        Not such a file (missing, empty, truncated, corrupted), an unsupported version, an MDP
+        file without a policy, an entry of the wrong dtype, shape or range (probabilities in
+        [0, 1] summing to one per state), or a policy that does not belong to ``mdp``.
     """
     path = Path(path)
-    try:
-        z = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise ExportError(f"{path}: not a readable .npz file ({exc})") from exc
-    with z:
-        fmt = str(z["format"]) if "format" in z.files else None
-        if fmt not in (POLICY_FORMAT, FORMAT):
-            raise ExportError(f"{path}: not a {POLICY_FORMAT} (or {FORMAT}) file "
-                              f"(keys: {', '.join(sorted(z.files)[:8])} ...)")
-        version = int(z["format_version"])
-        known = POLICY_FORMAT_VERSION if fmt == POLICY_FORMAT else FORMAT_VERSION
-        if version != known:
-            raise ExportError(f"{path}: {fmt} version {version} is not supported (this reader knows {known})")
-        if "policy" not in z.files:
-            raise ExportError(f"{path}: this {fmt} file holds no policy (write one with save_npz(..., policy=...))")
-        d = {k: z[k] for k in ("policy", "pair_ptr", "a_indices", "scenario_fingerprint", "n_states")}
-    probs = np.asarray(d["policy"], dtype=np.float64)
+    d = read_npz(path, what=f"a {POLICY_FORMAT} file", error=ExportError)
+    fmt, _ = _format_of(path, d, (POLICY_FORMAT, FORMAT))
+    if "policy" not in d:
+        raise ExportError(f"{path}: this {fmt} file holds no policy (write one with save_npz(..., policy=...))")
+    missing = [k for k in ("pair_ptr", "a_indices", "scenario_fingerprint", "n_states") if k not in d]
+    if missing:
+        raise ExportError(f"{path}: {fmt} file without the entr{'ies' if len(missing) > 1 else 'y'} "
+                          f"{', '.join(missing)}")
+    n = int(npz_array(d, "n_states", path, expect="i", shape=(), lo=1, error=ExportError))
+    probs = npz_array(d, "policy", path, expect="f", ndim=1, lo=0.0, hi=1.0, error=ExportError).astype(np.float64)
+    _pair_layout(path, d, n, probs.size)
+    npz_array(d, "scenario_fingerprint", path, expect="U", shape=(), error=ExportError)
+    sums = np.add.reduceat(probs, d["pair_ptr"][:-1])
+    if np.any(np.abs(sums - 1.0) > 1e-6):
+        s_bad = int(np.flatnonzero(np.abs(sums - 1.0) > 1e-6)[0])
+        raise ExportError(f"{path}: entry 'policy': the probabilities of state {s_bad} sum to {sums[s_bad]:.6g}, "
+                          "expected 1")
     if mdp is not None:
         if not (np.array_equal(d["pair_ptr"], mdp.pair_ptr) and np.array_equal(d["a_indices"], mdp.a_indices)):
-            raise ExportError(f"{path}: the policy's pairs ({int(d['n_states'])} states, {probs.size} pairs) "
+            raise ExportError(f"{path}: the policy's pairs ({n} states, {probs.size} pairs) "
                               f"are not those of {mdp.name} ({mdp.n_states} states, {mdp.n_pairs} pairs)")
         fp, mine = str(d["scenario_fingerprint"]), str(mdp.meta.get("fingerprint", ""))
         if fp and mine and fp != mine:

@@ -21,10 +21,15 @@ import scipy.sparse as sp
 
 from .errors import ModelError
 
-__all__ = ["MDP"]
+__all__ = ["MDP", "MAX_COST"]
 
 #: Tolerance on row sums of P.
 ROW_SUM_TOL = 1e-9
+#: The largest one-slot cost magnitude an MDP takes. The solvers add up, square and difference
+#: costs (value iteration sums them over sweeps, an interior-point LP takes norms of squares over
+#: every pair); with |c| <= 1e100 all of that stays finite in float64 (1e100^2 * 1e9 pairs is
+#: far below 1.8e308), so a cost that would overflow is refused where it enters.
+MAX_COST = 1e100
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,7 +103,7 @@ class MDP:
         """
         s = np.asarray(s_indices)
         a = np.asarray(a_indices)
-        c = np.asarray(cost, dtype=float)
+        c = _numeric(cost, "cost")
         if s.ndim != 1 or a.shape != s.shape or c.shape != s.shape:
             raise ModelError(
                 f"s_indices, a_indices and cost must be 1-D of one length; got shapes {s.shape}, {a.shape}, {c.shape}"
@@ -107,7 +112,7 @@ class MDP:
             raise ModelError(f"s_indices and a_indices must be integers; got {s.dtype} and {a.dtype}")
         s = s.astype(np.int64)
         a = a.astype(np.int64)
-        Pm = sp.csr_matrix(P, dtype=float)
+        Pm = _transition_matrix(P)
         if Pm.shape[0] != s.size:
             raise ModelError(f"P must have one row per pair: {s.size} pairs but P has {Pm.shape[0]} rows")
         n = int(Pm.shape[1] if n_states is None else n_states)
@@ -135,8 +140,8 @@ class MDP:
 
         ``feasible[s, a]`` (bool, default all True) marks the allowed pairs.
         """
-        P = np.asarray(P, dtype=float)
-        cost = np.asarray(cost, dtype=float)
+        P = _numeric(P, "P")
+        cost = _numeric(cost, "cost")
         if P.ndim != 3 or P.shape[0] != P.shape[2] or cost.shape != P.shape[:2]:
             raise ModelError(f"expected P of shape (n, m, n) and cost of shape (n, m); got {P.shape} and {cost.shape}")
         mask = np.ones(cost.shape, bool) if feasible is None else np.asarray(feasible, bool)
@@ -178,6 +183,13 @@ class MDP:
         """Check the invariants; raise :class:`ModelError` naming the first bad state or pair."""
         n, P = self.n_states, self.P
         _check_pairs(self.s_indices, self.a_indices, self.cost, n)
+        if P.shape != (self.n_pairs, n) or P.indptr.size != self.n_pairs + 1 or P.indptr[-1] != P.indices.size:
+            raise ModelError(f"P must be a CSR matrix of shape ({self.n_pairs}, {n}) with a consistent row pointer; "
+                             f"found shape {P.shape}, {P.indptr.size} row pointers and {P.indices.size} entries")
+        if P.nnz and (P.indices.min() < 0 or P.indices.max() >= n):
+            bad = int(np.flatnonzero((P.indices < 0) | (P.indices >= n))[0])
+            row = int(np.searchsorted(P.indptr, bad, side="right") - 1)
+            raise ModelError(f"P has a column index {int(P.indices[bad])} out of range 0..{n - 1} in pair {row}")
         if P.nnz and (not np.all(np.isfinite(P.data)) or P.data.min() < 0):
             bad = np.flatnonzero(~np.isfinite(P.data) | (P.data < 0))[0]
             row = int(np.searchsorted(P.indptr, bad, side="right") - 1)
@@ -205,9 +217,11 @@ def _check_pairs(s: np.ndarray, a: np.ndarray, c: np.ndarray, n: int) -> None:
         raise ModelError(f"state index {bad} out of range: expected 0..{n - 1}")
     if a.size and a.min() < 0:
         raise ModelError(f"action index {int(a.min())} is negative; expected indices >= 0")
-    if not np.all(np.isfinite(c)):
-        l = int(np.flatnonzero(~np.isfinite(c))[0])
-        raise ModelError(f"cost of pair {l} (state {int(s[l])}) is {c[l]}, expected a finite number")
+    bad = ~(np.abs(c) <= MAX_COST)  # catches nan too
+    if bad.any():
+        l = int(np.flatnonzero(bad)[0])
+        raise ModelError(f"cost of pair {l} (state {int(s[l])}) is {c[l]:.6g}, expected a finite number of magnitude "
+                         f"at most {MAX_COST:g} (beyond it the solvers' sums and squares overflow)")
     counts = np.bincount(s, minlength=n)
     if (counts == 0).any():
         raise ModelError(f"state {int(np.flatnonzero(counts == 0)[0])} has no feasible action")
@@ -217,3 +231,26 @@ def _check_pairs(s: np.ndarray, a: np.ndarray, c: np.ndarray, n: int) -> None:
         k = int(uniq[cnt > 1][0])
         base = int(a.max()) + 1
         raise ModelError(f"state {k // base} lists action {k % base} more than once")
+
+
+def _numeric(x: Any, name: str) -> np.ndarray:
+    """``x`` as a float array; one ModelError for strings, objects or anything not numeric."""
+    try:
+        raw = np.asarray(x)
+    except (TypeError, ValueError) as exc:  # ragged nests
+        raise ModelError(f"{name} must be an array of numbers: {exc}") from None
+    if raw.dtype.kind not in "biuf":
+        example = f" (e.g. {str(raw.flat[0])[:20]!r})" if raw.size else ""
+        raise ModelError(f"{name} must be an array of numbers, found dtype {raw.dtype}{example}")
+    return raw.astype(float)
+
+
+def _transition_matrix(P: Any) -> sp.csr_matrix:
+    """P as a float CSR matrix; one ModelError when it is not numeric."""
+    if not sp.issparse(P):
+        P = _numeric(P, "P")
+        if P.ndim != 2:
+            raise ModelError(f"P must be 2-D (one row per pair), found shape {P.shape}")
+    elif P.dtype.kind not in "biuf":
+        raise ModelError(f"P must hold numbers, found dtype {P.dtype}")
+    return sp.csr_matrix(P, dtype=float)

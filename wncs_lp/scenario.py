@@ -20,8 +20,9 @@ import copy
 import hashlib
 import json
 import math
+import re
 import sys
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -69,6 +70,13 @@ _TOP_FIELDS = {"model", "channel", "process", "server", "constraint"}
 QUANTITIES = ("cost", "process_cost", "aoi", "send_rate")
 #: Largest AoI cap accepted on load; far beyond anything enumerable, it only stops absurd input.
 MAX_TAU_CAP = 100_000
+#: Deepest nesting of lists and tables accepted (a scenario needs 5: top table, [[process]] list,
+#: its table, the matrix A, a row); deeper input is refused before anything recurses into it.
+MAX_DEPTH = 16
+#: A process or server selector of an override made of ASCII digits only is a 1-based index.
+_INDEX = re.compile(r"[0-9]+")
+#: One part of an override key: a "quoted" literal or bare text up to the next dot.
+_PART = re.compile(r'"([^"]*)"|([^."]+)')
 
 
 # ----------------------------------------------------------------------------- dataclasses
@@ -180,6 +188,17 @@ class Scenario:
         not part of :meth:`fingerprint`.
     source : str
         Where it came from (file path or ``<dict>``), for messages.
+    raw : mapping
+        The raw dictionary the fields were validated from (overrides applied): the source of
+        every other field. :meth:`replace` / :meth:`with_overrides` edit it and validate again.
+
+    Notes
+    -----
+    The fields are derived from ``raw`` (a server's ``p_up`` from the channel's ``p`` when it sets
+    none, ``T_k`` from ``slots_per_dimension`` and the dimension of A...), so
+    ``dataclasses.replace(scenario, p=0.5)`` cannot know what else must follow: it is refused
+    with a :class:`ScenarioError` naming the field (a scenario whose fields disagree with its
+    ``raw`` is never built). Use ``scenario.replace(p=0.5)``, which edits ``raw`` and validates.
     """
 
     model: ModelOptions
@@ -189,6 +208,26 @@ class Scenario:
     constraints: tuple[ConstraintSpec, ...] = ()
     source: str = field(default="<dict>", compare=False)
     raw: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
+    _: KW_ONLY
+    #: True when the fields were just validated from ``raw`` (set by :func:`scenario_from_dict`).
+    validated: InitVar[bool] = False
+
+    def __post_init__(self, validated: bool) -> None:
+        if validated or not self.raw:
+            return
+        # built another way (dataclasses.replace, the constructor): the fields must be raw's
+        truth = scenario_from_dict(self.raw, source=self.source)
+        for name in ("model", "p", "processes", "servers", "constraints"):
+            mine, theirs = getattr(self, name), getattr(truth, name)
+            both_nan = name == "p" and isinstance(mine, float) and math.isnan(mine) and math.isnan(theirs)
+            if not both_nan and mine != theirs:
+                raise ScenarioError(
+                    self.source, name,
+                    f"disagrees with the scenario's raw dictionary, from which the other fields are derived "
+                    f"(dataclasses.replace changes one field and leaves e.g. every server's p_up/p_down and "
+                    f"processing times as they were); use scenario.replace({name}=...) with a key of "
+                    f"docs/scenarios.md, e.g. scenario.replace(p=0.5) or scenario.replace(**{{'process.1.weight': 2}})",
+                    what="Scenario field")
 
     @property
     def n_processes(self) -> int:
@@ -206,12 +245,21 @@ class Scenario:
         """The raw (pre-validation) dictionary this scenario was built from, overrides applied."""
         return copy.deepcopy(dict(self.raw))
 
-    def with_overrides(self, overrides: Mapping[str, Any] | Iterable[str]) -> "Scenario":
-        """A new scenario with overrides applied (``{"p": 0.8}`` or ``["p=0.8", ...]``)."""
-        if not isinstance(overrides, Mapping):
-            overrides = parse_overrides(overrides)
-        raw = apply_overrides(self.to_dict(), overrides, self.source)
+    def with_overrides(self, overrides: Mapping[str, Any] | Iterable[str] | str) -> "Scenario":
+        """A new scenario with overrides applied (``{"p": 0.8}``, ``["p=0.8", ...]`` or ``"p=0.8"``),
+        validated like a file (the keys of :func:`apply_overrides`)."""
+        raw = apply_overrides(self.to_dict(), _as_overrides(overrides, self.source), self.source)
         return scenario_from_dict(raw, source=self.source)
+
+    def replace(self, **fields: Any) -> "Scenario":
+        """A new, validated scenario with some fields changed: ``scenario.replace(p=0.5, tau_cap=10)``.
+
+        The keys are those of an override (:func:`apply_overrides`: ``p``, ``tau_cap``,
+        ``model.FIELD``...; dotted ones as ``replace(**{"process.1.weight": 2})``), so every
+        derived field follows (each server's ``p_up``/``p_down`` from ``p`` when it sets none).
+        The same as :meth:`with_overrides`; prefer it to ``dataclasses.replace``, which is refused.
+        """
+        return self.with_overrides(fields)
 
     def fingerprint(self) -> str:
         """A stable hash of the validated content (for caches keyed by scenario)."""
@@ -286,52 +334,93 @@ def _canonical(obj: Any) -> Any:
 
 
 # ----------------------------------------------------------------------------- loading
-def load_scenario(path: str | Path, overrides: Mapping[str, Any] | Iterable[str] | None = None) -> Scenario:
+def load_scenario(path: str | Path, overrides: Mapping[str, Any] | Iterable[str] | str | None = None) -> Scenario:
     """Load and validate a TOML scenario file, applying overrides on top.
 
     Parameters
     ----------
     path : str or Path
         The TOML file.
-    overrides : mapping or iterable of ``"key=value"`` strings, optional
+    overrides : mapping, iterable of ``"key=value"`` strings, or one such string, optional
         Applied before validation: ``p`` (channel success probability), ``tau_cap`` (every
         process's cap), or a dotted path such as ``process.2.weight`` / ``server.edge.p_up``
-        (processes and servers addressed by 1-based index or by name).
+        (processes and servers addressed by 1-based index or by name; see :func:`apply_overrides`).
 
     Raises
     ------
     ScenarioError
         The file cannot be read or parsed, or a field or override is invalid.
     """
+    if not isinstance(path, (str, Path)):
+        raise ScenarioError("<argument>", "path", f"expected a file name (str or Path), found {_show(path)}",
+                            what="argument")
     path = Path(path)
     source = str(path)
     try:
         text = path.read_bytes()
     except OSError as exc:
         raise ScenarioError(source, "<file>", f"cannot be read ({exc.strerror or exc})") from None
+    raw = _parse_toml(text, source)
+    items = _as_overrides(overrides, source)
+    if items:
+        raw = apply_overrides(raw, items, source)
+    return scenario_from_dict(raw, source=source)
+
+
+def _parse_toml(text: bytes, source: str) -> dict[str, Any]:
+    """The TOML document of a file, or one ScenarioError naming the file."""
     try:
-        raw = tomllib.loads(text.decode("utf-8"))
+        return tomllib.loads(text.decode("utf-8"))
     except UnicodeDecodeError:
         raise ScenarioError(source, "<file>", "expected UTF-8 TOML text, found undecodable bytes") from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "<file>", f"malformed TOML: {exc}") from None
-    if overrides:
-        if not isinstance(overrides, Mapping):
-            overrides = parse_overrides(overrides)
-        raw = apply_overrides(raw, overrides, source)
-    return scenario_from_dict(raw, source=source)
+    except RecursionError:
+        raise ScenarioError(source, "<file>", f"arrays or tables nested too deeply (a scenario needs at most "
+                                              f"{MAX_DEPTH} levels)") from None
+    except ValueError:  # an integer of more digits than Python converts
+        raise ScenarioError(source, "<file>", f"expected values Python can read, found {_too_long()}") from None
 
 
-def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
-    """Parse ``["p=0.8", "process.1.A=[[1.1]]"]`` into ``{"p": 0.8, ...}``.
+def _too_long() -> str:
+    limit = sys.get_int_max_str_digits() if hasattr(sys, "get_int_max_str_digits") else 4300
+    return f"an integer of more than {limit} digits"
+
+
+def _as_overrides(overrides: Any, source: str) -> dict[str, Any]:
+    """Overrides given as a mapping, an iterable of ``"KEY=VALUE"`` strings or one such string,
+    as a ``{key: value}`` dict whose keys are strings."""
+    if overrides is None:
+        return {}
+    if isinstance(overrides, str):
+        return parse_overrides([overrides])
+    if isinstance(overrides, Mapping):
+        for key in overrides:
+            if not isinstance(key, str) or not key.strip():
+                raise ScenarioError(source, _show(key) if key else "<empty key>", "expected a string key such as "
+                                    "'p', 'tau_cap' or 'process.1.weight'", what="override")
+        return {key.strip(): value for key, value in overrides.items()}
+    try:
+        items = list(overrides)
+    except TypeError:
+        raise ScenarioError(source, "<overrides>", f"expected a mapping, a list of 'KEY=VALUE' strings or one "
+                            f"such string, found {_show(overrides)}", what="override") from None
+    return parse_overrides(items)
+
+
+def parse_overrides(items: Iterable[str] | str) -> dict[str, Any]:
+    """Parse ``["p=0.8", "process.1.A=[[1.1]]"]`` (or one string ``"p=0.8"``) into ``{"p": 0.8, ...}``.
 
     Values are read as TOML values (numbers, booleans, arrays, quoted strings); a bare word
     that is not valid TOML is taken as a string (``--set model.kind=preemption``).
     """
+    if isinstance(items, str):
+        items = [items]
     out: dict[str, Any] = {}
     for item in items:
         if not isinstance(item, str) or "=" not in item:
-            raise ScenarioError("--set", str(item), "expected KEY=VALUE, e.g. --set p=0.8", what="override")
+            shown = item if isinstance(item, str) else _show(item)
+            raise ScenarioError("--set", shown, "expected KEY=VALUE, e.g. --set p=0.8", what="override")
         key, value = item.split("=", 1)
         key, value = key.strip(), value.strip()
         if not key:
@@ -341,16 +430,46 @@ def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
             parsed = tomllib.loads(f"v = {value}")["v"]
         except tomllib.TOMLDecodeError:
             parsed = value
+        except RecursionError:
+            raise ScenarioError("--set", key, f"expected a value nested at most {MAX_DEPTH} levels deep",
+                                what="override") from None
+        except ValueError:  # an integer of more digits than Python converts
+            raise ScenarioError("--set", key, f"expected a value Python can read, found {_too_long()}",
+                                what="override") from None
         out[key] = parsed
     return out
 
 
-def _find_entry(entries: list, selector: str, kind: str, source: str, key: str) -> dict:
-    if selector.isdigit():
-        i = int(selector)
+def _key_parts(key: str, source: str) -> list[tuple[str, bool]]:
+    """The dot-separated parts of an override key, each ``(text, quoted)``.
+
+    A part in double quotes is taken literally (it may hold dots) and, as a process or server
+    selector, is always a name: ``process."2".weight`` is the process *named* "2".
+    """
+    parts: list[tuple[str, bool]] = []
+    i = 0
+    while True:
+        m = _PART.match(key, i)
+        if m is None:
+            raise ScenarioError(source, key, 'malformed key: expected dot-separated parts such as process.1.weight '
+                                             '(a name in double quotes may hold dots or be all digits)', what="override")
+        parts.append((m.group(1), True) if m.group(1) is not None else (m.group(2), False))
+        i = m.end()
+        if i == len(key):
+            return parts
+        if key[i] != "." or i + 1 == len(key):
+            raise ScenarioError(source, key, "malformed key: expected a '.' between parts and none at the end",
+                                what="override")
+        i += 1
+
+
+def _find_entry(entries: list, selector: str, quoted: bool, kind: str, source: str, key: str) -> dict:
+    if not quoted and _INDEX.fullmatch(selector):
+        i = int(selector) if len(selector) < 10 else 0
         if not 1 <= i <= len(entries):
             raise ScenarioError(
-                source, key, f"{kind} index {i} out of range: expected 1..{len(entries)}", what="override"
+                source, key, f"{kind} index {selector} out of range: expected 1..{len(entries)} (a selector of "
+                f"digits is an index; quote a name made of digits: {kind}.\"{selector}\")", what="override"
             )
         entry = entries[i - 1]
     else:
@@ -366,70 +485,47 @@ def _find_entry(entries: list, selector: str, kind: str, source: str, key: str) 
     return entry
 
 
+def _table_of(out: dict, name: str, source: str) -> dict:
+    """``out[name]``, created empty when missing; one error when it is not a table."""
+    out.setdefault(name, {})
+    if not isinstance(out[name], dict):
+        raise ScenarioError(source, name, f"expected a table, found {type(out[name]).__name__}")
+    return out[name]
+
+
 def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any], source: str = "<dict>") -> dict[str, Any]:
     """Apply overrides to a raw scenario dictionary (returns a new dict; input untouched).
 
     Keys: ``p`` (alias ``success_probability``), ``tau_cap`` (the model default *and* every
     process), ``model.FIELD``, ``channel.FIELD``, ``process.K.FIELD``, ``server.M.FIELD``
     (K, M a 1-based index or a name), ``constraint.J.FIELD`` (J a 1-based index; setting
-    ``max`` or ``min`` to ``"none"`` removes that bound). Unknown keys raise
-    :class:`ScenarioError`.
+    ``max`` or ``min`` to ``"none"`` removes that bound). A selector of ASCII digits only is an
+    index; a name made of digits, or holding a dot, is written in double quotes
+    (``process."2".weight``). Unknown keys raise :class:`ScenarioError`.
     """
+    _check_depth(raw, source, "<top>")
     out = copy.deepcopy(dict(raw))
-    for key, value in overrides.items():
-        parts = key.split(".")
-        if key in ("p", "success_probability"):
-            out.setdefault("channel", {})
-            if not isinstance(out["channel"], dict):
-                raise ScenarioError(source, "channel", "expected a table")
-            out["channel"]["success_probability"] = value
-        elif key == "tau_cap":
-            out.setdefault("model", {})
-            if not isinstance(out["model"], dict):
-                raise ScenarioError(source, "model", "expected a table")
-            out["model"]["tau_cap"] = value
-            for entry in out.get("process", []) or []:
+    for key, value in _as_overrides(overrides, source).items():
+        _check_depth(value, source, key, start=3)
+        parts = _key_parts(key, source)
+        names = [text for text, _ in parts]
+        if len(parts) == 1 and names[0] in ("p", "success_probability"):
+            _table_of(out, "channel", source)["success_probability"] = value
+        elif len(parts) == 1 and names[0] == "tau_cap":
+            _table_of(out, "model", source)["tau_cap"] = value
+            procs = out.get("process")
+            for entry in procs if isinstance(procs, list) else []:
                 if isinstance(entry, dict):
                     entry["tau_cap"] = value
-        elif len(parts) == 2 and parts[0] in ("model", "channel"):
-            allowed = _MODEL_FIELDS if parts[0] == "model" else _CHANNEL_FIELDS
-            if parts[1] not in allowed:
+        elif len(parts) == 2 and names[0] in ("model", "channel"):
+            allowed = _MODEL_FIELDS if names[0] == "model" else _CHANNEL_FIELDS
+            if names[1] not in allowed:
                 raise ScenarioError(
                     source, key, f"unknown key: expected one of {sorted(allowed)}", what="override"
                 )
-            out.setdefault(parts[0], {})
-            out[parts[0]][parts[1]] = value
-        elif len(parts) == 3 and parts[0] == "constraint":
-            if parts[2] not in _CONSTRAINT_FIELDS:
-                raise ScenarioError(
-                    source, key, f"unknown key: expected one of {sorted(_CONSTRAINT_FIELDS)}", what="override"
-                )
-            entries = out.get("constraint")
-            if not isinstance(entries, list) or not entries:
-                raise ScenarioError(source, key, "the scenario has no [[constraint]] tables", what="override")
-            if not parts[1].isdigit():
-                raise ScenarioError(source, key, f"expected a 1-based constraint index, found {parts[1]!r}",
-                                    what="override")
-            entry = _find_entry(entries, parts[1], "constraint", source, key)
-            if parts[2] in ("max", "min") and isinstance(value, str) and value.lower() == "none":
-                entry.pop(parts[2], None)
-            else:
-                entry[parts[2]] = value
-        elif len(parts) == 3 and parts[0] in ("process", "server"):
-            allowed = _PROCESS_FIELDS if parts[0] == "process" else _SERVER_FIELDS
-            if parts[2] not in allowed:
-                raise ScenarioError(
-                    source, key, f"unknown key: expected one of {sorted(allowed)}", what="override"
-                )
-            entries = out.get(parts[0])
-            if not isinstance(entries, list):
-                raise ScenarioError(source, key, f"the scenario has no [[{parts[0]}]] entries", what="override")
-            entry = _find_entry(entries, parts[1], parts[0], source, key)
-            entry[parts[2]] = value
-            if parts[0] == "server" and parts[2] in ("slots_per_dimension", "processing_time"):
-                # the two ways of giving T are exclusive: an override of one replaces the other
-                other = "processing_time" if parts[2] == "slots_per_dimension" else "slots_per_dimension"
-                entry.pop(other, None)
+            _table_of(out, names[0], source)[names[1]] = value
+        elif len(parts) == 3 and names[0] in ("process", "server", "constraint"):
+            _set_entry_field(out, parts, value, source, key)
         else:
             raise ScenarioError(
                 source,
@@ -439,6 +535,51 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any], source
                 what="override",
             )
     return out
+
+
+def _set_entry_field(out: dict, parts: list[tuple[str, bool]], value: Any, source: str, key: str) -> None:
+    """``process.K.FIELD``, ``server.M.FIELD`` or ``constraint.J.FIELD`` = value."""
+    (kind, _), (selector, quoted), (fld, _) = parts
+    allowed = {"process": _PROCESS_FIELDS, "server": _SERVER_FIELDS, "constraint": _CONSTRAINT_FIELDS}[kind]
+    if fld not in allowed:
+        raise ScenarioError(source, key, f"unknown key: expected one of {sorted(allowed)}", what="override")
+    entries = out.get(kind)
+    if not isinstance(entries, list) or not entries:
+        what = "[[constraint]] tables" if kind == "constraint" else f"[[{kind}]] entries"
+        raise ScenarioError(source, key, f"the scenario has no {what}", what="override")
+    if kind == "constraint" and (quoted or not _INDEX.fullmatch(selector)):
+        raise ScenarioError(source, key, f"expected a 1-based constraint index, found {selector!r}", what="override")
+    entry = _find_entry(entries, selector, quoted, kind, source, key)
+    if kind == "constraint" and fld in ("max", "min") and isinstance(value, str) and value.lower() == "none":
+        entry.pop(fld, None)
+        return
+    entry[fld] = value
+    if kind == "server" and fld in ("slots_per_dimension", "processing_time"):
+        # the two ways of giving T are exclusive: an override of one replaces the other
+        entry.pop("processing_time" if fld == "slots_per_dimension" else "slots_per_dimension", None)
+
+
+def _check_depth(obj: Any, source: str, fld: str, start: int = 0) -> None:
+    """Refuse lists / tables nested deeper than :data:`MAX_DEPTH` (before anything recurses)."""
+    stack = [(obj, start)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, (list, tuple, dict)):
+            if depth >= MAX_DEPTH:
+                raise ScenarioError(source, fld, f"expected lists and tables nested at most {MAX_DEPTH} levels deep "
+                                                 "(a matrix is a list of rows)")
+            stack.extend((v, depth + 1) for v in (item.values() if isinstance(item, dict) else item))
+
+
+def _show(obj: Any, width: int = 60) -> str:
+    """A short repr of user input for a message (never raises: huge integers and deep nests too)."""
+    if isinstance(obj, int) and not isinstance(obj, bool) and obj.bit_length() > 200:
+        return f"an integer of {int(obj.bit_length() * math.log10(2)) + 1} digits"
+    try:
+        text = repr(obj)
+    except (ValueError, RecursionError):  # an integer too long to print; a deep nest
+        return f"a {type(obj).__name__} that cannot be shown"
+    return text if len(text) <= width else text[: width - 3] + "..."
 
 
 # ----------------------------------------------------------------------------- validation
@@ -454,14 +595,14 @@ class _V:
     def table(self, obj: Any, fld: str, allowed: set[str]) -> dict:
         if not isinstance(obj, dict):
             raise self.err(fld, f"expected a table, found {type(obj).__name__}")
-        unknown = sorted(set(obj) - allowed)
+        unknown = sorted((k for k in obj if k not in allowed), key=str)
         if unknown:
             raise self.err(f"{fld}.{unknown[0]}", f"unknown field: expected one of {sorted(allowed)}")
         return obj
 
     def boolean(self, obj: Any, fld: str) -> bool:
         if not isinstance(obj, bool):
-            raise self.err(fld, f"expected true or false, found {obj!r}")
+            raise self.err(fld, f"expected true or false, found {_show(obj)}")
         return obj
 
     def integer(self, obj: Any, fld: str, lo: int, hi: int | None = None) -> int:
@@ -469,20 +610,23 @@ class _V:
             if isinstance(obj, float) and math.isfinite(obj) and obj.is_integer():
                 obj = int(obj)
             else:
-                raise self.err(fld, f"expected an integer >= {lo}, found {obj!r}")
+                raise self.err(fld, f"expected an integer >= {lo}, found {_show(obj)}")
         obj = int(obj)
         if obj < lo:
-            raise self.err(fld, f"expected an integer >= {lo}, found {obj}")
+            raise self.err(fld, f"expected an integer >= {lo}, found {_show(obj)}")
         if hi is not None and obj > hi:
-            raise self.err(fld, f"expected an integer <= {hi} (a sanity bound), found {obj}")
+            raise self.err(fld, f"expected an integer <= {hi} (a sanity bound), found {_show(obj)}")
         return obj
 
     def real(self, obj: Any, fld: str) -> float:
         if isinstance(obj, bool) or not isinstance(obj, (int, float, np.integer, np.floating)):
-            raise self.err(fld, f"expected a number, found {obj!r}")
-        val = float(obj)
+            raise self.err(fld, f"expected a number, found {_show(obj)}")
+        try:
+            val = float(obj)
+        except OverflowError:  # an integer beyond the float range
+            raise self.err(fld, f"expected a finite number, found {_show(obj)} (beyond the float range)") from None
         if not math.isfinite(val):
-            raise self.err(fld, f"expected a finite number, found {obj!r}")
+            raise self.err(fld, f"expected a finite number, found {_show(obj)}")
         return val
 
     def probability(self, obj: Any, fld: str) -> float:
@@ -493,125 +637,38 @@ class _V:
 
     def string(self, obj: Any, fld: str) -> str:
         if not isinstance(obj, str) or not obj.strip():
-            raise self.err(fld, f"expected a non-empty string, found {obj!r}")
+            raise self.err(fld, f"expected a non-empty string, found {_show(obj)}")
         return obj
 
     def matrix(self, obj: Any, fld: str) -> np.ndarray:
         if not isinstance(obj, list) or not obj:
-            raise self.err(fld, f"expected a non-empty square matrix (list of rows), found {repr(obj)[:60]}")
+            raise self.err(fld, f"expected a non-empty square matrix (list of rows), found {_show(obj)}")
         rows = []
         for i, row in enumerate(obj):
             if not isinstance(row, list):
-                raise self.err(fld, f"row {i + 1}: expected a list of numbers, found {repr(row)[:40]}")
+                raise self.err(fld, f"row {i + 1}: expected a list of numbers, found {_show(row, 40)}")
             rows.append([self.real(x, f"{fld}[{i + 1}]") for x in row])
         n = len(rows)
         if any(len(r) != n for r in rows):
             shape = f"{n} rows of lengths {[len(r) for r in rows]}"
-            raise self.err(fld, f"expected a square matrix, found {shape}")
+            raise self.err(fld, f"expected a square matrix, found {_show(shape, 120)}")
         return np.array(rows, dtype=float)
 
 
 def scenario_from_dict(raw: Mapping[str, Any], source: str = "<dict>") -> Scenario:
-    """Validate a raw scenario dictionary (the TOML structure) into a :class:`Scenario`."""
+    """Validate a raw scenario dictionary (the TOML structure) into a :class:`Scenario`.
+
+    Phases: the structure (tables, nesting depth), ``[model]``, ``[channel]``, the
+    ``[[process]]`` tables, the ``[[server]]`` tables, the ``[[constraint]]`` tables; each
+    raises one :class:`ScenarioError` naming the source and the field.
+    """
     v = _V(source)
     raw = v.table(dict(raw) if isinstance(raw, Mapping) else raw, "<top>", _TOP_FIELDS)
-    if "model" not in raw:
-        raise v.err("model", "missing table [model] (with at least kind = \"wncs\" or \"preemption\")")
-    mt = v.table(raw["model"], "model", _MODEL_FIELDS)
-    if "kind" not in mt:
-        raise v.err("model.kind", f"missing: expected one of {list(KINDS)}")
-    kind = mt["kind"]
-    if kind not in KINDS:
-        raise v.err("model.kind", f"expected one of {list(KINDS)}, found {kind!r}")
-    model = ModelOptions(
-        kind=kind,
-        allow_idle=v.boolean(mt.get("allow_idle", False), "model.allow_idle"),
-        distinct=v.boolean(mt.get("distinct", True), "model.distinct"),
-        preemptive=v.boolean(mt.get("preemptive", True), "model.preemptive"),
-    )
-    default_cap = (
-        v.integer(mt["tau_cap"], "model.tau_cap", 1, MAX_TAU_CAP) if "tau_cap" in mt else None
-    )
-
-    ct = v.table(raw.get("channel", {}), "channel", _CHANNEL_FIELDS)
-    p = v.probability(ct["success_probability"], "channel.success_probability") if "success_probability" in ct else None
-
-    plist = raw.get("process")
-    if not isinstance(plist, list) or not plist:
-        raise v.err("process", "expected at least one [[process]] table")
-    processes = []
-    for i, entry in enumerate(plist, start=1):
-        f = f"process[{i}]"
-        entry = v.table(entry, f, _PROCESS_FIELDS)
-        name = v.string(entry.get("name", f"process-{i}"), f"{f}.name")
-        if "A" not in entry:
-            raise v.err(f"{f}.A", "missing: expected a square matrix")
-        A = v.matrix(entry["A"], f"{f}.A")
-        n = A.shape[0]
-        r_raw = entry.get("R", "identity")
-        if isinstance(r_raw, str):
-            if r_raw != "identity":
-                raise v.err(f"{f}.R", f"expected \"identity\" or a {n}x{n} matrix, found {r_raw!r}")
-            R = np.eye(n)
-        else:
-            R = v.matrix(r_raw, f"{f}.R")
-            if R.shape != (n, n):
-                raise v.err(f"{f}.R", f"expected a {n}x{n} matrix (A is {n}x{n}), found {R.shape[0]}x{R.shape[1]}")
-            scale = max(1.0, float(np.abs(R).max()))
-            if not np.allclose(R, R.T, rtol=0, atol=1e-12 * scale):
-                raise v.err(f"{f}.R", "expected a symmetric matrix")
-            lam = float(np.linalg.eigvalsh(R).min())
-            if lam < -1e-10 * scale:
-                raise v.err(f"{f}.R", f"expected positive semi-definite, found eigenvalue {lam:.3g}")
-        weight = v.real(entry.get("weight", 1.0), f"{f}.weight")
-        if weight <= 0:
-            raise v.err(f"{f}.weight", f"expected a number > 0, found {weight:g}")
-        if "tau_cap" in entry:
-            cap = v.integer(entry["tau_cap"], f"{f}.tau_cap", 1, MAX_TAU_CAP)
-        elif default_cap is not None:
-            cap = default_cap
-        else:
-            raise v.err(f"{f}.tau_cap", "missing: set it here or as [model].tau_cap")
-        processes.append(ProcessSpec(name, _frozen_array(A), _frozen_array(R), weight, cap))
-    _unique([pr.name for pr in processes], "process", v)
-    N = len(processes)
-
-    slist = raw.get("server")
-    if not isinstance(slist, list) or not slist:
-        raise v.err("server", "expected at least one [[server]] table")
-    servers = []
-    for m, entry in enumerate(slist, start=1):
-        f = f"server[{m}]"
-        entry = v.table(entry, f, _SERVER_FIELDS)
-        name = v.string(entry.get("name", f"server-{m}"), f"{f}.name")
-        for key in ("uplink_delay", "downlink_delay"):
-            if key not in entry:
-                raise v.err(f"{f}.{key}", "missing: expected an integer >= 0 (whole slots)")
-        U = v.integer(entry["uplink_delay"], f"{f}.uplink_delay", 0, 10_000)
-        D = v.integer(entry["downlink_delay"], f"{f}.downlink_delay", 0, 10_000)
-        has_spd, has_pt = "slots_per_dimension" in entry, "processing_time" in entry
-        if has_spd == has_pt:
-            raise v.err(
-                f"{f}.processing_time",
-                "expected exactly one of slots_per_dimension (integer >= 1) or processing_time (one integer >= 1 per process)",
-            )
-        if has_spd:
-            spd = v.integer(entry["slots_per_dimension"], f"{f}.slots_per_dimension", 1, 10_000)
-            T = tuple(spd * pr.dim for pr in processes)
-        else:
-            pt = entry["processing_time"]
-            if not isinstance(pt, list) or len(pt) != N:
-                raise v.err(f"{f}.processing_time", f"expected a list of {N} integers >= 1 (one per process), found {pt!r}")
-            T = tuple(v.integer(x, f"{f}.processing_time[{k + 1}]", 1, 100_000) for k, x in enumerate(pt))
-        pu = v.probability(entry["p_up"], f"{f}.p_up") if "p_up" in entry else p
-        pd = v.probability(entry["p_down"], f"{f}.p_down") if "p_down" in entry else p
-        if pu is None or pd is None:
-            raise v.err(
-                "channel.success_probability",
-                f"missing: needed by {f} (which sets no own p_up/p_down); expected a probability in [0, 1]",
-            )
-        servers.append(ServerSpec(name, U, D, T, pu, pd))
-    _unique([s.name for s in servers], "server", v)
+    _check_depth(raw, source, "<top>")
+    model, default_cap = _model_table(raw, v)
+    p = _channel_table(raw, v)
+    processes = _process_tables(raw, v, default_cap)
+    servers = _server_tables(raw, v, processes, p)
     if model.kind == "preemption" and len(servers) != 1:
         raise v.err("server", f"a preemption scenario has exactly one server, found {len(servers)}")
     constraints = _constraints(raw.get("constraint", []), processes, servers, v)
@@ -623,7 +680,133 @@ def scenario_from_dict(raw: Mapping[str, Any], source: str = "<dict>") -> Scenar
         constraints=constraints,
         source=source,
         raw=copy.deepcopy(dict(raw)),
+        validated=True,
     )
+
+
+def _model_table(raw: dict, v: _V) -> tuple[ModelOptions, int | None]:
+    """``[model]``: the options and the default AoI cap (None when not set)."""
+    if "model" not in raw:
+        raise v.err("model", "missing table [model] (with at least kind = \"wncs\" or \"preemption\")")
+    mt = v.table(raw["model"], "model", _MODEL_FIELDS)
+    if "kind" not in mt:
+        raise v.err("model.kind", f"missing: expected one of {list(KINDS)}")
+    kind = mt["kind"]
+    if not isinstance(kind, str) or kind not in KINDS:
+        raise v.err("model.kind", f"expected one of {list(KINDS)}, found {_show(kind)}")
+    model = ModelOptions(
+        kind=kind,
+        allow_idle=v.boolean(mt.get("allow_idle", False), "model.allow_idle"),
+        distinct=v.boolean(mt.get("distinct", True), "model.distinct"),
+        preemptive=v.boolean(mt.get("preemptive", True), "model.preemptive"),
+    )
+    default_cap = v.integer(mt["tau_cap"], "model.tau_cap", 1, MAX_TAU_CAP) if "tau_cap" in mt else None
+    return model, default_cap
+
+
+def _channel_table(raw: dict, v: _V) -> float | None:
+    """``[channel]``: the success probability of every link (None when not set)."""
+    ct = v.table(raw.get("channel", {}), "channel", _CHANNEL_FIELDS)
+    if "success_probability" not in ct:
+        return None
+    return v.probability(ct["success_probability"], "channel.success_probability")
+
+
+def _process_tables(raw: dict, v: _V, default_cap: int | None) -> list[ProcessSpec]:
+    """The ``[[process]]`` tables, in file order, with unique names."""
+    plist = raw.get("process")
+    if not isinstance(plist, list) or not plist:
+        raise v.err("process", "expected at least one [[process]] table")
+    processes = [_process_table(entry, i, v, default_cap) for i, entry in enumerate(plist, start=1)]
+    _unique([pr.name for pr in processes], "process", v)
+    return processes
+
+
+def _process_table(entry: Any, i: int, v: _V, default_cap: int | None) -> ProcessSpec:
+    f = f"process[{i}]"
+    entry = v.table(entry, f, _PROCESS_FIELDS)
+    name = v.string(entry.get("name", f"process-{i}"), f"{f}.name")
+    if "A" not in entry:
+        raise v.err(f"{f}.A", "missing: expected a square matrix")
+    A = v.matrix(entry["A"], f"{f}.A")
+    R = _noise_covariance(entry.get("R", "identity"), A.shape[0], f"{f}.R", v)
+    weight = v.real(entry.get("weight", 1.0), f"{f}.weight")
+    if weight <= 0:
+        raise v.err(f"{f}.weight", f"expected a number > 0, found {weight:g}")
+    if "tau_cap" in entry:
+        cap = v.integer(entry["tau_cap"], f"{f}.tau_cap", 1, MAX_TAU_CAP)
+    elif default_cap is not None:
+        cap = default_cap
+    else:
+        raise v.err(f"{f}.tau_cap", "missing: set it here or as [model].tau_cap")
+    return ProcessSpec(name, _frozen_array(A), _frozen_array(R), weight, cap)
+
+
+def _noise_covariance(r_raw: Any, n: int, fld: str, v: _V) -> np.ndarray:
+    """R: ``"identity"`` or an n x n symmetric positive semi-definite matrix."""
+    if isinstance(r_raw, str):
+        if r_raw != "identity":
+            raise v.err(fld, f"expected \"identity\" or a {n}x{n} matrix, found {_show(r_raw)}")
+        return np.eye(n)
+    R = v.matrix(r_raw, fld)
+    if R.shape != (n, n):
+        raise v.err(fld, f"expected a {n}x{n} matrix (A is {n}x{n}), found {R.shape[0]}x{R.shape[1]}")
+    scale = max(1.0, float(np.abs(R).max()))
+    if not math.isfinite(scale):
+        raise v.err(fld, "expected entries whose magnitude fits a float")
+    if not np.allclose(R, R.T, rtol=0, atol=1e-12 * scale):
+        raise v.err(fld, "expected a symmetric matrix")
+    lam = float(np.linalg.eigvalsh(R).min())
+    if lam < -1e-10 * scale:
+        raise v.err(fld, f"expected positive semi-definite, found eigenvalue {lam:.3g}")
+    return R
+
+
+def _server_tables(raw: dict, v: _V, processes: list[ProcessSpec], p: float | None) -> list[ServerSpec]:
+    """The ``[[server]]`` tables, in file order, with unique names."""
+    slist = raw.get("server")
+    if not isinstance(slist, list) or not slist:
+        raise v.err("server", "expected at least one [[server]] table")
+    servers = [_server_table(entry, m, v, processes, p) for m, entry in enumerate(slist, start=1)]
+    _unique([s.name for s in servers], "server", v)
+    return servers
+
+
+def _server_table(entry: Any, m: int, v: _V, processes: list[ProcessSpec], p: float | None) -> ServerSpec:
+    f = f"server[{m}]"
+    entry = v.table(entry, f, _SERVER_FIELDS)
+    name = v.string(entry.get("name", f"server-{m}"), f"{f}.name")
+    for key in ("uplink_delay", "downlink_delay"):
+        if key not in entry:
+            raise v.err(f"{f}.{key}", "missing: expected an integer >= 0 (whole slots)")
+    U = v.integer(entry["uplink_delay"], f"{f}.uplink_delay", 0, 10_000)
+    D = v.integer(entry["downlink_delay"], f"{f}.downlink_delay", 0, 10_000)
+    T = _processing_times(entry, f, v, processes)
+    pu = v.probability(entry["p_up"], f"{f}.p_up") if "p_up" in entry else p
+    pd = v.probability(entry["p_down"], f"{f}.p_down") if "p_down" in entry else p
+    if pu is None or pd is None:
+        raise v.err(
+            "channel.success_probability",
+            f"missing: needed by {f} (which sets no own p_up/p_down); expected a probability in [0, 1]",
+        )
+    return ServerSpec(name, U, D, T, pu, pd)
+
+
+def _processing_times(entry: dict, f: str, v: _V, processes: list[ProcessSpec]) -> tuple[int, ...]:
+    """T_{m,k} of every process: ``slots_per_dimension`` x n_k, or ``processing_time`` as given."""
+    has_spd, has_pt = "slots_per_dimension" in entry, "processing_time" in entry
+    if has_spd == has_pt:
+        raise v.err(
+            f"{f}.processing_time",
+            "expected exactly one of slots_per_dimension (integer >= 1) or processing_time (one integer >= 1 per process)",
+        )
+    if has_spd:
+        spd = v.integer(entry["slots_per_dimension"], f"{f}.slots_per_dimension", 1, 10_000)
+        return tuple(spd * pr.dim for pr in processes)
+    pt, N = entry["processing_time"], len(processes)
+    if not isinstance(pt, list) or len(pt) != N:
+        raise v.err(f"{f}.processing_time", f"expected a list of {N} integers >= 1 (one per process), found {_show(pt)}")
+    return tuple(v.integer(x, f"{f}.processing_time[{k + 1}]", 1, 100_000) for k, x in enumerate(pt))
 
 
 def _unique(names: list[str], kind: str, v: _V) -> None:
@@ -637,17 +820,17 @@ def _unique(names: list[str], kind: str, v: _V) -> None:
 def _pick(obj: Any, names: list[str], kind: str, fld: str, v: _V) -> int:
     """A 0-based index from a 1-based index or a name."""
     if isinstance(obj, bool):
-        raise v.err(fld, f"expected a {kind} name or 1-based index, found {obj!r}")
-    if isinstance(obj, (int, np.integer)) or (isinstance(obj, float) and obj.is_integer()):
+        raise v.err(fld, f"expected a {kind} name or 1-based index, found {_show(obj)}")
+    if isinstance(obj, (int, np.integer)) or (isinstance(obj, float) and math.isfinite(obj) and obj.is_integer()):
         i = int(obj)
         if not 1 <= i <= len(names):
-            raise v.err(fld, f"{kind} index {i} out of range: expected 1..{len(names)} or one of {names}")
+            raise v.err(fld, f"{kind} index {_show(i)} out of range: expected 1..{len(names)} or one of {names}")
         return i - 1
     if isinstance(obj, str):
         if obj in names:
             return names.index(obj)
-        raise v.err(fld, f"no {kind} named {obj!r}: expected a 1-based index or one of {names}")
-    raise v.err(fld, f"expected a {kind} name or 1-based index, found {obj!r}")
+        raise v.err(fld, f"no {kind} named {_show(obj)}: expected a 1-based index or one of {names}")
+    raise v.err(fld, f"expected a {kind} name or 1-based index, found {_show(obj)}")
 
 
 def _constraints(clist: Any, processes: list, servers: list, v: _V) -> tuple[ConstraintSpec, ...]:
@@ -662,8 +845,8 @@ def _constraints(clist: Any, processes: list, servers: list, v: _V) -> tuple[Con
         if "quantity" not in entry:
             raise v.err(f"{f}.quantity", f"missing: expected one of {list(QUANTITIES)}")
         qty = entry["quantity"]
-        if qty not in QUANTITIES:
-            raise v.err(f"{f}.quantity", f"unknown quantity {qty!r}: expected one of {list(QUANTITIES)}")
+        if not isinstance(qty, str) or qty not in QUANTITIES:
+            raise v.err(f"{f}.quantity", f"unknown quantity {_show(qty)}: expected one of {list(QUANTITIES)}")
         server = process = None
         if qty == "send_rate":
             if "server" not in entry:

@@ -6,7 +6,8 @@ commands that solve share one ``--method`` vocabulary (:mod:`wncs_lp.methods`, d
 ``auto``); ``--progress/--no-progress`` (default: on a terminal without ``--json``) shows the
 phases and the solver's iterations on stderr. Errors from bad
 input print one line ``error: ...`` on stderr and exit with status 2 (with ``--json`` also one
-object ``{"error", "type", "source", "field"}`` on stdout).
+object ``{"error", "type", "source", "field"}`` on stdout). Ctrl-C and SIGTERM stop a command
+with one line on stderr and status 130 / 143; what was written so far is complete (atomic writes).
 
 Each module of this package lists its subcommands in ``COMMANDS``; :func:`build_parser` adds
 the modules' commands in the order of :data:`MODULES` (the one place a new module is named).
@@ -47,16 +48,38 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    import signal
     import warnings
 
     from ..errors import ScenarioWarning
 
     args = build_parser().parse_args(argv)
+    terminated: list[int] = []
+
+    def on_sigterm(signum, frame):  # stop like Ctrl-C (files are written atomically), then say so
+        terminated.append(signum)
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # not the main thread: leave SIGTERM alone
+        previous = None
     try:
         with warnings.catch_warnings():
             # the commands print a degenerate scenario's warnings themselves, in words (common.load)
             warnings.filterwarnings("ignore", category=ScenarioWarning)
-            return int(args.func(args) or 0)
+            code = int(args.func(args) or 0)
+        if terminated:
+            raise KeyboardInterrupt
+        return code
+    except OSError as exc:  # a write that failed mid-run (disk full, folder removed): one line
+        text = f"{str(exc.filename) + ': ' if exc.filename else ''}{exc.strerror or exc}"
+        print(f"error: {text}", file=sys.stderr)
+        if getattr(args, "json", False):
+            from .common import emit_json
+
+            emit_json({"error": text, "type": type(exc).__name__})
+        return 2
     except WncsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         if getattr(args, "json", False):  # --json promises one JSON object on stdout, errors included
@@ -66,5 +89,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                        **{k: getattr(exc, k) for k in ("source", "field") if hasattr(exc, k)}})
         return 2
     except KeyboardInterrupt:
+        if terminated:
+            print("terminated (SIGTERM): results already written are kept", file=sys.stderr)
+            return 143
         print("interrupted: results already written are kept", file=sys.stderr)
         return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)

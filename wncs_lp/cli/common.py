@@ -9,8 +9,8 @@ from typing import Callable, NamedTuple, Sequence
 from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD, METHOD_HELP, METHODS, SCENARIO_METHODS
 
 __all__ = ["Command", "add_scenario_args", "add_method_arg", "add_progress_arg", "add_threads_arg",
-           "add_parallel_args", "executor_of", "progress_for", "load", "emit_json", "head", "output_file", "warn",
-           "SOLVE_METHODS", "MATRIX_FREE_METHODS"]
+           "add_parallel_args", "executor_of", "progress_for", "load", "emit_json", "head", "output_file",
+           "output_folder", "write_after_work", "warn", "SOLVE_METHODS", "MATRIX_FREE_METHODS"]
 
 #: The methods of a command that takes a scenario beyond :data:`METHODS` (the matrix-free solver),
 #: and those of ``solve``: every unconstrained method and every constrained one.
@@ -128,8 +128,8 @@ def load(args: argparse.Namespace):
 
 
 def output_file(path: str, option: str, suffixes: Sequence[str] | None = None) -> Path:
-    """Check an output file before any work: its folder exists (nothing is created) and, with
-    ``suffixes``, its extension is one of them.
+    """Check an output file before any work: its folder exists (nothing is created) and is
+    writable, the path is not a folder, and, with ``suffixes``, its extension is one of them.
 
     Raises
     ------
@@ -137,19 +137,42 @@ def output_file(path: str, option: str, suffixes: Sequence[str] | None = None) -
         One line naming the option, the path and what is wrong.
     """
     from ..errors import WncsError
+    from ..files import check_output_file
 
     out = Path(path)
     if suffixes is not None and out.suffix.lower().lstrip(".") not in suffixes:
         found = f"'{out.suffix}'" if out.suffix else "no extension"
         raise WncsError(f"{option} {path}: expected a file ending in "
                         f"{', '.join('.' + s for s in suffixes)}, found {found}")
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        what = "is not a folder" if parent.exists() else "does not exist"
-        raise WncsError(f"{option} {path}: the folder {parent} {what} (create it first)")
-    if out.is_dir():
-        raise WncsError(f"{option} {path}: is a folder, expected a file name")
-    return out
+    return check_output_file(out, option)
+
+
+def output_folder(path: str, option: str = "--out") -> Path:
+    """Check an output folder before any work: it is a writable folder, or can be created as one
+    (nothing is created here).
+
+    Raises
+    ------
+    WncsError
+        One line naming the option, the path and what is wrong.
+    """
+    from ..files import check_output_folder
+
+    return check_output_folder(path, option)
+
+
+def write_after_work(write: Callable[[], object], path: str, option: str = "--out") -> tuple[object, str | None]:
+    """Run ``write()`` (saving a finished result) and return ``(its value, None)``, or
+    ``(None, message)`` when the write fails: the caller still prints the result, then the
+    message, and exits non-zero, so a finished computation is never lost to a full disk or a
+    folder that became unwritable."""
+    from ..errors import WncsError
+
+    try:
+        return write(), None
+    except (OSError, WncsError) as exc:
+        why = f"{exc.strerror} ({exc.filename})" if isinstance(exc, OSError) and exc.strerror else str(exc)
+        return None, f"{option} {path}: the result above was computed but could not be written: {why}"
 
 
 def head(args: argparse.Namespace, scenario, mdp=None) -> dict:

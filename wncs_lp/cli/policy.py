@@ -5,7 +5,7 @@ import argparse
 import sys
 
 from .common import (Command, add_method_arg, add_parallel_args, add_progress_arg, add_scenario_args,
-                     add_threads_arg, emit_json, executor_of, head, load, progress_for)
+                     add_threads_arg, emit_json, executor_of, head, load, output_folder, progress_for)
 
 
 def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
@@ -125,6 +125,7 @@ def _configure_simulate(p: argparse.ArgumentParser) -> None:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from ..studies import run_sweep
 
+    output_folder(args.out)  # before any work
     scenario = load(args)
     log = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
     res = run_sweep(

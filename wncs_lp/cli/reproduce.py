@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import argparse
 
-from .common import Command, emit_json
+from .common import Command, emit_json, output_folder
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from ..reproduce import run_reproduction
     from ..reproduce.report import basis_words
 
+    output_folder(args.out)  # before any work
     result = run_reproduction(args.out, args.profile, force=args.recompute,
                               claims=[c.strip().upper() for c in args.claims.split(",")] if args.claims else None,
                               progress=not args.json)

@@ -6,15 +6,16 @@ import time
 
 from ..methods import DEFAULT_METHOD, METHOD_HELP
 from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_threads_arg, emit_json, head,
-                     load, output_file, progress_for)
+                     load, output_file, progress_for, write_after_work)
 
 
 def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
     """A solve without a stored matrix (:mod:`wncs_lp.solvers.matrix_free`): asked for, or auto's fallback."""
     sol = run.solution
+    failed = None
     if args.out is not None:  # one byte a state: wncs_lp.solvers.matrix_free.load_solution reads it back
         progress_for(args).phase(f"writing the policy to {args.out}")
-        sol.save(args.out)
+        _, failed = write_after_work(lambda: sol.save(args.out), args.out)
     payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)), **sol.summary(),
                "matrix_free_reason": run.route, "seconds": time.perf_counter() - t0}
     if args.json:
@@ -24,7 +25,17 @@ def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
         print(f"method matrix-free ({run.route}): status {sol.status}, {sol.iterations} sweeps, {sol.seconds:.2f} s")
         print(f"optimal average cost (gain): {sol.gain:.10g}")
         print(f"certificate: {sol.gain_lower:.12g} <= g* <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e})")
-    return 0 if sol.ok else 1
+    return _write_failed(failed) or (0 if sol.ok else 1)
+
+
+def _write_failed(message: str | None) -> int:
+    """2 after printing ``error: message`` when writing the finished result failed, else 0."""
+    if message is None:
+        return 0
+    import sys
+
+    print(f"error: {message}", file=sys.stderr)
+    return 2
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
@@ -50,12 +61,13 @@ def _unconstrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> 
     mdp, sol, t_build = run.mdp, run.solution, run.build_seconds
     prog.phase("measuring the optimal policy's time at the AoI cap")
     cap = policy_cap_mass(mdp, sol.policy)
-    extra = {}
+    extra, failed = {}, None
     if args.out is not None:
-        extra["out"] = str(_save(args, scenario, mdp, sol, prog))
+        saved, failed = write_after_work(lambda: _save(args, scenario, mdp, sol, prog), args.out)
+        extra = {"out": str(saved)} if failed is None else {"out_error": failed}
     if args.json:
         emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, **extra))
-        return 0 if sol.ok else 1
+        return _write_failed(failed) or (0 if sol.ok else 1)
     _header(scenario, mdp, t_build)
     used = f"{sol.method} -> {sol.stats['auto_choice']}" if "auto_choice" in sol.stats else sol.method
     print(f"method {used}: status {sol.status}, {sol.iterations} iterations, {sol.seconds:.2f} s")
@@ -68,7 +80,7 @@ def _unconstrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> 
     print(f"truncation: under the optimal policy {cap.message()}")
     if "out" in extra:
         print(f"policy and bias written to {extra['out']} (format: see wncs_lp.export)")
-    return 0 if sol.ok else 1
+    return _write_failed(failed) or (0 if sol.ok else 1)
 
 
 def _print_auto(st: dict) -> None:
@@ -102,12 +114,13 @@ def _constrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> in
 
     mdp, sol, t_build = run.mdp, run.solution, run.build_seconds
     cap = cap_mass(mdp, sol.occupation)
-    extra = {}
+    extra, failed = {}, None
     if args.out is not None:
-        extra["out"] = str(_save(args, scenario, mdp, sol, prog))
+        saved, failed = write_after_work(lambda: _save(args, scenario, mdp, sol, prog), args.out)
+        extra = {"out": str(saved)} if failed is None else {"out_error": failed}
     if args.json:
         emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, mixes=sol.mixes(mdp), **extra))
-        return 0 if sol.ok else 1
+        return _write_failed(failed) or (0 if sol.ok else 1)
     _header(scenario, mdp, t_build)
     print(f"constrained solve ({sol.method}): status {sol.status}, {sol.seconds:.2f} s")
     print(f"optimal average cost under the constraints: {sol.gain:.10g}")
@@ -126,7 +139,7 @@ def _constrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> in
     print(f"truncation: under the returned policy {cap.message()}")
     if "out" in extra:
         print(f"policy written to {extra['out']} (format: see wncs_lp.export)")
-    return 0 if sol.ok else 1
+    return _write_failed(failed) or (0 if sol.ok else 1)
 
 
 def _configure_solve(p: argparse.ArgumentParser) -> None:

@@ -7,7 +7,7 @@ import sys
 
 from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD
 from .common import (Command, add_parallel_args, add_scenario_args, add_threads_arg, emit_json, executor_of, head,
-                     load)
+                     load, output_folder)
 
 
 def cmd_tradeoff(args: argparse.Namespace) -> int:
@@ -15,6 +15,7 @@ def cmd_tradeoff(args: argparse.Namespace) -> int:
     from ..solvers.route import build_scenario
     from ..studies import parse_values, tradeoff
 
+    output_folder(args.out)  # before any work
     scenario = load(args)
     n = len(scenario.constraints)
     if not 1 <= args.constraint <= n:

@@ -29,6 +29,10 @@ MODELS: dict[str, type[Model]] = {WncsModel.kind: WncsModel, PreemptionModel.kin
 
 def model_for(scenario: Scenario) -> Model:
     """The :class:`Model` of a scenario (dispatching on ``scenario.model.kind``)."""
+    if not isinstance(scenario, Scenario):
+        hint = (" (an MDP is already built: solve it)" if isinstance(scenario, MDP) else
+                " (load it first: wncs_lp.load_scenario(path) or wncs_lp.scenario_from_dict(raw))")
+        raise ModelError(f"expected a Scenario, got {type(scenario).__name__}{hint}")
     cls = MODELS.get(scenario.model.kind)
     if cls is None:
         raise ModelError(f"{scenario.source}: no model of kind {scenario.model.kind!r}; expected one of {', '.join(MODELS)}")
@@ -87,8 +91,8 @@ def build(scenario: Scenario, model: Model | None = None, *, force: bool = False
     from ..errors import ScenarioWarning
     from .guard import check_size
 
+    model = model if model is not None else model_for(scenario)  # refuses anything but a Scenario
     for text in scenario.degenerate_warnings():
         warnings.warn(text, ScenarioWarning, stacklevel=2)
-    model = model if model is not None else model_for(scenario)
     check_size(scenario, force=force, need_lp=need_lp, model=model)
     return model.build()

@@ -12,15 +12,144 @@ A model describes the automaton over C one configuration at a time (:func:`explo
 """
 from __future__ import annotations
 
+import math
 from collections import deque
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
-from typing import Callable, Hashable, Sequence
+from typing import Callable, Hashable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from ..errors import ModelError
+from ..errors import ModelError, SizeLimitError
 
-__all__ = ["Outcome", "ConfigAutomaton", "FlatAutomaton", "explore_configs"]
+__all__ = ["Outcome", "ConfigAutomaton", "FlatAutomaton", "AutomatonBounds", "explore_configs",
+           "ExplorationLimitError", "exploration_limit", "approx_count", "MAX_CONFIGS", "MAX_EDGES", "MAX_WORK"]
+
+#: The most configurations :func:`explore_configs` explores (about 45 s and 1 GB of Python
+#: objects at the measured 4,400 configurations a second and 4 KB a configuration). The
+#: automaton grows exponentially in the delays (an uplink pipeline of U - 1 places holds any
+#: pattern of sent / lost updates); past this the MDP would not fit either, since each
+#: configuration carries at least one state. ``exploration_limit(None)`` lifts the budget
+#: (``force``).
+MAX_CONFIGS = 200_000
+#: The most edges (positive-probability outcomes of a configuration's actions) explored: about
+#: 100 bytes each in Python lists, so 10 million is about 1 GB (the measured 4 KB a configuration
+#: is mostly its ~40 edges).
+MAX_EDGES = 10_000_000
+#: The most work units spent exploring, one unit about 1.6 microseconds (measured, under load):
+#: 100 plus its places (scalars of the nested tuple: a delay of U slots is U - 1 uplink places)
+#: for each configuration interned, 20 plus N per outcome for each action's outcome list merged
+#: (its delivery vectors have N entries). The paper's processes 1-3 with an uplink delay of 10
+#: (118,765 configurations, 427,800 states) take 20 million; the budget stops a delay of 10,000
+#: slots after ~4,000 configurations and 21 processes after ~230,000 outcome lists.
+MAX_WORK = 40_000_000
+
+_LIMIT: ContextVar[int | None] = ContextVar("wncs_lp_exploration_limit", default=-1)
+
+
+@dataclass(frozen=True)
+class AutomatonBounds:
+    """What a model knows of its automaton from the scenario alone, before exploring it.
+
+    Attributes
+    ----------
+    configs : int or None
+        An upper bound on the reachable configurations (None: unknown).
+    initial : int
+        The number of initial configurations (each carries the whole AoI box as states).
+    edges_initial : int
+        A lower bound on the edges (actions x outcomes) leaving one initial configuration.
+    """
+
+    configs: int | None = None
+    initial: int = 1
+    edges_initial: int = 1
+
+
+@contextmanager
+def exploration_limit(max_configs: int | None) -> Iterator[None]:
+    """Within the block, :func:`explore_configs` stops past ``max_configs`` configurations
+    (``None``: no budget at all; outside any block: :data:`MAX_CONFIGS`, :data:`MAX_EDGES`
+    and :data:`MAX_WORK`)."""
+    token = _LIMIT.set(max_configs)
+    try:
+        yield
+    finally:
+        _LIMIT.reset(token)
+
+
+class ExplorationLimitError(SizeLimitError):
+    """The configuration automaton is larger than the exploration budget.
+
+    Attributes
+    ----------
+    explored : int
+        Configurations found when the exploration stopped.
+    edges : int
+        Edges found by then.
+    places : int
+        Places (scalars) of one configuration.
+    """
+
+    def __init__(self, message: str, explored: int, edges: int, places: int):
+        self.explored, self.edges, self.places = explored, edges, places
+        super().__init__(message)
+
+
+def _places(config: Hashable) -> int:
+    """Scalars in a (nested) configuration tuple."""
+    n, stack = 0, [config]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, tuple):
+            stack.extend(item)
+        else:
+            n += 1
+    return n
+
+
+def approx_count(n: int) -> str:
+    """A count for a message: ``1,234,567``, or ``9.22e18`` past 10^15 (any Python int, however large)."""
+    n = int(n)
+    if n < 10**15:
+        return f"{n:,}"
+    e = math.log10(n)
+    return f"{10 ** (e - math.floor(e)):.2f}e{math.floor(e)}"
+
+
+class _Budget:
+    """The exploration budget of one :func:`explore_configs` call (off under ``exploration_limit(None)``)."""
+
+    def __init__(self, initial: Sequence[Hashable]):
+        limit = _LIMIT.get()
+        self.on = limit is not None
+        self.max_configs = MAX_CONFIGS if limit in (-1, None) else int(limit)
+        self.max_edges = MAX_EDGES if self.on else float("inf")
+        self.places = max((_places(c) for c in initial[:1000]), default=1)
+        self.work = 0
+
+    def config(self, n_configs: int, n_edges: int) -> None:
+        """Before interning configuration number ``n_configs + 1``."""
+        if self.on:
+            self.work += 100 + self.places
+            if n_configs >= self.max_configs or self.work > MAX_WORK:
+                raise self.error(n_configs, n_edges)
+
+    def merged(self, n_configs: int, n_edges: int, scalars: int) -> None:
+        """After merging an outcome list of ``scalars`` delivery entries."""
+        if self.on:
+            self.work += 20 + scalars
+            if self.work > MAX_WORK:
+                raise self.error(n_configs, n_edges)
+
+    def error(self, n_configs: int, n_edges: int) -> ExplorationLimitError:
+        return ExplorationLimitError(
+            f"the configuration automaton is larger than the exploration budget: it stopped at {n_configs:,} "
+            f"configurations of {self.places:,} places each and {n_edges:,} edges (actions x outcomes), "
+            f"{self.work:,} work units spent (wncs_lp.models.automaton: at most {self.max_configs:,} configurations, "
+            f"{MAX_EDGES:,} edges, {MAX_WORK:,} units, about a minute)", n_configs, n_edges, self.places)
+
 
 #: (next configuration, delivery ages per process (0 = none), probability)
 Outcome = tuple[Hashable, tuple[int, ...], float]
@@ -118,24 +247,37 @@ class ConfigAutomaton:
 
 def explore_configs(
     initial: Sequence[Hashable],
-    step: Callable[[Hashable], list[tuple[tuple, list[Outcome]]]],
+    step: Callable[[Hashable], Iterable[tuple[tuple, list[Outcome]]]],
 ) -> ConfigAutomaton:
     """Breadth-first exploration of the configurations reachable from ``initial``.
 
-    ``step(config)`` returns ``[(action_label, [(next_config, delta, prob), ...]), ...]``.
+    ``step(config)`` returns (or yields) ``[(action_label, [(next_config, delta, prob), ...]), ...]``.
     Outcomes of probability 0 are dropped and equal (next, delta) outcomes merged, so the
     automaton only has edges of positive probability.
 
     The merge of an outcome list is cached by the identity of the list object (a reference
     is kept, so the identity cannot be reused): a ``step`` that returns the same cached list
     for many configurations -- the preemption model does -- is merged once.
+
+    Raises
+    ------
+    ExplorationLimitError
+        The automaton exceeds the budget (:func:`exploration_limit`; by default
+        :data:`MAX_CONFIGS`, :data:`MAX_EDGES`, :data:`MAX_WORK`): the exploration stops there.
     """
     configs: list = []
     index: dict = {}
+    budget = _Budget(initial)
+    f_nact: list[int] = []
+    f_nout: list[int] = []
+    f_nxt: list[int] = []
+    f_did: list[int] = []
+    f_prob: list[float] = []
 
     def intern(cfg: Hashable) -> int:
         i = index.get(cfg)
         if i is None:
+            budget.config(len(configs), len(f_nxt))
             i = index[cfg] = len(configs)
             configs.append(cfg)
             queue.append(i)
@@ -147,15 +289,13 @@ def explore_configs(
     outcomes: list[list[list[tuple[int, tuple[int, ...], float]]]] = []
     merge_cache: dict[int, tuple] = {}
     delta_id: dict[tuple[int, ...], int] = {}
-    f_nact: list[int] = []
-    f_nout: list[int] = []
-    f_nxt: list[int] = []
-    f_did: list[int] = []
-    f_prob: list[float] = []
+    max_edges = budget.max_edges
     while queue:
         c = queue.popleft()
         acts, outs = [], []
-        for label, outs_raw in step(configs[c]):
+        for label, outs_raw in step(configs[c]):  # a generator is consumed lazily: the budget stops it
+            if len(f_nxt) > max_edges:
+                raise budget.error(len(configs), len(f_nxt))
             hit = merge_cache.get(id(outs_raw))
             if hit is None or hit[0] is not outs_raw:
                 merged: dict[tuple[int, tuple[int, ...]], float] = {}
@@ -166,6 +306,7 @@ def explore_configs(
                 if not merged:
                     raise ModelError(f"configuration {configs[c]!r}, action {label}: no outcome of positive probability")
                 lst = [(n, d, p) for (n, d), p in merged.items()]
+                budget.merged(len(configs), len(f_nxt), len(outs_raw) * len(lst[0][1]))
                 hit = (
                     outs_raw,
                     lst,

@@ -27,7 +27,7 @@ import numpy as np
 from ..mdp import MDP
 from ..scenario import Scenario
 from .assemble import build_aoi_mdp
-from .automaton import ConfigAutomaton
+from .automaton import AutomatonBounds, ConfigAutomaton, ExplorationLimitError, approx_count
 from .cost import cost_tables
 
 __all__ = ["Model"]
@@ -71,8 +71,30 @@ class Model(ABC):
     # ------------------------------------------------------------------ the automaton
     @cached_property
     def automaton(self) -> ConfigAutomaton:
-        """The configurations reachable from the initial ones (explored once, then cached)."""
-        return self.explore()
+        """The configurations reachable from the initial ones (explored once, then cached).
+
+        Raises
+        ------
+        ExplorationLimitError
+            The automaton is larger than the exploration budget
+            (:func:`~wncs_lp.models.automaton.exploration_limit`); the message names the scenario
+            and the upper bound of :meth:`automaton_bounds`.
+        """
+        try:
+            return self.explore()
+        except ExplorationLimitError as exc:
+            bound = self.automaton_bounds().configs
+            told = (f"; its upper bound from the delays, processing times and number of processes is "
+                    f"{approx_count(bound)} configurations" if bound else "")
+            raise ExplorationLimitError(
+                f"{self.scenario.source}: {exc}{told}. Every configuration carries at least one state, so the MDP "
+                f"would not fit either: shorter delays, fewer processes or servers make it smaller; force=True "
+                f"(--force) explores it anyway", exc.explored, exc.edges, exc.places) from None
+
+    def automaton_bounds(self) -> AutomatonBounds:
+        """Bounds on the automaton from the scenario alone, before exploring it (the size guard's
+        first look); the default knows nothing beyond one initial configuration."""
+        return AutomatonBounds()
 
     @abstractmethod
     def explore(self) -> ConfigAutomaton:

@@ -3,22 +3,32 @@
 q_k(tau) = w_k * trace( sum_{i=0}^{tau-1} A_k^i R_k (A_k^T)^i ),  tau = 1..tau_hat_k,
 
 the trace of the paper's Q_k (eq. (5)): the estimation error covariance of process k when its
-freshest information is tau slots old.
+freshest information is tau slots old. It grows like rho(A_k)^(2 tau) for an unstable A_k, so a
+large cap can overflow: a table whose entries pass :data:`wncs_lp.mdp.MAX_COST` (or are not
+finite) is refused where it is computed, naming the process and the AoI.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..errors import ModelError
+from ..mdp import MAX_COST
 from ..scenario import ProcessSpec, Scenario
 
-__all__ = ["mse_table", "cost_tables"]
+__all__ = ["mse_table", "cost_tables", "process_cost"]
 
 
-def mse_table(A: np.ndarray, R: np.ndarray, tau_max: int, weight: float = 1.0) -> np.ndarray:
+def mse_table(A: np.ndarray, R: np.ndarray, tau_max: int, weight: float = 1.0, *, what: str = "the cost") -> np.ndarray:
     """Return ``q`` with ``q[tau - 1] = weight * trace(sum_{i<tau} A^i R A^iT)`` for tau = 1..tau_max.
 
     Computed by the recursion S_tau = S_{tau-1} + A^{tau-1} R A^{tau-1 T}, carrying
     M_i = A^i R A^iT = A M_{i-1} A^T, so it costs tau_max small matrix products.
+
+    Raises
+    ------
+    ModelError
+        Some q(tau) is not finite or exceeds :data:`~wncs_lp.mdp.MAX_COST` in magnitude; the
+        message names ``what`` and the first such AoI.
 
     Examples
     --------
@@ -29,18 +39,35 @@ def mse_table(A: np.ndarray, R: np.ndarray, tau_max: int, weight: float = 1.0) -
     M = np.asarray(R, dtype=float).copy()
     out = np.empty(tau_max)
     acc = 0.0
-    for t in range(tau_max):
-        acc += float(np.trace(M))
-        out[t] = weight * acc
-        M = A @ M @ A.T
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow is detected and named below
+        for t in range(tau_max):
+            acc += float(np.trace(M))
+            out[t] = weight * acc
+            if not abs(out[t]) <= MAX_COST:
+                _overflow(what, t + 1, out[t], A)
+            M = A @ M @ A.T
     return out
 
 
-def process_cost(process: ProcessSpec, tau_max: int | None = None) -> np.ndarray:
+def _overflow(what: str, tau: int, value: float, A: np.ndarray) -> None:
+    try:
+        rho = float(np.max(np.abs(np.linalg.eigvals(A)))) if np.all(np.isfinite(A)) else float("inf")
+    except np.linalg.LinAlgError:  # pragma: no cover - eigvals of a finite square matrix converges
+        rho = float("nan")
+    found = "overflows float64" if not np.isfinite(value) else f"is {value:.3g}, beyond {MAX_COST:g}"
+    raise ModelError(
+        f"{what}: the cost q(tau) = weight * trace(sum_(i<tau) A^i R A^iT) {found} at AoI tau = {tau} "
+        f"(the largest cost the solvers take is {MAX_COST:g}: sums and squares of larger ones overflow; q grows "
+        f"like rho(A)^(2 tau), rho(A) = {rho:.4g}): lower tau_cap below {tau}, or scale A, R or the weight down"
+    )
+
+
+def process_cost(process: ProcessSpec, tau_max: int | None = None, source: str = "") -> np.ndarray:
     """q_k(1..tau_max) for one process (default: up to its own cap)."""
-    return mse_table(process.A, process.R, tau_max or process.tau_cap, process.weight)
+    what = f"{source + ': ' if source else ''}process '{process.name}'"
+    return mse_table(process.A, process.R, tau_max or process.tau_cap, process.weight, what=what)
 
 
 def cost_tables(scenario: Scenario) -> list[np.ndarray]:
     """q_k(1..tau_hat_k) for every process of a scenario, in order."""
-    return [process_cost(pr) for pr in scenario.processes]
+    return [process_cost(pr, source=scenario.source) for pr in scenario.processes]

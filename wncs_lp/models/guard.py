@@ -16,19 +16,35 @@ The matrix-free solver (:mod:`wncs_lp.solvers.matrix_free`) stores no matrix: it
 configuration, the box spanned by the per-axis sets' intervals (their hull), keeping one float64
 value vector, one byte of policy and (only when its bracket needs it) one byte of reachability
 mask per box state: ``matrix_free_bytes``.
+
+Before exploring, :func:`check_size` looks at what the scenario alone tells
+(:meth:`~wncs_lp.models.base.Model.automaton_bounds`): every initial configuration carries the
+whole AoI box, so ``initial x prod_k tau_hat_k`` states is a lower bound, and the automaton's
+exploration is bounded (:data:`~wncs_lp.models.automaton.MAX_CONFIGS`, ``MAX_EDGES``). A
+scenario whose lower bounds already exceed the limit is refused at once. All the arithmetic is in
+Python integers and floats: a box of 8^21 vectors does not wrap around int64.
+
+The limit is the smallest of the memory limits that apply to this process
+(:func:`memory_limits`): the machine's available memory, the container's cgroup limit and the
+process's own ``RLIMIT_AS`` / ``RLIMIT_DATA`` (``prlimit --as=8G``), each less what is in use.
 """
 from __future__ import annotations
 
+import math
 import os
+import re
 from collections import deque
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 
-from ..errors import WncsError
+from ..errors import SizeLimitError
 from ..scenario import Scenario
+from .automaton import MAX_CONFIGS, MAX_EDGES, MAX_WORK, approx_count as _count, exploration_limit
 
-__all__ = ["SizeEstimate", "SizeLimitError", "estimate_size", "check_size", "build_checked", "available_memory"]
+__all__ = ["SizeEstimate", "SizeLimitError", "estimate_size", "check_size", "build_checked", "available_memory",
+           "memory_limits"]
 
 #: Bytes per stored transition nonzero at the peak of a build followed by a stored-matrix value
 #: iteration: P's float64 data and int32 indices (12) and the sweeps' uint8 probability code (1),
@@ -54,14 +70,6 @@ MATRIX_FREE_BYTES_PER_STATE = 10
 MATRIX_FREE_OVERHEAD = 400 << 20
 
 
-class SizeLimitError(WncsError):
-    """The MDP a scenario would build exceeds the memory limit (use ``force`` to build anyway)."""
-
-    def __init__(self, message: str, estimate: "SizeEstimate"):
-        self.estimate = estimate
-        super().__init__(message)
-
-
 @dataclass(frozen=True)
 class SizeEstimate:
     """Upper-bound estimate of an MDP's size, from its scenario.
@@ -82,6 +90,11 @@ class SizeEstimate:
         States of the matrix-free solver's layout (the per-axis interval hull; exact).
     matrix_free_bytes : int
         Peak memory of a matrix-free solve (no matrix: see the module docstring).
+    configs_bound : int or None
+        The model's upper bound on the configurations, from the scenario alone.
+    complete : bool
+        False for a refusal before exploring: then ``configs`` is the number of initial
+        configurations and the sizes are lower bounds from their AoI boxes alone.
     """
 
     configs: int
@@ -93,31 +106,129 @@ class SizeEstimate:
     lp_bytes: int
     matrix_free_states: int = 0
     matrix_free_bytes: int = 0
+    configs_bound: int | None = None
+    complete: bool = True
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
-def available_memory() -> int:
-    """Bytes of memory available now (``MemAvailable`` of /proc/meminfo; 8 GiB if unknown)."""
+def _meminfo() -> dict[str, int]:
+    """/proc/meminfo and /proc/self/status lines of interest, in bytes."""
+    out = {}
+    for path, keys in (("/proc/meminfo", ("MemAvailable",)), ("/proc/self/status", ("VmSize", "VmData"))):
+        try:
+            for line in Path(path).read_text().splitlines():
+                key, _, rest = line.partition(":")
+                if key in keys and rest.split():
+                    out[key] = int(rest.split()[0]) * 1024
+        except (OSError, ValueError):
+            pass
+    return out
+
+
+def _read_int(path: Path) -> int | None:
     try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
+        text = path.read_text().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None  # "max" (cgroup v2): no limit
+
+
+def _inactive_file(folder: Path, key: str) -> int:
+    try:
+        for line in (folder / "memory.stat").read_text().splitlines():
+            name, _, value = line.partition(" ")
+            if name == key and value.strip().isdigit():
+                return int(value)
     except OSError:
         pass
+    return 0
+
+
+def _cgroup_headroom(root: Path = Path("/")) -> int | None:
+    """The least (limit - usage) over this process's memory cgroup and its ancestors (v1 or v2;
+    reclaimable page cache counted free), or None without a limit. ``root``: the file system root."""
     try:
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return 8 << 30
+        lines = (root / "proc/self/cgroup").read_text().splitlines()
+    except OSError:
+        return None
+    best = None
+    for line in lines:
+        parts = line.split(":", 2)
+        if len(parts) != 3:
+            continue
+        if parts[0] == "0" and parts[1] == "":
+            base, files = root / "sys/fs/cgroup", ("memory.max", "memory.current", "inactive_file")
+        elif "memory" in parts[1].split(","):
+            base, files = root / "sys/fs/cgroup/memory", ("memory.limit_in_bytes", "memory.usage_in_bytes",
+                                                          "total_inactive_file")
+        else:
+            continue
+        rel = Path(parts[2].lstrip("/"))
+        for folder in {base / rel, *(base / q for q in rel.parents)}:
+            limit, usage = _read_int(folder / files[0]), _read_int(folder / files[1])
+            if limit is None or usage is None or limit >= 1 << 60:
+                continue
+            room = max(limit - usage + _inactive_file(folder, files[2]), 0)
+            best = room if best is None else min(best, room)
+    return best
+
+
+def memory_limits() -> dict[str, int]:
+    """Bytes this process may still allocate, by the limit that applies.
+
+    ``"available memory"`` (``MemAvailable`` of /proc/meminfo), ``"cgroup limit"`` (the
+    container's memory limit less its usage), ``"RLIMIT_AS"`` and ``"RLIMIT_DATA"`` (the
+    process's address-space and data limits, e.g. ``prlimit --as=8G``, less what it maps now).
+    Limits that do not apply (or cannot be read) are absent.
+    """
+    info = _meminfo()
+    out = {}
+    if "MemAvailable" in info:
+        out["available memory"] = info["MemAvailable"]
+    else:
+        try:
+            out["available memory"] = int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+        except (ValueError, OSError, AttributeError):
+            pass
+    room = _cgroup_headroom()
+    if room is not None:
+        out["cgroup limit"] = room
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not on POSIX
+        return out
+    for name, used in (("RLIMIT_AS", "VmSize"), ("RLIMIT_DATA", "VmData")):
+        soft = resource.getrlimit(getattr(resource, name))[0]
+        if soft != resource.RLIM_INFINITY and soft > 0:
+            out[name] = max(int(soft) - info.get(used, 0), 0)
+    return out
+
+
+def available_memory() -> int:
+    """Bytes this process may allocate now: the smallest of :func:`memory_limits` (8 GiB if none
+    can be read)."""
+    limits = memory_limits()
+    return min(limits.values()) if limits else 8 << 30
+
+
+def _limit_words(available: int) -> str:
+    """Which limit set ``available`` (for messages): the smallest one, when it is that one."""
+    limits = memory_limits()
+    if limits:
+        name = min(limits, key=limits.get)
+        if name != "available memory" and abs(limits[name] - available) <= 0.1 * max(available, 1):
+            return f"the memory this process may still use under its {name}"
+    return "the memory available now"
 
 
 def estimate_size(scenario: Scenario, model=None) -> SizeEstimate:
     """Estimate (upper bounds) the size of the MDP of a scenario without building it.
 
     ``model`` (a :class:`~wncs_lp.models.base.Model` of the scenario) lends its explored
-    automaton, which a following ``model.build()`` then reuses.
+    automaton, which a following ``model.build()`` then reuses. The automaton is explored within
+    the budget of :func:`~wncs_lp.models.automaton.exploration_limit`.
     """
     if model is None:
         from . import model_for
@@ -125,9 +236,34 @@ def estimate_size(scenario: Scenario, model=None) -> SizeEstimate:
         model = model_for(scenario)
     auto = model.automaton
     caps = scenario.tau_caps
-    N = len(caps)
+    masks = _axis_masks(auto, caps)
     nC = len(auto.configs)
-    # per-axis reachable masks: masks[k][c, i] = tau_k = i + 1 reachable with configuration c
+    # float64 products: sizes beyond 2^53 lose digits, never wrap around (int64 would at 8^21)
+    per_cfg = np.ones(nC, dtype=np.float64)
+    hull = np.ones(nC, dtype=np.float64)
+    for k, cap in enumerate(caps):
+        per_cfg *= masks[k].sum(axis=1)
+        first = masks[k].argmax(axis=1)
+        last = cap - 1 - masks[k][:, ::-1].argmax(axis=1)
+        hull *= last - first + 1
+    n_act = np.array([len(a) for a in auto.actions], dtype=np.float64)
+    n_out = np.array([sum(len(o) for o in outs) for outs in auto.outcomes], dtype=np.float64)
+    states = int(per_cfg.sum())
+    pairs = int((per_cfg * n_act).sum())
+    nnz = int((per_cfg * n_out).sum())
+    box = math.prod(caps)
+    build = nnz * BUILD_BYTES_PER_NNZ + pairs * BYTES_PER_PAIR + states * BYTES_PER_STATE + nC * box
+    lp = int(LP_FACTOR * (nnz * 16 + pairs * 8))
+    mf_states = int(hull.sum())
+    mf = mf_states * MATRIX_FREE_BYTES_PER_STATE + MATRIX_FREE_OVERHEAD
+    return SizeEstimate(nC, box, states, pairs, nnz, int(build), lp, mf_states, int(mf),
+                        model.automaton_bounds().configs)
+
+
+def _axis_masks(auto, caps: tuple[int, ...]) -> list[np.ndarray]:
+    """Per-axis reachable masks: ``masks[k][c, i]``: tau_k = i + 1 is reachable with configuration c
+    (the reachability fixed point of :mod:`wncs_lp.models.assemble` on per-axis sets)."""
+    N, nC = len(caps), len(auto.configs)
     masks = [np.zeros((nC, cap), dtype=bool) for cap in caps]
     work: deque[int] = deque()
     queued = np.zeros(nC, dtype=bool)
@@ -156,28 +292,49 @@ def estimate_size(scenario: Scenario, model=None) -> SizeEstimate:
                 if grew and not queued[nxt]:
                     work.append(nxt)
                     queued[nxt] = True
-    per_cfg = np.ones(nC, dtype=np.float64)
-    for k in range(N):
-        per_cfg *= masks[k].sum(axis=1)
-    n_act = np.array([len(a) for a in auto.actions], dtype=np.float64)
-    n_out = np.array([sum(len(o) for o in outs) for outs in auto.outcomes], dtype=np.float64)
-    states = int(per_cfg.sum())
-    pairs = int((per_cfg * n_act).sum())
-    nnz = int((per_cfg * n_out).sum())
-    build = nnz * BUILD_BYTES_PER_NNZ + pairs * BYTES_PER_PAIR + states * BYTES_PER_STATE + nC * int(np.prod(caps))
-    lp = int(LP_FACTOR * (nnz * 16 + pairs * 8))
-    hull = np.ones(nC, dtype=np.int64)
-    for k in range(N):
-        first = masks[k].argmax(axis=1)
-        last = caps[k] - 1 - masks[k][:, ::-1].argmax(axis=1)
-        hull *= last - first + 1
-    mf_states = int(hull.sum())
-    mf = mf_states * MATRIX_FREE_BYTES_PER_STATE + MATRIX_FREE_OVERHEAD
-    return SizeEstimate(nC, int(np.prod(caps)), states, pairs, nnz, int(build), lp, mf_states, int(mf))
+    return masks
 
 
 def _gib(b: float) -> str:
-    return f"{b / 2**30:.1f} GiB"
+    return f"{_count(int(b) >> 30)} GiB" if b >= 2**50 else f"{b / 2**30:.1f} GiB"
+
+
+def _lower_bounds(scenario: Scenario, model) -> SizeEstimate:
+    """What the scenario alone guarantees, before exploring: every initial configuration carries
+    the whole AoI box as states, each state has an action and a transition."""
+    bounds = model.automaton_bounds()
+    box = math.prod(scenario.tau_caps)
+    states = bounds.initial * box
+    build = states * (BUILD_BYTES_PER_NNZ + BYTES_PER_PAIR + BYTES_PER_STATE)
+    lp = states * 24 * int(LP_FACTOR)
+    mf = states * MATRIX_FREE_BYTES_PER_STATE + MATRIX_FREE_OVERHEAD
+    return SizeEstimate(bounds.initial, box, states, states, states, build, lp, states, mf, bounds.configs,
+                        complete=False)
+
+
+def _refuse_before_exploring(scenario: Scenario, model, limit: int, words: str, *, need_lp: bool,
+                             matrix_free: bool) -> None:
+    """Raise :class:`SizeLimitError` when the lower bounds alone exceed the limit or the budget."""
+    low = _lower_bounds(scenario, model)
+    bounds = model.automaton_bounds()
+    head = f"{scenario.source}: "
+    need = low.matrix_free_bytes if matrix_free else low.build_bytes + (low.lp_bytes if need_lp else 0)
+    if need > limit:
+        what = "the matrix-free solver's value vector" if matrix_free else "the MDP"
+        raise SizeLimitError(
+            head + f"{what} would need at least {_gib(need)} before its automaton is even explored: the AoI box "
+            f"(prod tau_hat = {_count(low.box)} vectors) of each of its {_count(bounds.initial)} initial "
+            f"configuration(s) is a set of states, {_count(low.states)} in all; over the limit of {_gib(limit)} "
+            f"({words}). Cheaper routes: a smaller cap (--set tau_cap=...) or fewer processes; "
+            + "; ".join(model.cheaper_routes() or ["none"]) + ". Use --force (force=True) to run anyway.", low)
+    edges = bounds.initial * bounds.edges_initial
+    if bounds.initial > MAX_CONFIGS or edges > MAX_EDGES or edges * scenario.n_processes > MAX_WORK:
+        raise SizeLimitError(
+            head + f"the configuration automaton has {_count(bounds.initial)} initial configuration(s) with at least "
+            f"{_count(edges)} edges (actions x outcomes, each with a delivery vector of {scenario.n_processes:,} "
+            f"entries) among them, beyond the exploration budget ({MAX_CONFIGS:,} configurations, {MAX_EDGES:,} "
+            f"edges, {MAX_WORK:,} work units: wncs_lp.models.automaton); fewer processes or servers make it "
+            "smaller. Use --force (force=True) to explore it anyway.", low)
 
 
 def check_size(
@@ -192,37 +349,51 @@ def check_size(
 ) -> SizeEstimate:
     """Refuse (raise :class:`SizeLimitError`) a build whose estimate exceeds the memory limit.
 
-    The limit is ``MEMORY_FRACTION`` of :func:`available_memory` unless ``limit_bytes`` is given.
-    With ``need_lp`` the LP's memory counts too. ``force=True`` only returns the estimate.
+    The limit is ``MEMORY_FRACTION`` of :func:`available_memory` (the smallest of the limits
+    that apply: :func:`memory_limits`) unless ``limit_bytes`` is given. With ``need_lp`` the LP's
+    memory counts too. ``force=True`` only returns the estimate (and lifts the exploration budget).
     The message gives the estimate and the cheaper routes that exist.
     With a method whose memory model is the AoI box (:data:`wncs_lp.methods.BOX`: the
     matrix-free solver) the need is that solver's (``matrix_free_bytes``: nothing is built),
-    against the whole available memory (the estimate is exact up to the fixed overhead, not an
+    against 90% of the available memory (the estimate is exact up to the fixed overhead, not an
     upper bound with slack). ``offer``: the methods (:class:`wncs_lp.methods.Method` rows) the
     caller takes, of which the message suggests those that fit (default: the unconstrained ones).
+
+    In order: the cost tables (an overflowing one is a :class:`~wncs_lp.errors.ModelError`
+    naming the process and the AoI), the lower bounds the scenario alone gives (refused before
+    exploring), the automaton explored within its budget, the estimate.
     """
     from ..methods import BOX, STORED, TABLE, memory_of
+    from .cost import cost_tables
 
     if model is None:
         from . import model_for
 
         model = model_for(scenario)
-    est = estimate_size(scenario, model)
+    cost_tables(scenario)  # cheap, and an overflowing cost is the first thing to say
+    matrix_free = memory_of(method) == BOX
+    avail = available_memory() if limit_bytes is None else None
+    if limit_bytes is not None:
+        limit, words = int(limit_bytes), "the limit given"
+    else:
+        share = 0.9 if matrix_free else MEMORY_FRACTION
+        limit, words = int(share * avail), f"{share:.0%} of {_limit_words(avail)}"
     if force:
-        return est
-    if memory_of(method) == BOX:
-        limit = int(0.9 * available_memory()) if limit_bytes is None else int(limit_bytes)
+        with exploration_limit(None):
+            return estimate_size(scenario, model)
+    _refuse_before_exploring(scenario, model, limit, words, need_lp=need_lp, matrix_free=matrix_free)
+    est = estimate_size(scenario, model)
+    if matrix_free:
         if est.matrix_free_bytes <= limit:
             return est
         raise SizeLimitError(
-            f"{scenario.source}: the matrix-free solver would sweep {est.matrix_free_states:,} states "
+            f"{scenario.source}: the matrix-free solver would sweep {_count(est.matrix_free_states)} states "
             f"(one float64 value, one policy byte and one mask byte each), needing about "
-            f"{_gib(est.matrix_free_bytes)}, over the limit of {_gib(limit)} (90% of the memory available now). "
+            f"{_gib(est.matrix_free_bytes)}, over the limit of {_gib(limit)} ({words}). "
             f"Cheaper routes: a smaller cap (--set tau_cap=...); "
             + "; ".join(model.cheaper_routes() or ["none"]) + ". Use --force (force=True) to run anyway.",
             est,
         )
-    limit = int(MEMORY_FRACTION * available_memory()) if limit_bytes is None else int(limit_bytes)
     need = est.build_bytes + (est.lp_bytes if need_lp else 0)
     if need <= limit:
         return est
@@ -236,12 +407,12 @@ def check_size(
         routes.append(f"{box.hint} (--method {box.name}, about {_gib(est.matrix_free_bytes)}: "
                       "no matrix is built), which fits")
     routes += model.cheaper_routes()
-    routes.append(f"a smaller cap (--set tau_cap=...; the box is {est.box:,} AoI vectors per configuration)")
+    routes.append(f"a smaller cap (--set tau_cap=...; the box is {_count(est.box)} AoI vectors per configuration)")
     raise SizeLimitError(
-        f"{scenario.source}: the MDP would have up to {est.states:,} states, {est.pairs:,} state-action pairs "
-        f"and {est.nnz:,} transition nonzeros, needing about {_gib(need)}"
+        f"{scenario.source}: the MDP would have up to {_count(est.states)} states, {_count(est.pairs)} "
+        f"state-action pairs and {_count(est.nnz)} transition nonzeros, needing about {_gib(need)}"
         f"{' (LP included)' if need_lp else ''}, over the limit of {_gib(limit)} "
-        f"({MEMORY_FRACTION:.0%} of the memory available now). Cheaper routes: "
+        f"({words}). Cheaper routes: "
         + "; ".join(routes)
         + ". Use --force (force=True) to build anyway.",
         est,

@@ -88,7 +88,7 @@ import numpy as np
 from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario
-from .automaton import ConfigAutomaton, explore_configs
+from .automaton import AutomatonBounds, ConfigAutomaton, explore_configs
 from .base import Model
 
 __all__ = [
@@ -279,6 +279,18 @@ class PreemptionModel(Model):
 
     def explore(self) -> ConfigAutomaton:
         return preemption_automaton(self.scenario)
+
+    def automaton_bounds(self) -> AutomatonBounds:
+        """b is one of 2^N arrival vectors; the job in service is none or (k, d <= T_k, g <= tau_hat_k)
+        (J = sum_k T_k tau_hat_k choices), the stack at most N - 1 such jobs, each of the D downlink
+        places none or (k, g <= tau_hat_k): at most 2^N (1 + J)^N (1 + sum_k tau_hat_k)^D
+        configurations. The 2^N initial ones each draw every arrival vector next when 0 < pu < 1."""
+        sc = self.scenario
+        N, srv = sc.n_processes, sc.servers[0]
+        jobs = sum(t * cap for t, cap in zip(srv.processing_time, sc.tau_caps))
+        configs = 2 ** N * (1 + jobs) ** N * (1 + sum(sc.tau_caps)) ** srv.downlink_delay
+        edges = 2 ** N if 0.0 < srv.p_up < 1.0 else 1
+        return AutomatonBounds(configs=configs, initial=2 ** N, edges_initial=edges)
 
     def initial_config(self) -> PreemptionConfig:
         return initial_preemption_configs(self.scenario)[0]

@@ -16,6 +16,7 @@ uplink loss -> start at once if U = 0 -> service -> downlink -> start from the u
 from __future__ import annotations
 
 import itertools
+import math
 from functools import lru_cache
 from typing import Any, Sequence
 
@@ -24,7 +25,7 @@ import numpy as np
 from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario, ServerSpec
-from .automaton import ConfigAutomaton, explore_configs
+from .automaton import AutomatonBounds, ConfigAutomaton, explore_configs
 from .base import Model
 
 __all__ = [
@@ -142,8 +143,7 @@ def wncs_automaton(scenario: Scenario) -> ConfigAutomaton:
     N = scenario.n_processes
     steps = [lru_cache(maxsize=None)(lambda st, a, s=s: server_step(s, st, a)) for s in servers]
 
-    def step(config: tuple):
-        result = []
+    def step(config: tuple):  # a generator: explore_configs' edge budget can stop a huge action set
         for action in feasible_actions(scenario, config):
             per_server = [steps[m](config[m], action[m]) for m in range(len(servers))]
             outs = []
@@ -157,8 +157,7 @@ def wncs_automaton(scenario: Scenario) -> ConfigAutomaton:
                         k = delivered - 1
                         delta[k] = age if delta[k] == 0 else min(delta[k], age)
                 outs.append((tuple(c[0] for c in combo), tuple(delta), prob))
-            result.append((action, outs))
-        return result
+            yield action, outs
 
     return explore_configs([idle_config(scenario)], step)
 
@@ -211,6 +210,23 @@ class WncsModel(Model):
 
     def explore(self) -> ConfigAutomaton:
         return wncs_automaton(self.scenario)
+
+    def automaton_bounds(self) -> AutomatonBounds:
+        """A server's configuration holds U - 1 uplink places and D downlink places (each empty or
+        one of N processes) and a job with its remaining slots (idle, or process k with 1..T_k
+        left): at most (N + 1)^(U - 1 + D) (1 + sum_k T_k) configurations, and the joint one the
+        product over servers. In the idle configuration every server accepts, so it has at least
+        N!/(N - M)! actions (distinct processes) or N^M."""
+        sc = self.scenario
+        N, M = sc.n_processes, sc.n_servers
+        configs = 1
+        for s in sc.servers:
+            configs *= (N + 1) ** (max(s.uplink_delay - 1, 0) + s.downlink_delay) * (1 + sum(s.processing_time))
+        if sc.model.distinct:
+            actions = math.perm(N, min(N, M))
+        else:
+            actions = N ** M
+        return AutomatonBounds(configs=configs, initial=1, edges_initial=max(actions, 1))
 
     def initial_config(self) -> tuple:
         return idle_config(self.scenario)

@@ -1,10 +1,15 @@
-"""On-disk step cache for the reproduction: resumable, atomic, keyed by content.
+"""On-disk step cache for the reproduction: resumable, atomic, keyed by content, checksummed.
 
 Each step's result is a JSON document (plus optional numpy arrays in an ``.npz`` beside it) under
 ``DIR/cache/``, named by a hash of the step name and its parameters (scenario fingerprints
 included). Files are written to a temporary name and moved into place with :func:`os.replace`,
 so an interrupted run never leaves a half-written entry, and two runs into the same folder at
 worst compute a step twice.
+
+Every entry carries a checksum of its key, result and arrays (:meth:`StepCache.checksum`). An
+entry is used only when it reads back whole and its checksum matches; otherwise -- a truncated
+``.npz``, JSON without a ``result`` or with ``result: null``, a hand-edited number, an entry
+copied from another key -- it is recomputed (and counted in ``StepCache.rejected``).
 """
 from __future__ import annotations
 
@@ -15,7 +20,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..files import atomic_write_bytes, atomic_write_text, json_ready
+from ..errors import WncsError
+from ..files import atomic_write_bytes, atomic_write_text, json_ready, read_npz
 
 __all__ = ["StepCache", "code_version"]
 
@@ -45,6 +51,13 @@ class StepCache:
         The cache folder (created).
     force : bool
         Recompute every step (existing entries are overwritten).
+
+    Attributes
+    ----------
+    hits, misses : int
+        Entries used, steps computed.
+    rejected : list of str
+        Entry files found damaged, foreign or edited (recomputed).
     """
 
     def __init__(self, root: Path, force: bool = False):
@@ -53,41 +66,73 @@ class StepCache:
         self.force = force
         self.hits = 0
         self.misses = 0
+        self.rejected: list[str] = []
 
     @staticmethod
     def key(step: str, params: dict[str, Any]) -> str:
         blob = json.dumps(json_ready({"step": step, "params": params, "code": code_version()}), sort_keys=True)
         return f"{step}-{hashlib.sha256(blob.encode()).hexdigest()[:16]}"
 
+    @staticmethod
+    def checksum(key: str, result: Any, arrays: dict[str, np.ndarray]) -> str:
+        """sha256 of the entry's key, its JSON result and every array's name, dtype, shape and bytes."""
+        h = hashlib.sha256(key.encode())
+        h.update(json.dumps(json_ready(result), sort_keys=True).encode())
+        for name in sorted(arrays):
+            a = np.ascontiguousarray(arrays[name])
+            h.update(f"|{name}|{a.dtype.str}|{a.shape}|".encode())
+            h.update(a.tobytes())
+        return h.hexdigest()
+
     def _paths(self, key: str) -> tuple[Path, Path]:
         return self.root / f"{key}.json", self.root / f"{key}.npz"
 
     def load(self, step: str, params: dict[str, Any]) -> tuple[dict, dict[str, np.ndarray]] | None:
+        """The cached (result, arrays) of a step, or None when absent, damaged, foreign or edited."""
         if self.force:
             return None
-        jpath, npath = self._paths(self.key(step, params))
+        key = self.key(step, params)
+        jpath, npath = self._paths(key)
         if not jpath.exists():
             return None
+        entry = self._read(key, jpath, npath)
+        if entry is None:
+            self.rejected.append(jpath.name)
+        return entry
+
+    def _read(self, key: str, jpath: Path, npath: Path) -> tuple[dict, dict[str, np.ndarray]] | None:
         try:
-            doc = json.loads(jpath.read_text())
-            arrays: dict[str, np.ndarray] = {}
-            if doc.get("_has_arrays"):
-                with np.load(npath, allow_pickle=False) as z:
-                    arrays = {k: z[k] for k in z.files}
-        except (OSError, ValueError, KeyError):
-            return None  # a damaged entry is recomputed
+            doc = json.loads(jpath.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+        if not isinstance(doc, dict) or not isinstance(doc.get("result"), dict) or doc.get("key") != key:
+            return None
+        arrays: dict[str, np.ndarray] = {}
+        names = doc.get("arrays", [])
+        if not isinstance(names, list) or not all(isinstance(k, str) for k in names):
+            return None
+        if names:
+            try:
+                arrays = read_npz(npath, required=names)
+            except WncsError:
+                return None
+            arrays = {k: arrays[k] for k in names}
+        if doc.get("checksum") != self.checksum(key, doc["result"], arrays):
+            return None
         return doc["result"], arrays
 
     def store(self, step: str, params: dict[str, Any], result: dict, arrays: dict[str, np.ndarray] | None = None) -> None:
         key = self.key(step, params)
         jpath, npath = self._paths(key)
+        arrays = {k: np.asarray(v) for k, v in (arrays or {}).items()}
         if arrays:
             import io
 
             buf = io.BytesIO()
             np.savez_compressed(buf, **arrays)
             atomic_write_bytes(npath, buf.getvalue())  # arrays first: the JSON marks completion
-        doc = {"step": step, "params": json_ready(params), "result": json_ready(result), "_has_arrays": bool(arrays)}
+        doc = {"step": step, "key": key, "params": json_ready(params), "result": json_ready(result),
+               "arrays": sorted(arrays), "checksum": self.checksum(key, result, arrays)}
         atomic_write_text(jpath, json.dumps(doc, indent=1))
 
     def get_or_compute(
