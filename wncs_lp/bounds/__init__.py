@@ -88,6 +88,8 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         relaxation (the preemption model), refused before any work with the reason.
     """
     name = parse_relaxation(relaxation)
+    if not isinstance(scenario_or_system, (Scenario, System)):
+        raise WncsError(f"expected a Scenario or a System, got {type(scenario_or_system).__name__}")
     if name == "private-servers":
         return private_bound(scenario_or_system, **options)
     joint, why_not = _joint_module()
@@ -95,34 +97,29 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         if joint is None:
             raise WncsError(f"relaxation joint-configuration asked for, but {why_not}")
         return joint.joint_bound(_as_system(scenario_or_system), **options)
-    return _auto(scenario_or_system, joint, why_not, options)
-
-
-def _auto(scenario_or_system: Scenario | System, joint: Any, why_not: str, options: dict) -> BoundResult:
-    """Relaxation 2 where it can run, else relaxation 1, saying which and why in ``stats``."""
-    if joint is None:  # relaxation 1 refuses a model without it before exploring the joint automaton
-        res = private_bound(scenario_or_system, **options)
-        return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": why_not})
-    system = _as_system(scenario_or_system)
     if joint is not None:
-        reach = getattr(joint, "joint_reach", None)
-        why_not = reach(system) if reach is not None else None
-        if why_not is None:
-            try:
-                res = joint.joint_bound(system, **options)
-                return replace(res, stats={**res.stats, "auto_choice": res.relaxation,
-                                           "auto_reason": "relaxation 2 is installed and the instance is within its reach"})
-            except WncsError as exc:
-                why_not = f"relaxation 2 could not run: {exc}"
-        else:
-            why_not = f"beyond relaxation 2's reach: {why_not}"
-    res = private_bound(system, **options)
+        system = _as_system(scenario_or_system)
+        res, why_not = _try_joint(joint, system, options)
+        if res is not None:
+            return res
+        scenario_or_system = system
+    res = private_bound(scenario_or_system, **options)
     return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": why_not})
 
 
+def _try_joint(joint: Any, system: System, options: dict) -> tuple[BoundResult | None, str]:
+    """Relaxation 2 when the instance is within its reach: (its result, "") or (None, why not)."""
+    reach = getattr(joint, "joint_reach", None)
+    why_not = reach(system) if reach is not None else None
+    if why_not is not None:
+        return None, f"beyond relaxation 2's reach: {why_not}"
+    try:
+        res = joint.joint_bound(system, **options)
+    except WncsError as exc:
+        return None, f"relaxation 2 could not run: {exc}"
+    reason = "relaxation 2 is installed and the instance is within its reach"
+    return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": reason}), ""
+
+
 def _as_system(obj: Scenario | System) -> System:
-    if isinstance(obj, System):
-        return obj
-    if isinstance(obj, Scenario):
-        return System.from_scenario(obj)
-    raise WncsError(f"expected a Scenario or a System, got {type(obj).__name__}")
+    return obj if isinstance(obj, System) else System.from_scenario(obj)

@@ -190,11 +190,15 @@ def _private_actions(system: System, chain: PrivateChain, k: int, col: np.ndarra
     """(|C|, A_max) local index, in k's private system, of k's projection of every joint action."""
     proj = system.model.project_labels(system.labels, k)  # (C, A, M)
     C, A, M = proj.shape
-    rows = np.concatenate([np.repeat(col, A)[:, None], proj.reshape(C * A, M)], axis=1)
-    uniq, inv = np.unique(rows, axis=0, return_inverse=True)
+    base = int(max(proj.max(), 0)) + 2  # one integer key per (private configuration, label)
+    key = np.repeat(col, A)
+    for m in range(M):
+        key = key * base + (proj[:, :, m].reshape(-1) + 1)
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
     acts = chain.model.automaton.actions
     index = [{tuple(a): j for j, a in enumerate(acts[c])} for c in range(chain.n_configs)]
-    local = np.array([index[u[0]].get(tuple(int(x) for x in u[1:]), -1) for u in uniq], np.int64)
+    cols, labels = np.repeat(col, A)[first], proj.reshape(C * A, M)[first]
+    local = np.array([index[c].get(tuple(int(x) for x in lab), -1) for c, lab in zip(cols, labels)], np.int64)
     out = local[inv.ravel()].reshape(C, A)
     if np.any(out[system.action_valid] < 0):
         raise SolverError(f"internal error: a projected action of process {k + 1} is not feasible in its private system")

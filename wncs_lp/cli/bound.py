@@ -54,9 +54,10 @@ def _print(scenario, res, report) -> None:
         print(f"policies, by Monte Carlo ({r0.get('reps')} x {r0.get('slots')} slots, seed {r0.get('seed')}); upper = "
               f"one-sided {100 * r0.get('confidence', 0.95):g}% upper confidence limit (the AoI box has "
               f"{report.states:,} states, above --exact-max-states):")
-    print(f"  {'policy':<28} {'gain':>16} {'upper':>16} {'gap <=':>9}")
+    w = max(len("policy"), *(len(r.policy) for r in report.rows))
+    print(f"  {'policy':<{w}} {'gain':>16} {'upper':>16} {'gap <=':>9}")
     for r in report.rows:
-        print(f"  {r.policy:<28} {r.gain:>16.10g} {r.gain_upper:>16.10g} {100 * r.gap:>8.3f}%")
+        print(f"  {r.policy:<{w}} {r.gain:>16.10g} {r.gain_upper:>16.10g} {100 * r.gap:>8.3f}%")
     print("  gap = (upper - lower bound) / lower bound, an upper bound on (g_pi - g*) / g*")
 
 

@@ -59,22 +59,27 @@ def separable_table(system: System, k: int, h: np.ndarray, column: np.ndarray | 
     column : (|C|,) int array, optional
         The column of ``h`` each configuration reads (default: the identity, n_cols = |C|).
 
-    Built in blocks of configurations (:data:`TABLE_BLOCK` elements at most), so the memory is
-    the table itself, |C| * A_max * tau_hat_k floats.
+    Only the outcomes of positive probability are visited, in blocks of at most
+    :data:`TABLE_BLOCK` (outcome, tau) entries, so the memory is the table itself,
+    |C| * A_max * tau_hat_k floats.
     """
     ot = system.outcome_tables
     K = int(system.caps[k])
     nC, A, O = ot.nxt.shape
     col = np.arange(nC) if column is None else np.asarray(column, dtype=np.int64)
     t_next0 = np.minimum(np.arange(1, K + 1) + 1, K)
-    W = np.empty((nC, A, K))
-    step = max(1, TABLE_BLOCK // max(A * O * K, 1))
-    for c0 in range(0, nC, step):
-        sl = slice(c0, min(c0 + step, nC))
-        dk = ot.delta[sl, :, :, k][..., None]  # (c, A, O, 1)
-        t_next = np.where(dk > 0, np.minimum(t_next0, dk), t_next0)  # (c, A, O, K)
-        vals = h[col[ot.nxt[sl]][..., None], t_next - 1]
-        W[sl] = np.einsum("cao,caok->cak", ot.prob[sl], vals)
+    real = np.flatnonzero(ot.prob.reshape(-1) > 0)  # sorted: (C, a) rows stay contiguous
+    W = np.zeros((nC * A, K))
+    step = max(1, TABLE_BLOCK // K)
+    for i0 in range(0, real.size, step):
+        idx = real[i0:i0 + step]
+        dk = ot.delta.reshape(-1, ot.delta.shape[-1])[idx, k][:, None]
+        t_next = np.where(dk > 0, np.minimum(t_next0, dk), t_next0)
+        vals = h[col[ot.nxt.reshape(-1)[idx]][:, None], t_next - 1] * ot.prob.reshape(-1)[idx][:, None]
+        rows = idx // O
+        starts = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
+        W[rows[starts]] += np.add.reduceat(vals, starts, axis=0)
+    W = W.reshape(nC, A, K)
     W[~system.action_valid] = np.inf
     return W
 
