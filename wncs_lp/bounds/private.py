@@ -201,7 +201,8 @@ def _private_actions(system: System, chain: PrivateChain, k: int, col: np.ndarra
     local = np.array([index[c].get(tuple(int(x) for x in lab), -1) for c, lab in zip(cols, labels)], np.int64)
     out = local[inv.ravel()].reshape(C, A)
     if np.any(out[system.action_valid] < 0):
-        raise SolverError(f"internal error: a projected action of process {k + 1} is not feasible in its private system")
+        raise SolverError(f"internal error: a projected action of process {k + 1} is not feasible in its "
+                          "private system")
     return out
 
 
