@@ -111,3 +111,17 @@ def test_describe_names_the_relaxation():
     d = pol.describe()
     assert d["relaxation"] == "private-servers" and d["lower_bound"] == res.lower_bound
     assert pol.name == "bound[private-servers]"
+
+
+def test_policy_maps_like_any_policy():
+    from wncs_lp.maps import policy_grid
+
+    sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=8"])
+    system, res, pol = _setup(sc)
+    mdp = build(sc)
+    A, S, _ = policy_grid(mdp, pol, "idle")
+    st = mdp.states
+    cells = S[S >= 0]
+    assert cells.size > 10
+    j = pol.act(np.asarray(st.tau)[cells], np.asarray(st.config)[cells])
+    np.testing.assert_array_equal(A[S >= 0], mdp.a_indices[mdp.pair_ptr[cells] + j])
