@@ -7,9 +7,10 @@ the enumerated MDP).
 * :func:`~wncs_lp.bounds.private.private_bound` -- relaxation 1, private servers with averaged
   capacity (:mod:`wncs_lp.bounds.private`);
 * relaxation 2, the joint configuration with separable value functions, lives in
-  :mod:`wncs_lp.bounds.joint` when installed (``joint_bound(system, **options)``, and
-  optionally ``joint_reach(system)`` returning ``None`` when the instance is within its reach,
-  else the reason in words);
+  :mod:`wncs_lp.bounds.joint` when installed: ``joint_bound(system, **options)`` (the command
+  line passes ``tol`` and ``progress``; a :class:`~wncs_lp.errors.WncsError` it raises makes
+  ``auto`` fall back to relaxation 1) and optionally ``joint_reach(system)``, ``None`` when the
+  instance is within its reach, else the reason in words;
 * :func:`bound_policy` / :class:`BoundPolicy` -- the greedy policy on a bound's value tables;
 * :func:`~wncs_lp.bounds.gaps.policy_gaps` -- policies evaluated against a bound: the certified
   optimality gap of each.
