@@ -2,11 +2,125 @@
 they give (relaxations of the joint MDP built on :class:`~wncs_lp.models.system.System`, never on
 the enumerated MDP).
 
-The result type of every relaxation is :class:`BoundResult`; its value tables
-(:class:`ValueTables`) drive the greedy policy of the bound.
+* :func:`lower_bound` -- the entry point: a :class:`BoundResult` from the relaxation asked for
+  (``"private-servers"`` = 1, ``"joint-configuration"`` = 2, or ``"auto"``);
+* :func:`~wncs_lp.bounds.private.private_bound` -- relaxation 1, private servers with averaged
+  capacity (:mod:`wncs_lp.bounds.private`);
+* relaxation 2, the joint configuration with separable value functions, lives in
+  :mod:`wncs_lp.bounds.joint` when installed: ``joint_bound(system, **options)`` (the command
+  line passes ``tol`` and ``progress``; a :class:`~wncs_lp.errors.WncsError` it raises makes
+  ``auto`` fall back to relaxation 1) and optionally ``joint_reach(system)``, ``None`` when the
+  instance is within its reach, else the reason in words;
+* :func:`bound_policy` / :class:`BoundPolicy` -- the greedy policy on a bound's value tables;
+* :func:`~wncs_lp.bounds.gaps.policy_gaps` -- policies evaluated against a bound: the certified
+  optimality gap of each.
+
+Every bound is certified by the Bellman brackets of the chains it solves, never by an LP
+solver's status; the result type of every relaxation is :class:`BoundResult`, whose value
+tables (:class:`ValueTables`) drive the greedy policy of the bound.
 """
 from __future__ import annotations
 
+import importlib
+from dataclasses import replace
+from typing import Any
+
+from ..errors import WncsError
+from ..models.system import System
+from ..scenario import Scenario
+from .gaps import GapReport, PolicyGap, policy_gaps
+from .policy import BoundPolicy, bound_policy
+from .private import private_bound
 from .result import BoundResult, ValueTables
 
-__all__ = ["BoundResult", "ValueTables"]
+__all__ = ["BoundResult", "ValueTables", "BoundPolicy", "GapReport", "PolicyGap", "RELAXATIONS", "lower_bound",
+           "bound_policy", "policy_gaps", "private_bound", "parse_relaxation"]
+
+#: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
+RELAXATIONS = ("auto", "private-servers", "joint-configuration")
+_SHORT = {"1": "private-servers", "2": "joint-configuration"}
+
+
+def parse_relaxation(name: str | int) -> str:
+    """``1`` / ``"1"`` / ``"private-servers"`` -> ``"private-servers"`` (likewise 2 and auto).
+
+    Raises
+    ------
+    WncsError
+        An unknown name (the message lists the allowed ones).
+    """
+    text = _SHORT.get(str(name).strip(), str(name).strip())
+    if text not in RELAXATIONS:
+        raise WncsError(f"unknown relaxation {name!r}; expected one of 1, 2, {', '.join(RELAXATIONS)}")
+    return text
+
+
+def _joint_module() -> tuple[Any, str]:
+    """(the relaxation-2 module or None, why not)."""
+    try:
+        return importlib.import_module(f"{__name__}.joint"), ""
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__name__}.joint":
+            raise
+        return None, "relaxation 2 (wncs_lp.bounds.joint) is not installed"
+
+
+def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "auto", **options: Any) -> BoundResult:
+    """A certified lower bound on the optimal gain g* of a Section II scenario.
+
+    Parameters
+    ----------
+    scenario_or_system : Scenario or System
+    relaxation : {"auto", "private-servers", "joint-configuration"} or 1 / 2
+        ``"auto"``: relaxation 2 (the tighter) when it is installed and the instance is within
+        its reach, else relaxation 1; ``stats["auto_choice"]`` and ``stats["auto_reason"]`` say
+        which fired and why.
+    **options
+        Keyword arguments of the relaxation's function (e.g. ``tol``, ``progress``).
+
+    Returns
+    -------
+    BoundResult
+
+    Raises
+    ------
+    WncsError
+        An unknown relaxation, relaxation 2 asked for but not installed, or a model without the
+        relaxation (the preemption model), refused before any work with the reason.
+    """
+    name = parse_relaxation(relaxation)
+    if not isinstance(scenario_or_system, (Scenario, System)):
+        raise WncsError(f"expected a Scenario or a System, got {type(scenario_or_system).__name__}")
+    if name == "private-servers":
+        return private_bound(scenario_or_system, **options)
+    joint, why_not = _joint_module()
+    if name == "joint-configuration":
+        if joint is None:
+            raise WncsError(f"relaxation joint-configuration asked for, but {why_not}")
+        return joint.joint_bound(_as_system(scenario_or_system), **options)
+    if joint is not None:
+        system = _as_system(scenario_or_system)
+        res, why_not = _try_joint(joint, system, options)
+        if res is not None:
+            return res
+        scenario_or_system = system
+    res = private_bound(scenario_or_system, **options)
+    return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": why_not})
+
+
+def _try_joint(joint: Any, system: System, options: dict) -> tuple[BoundResult | None, str]:
+    """Relaxation 2 when the instance is within its reach: (its result, "") or (None, why not)."""
+    reach = getattr(joint, "joint_reach", None)
+    why_not = reach(system) if reach is not None else None
+    if why_not is not None:
+        return None, f"beyond relaxation 2's reach: {why_not}"
+    try:
+        res = joint.joint_bound(system, **options)
+    except WncsError as exc:
+        return None, f"relaxation 2 could not run: {exc}"
+    reason = "relaxation 2 is installed and the instance is within its reach"
+    return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": reason}), ""
+
+
+def _as_system(obj: Scenario | System) -> System:
+    return obj if isinstance(obj, System) else System.from_scenario(obj)

@@ -6,6 +6,9 @@ from typing import Any
 
 import numpy as np
 
+from ..files import json_ready
+from ..status import OPTIMAL
+
 __all__ = ["ValueTables", "BoundResult"]
 
 
@@ -88,3 +91,29 @@ class BoundResult:
     def gap_of(self, gain: float) -> float:
         """The certified relative optimality gap of a policy of gain ``gain``: (gain - LB) / LB."""
         return (float(gain) - self.lower_bound) / self.lower_bound
+
+    @property
+    def ok(self) -> bool:
+        """The relaxation was solved to its tolerance (the bound holds either way)."""
+        return self.status == OPTIMAL
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready scalars and short lists (not the value tables)."""
+        return {
+            "relaxation": self.relaxation,
+            "lower_bound": float(self.lower_bound),
+            "relaxation_upper": float(self.relaxation_upper),
+            "status": self.status,
+            "certified_by": self.certified_by,
+            "multipliers": np.asarray(self.multipliers, float).ravel().tolist() if np.size(self.multipliers) <= 64
+            else f"{np.size(self.multipliers)} values",
+            "process_gains": np.asarray(self.process_gains, float).tolist(),
+            "seconds": float(self.seconds),
+            "iterations": int(self.iterations),
+            "stats": json_ready(self.stats),
+        }
+
+    def __repr__(self) -> str:
+        up = "" if not np.isfinite(self.relaxation_upper) else f" (relaxation <= {self.relaxation_upper:.10g})"
+        return (f"BoundResult({self.relaxation}: g* >= {self.lower_bound:.10g}{up}, status {self.status}, "
+                f"{self.iterations} iterations, {self.seconds:.2f} s)")

@@ -19,13 +19,13 @@ import sys
 from typing import Sequence
 
 from ..errors import WncsError
-from . import capstudy, export, maps, policy, reproduce, solve, tradeoff, verify
+from . import bound, capstudy, export, maps, policy, reproduce, solve, tradeoff, verify
 from .common import Command
 
 __all__ = ["main", "build_parser", "COMMANDS"]
 
 #: Command modules, in the order their subcommands appear in ``wncs-lp --help``.
-MODULES = (solve, policy, tradeoff, capstudy, reproduce, verify, maps, export)
+MODULES = (solve, bound, policy, tradeoff, capstudy, reproduce, verify, maps, export)
 
 #: Every subcommand of ``wncs-lp``.
 COMMANDS: list[Command] = [cmd for module in MODULES for cmd in module.COMMANDS]

@@ -24,6 +24,7 @@ from typing import Any, ClassVar, Hashable, Sequence
 
 import numpy as np
 
+from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario
 from .assemble import build_aoi_mdp
@@ -142,6 +143,37 @@ class Model(ABC):
     def cheaper_routes(self) -> list[str]:
         """Routes that need no enumeration of the state space (for the size guard's message)."""
         return []
+
+    # ------------------------------------------------------------------ private servers
+    #: Why this kind has no private-servers relaxation (:mod:`wncs_lp.bounds.private`), in words.
+    private_servers_refusal: ClassVar[str] = "its processes do not decompose into private copies of the servers"
+
+    def private_scenario(self, k: int) -> Scenario:
+        """Process ``k`` (0-based) alone with its own copy of every server, idling allowed: the
+        private system of the private-servers relaxation.
+
+        Raises
+        ------
+        ModelError
+            The kind has no such relaxation (:attr:`private_servers_refusal` says why).
+        """
+        raise ModelError(f"{self.scenario.source}: no private-servers bound for a {self.kind!r} model: "
+                         f"{self.private_servers_refusal}")
+
+    def project(self, config: Hashable, k: int) -> Hashable:
+        """Process ``k``'s own jobs of a joint configuration, as a configuration of
+        :meth:`private_scenario` (``k``)."""
+        raise ModelError(f"{self.scenario.source}: a {self.kind!r} configuration has no per-process projection")
+
+    def project_labels(self, labels: np.ndarray, k: int) -> np.ndarray:
+        """The action labels (an (..., M) int array) as seen by process ``k`` alone: what it sends
+        where, as labels of :meth:`private_scenario` (``k``)."""
+        raise ModelError(f"{self.scenario.source}: a {self.kind!r} action has no per-process projection")
+
+    def claims(self, config: Hashable, labels: np.ndarray) -> np.ndarray:
+        """(A, M, N) 0/1 array: whether process k holds server m's resource under each action
+        label of ``config`` (the capacity of the private-servers relaxation)."""
+        raise ModelError(f"{self.scenario.source}: a {self.kind!r} model defines no server claims")
 
     # ------------------------------------------------------------------ reading configurations
     @abstractmethod

@@ -272,6 +272,9 @@ class PreemptionModel(Model):
     threshold_form = "intervals"
     threshold_configs = "all"
     has_static_policy = False
+    private_servers_refusal = ("its one server is shared through preemption and a stack of preempted jobs, so a "
+                               "process's job progress depends on the other processes' (a process alone with its "
+                               "own server is no relaxation of it); the bounds need the Section II model")
 
     def __init__(self, scenario: Scenario):
         _check_scenario(scenario)

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..mdp import MDP
-from ..scenario import Scenario, ServerSpec
+from ..scenario import Scenario, ServerSpec, scenario_from_dict
 from .automaton import AutomatonBounds, ConfigAutomaton, explore_configs
 from .base import Model
 
@@ -264,6 +264,64 @@ class WncsModel(Model):
 
     def cheaper_routes(self) -> list[str]:
         return ["the separable suboptimal policy with Monte Carlo simulation (needs no enumeration)"]
+
+    # ------------------------------------------------------------------ private servers
+    def private_scenario(self, k: int) -> Scenario:
+        """Process ``k`` alone with its own copy of every server (same delays, its processing
+        times, same links), ``allow_idle = true``, ``distinct`` as in the scenario."""
+        sc = self.scenario
+        pr = sc.processes[k]
+        raw = {
+            "model": {"kind": self.kind, "allow_idle": True, "distinct": sc.model.distinct},
+            "channel": {} if sc.p != sc.p else {"success_probability": sc.p},
+            "process": [{"name": pr.name, "A": pr.A.tolist(), "R": pr.R.tolist(), "weight": pr.weight,
+                         "tau_cap": pr.tau_cap}],
+            "server": [{"name": s.name, "uplink_delay": s.uplink_delay, "downlink_delay": s.downlink_delay,
+                        "processing_time": [s.processing_time[k]], "p_up": s.p_up, "p_down": s.p_down}
+                       for s in sc.servers],
+        }
+        return scenario_from_dict(raw, source=f"{sc.source} [{pr.name} alone on private servers]")
+
+    def project(self, config: tuple, k: int) -> tuple:
+        """Every entry of another process emptied, process ``k`` renamed 1 (its private index)."""
+        own = k + 1
+
+        def mine(x: int) -> int:
+            return 1 if x == own else 0
+
+        return tuple((tuple(mine(x) for x in up), mine(job), d if job == own else 0, tuple(mine(x) for x in down))
+                     for (up, job, d, down) in config)
+
+    def project_labels(self, labels: np.ndarray, k: int) -> np.ndarray:
+        """a^k_m = 1 where a_m = k + 1 (process k sent to server m), else 0."""
+        return (np.asarray(labels) == k + 1).astype(np.int64)
+
+    def claims(self, config: tuple, labels: np.ndarray) -> np.ndarray:
+        """Who takes slot t + U_m of server m's timeline: process k claims it when
+
+        * its job in service still runs then: d >= U_m + 1;
+        * its update in uplink place i (sent i + 1 slots ago, service from slot t + U_m - 1 - i)
+          still runs then: T_{m,k} >= i + 2 (only for U_m >= 2);
+        * it is sent to server m now (a_m = k + 1): its service would start at slot t + U_m.
+
+        A server accepts exactly when no job already there holds slot t + U_m
+        (:func:`server_accepts`: busy <= U_m), and jobs never overlap, so in every state-action
+        pair the claims of all processes on server m sum to 1, or to 0 when an accepting server
+        is left unused.
+        """
+        labels = np.asarray(labels)
+        N = self.scenario.n_processes
+        out = np.zeros(labels.shape + (N,), dtype=np.int64)
+        for m, (srv, (up, job, d, _)) in enumerate(zip(self.scenario.servers, config)):
+            U = srv.uplink_delay
+            if job and d >= U + 1:
+                out[:, m, job - 1] += 1
+            for i, kk in enumerate(up):
+                if kk and srv.processing_time[kk - 1] >= i + 2:
+                    out[:, m, kk - 1] += 1
+            for kk in range(1, N + 1):
+                out[:, m, kk - 1] += labels[:, m] == kk
+        return out
 
     def describe(self, config: tuple) -> str:
         return describe_wncs_config(self.scenario.servers, config)

@@ -1,0 +1,81 @@
+"""lower_bound's dispatch: the relaxation asked for, and auto with or without relaxation 2 (a
+stand-in module plays relaxation 2 here, so the tests hold whether or not it is installed)."""
+from __future__ import annotations
+
+import types
+from dataclasses import replace
+
+import pytest
+
+from wncs_lp import scenario_path
+from wncs_lp.bounds import RELAXATIONS, lower_bound, parse_relaxation, private_bound
+from wncs_lp.errors import WncsError
+from wncs_lp.models import build
+from wncs_lp.models.system import System
+from wncs_lp.scenario import load_scenario
+from wncs_lp.solvers import solve
+
+JOINT = "wncs_lp.bounds.joint"
+
+
+@pytest.fixture(scope="module")
+def p12():
+    return System.from_scenario(load_scenario(scenario_path("paper_p12"), ["tau_cap=9"]))
+
+
+def _fake_joint(reach=None, bound=None):
+    mod = types.ModuleType(JOINT)
+    if reach is not None:
+        mod.joint_reach = reach
+    mod.joint_bound = bound
+    return mod
+
+
+def test_names_and_short_names():
+    assert parse_relaxation(1) == "private-servers" and parse_relaxation("2") == "joint-configuration"
+    assert [parse_relaxation(r) for r in RELAXATIONS] == list(RELAXATIONS)
+    with pytest.raises(WncsError, match="expected one of 1, 2"):
+        parse_relaxation("3")
+
+
+def test_auto_is_a_valid_bound_and_says_which_fired(p12):
+    res = lower_bound(p12)
+    assert res.stats["auto_choice"] in RELAXATIONS and res.stats["auto_reason"]
+    assert res.lower_bound <= solve(build(p12.scenario)).gain_upper * (1 + 1e-12)
+
+
+def test_auto_without_relaxation_2(monkeypatch, p12):
+    monkeypatch.setitem(__import__("sys").modules, JOINT, None)
+    res = lower_bound(p12, "auto")
+    assert res.relaxation == "private-servers" and "not installed" in res.stats["auto_reason"]
+    with pytest.raises(WncsError, match="not installed"):
+        lower_bound(p12, 2)
+
+
+def test_auto_takes_relaxation_2_within_its_reach(monkeypatch, p12):
+    base = private_bound(p12)
+    fake = replace(base, relaxation="joint-configuration", lower_bound=base.lower_bound + 1.0, stats={})
+    monkeypatch.setitem(__import__("sys").modules, JOINT, _fake_joint(lambda s: None, lambda s, **kw: fake))
+    res = lower_bound(p12, "auto")
+    assert res.relaxation == "joint-configuration" and res.stats["auto_choice"] == "joint-configuration"
+    assert lower_bound(p12, "joint-configuration") is fake
+
+
+def test_auto_falls_back_beyond_the_reach_of_relaxation_2(monkeypatch, p12):
+    def refuse(system, **kw):
+        raise WncsError("no room for the joint LP")
+
+    monkeypatch.setitem(__import__("sys").modules, JOINT, _fake_joint(lambda s: "2.5e9 columns", refuse))
+    res = lower_bound(p12, "auto")
+    assert res.relaxation == "private-servers" and "2.5e9 columns" in res.stats["auto_reason"]
+    monkeypatch.setitem(__import__("sys").modules, JOINT, _fake_joint(None, refuse))
+    res = lower_bound(p12, "auto")
+    assert res.relaxation == "private-servers" and "no room for the joint LP" in res.stats["auto_reason"]
+
+
+def test_scenario_or_system(p12):
+    a = lower_bound(p12.scenario, "private-servers")
+    b = lower_bound(p12, 1)
+    assert a.lower_bound == b.lower_bound
+    with pytest.raises(WncsError, match="Scenario or a System"):
+        lower_bound("paper_p12.toml", "auto")

@@ -1,0 +1,202 @@
+r"""Certified optimality gaps: policies evaluated against a lower bound.
+
+For a policy :math:`\pi` with long-run average cost :math:`g_\pi` and a certified bound
+:math:`LB \le g^*`,
+
+.. math:: \frac{g_\pi - g^*}{g^*} \le \frac{\bar g_\pi - LB}{LB},
+
+where :math:`\bar g_\pi \ge g_\pi` is
+
+* the upper end of the certified bracket of the matrix-free policy evaluation
+  (:func:`wncs_lp.solvers.matrix_free.matrix_free_evaluate`) where the AoI box is small enough
+  (``exact_max_states``): a certified statement;
+* beyond, the one-sided upper confidence limit of a seeded Monte Carlo estimate
+  (:func:`wncs_lp.simulate.simulate`, independent replications, Student t with R - 1 degrees
+  of freedom): a statement at that confidence level.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+from scipy import stats as sps
+
+from ..errors import SolverError
+from ..models.system import System
+from ..policies import Policy, make_policy
+from ..progress import as_progress
+from ..simulate import simulate
+from .policy import BoundPolicy
+from .result import BoundResult
+
+__all__ = ["PolicyGap", "GapReport", "policy_gaps", "DEFAULT_POLICIES", "EXACT_MAX_STATES"]
+
+#: The policies :func:`policy_gaps` evaluates by default.
+DEFAULT_POLICIES = ("bound", "suboptimal", "static", "greedy")
+#: Largest AoI box (states of the matrix-free layout) evaluated exactly by default.
+EXACT_MAX_STATES = 50_000_000
+
+
+@dataclass(frozen=True)
+class PolicyGap:
+    """One policy against the bound.
+
+    Attributes
+    ----------
+    policy : str
+    how : {"exact", "monte-carlo"}
+    gain : float
+        The policy's average cost (exact: the bracket's midpoint; Monte Carlo: the mean).
+    gain_upper : float
+        What the gap uses: the certified upper end (exact) or the upper confidence limit.
+    gap : float
+        (gain_upper - LB) / LB, an upper bound on the policy's relative distance to g*.
+    detail : dict
+        Exact: status, gain_lower, iterations. Monte Carlo: stderr, reps, slots, seed,
+        confidence.
+    seconds : float
+    """
+
+    policy: str
+    how: str
+    gain: float
+    gain_upper: float
+    gap: float
+    detail: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+    def summary(self) -> dict[str, Any]:
+        return {"policy": self.policy, "how": self.how, "gain": self.gain, "gain_upper": self.gain_upper,
+                "gap": self.gap, **self.detail, "seconds": self.seconds}
+
+
+@dataclass(frozen=True)
+class GapReport:
+    """Policies evaluated against one certified bound (:func:`policy_gaps`)."""
+
+    lower_bound: float
+    relaxation: str
+    rows: tuple[PolicyGap, ...]
+    how: str
+    states: int
+    seconds: float
+
+    def __repr__(self) -> str:
+        lines = [f"GapReport({self.relaxation}, LB = {self.lower_bound:.10g}, {self.how}, {self.states:,} states)"]
+        lines += [f"  {r.policy:<28} gain {r.gain:.10g}  upper {r.gain_upper:.10g}  gap <= {100 * r.gap:.3f}%"
+                  for r in self.rows]
+        return "\n".join(lines)
+
+    def row(self, policy: str) -> PolicyGap:
+        """The row of a policy by name (a bound's policy also answers to ``"bound"``)."""
+        for r in self.rows:
+            if r.policy == policy or (policy == "bound" and r.policy.startswith("bound")):
+                return r
+        raise KeyError(policy)
+
+    def summary(self) -> dict[str, Any]:
+        return {"lower_bound": self.lower_bound, "relaxation": self.relaxation, "how": self.how,
+                "states": self.states, "policies": [r.summary() for r in self.rows], "seconds": self.seconds}
+
+
+def _policy(name: str | Policy, bound: BoundResult, system: System) -> Policy:
+    if isinstance(name, Policy):
+        return name
+    return BoundPolicy(bound, system) if name == "bound" else make_policy(name, system)
+
+
+def _exact_route(system: System, exact: bool | None, exact_max_states: int) -> tuple[bool, int]:
+    """(evaluate exactly?, states of the matrix-free layout)."""
+    from ..solvers.matrix_free import BoxLayout
+
+    n = int(BoxLayout.from_system(system, "hull").n_states)
+    return (n <= exact_max_states if exact is None else bool(exact)), n
+
+
+def _exact(policy: Policy, system: System, lb: float, progress: bool) -> PolicyGap:
+    from ..solvers.matrix_free import matrix_free_evaluate
+
+    t0 = time.perf_counter()
+    ev = matrix_free_evaluate(system, policy, progress=progress, name=policy.name)
+    return PolicyGap(policy.name, "exact", float(ev.gain), float(ev.gain_upper), (float(ev.gain_upper) - lb) / lb,
+                     {"status": ev.status, "gain_lower": float(ev.gain_lower), "iterations": int(ev.iterations)},
+                     time.perf_counter() - t0)
+
+
+def _monte_carlo(policy: Policy, lb: float, slots: int, reps: int, seed: int, burn_in: int,
+                 confidence: float) -> PolicyGap:
+    t0 = time.perf_counter()
+    res = simulate(policy, slots=slots, reps=reps, seed=seed, burn_in=burn_in, progress=False)
+    if reps < 2:
+        raise SolverError("a Monte Carlo gap needs at least 2 replications (for its confidence limit)")
+    t = float(sps.t.ppf(confidence, reps - 1))
+    ucl = float(res.mean + t * res.stderr)
+    return PolicyGap(policy.name, "monte-carlo", float(res.mean), ucl, (ucl - lb) / lb,
+                     {"stderr": float(res.stderr), "reps": reps, "slots": slots, "burn_in": burn_in, "seed": seed,
+                      "confidence": confidence}, time.perf_counter() - t0)
+
+
+def policy_gaps(
+    bound: BoundResult,
+    system: System,
+    policies: Sequence[str | Policy] = DEFAULT_POLICIES,
+    *,
+    exact: bool | None = None,
+    exact_max_states: int = EXACT_MAX_STATES,
+    slots: int = 40_000,
+    reps: int = 20,
+    seed: int = 0,
+    burn_in: int = 1_000,
+    confidence: float = 0.95,
+    progress: Any = False,
+) -> GapReport:
+    """Evaluate policies and bound their optimality gap by a certified lower bound.
+
+    Parameters
+    ----------
+    bound : BoundResult
+    system : System
+        The system the bound was computed on.
+    policies : sequence of str or Policy
+        ``"bound"`` (the bound's greedy policy), any name of :func:`wncs_lp.policies.make_policy`
+        that needs no enumerated MDP (``suboptimal``, ``static``, ``greedy``, ``random``), or
+        policies.
+    exact : bool, optional
+        Evaluate by the certified matrix-free evaluation (True) or by Monte Carlo (False);
+        default: exact when the AoI box has at most ``exact_max_states`` states.
+    slots, reps, seed, burn_in : int
+        The Monte Carlo run of each policy (same seed for every policy: common random numbers).
+    confidence : float
+        Level of the one-sided upper confidence limit of a Monte Carlo gain.
+    progress : bool or Progress
+
+    Returns
+    -------
+    GapReport
+    """
+    if not 0.5 <= confidence < 1:
+        raise SolverError(f"confidence must be in [0.5, 1), got {confidence}")
+    if not bound.lower_bound > 0:
+        raise SolverError(f"a relative gap needs a positive lower bound, found {bound.lower_bound}")
+    t0 = time.perf_counter()
+    prog = as_progress(progress)
+    use_exact, n = _exact_route(system, exact, exact_max_states)
+    rows = []
+    for name in policies:
+        pol = _policy(name, bound, system)
+        prog.phase(f"evaluating the {pol.name} policy " + ("exactly (matrix-free)" if use_exact else
+                                                           f"by Monte Carlo ({reps} x {slots} slots)"))
+        if use_exact:
+            try:
+                rows.append(_exact(pol, system, bound.lower_bound, bool(prog)))
+                continue
+            except SolverError:  # no numba here: the default route falls back to Monte Carlo
+                if exact is not None:
+                    raise
+                use_exact = False
+        rows.append(_monte_carlo(pol, bound.lower_bound, slots, reps, seed, burn_in, confidence))
+    how = sorted({r.how for r in rows})
+    return GapReport(float(bound.lower_bound), bound.relaxation, tuple(rows), "+".join(how), n,
+                     time.perf_counter() - t0)

@@ -1,0 +1,92 @@
+"""``wncs-lp bound``: a certified lower bound on g*, and with ``--policy`` the certified optimality
+gaps of the bound's policy and of the baselines."""
+from __future__ import annotations
+
+import argparse
+import time
+
+from .common import Command, add_progress_arg, add_scenario_args, emit_json, head, load, progress_for
+
+
+def cmd_bound(args: argparse.Namespace) -> int:
+    from ..bounds import lower_bound, parse_relaxation, policy_gaps
+    from ..models.system import System
+    from ..policies import parse_policy_names
+
+    relaxation = parse_relaxation(args.relaxation)  # before any work
+    compare = parse_policy_names(args.compare) if args.compare else []
+    scenario = load(args)
+    prog = progress_for(args)
+    t0 = time.perf_counter()
+    system = System.from_scenario(scenario)
+    prog.phase(f"computing the {relaxation} lower bound")
+    res = lower_bound(system, relaxation, tol=args.tol, progress=prog)
+    report = None
+    if args.policy:
+        report = policy_gaps(res, system, ["bound", *compare], exact=None if args.exact_max_states else False,
+                             exact_max_states=args.exact_max_states or 0, slots=args.slots, reps=args.reps,
+                             seed=args.seed, burn_in=args.burn_in, progress=prog)
+    if args.json:
+        emit_json({**head(args, scenario), "bound": res.summary(),
+                   "policies": None if report is None else report.summary(), "seconds": time.perf_counter() - t0})
+    else:
+        _print(scenario, res, report)
+    return 0 if res.ok else 1
+
+
+def _print(scenario, res, report) -> None:
+    print(scenario.describe())
+    why = f" (auto: {res.stats['auto_reason']})" if res.stats.get("auto_reason") else ""
+    print(f"relaxation {res.relaxation}{why}: status {res.status}, {res.iterations} iterations, {res.seconds:.2f} s")
+    print(f"certified lower bound: g* >= {res.lower_bound:.10g}")
+    print(f"  certified by: {res.certified_by}")
+    if res.relaxation == "private-servers":
+        names = ", ".join(f"{s.name} {lam:.8g}" for s, lam in zip(scenario.servers, res.multipliers))
+        print(f"  multipliers (price of a server slot): {names}; capacity as an {res.stats['capacity']}")
+    if res.relaxation_upper < float("inf"):
+        print(f"  the relaxation itself is worth at most {res.relaxation_upper:.10g}")
+    if report is None:
+        return
+    if report.how == "exact":
+        print(f"policies, evaluated exactly (matrix-free, {report.states:,} states); upper = certified upper end:")
+    else:
+        r0 = report.rows[0].detail
+        print(f"policies, by Monte Carlo ({r0.get('reps')} x {r0.get('slots')} slots, seed {r0.get('seed')}); upper = "
+              f"one-sided {100 * r0.get('confidence', 0.95):g}% upper confidence limit (the AoI box has "
+              f"{report.states:,} states, above --exact-max-states):")
+    w = max(len("policy"), *(len(r.policy) for r in report.rows))
+    print(f"  {'policy':<{w}} {'gain':>16} {'upper':>16} {'gap <=':>9}")
+    for r in report.rows:
+        print(f"  {r.policy:<{w}} {r.gain:>16.10g} {r.gain_upper:>16.10g} {100 * r.gap:>8.3f}%")
+    print("  gap = (upper - lower bound) / lower bound, an upper bound on (g_pi - g*) / g*")
+
+
+def _configure(p: argparse.ArgumentParser) -> None:
+    add_scenario_args(p)
+    p.add_argument("--relaxation", default="auto", metavar="1|2|auto",
+                   help="1 = private servers with averaged capacity (seconds at any number of processes), "
+                        "2 = joint configuration with separable value functions (tighter, when installed), "
+                        "auto = 2 where it can run, else 1 (default)")
+    p.add_argument("--tol", type=float, default=1e-6,
+                   help="relative tolerance of the multiplier search (default 1e-6); the bound is certified "
+                        "whatever it is")
+    p.add_argument("--policy", action="store_true",
+                   help="also evaluate the bound's greedy policy and the --compare policies, with the certified "
+                        "optimality gap of each")
+    p.add_argument("--compare", default="suboptimal,static,greedy", metavar="NAMES",
+                   help="policies evaluated with --policy besides the bound's (default suboptimal,static,greedy; "
+                        "'' for none)")
+    p.add_argument("--exact-max-states", type=int, default=50_000_000, metavar="N",
+                   help="evaluate exactly (certified matrix-free evaluation) when the AoI box has at most N states, "
+                        "else by Monte Carlo (default 50000000; 0: always Monte Carlo)")
+    p.add_argument("--slots", type=int, default=40_000, help="Monte Carlo: slots per replication (default 40000)")
+    p.add_argument("--reps", type=int, default=20, help="Monte Carlo: independent replications (default 20)")
+    p.add_argument("--seed", type=int, default=0, help="Monte Carlo: random seed (default 0)")
+    p.add_argument("--burn-in", type=int, default=1000, help="Monte Carlo: slots discarded first (default 1000)")
+    add_progress_arg(p)
+
+
+COMMANDS = [
+    Command("bound", "a certified lower bound on the optimal cost for any number of processes, and the certified "
+            "optimality gap of the bound's policy and of the baselines", _configure, cmd_bound),
+]
