@@ -10,7 +10,7 @@ import itertools
 import numpy as np
 import pytest
 
-from wncs_lp.errors import PolicyError, SolverError
+from wncs_lp.errors import ModelError, PolicyError, SolverError
 from wncs_lp.mdp import MDP
 from wncs_lp.solvers import (
     METHODS,
@@ -261,7 +261,10 @@ def test_a_slowly_converging_unichain_mdp_is_not_called_start_dependent():
 
 def test_values_that_overflow_are_an_error_not_an_optimal_inf():
     P = np.array([[[0.5, 0.5], [0.2, 0.8]], [[0.9, 0.1], [0.3, 0.7]]])
-    mdp = MDP.from_dense(P, 1.7e308 * np.array([[1.0, 0.5], [0.6, 1.0]]))
+    cost = 1.7e308 * np.array([[1.0, 0.5], [0.6, 1.0]])
+    with pytest.raises(ModelError, match=r"cost of pair 0 \(state 0\) is 1.7e\+308"):
+        MDP.from_dense(P, cost)  # the validated constructor refuses such costs at the source
+    mdp = MDP.from_dense(P, cost, check=False)  # an unchecked MDP still never iterates on inf
     for fn in (value_iteration, relative_value_iteration):
         with pytest.raises(SolverError, match=r"values overflow .* the costs \(max \|c\| = 1.7e\+308\)"):
             fn(mdp)
