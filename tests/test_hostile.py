@@ -187,13 +187,14 @@ def test_dataclasses_replace_cannot_leave_derived_fields_stale(tmp_path):
 @pytest.fixture
 def no_work(monkeypatch):
     """Fail when a command starts working before it checked its output."""
-    import wncs_lp.cli.solve as cli_solve
     import wncs_lp.models.guard as guard
+    import wncs_lp.solvers.route as route
 
     def refuse(*a, **k):
         raise AssertionError("work started before the output was checked")
 
-    monkeypatch.setattr(cli_solve, "build_with_progress", refuse)
+    monkeypatch.setattr(route, "solve_scenario", refuse)
+    monkeypatch.setattr(route, "build_scenario", refuse)
     monkeypatch.setattr(guard, "build_checked", refuse)
     monkeypatch.setattr("wncs_lp.scenario.load_scenario", refuse)
 
