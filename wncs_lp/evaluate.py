@@ -144,61 +144,17 @@ def evaluate(
         multichain induced chain (the message names the policy and two recurrent classes).
     """
     t0 = time.perf_counter()
-    if hasattr(policy, "on_mdp"):
-        system = system or policy.system
-        name = name or policy.name
-        arr = policy.on_mdp(mdp)
-    else:
-        if system is None:
-            raise PolicyError("evaluating a policy given as an array needs the System (system=...)")
-        system.check_mdp(mdp)
-        arr = np.asarray(policy)
-        name = name or "array"
+    arr, system, name = _policy_array(mdp, policy, system, name)
     if multichain not in ("error", "initial"):
         raise PolicyError(f"multichain must be 'error' or 'initial', got {multichain!r}")
-    try:
-        chain = PolicyChain(mdp, arr)
-    except PolicyError as exc:
-        raise PolicyError(f"policy {name}: {exc}") from None
-    P, c_pi = chain.P, chain.cost
-    classes = chain.recurrent_classes
-    n_classes = len(classes)
-    if n_classes == 1:
-        pi, residual = chain.stationary, chain.residual
-    elif multichain == "error":
-        a, b = classes[0], classes[1]
-        raise MultichainEvaluationError(
-            f"policy {name} induces a multichain Markov chain with {n_classes} recurrent classes "
-            f"(e.g. state {mdp.state_label(int(a[0]))} in a class of {a.size} state(s) and "
-            f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost depends on "
-            "the start state"
-        )
-    else:
-        pi, residual = _limit_from_initial(mdp, P, classes, system)
-    gain = float(pi @ c_pi)
-    st = mdp.states
-    tau = np.asarray(st.tau, dtype=np.int64)
-    mse = tuple(float(pi @ system.q[k][tau[:, k] - 1]) for k in range(system.n_processes))
-
-    # pair frequencies x(l) = pi(s_l) beta(l)
-    if np.issubdtype(arr.dtype, np.integer):
-        pairs = arr.astype(np.int64)
-        weights = pi
-    else:
-        pairs = np.arange(mdp.n_pairs)
-        weights = pi[mdp.s_indices] * arr
-    states = mdp.s_indices[pairs]
-    local = pairs - mdp.pair_ptr[states]
-    cfg = np.asarray(st.config, dtype=np.int64)[states]
-    busy = system.busy[cfg, local]  # (len(pairs), M)
-    util = tuple(float(x) for x in weights @ busy)
-
+    pi, residual, n_classes, c_pi = _long_run_law(mdp, arr, system, name, multichain)
+    tau = np.asarray(mdp.states.tau, dtype=np.int64)
     sc = system.scenario
     return Evaluation(
         policy=name,
-        gain=gain,
-        mse=mse,
-        utilisation=util,
+        gain=float(pi @ c_pi),
+        mse=tuple(float(pi @ system.q[k][tau[:, k] - 1]) for k in range(system.n_processes)),
+        utilisation=_utilisation(mdp, arr, pi, system),
         process_names=tuple(p.name for p in sc.processes),
         server_names=tuple(s.name for s in sc.servers),
         randomised=not np.issubdtype(arr.dtype, np.integer),
@@ -208,6 +164,55 @@ def evaluate(
         n_pairs=mdp.n_pairs,
         seconds=time.perf_counter() - t0,
     )
+
+
+def _policy_array(mdp: MDP, policy: Any, system: System | None, name: str | None) -> tuple[np.ndarray, System, str]:
+    """``(pair indices or pair probabilities, system, name)`` of a Policy or an array."""
+    if hasattr(policy, "on_mdp"):
+        return policy.on_mdp(mdp), system or policy.system, name or policy.name
+    if system is None:
+        raise PolicyError("evaluating a policy given as an array needs the System (system=...)")
+    system.check_mdp(mdp)
+    return np.asarray(policy), system, name or "array"
+
+
+def _long_run_law(mdp: MDP, arr: np.ndarray, system: System, name: str, multichain: str):
+    """``(pi, residual, number of recurrent classes, cost per state)``: the stationary law of a
+    unichain policy, or the limit from the initial state of a multichain one (``"initial"``)."""
+    try:
+        chain = PolicyChain(mdp, arr)
+    except PolicyError as exc:
+        raise PolicyError(f"policy {name}: {exc}") from None
+    classes = chain.recurrent_classes
+    n_classes = len(classes)
+    if n_classes == 1:
+        return chain.stationary, chain.residual, n_classes, chain.cost
+    if multichain == "error":
+        a, b = classes[0], classes[1]
+        raise MultichainEvaluationError(
+            f"policy {name} induces a multichain Markov chain with {n_classes} recurrent classes "
+            f"(e.g. state {mdp.state_label(int(a[0]))} in a class of {a.size} state(s) and "
+            f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost depends on "
+            "the start state"
+        )
+    pi, residual = _limit_from_initial(mdp, chain.P, classes, system)
+    return pi, residual, n_classes, chain.cost
+
+
+def _utilisation(mdp: MDP, arr: np.ndarray, pi: np.ndarray, system: System) -> tuple[float, ...]:
+    """Each server's long-run fraction of service steps, from the pair frequencies
+    ``x(l) = pi(s_l) beta(l)``."""
+    if np.issubdtype(arr.dtype, np.integer):
+        pairs = arr.astype(np.int64)
+        weights = pi
+    else:
+        pairs = np.arange(mdp.n_pairs)
+        weights = pi[mdp.s_indices] * arr
+    states = mdp.s_indices[pairs]
+    local = pairs - mdp.pair_ptr[states]
+    cfg = np.asarray(mdp.states.config, dtype=np.int64)[states]
+    busy = system.busy[cfg, local]  # (len(pairs), M)
+    return tuple(float(x) for x in weights @ busy)
 
 
 def _limit_from_initial(mdp: MDP, P, classes: list, system: System) -> tuple:

@@ -392,6 +392,20 @@ def _weights(mdp: MDP, pol: np.ndarray, stationary: Any) -> np.ndarray | None:
     return recurrent_mask(mdp, pol, None).astype(float)
 
 
+def _view(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[int], n_axes: int,
+          fixed_tau: Mapping[int, int] | None, stationary: Any) -> tuple[tuple[int, ...], int, np.ndarray, dict[int, int]]:
+    """What a map or a slice looks at: ``(axes, configuration id, chosen pair per state, the values of
+    the AoIs off the axes)``."""
+    N = len(mdp.states.caps)
+    axes = _check_axes(N, axes, n_axes)
+    c = parse_config_spec(mdp, config)
+    chain_pol = _chain_policy(mdp, policy_or_solution)
+    pol = policy_pairs(mdp, chain_pol)
+    fixed = _fixed(mdp, c, axes, fixed_tau,
+                   _weights(mdp, chain_pol, stationary) if len(fixed_tau or {}) < N - n_axes else None)
+    return axes, c, pol, fixed
+
+
 def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[int] = (1, 2),
                 fixed_tau: Mapping[int, int] | None = None, stationary: Any = None
                 ) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
@@ -413,12 +427,7 @@ def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[i
     """
     space = mdp.states
     N = len(space.caps)
-    axes = _check_axes(N, axes, 2)
-    c = parse_config_spec(mdp, config)
-    chain_pol = _chain_policy(mdp, policy_or_solution)
-    pol = policy_pairs(mdp, chain_pol)
-    fixed = _fixed(mdp, c, axes, fixed_tau,
-                   _weights(mdp, chain_pol, stationary) if len(fixed_tau or {}) < N - 2 else None)
+    axes, c, pol, fixed = _view(mdp, policy_or_solution, config, axes, 2, fixed_tau, stationary)
     G = space.lookup_grid(c)
     idx = [slice(None) if k in axes else fixed[k] - 1 for k in range(1, N + 1)]
     S = G[tuple(idx)]
@@ -449,12 +458,7 @@ def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes:
     N = len(caps)
     if N < 3:
         raise ModelError(f"a slice tau_i + tau_j + tau_k = total needs 3 processes, this model has {N}")
-    axes = _check_axes(N, axes, 3)
-    c = parse_config_spec(mdp, config)
-    chain_pol = _chain_policy(mdp, policy_or_solution)
-    pol = policy_pairs(mdp, chain_pol)
-    fixed = _fixed(mdp, c, axes, fixed_tau,
-                   _weights(mdp, chain_pol, stationary) if len(fixed_tau or {}) < N - 3 else None)
+    axes, c, pol, fixed = _view(mdp, policy_or_solution, config, axes, 3, fixed_tau, stationary)
     i, j, k = axes
     ci, cj, ck = caps[i - 1], caps[j - 1], caps[k - 1]
     if not 3 <= total <= ci + cj + ck:

@@ -32,6 +32,7 @@ from ..chain import PolicyChain
 from ..errors import PolicyError
 from ..mdp import MDP
 from ..solvers.certify import certificate_closed
+from ..solvers.lp import status_from
 from .problem import LinearConstraint, Rows, max_form, with_cost
 from .result import ConstrainedSolution, ConstraintReport
 
@@ -195,39 +196,12 @@ def certify(
     if lower is None:
         lower = lagrangian_bound(mdp, rows, lam_rows, h0=h0)
     lo, vi = lower
-    reports, viol_max = [], 0.0
-    mult = np.zeros(len(constraints))
-    for j, c in enumerate(constraints):
-        v = float(ev["values"][j])
-        tol_j = {s: feas_rtol * max(1.0, abs(float(getattr(c, s)))) for s in ("max", "min") if getattr(c, s) is not None}
-        over = max(0.0, v - c.max) if c.max is not None else 0.0
-        under = max(0.0, c.min - v) if c.min is not None else 0.0
-        viol = max(over, under)
-        viol_max = max(viol_max, viol / max(1.0, abs(float(c.max if over > 0 else (c.min if under > 0 else 1.0)))))
-        # active = the exact value sits on a bound; the multiplier is that side's. Off the
-        # bounds complementary slackness makes it 0 exactly (the solver's ~1e-9 residue stays
-        # in stats["row_multipliers"] and in the Lagrangian bound, valid for any lambda)
-        side, lam_j = None, 0.0
-        for r in np.flatnonzero(rows.owner == j):
-            s_r = rows.side[r]
-            if abs(v - float(getattr(c, s_r))) <= tol_j[s_r]:
-                side, lam_j = s_r, float(lam_rows[r])
-                break
-        mult[j] = lam_j
-        lpv = float(lp_values[j]) if lp_values is not None else float("nan")
-        reports.append(ConstraintReport(c.label, c.quantity, c.max, c.min, v, lpv, side is not None, side, lam_j, viol))
+    reports, mult, viol_max = _constraint_reports(constraints, rows, ev["values"], lam_rows, lp_values, feas_rtol)
     gain = ev["gain"]
     hi = gain
     closed = certificate_closed(mdp, lo, hi, gain, cert_rtol)
-    feasible = viol_max <= feas_rtol
-    if solver_status != "optimal":
-        status = f"inaccurate:{solver_status}"
-    elif not feasible:
-        status = "inaccurate:infeasible_policy"
-    elif not closed:
-        status = "inaccurate:certificate"
-    else:
-        status = "optimal"
+    status = status_from((None if solver_status == "optimal" else solver_status,
+                          None if viol_max <= feas_rtol else "infeasible_policy", None if closed else "certificate"))
     st = dict(stats or {})
     st.update(
         evaluation_residual=ev["residual"],
@@ -256,3 +230,32 @@ def certify(
         seconds=time.perf_counter() - t0,
         stats=st,
     )
+
+
+def _constraint_reports(constraints: Sequence[LinearConstraint], rows: Rows, values: np.ndarray, lam_rows: np.ndarray,
+                        lp_values: np.ndarray | None, feas_rtol: float
+                        ) -> tuple[list[ConstraintReport], np.ndarray, float]:
+    """Each constraint's report from the exact values: whether it is active (on a bound, within
+    ``feas_rtol``) and that side's multiplier; the multipliers; the largest relative violation."""
+    reports, viol_max = [], 0.0
+    mult = np.zeros(len(constraints))
+    for j, c in enumerate(constraints):
+        v = float(values[j])
+        tol_j = {s: feas_rtol * max(1.0, abs(float(getattr(c, s)))) for s in ("max", "min") if getattr(c, s) is not None}
+        over = max(0.0, v - c.max) if c.max is not None else 0.0
+        under = max(0.0, c.min - v) if c.min is not None else 0.0
+        viol = max(over, under)
+        viol_max = max(viol_max, viol / max(1.0, abs(float(c.max if over > 0 else (c.min if under > 0 else 1.0)))))
+        # active = the exact value sits on a bound; the multiplier is that side's. Off the
+        # bounds complementary slackness makes it 0 exactly (the solver's ~1e-9 residue stays
+        # in stats["row_multipliers"] and in the Lagrangian bound, valid for any lambda)
+        side, lam_j = None, 0.0
+        for r in np.flatnonzero(rows.owner == j):
+            s_r = rows.side[r]
+            if abs(v - float(getattr(c, s_r))) <= tol_j[s_r]:
+                side, lam_j = s_r, float(lam_rows[r])
+                break
+        mult[j] = lam_j
+        lpv = float(lp_values[j]) if lp_values is not None else float("nan")
+        reports.append(ConstraintReport(c.label, c.quantity, c.max, c.min, v, lpv, side is not None, side, lam_j, viol))
+    return reports, mult, viol_max

@@ -134,7 +134,7 @@ def _onehot(mdp: MDP, pol: np.ndarray) -> np.ndarray:
     return probs
 
 
-def _evaluate(mdp: MDP, pol: np.ndarray, cons: Sequence[LinearConstraint], row: np.ndarray) -> _Det:
+def _exact_averages(mdp: MDP, pol: np.ndarray, cons: Sequence[LinearConstraint], row: np.ndarray) -> _Det:
     """Exact averages of a deterministic policy (raises PolicyError when multichain)."""
     ev = evaluate_rows(mdp, _onehot(mdp, pol), cons)
     return _Det(np.asarray(pol, dtype=np.int64).copy(), ev["gain"], float(row @ ev["occupation"]), ev["occupation"])
@@ -212,151 +212,185 @@ def solve_lagrangian(
     """
     t0 = time.perf_counter()
     cons = tuple(constraints)
+    tol = cert_rtol / 20.0 if tol is None else tol
     if len(cons) != 1:
         raise SolverError(f"the Lagrangian route handles exactly one constraint, got {len(cons)}; use method='lp'")
-    if tol is None:
-        tol = cert_rtol / 20.0
     if not (tol > 0 and growth > 1 and max_steps >= 2):
         raise SolverError("solve_lagrangian needs tol > 0, growth > 1 and max_steps >= 2")
-    con = cons[0]
-    rows = max_form(cons, mdp.n_pairs)
-    lam_rows = np.zeros(rows.n_rows)
-    cscale = float(np.max(np.abs(mdp.cost))) if mdp.n_pairs else 1.0
-    stats: dict[str, Any] = {"vi_sweeps_total": 0}
-    h = h0
-    n_vi = 0
-    vi_tol = min(max(0.25 * tol, _VI_TOL_MIN), _VI_TOL_MAX)
-
-    def say(msg: str) -> None:
-        if progress:
-            print(f"[lagrangian] {msg}", file=sys.stderr, flush=True)
-
-    def solve_at(lam: float, j: int, vtol: float):
-        nonlocal h, n_vi
-        lam_rows[:] = 0.0
-        if j >= 0:
-            lam_rows[j] = lam
-        bound, vi = lagrangian_bound(mdp, rows, lam_rows, h0=h, tol=vtol)
-        h = vi.bias  # the next lambda is close: its bias is the best warm start
-        n_vi += 1
-        stats["vi_sweeps_total"] += int(vi.iterations)
-        return bound, vi
-
-    def evaluate_greedy(vi, row) -> _Det:
-        try:
-            return _evaluate(mdp, vi.policy, cons, row)
-        except PolicyError as exc:
-            raise SolverError(f"lagrangian: the greedy policy of a value-iteration step is multichain ({exc}); "
-                              f"use method='lp'") from exc
-
+    search = _Search(mdp, cons, tol, max_steps, h0, progress)
+    stats = search.stats
     # ---- 1. lambda = 0: the unconstrained optimum, and the side that can bind
-    bound0, vi0 = solve_at(0.0, -1, vi_tol)
-    try:
-        ev0 = evaluate_rows(mdp, _onehot(mdp, vi0.policy), cons)
-    except PolicyError as exc:
-        raise SolverError(f"lagrangian: the unconstrained greedy policy is multichain ({exc}); "
-                          f"use method='lp'") from exc
-    occ0 = ev0["occupation"]
-    r_rows = rows.D @ occ0
-    excess = (r_rows - rows.b) / np.maximum(1.0, np.abs(rows.b))
-    say(f"lambda=0: gain={ev0['gain']:.10g} value={ev0['values'][0]:.10g} sweeps={vi0.iterations}")
-    if np.all(excess <= FEAS_RTOL):
-        stats.update({"lambda": 0.0, "binding_side": None, "lambda_steps": n_vi, "lambda_converged": True})
-        return certify(mdp, cons, _onehot(mdp, vi0.policy), np.zeros(0, np.int64), np.zeros(rows.n_rows),
+    bound0, vi0 = search.solve_at(0.0, min(max(0.25 * tol, _VI_TOL_MIN), _VI_TOL_MAX))
+    high, ev0 = search.unconstrained(vi0)
+    if high is None:
+        stats.update({"lambda": 0.0, "binding_side": None, "lambda_steps": search.n_vi, "lambda_converged": True})
+        return certify(mdp, cons, _onehot(mdp, vi0.policy), np.zeros(0, np.int64), np.zeros(search.rows.n_rows),
                        method="lagrangian", solver_gain=ev0["gain"], lp_values=ev0["values"],
-                       lower=(bound0, vi0), cert_rtol=cert_rtol, iterations=n_vi, t0=t0, stats=stats)
-    j = int(np.argmax(excess))
-    row, beta = rows.D[j], float(rows.b[j])
-    stats["binding_side"] = rows.side[j]
-    meets_tol = 0.01 * FEAS_RTOL * max(1.0, abs(beta))  # "meets the bound" for a search endpoint
-    high = _Det(np.asarray(vi0.policy, np.int64).copy(), ev0["gain"], float(r_rows[j]), occ0)
-    lam_lo, lam_hi = 0.0, np.inf
-    low: _Det | None = None
-
+                       lower=(bound0, vi0), cert_rtol=cert_rtol, iterations=search.n_vi, t0=t0, stats=stats)
     # ---- 2. bracket: grow lambda until the greedy policy meets the bound
-    lam = lambda0 if lambda0 is not None else max(abs(high.c), 1e-3 * cscale, 1e-300) / (high.r - beta)
-    reach_checked = False
-    n_bracket = 0
-    while low is None:
-        if n_vi >= max_steps:
-            raise SolverError(f"lagrangian: no multiplier up to {lam_lo:.6g} meets {con.label!r} within "
-                              f"max_steps={max_steps} value-iteration solves")
-        # the Lagrangian gain is ~ c + lam r: scale the VI tolerance to the constrained gain's units
-        vtol = min(max(0.25 * tol * abs(high.c) / max(abs(high.c + lam * high.r), 1e-300), _VI_TOL_MIN), _VI_TOL_MAX)
-        bound, vi = solve_at(lam, j, vtol)
-        p = evaluate_greedy(vi, row)
-        n_bracket += 1
-        say(f"bracket lambda={lam:.10g}: value={p.r:.10g} bound={beta:.10g} sweeps={vi.iterations}")
-        if p.r <= beta + meets_tol:
-            low, lam_hi, last = p, lam, (lam, bound, vi)
-            break
-        high, lam_lo = p, lam
-        if not reach_checked:
-            check_reachable(mdp, cons)  # raises InfeasibleConstraintsError, naming what can be reached
-            reach_checked = True
-        lam *= growth
-    stats["lambda_bracket_steps"] = n_bracket
-
+    ends = search.bracket(high, lambda0, growth)
     # ---- 3. search: trial point where the two lines meet, until both are optimal there
-    n_search, kinds, converged, gap_rel = 0, {"secant": 0, "bisect": 0}, False, np.inf
-    tighten = 1.0  # extra factor on the VI tolerance after a step that found no better policy
-    while n_vi < max_steps:
-        dr = high.r - low.r
-        lam_x = (low.c - high.c) / dr if dr > 0 else np.nan
-        step = "secant"
-        if not (lam_lo <= lam_x <= lam_hi):  # round-off only: each end is optimal at its own lambda
-            lam_x, step = 0.5 * (lam_lo + lam_hi), "bisect"
-        m = max(high.line(lam_x), low.line(lam_x))
-        g_est = abs(m - lam_x * beta)  # ~ the constrained gain
-        base = 0.25 * tol * g_est / max(abs(m), 1e-300)
-        vtol = min(max(base * tighten, _VI_TOL_MIN), _VI_TOL_MAX)
-        bound, vi = solve_at(lam_x, j, vtol)
-        n_search += 1
-        kinds[step] += 1
-        last = (lam_x, bound, vi)
-        gap = m - vi.gain_lower
-        gap_rel = gap / max(g_est, 1e-300)
-        say(f"search {step} lambda={lam_x:.12g} interval=[{lam_lo:.12g}, {lam_hi:.12g}] gap={gap_rel:.3g} "
-            f"sweeps={vi.iterations}")
-        if gap <= tol * g_est or gap <= 1e-13 * cscale:
-            converged = True
-            break
-        p = evaluate_greedy(vi, row)
-        # the greedy policy's exact line is <= the VI's upper end: if it is no lower than m, the
-        # bracket was only loose (VI stopped at max_iter or at a clipped tolerance)
-        if p.line(lam_x) < m - 0.1 * tol * g_est or step == "bisect":
-            if p.r <= beta + meets_tol:  # a new piece of the envelope replaces the end on its side
-                low, lam_hi = p, lam_x
-            else:
-                high, lam_lo = p, lam_x
-            tighten = 1.0
-        elif vtol <= _VI_TOL_MIN:
-            break  # cannot tighten further: the certificate will say how far it got
-        else:
-            tighten *= 1e-2
-    lam_star, bound_star, vi_star = last
-    stats.update({"lambda": float(lam_star), "lambda_interval": [float(lam_lo), float(lam_hi)], "lambda_steps": n_vi,
-                  "lambda_search_steps": n_search, "lambda_secant_steps": kinds["secant"],
-                  "lambda_bisect_steps": kinds["bisect"], "lambda_converged": converged,
-                  "search_gap_rel": float(gap_rel)})
-    say(f"lambda*={lam_star:.12g} ({'converged' if converged else 'NOT converged'}, gap {gap_rel:.3g})")
+    high, low, last = search.secant(*ends)
+    # ---- 4-6. walk from pi_high to pi_low, mix in the state where the value crosses beta
+    probs, randomized, predicted = _mixed_policy(search, high, low, last, cert_rtol, walk_orders, seed)
+    lam_rows = np.zeros(search.rows.n_rows)
+    lam_rows[search.j] = last[0]
+    return certify(mdp, cons, probs, randomized, lam_rows, method="lagrangian",
+                   solver_gain=predicted[0], lp_values=np.array([predicted[1]]), lower=last[1:],
+                   cert_rtol=cert_rtol, iterations=search.n_vi, t0=t0, stats=stats)
 
-    # ---- 4-5. walk from pi_high to pi_low, mix in the state where the value crosses beta
+
+def _mixed_policy(search: "_Search", high: _Det, low: _Det, last, cert_rtol: float, walk_orders: int, seed: int):
+    """Steps 4-6 at ``last = (lambda*, bound, vi)``: both ends made greedy for the final bias, the
+    walk between them and the mix in one state; ``(probs, randomised states, prediction)``."""
+    lam_star, _, vi_star = last
+    row, beta = search.row, search.beta
     g_est = abs(max(high.line(lam_star), low.line(lam_star)) - lam_star * beta)
     # eps: a quarter of the certificate's budget. The VI bias is only approximate, so an action
     # that is optimal on a recurrent state can look eps_VI ~ (m - lo) / mu(s) worse than the
     # best; eps must exceed that, and the walk's policies then cost at most hi + eps.
-    high, low = _common_greedy(mdp, row, beta, lam_star, vi_star.bias, high, low, 0.25 * cert_rtol * g_est,
-                               meets_tol, cons, stats, say)
+    high, low = _common_greedy(search.mdp, row, beta, lam_star, vi_star.bias, high, low, 0.25 * cert_rtol * g_est,
+                               search.meets_tol, search.cons, search.stats, search.say)
     # a walk policy whose Lagrangian line stays below this keeps the mix inside the certificate
     line_max = vi_star.gain_lower + 0.5 * cert_rtol * g_est
-    probs, randomized, predicted = _walk_and_mix(mdp, cons, row, beta, high, low, walk_orders, seed, stats, say,
-                                                 lam_star, line_max)
-    lam_rows[:] = 0.0
-    lam_rows[j] = lam_star
-    return certify(mdp, cons, probs, randomized, lam_rows, method="lagrangian",
-                   solver_gain=predicted[0], lp_values=np.array([predicted[1]]), lower=(bound_star, vi_star),
-                   cert_rtol=cert_rtol, iterations=n_vi, t0=t0, stats=stats)
+    return _walk_and_mix(search.mdp, search.cons, row, beta, high, low, walk_orders, seed, search.stats,
+                         search.say, lam_star, line_max)
+
+
+class _Search:
+    """The multiplier search: warm-started certified value iterations on the Lagrangian cost
+    ``c + lambda r`` of the binding row ``j`` (``r = D_j``, bound ``beta``), and their count."""
+
+    def __init__(self, mdp: MDP, cons: tuple[LinearConstraint, ...], tol: float, max_steps: int,
+                 h0: np.ndarray | None, progress: bool) -> None:
+        self.mdp, self.cons, self.tol, self.max_steps, self.progress = mdp, cons, tol, max_steps, progress
+        self.rows = max_form(cons, mdp.n_pairs)
+        self.lam_rows = np.zeros(self.rows.n_rows)
+        self.cscale = float(np.max(np.abs(mdp.cost))) if mdp.n_pairs else 1.0
+        self.stats: dict[str, Any] = {"vi_sweeps_total": 0}
+        self.h = h0  # the warm start of the next value iteration
+        self.n_vi = 0
+        self.j, self.row, self.beta, self.meets_tol = -1, np.zeros(0), np.nan, 0.0
+
+    def say(self, msg: str) -> None:
+        if self.progress:
+            print(f"[lagrangian] {msg}", file=sys.stderr, flush=True)
+
+    def solve_at(self, lam: float, vtol: float):
+        """``(L(lambda), vi)`` of the certified value iteration at multiplier ``lam`` on row j."""
+        self.lam_rows[:] = 0.0
+        if self.j >= 0:
+            self.lam_rows[self.j] = lam
+        bound, vi = lagrangian_bound(self.mdp, self.rows, self.lam_rows, h0=self.h, tol=vtol)
+        self.h = vi.bias  # the next lambda is close: its bias is the best warm start
+        self.n_vi += 1
+        self.stats["vi_sweeps_total"] += int(vi.iterations)
+        return bound, vi
+
+    def greedy(self, vi) -> _Det:
+        """The exact averages of a value iteration's greedy policy."""
+        try:
+            return _exact_averages(self.mdp, vi.policy, self.cons, self.row)
+        except PolicyError as exc:
+            raise SolverError(f"lagrangian: the greedy policy of a value-iteration step is multichain ({exc}); "
+                              f"use method='lp'") from exc
+
+    def unconstrained(self, vi0) -> tuple[_Det | None, dict]:
+        """The unconstrained optimum: ``(None, its averages)`` when it meets the bound, else the
+        violated row becomes the binding one and ``(pi_high, its averages)``."""
+        mdp, rows = self.mdp, self.rows
+        try:
+            ev0 = evaluate_rows(mdp, _onehot(mdp, vi0.policy), self.cons)
+        except PolicyError as exc:
+            raise SolverError(f"lagrangian: the unconstrained greedy policy is multichain ({exc}); "
+                              f"use method='lp'") from exc
+        occ0 = ev0["occupation"]
+        r_rows = rows.D @ occ0
+        excess = (r_rows - rows.b) / np.maximum(1.0, np.abs(rows.b))
+        self.say(f"lambda=0: gain={ev0['gain']:.10g} value={ev0['values'][0]:.10g} sweeps={vi0.iterations}")
+        if np.all(excess <= FEAS_RTOL):
+            return None, ev0
+        j = int(np.argmax(excess))
+        self.j, self.row, self.beta = j, rows.D[j], float(rows.b[j])
+        self.stats["binding_side"] = rows.side[j]
+        self.meets_tol = 0.01 * FEAS_RTOL * max(1.0, abs(self.beta))  # "meets the bound" for a search endpoint
+        return _Det(np.asarray(vi0.policy, np.int64).copy(), ev0["gain"], float(r_rows[j]), occ0), ev0
+
+    def bracket(self, high: _Det, lambda0: float | None, growth: float):
+        """Grow lambda geometrically until the greedy policy meets the bound: ``(high, low,
+        lam_lo, lam_hi, last)`` with ``last = (lambda, bound, vi)`` of the step that met it."""
+        beta, tol = self.beta, self.tol
+        lam_lo = 0.0
+        lam = lambda0 if lambda0 is not None else max(abs(high.c), 1e-3 * self.cscale, 1e-300) / (high.r - beta)
+        reach_checked = False
+        n_bracket = 0
+        while True:
+            if self.n_vi >= self.max_steps:
+                raise SolverError(f"lagrangian: no multiplier up to {lam_lo:.6g} meets {self.cons[0].label!r} "
+                                  f"within max_steps={self.max_steps} value-iteration solves")
+            # the Lagrangian gain is ~ c + lam r: scale the VI tolerance to the constrained gain's units
+            vtol = min(max(0.25 * tol * abs(high.c) / max(abs(high.c + lam * high.r), 1e-300), _VI_TOL_MIN),
+                       _VI_TOL_MAX)
+            bound, vi = self.solve_at(lam, vtol)
+            p = self.greedy(vi)
+            n_bracket += 1
+            self.say(f"bracket lambda={lam:.10g}: value={p.r:.10g} bound={beta:.10g} sweeps={vi.iterations}")
+            if p.r <= beta + self.meets_tol:
+                self.stats["lambda_bracket_steps"] = n_bracket
+                return high, p, lam_lo, lam, (lam, bound, vi)
+            high, lam_lo = p, lam
+            if not reach_checked:
+                check_reachable(self.mdp, self.cons)  # raises InfeasibleConstraintsError, naming what can be reached
+                reach_checked = True
+            lam *= growth
+
+    def secant(self, high: _Det, low: _Det, lam_lo: float, lam_hi: float, last):
+        """Trial points where the two ends' lines meet, until both ends are optimal there (or the
+        budget of solves is spent): ``(high, low, last)``, the search's numbers in the stats."""
+        tol, beta = self.tol, self.beta
+        n_search, kinds, converged, gap_rel = 0, {"secant": 0, "bisect": 0}, False, np.inf
+        tighten = 1.0  # extra factor on the VI tolerance after a step that found no better policy
+        while self.n_vi < self.max_steps:
+            dr = high.r - low.r
+            lam_x = (low.c - high.c) / dr if dr > 0 else np.nan
+            step = "secant"
+            if not (lam_lo <= lam_x <= lam_hi):  # round-off only: each end is optimal at its own lambda
+                lam_x, step = 0.5 * (lam_lo + lam_hi), "bisect"
+            m = max(high.line(lam_x), low.line(lam_x))
+            g_est = abs(m - lam_x * beta)  # ~ the constrained gain
+            base = 0.25 * tol * g_est / max(abs(m), 1e-300)
+            vtol = min(max(base * tighten, _VI_TOL_MIN), _VI_TOL_MAX)
+            bound, vi = self.solve_at(lam_x, vtol)
+            n_search += 1
+            kinds[step] += 1
+            last = (lam_x, bound, vi)
+            gap = m - vi.gain_lower
+            gap_rel = gap / max(g_est, 1e-300)
+            self.say(f"search {step} lambda={lam_x:.12g} interval=[{lam_lo:.12g}, {lam_hi:.12g}] gap={gap_rel:.3g} "
+                     f"sweeps={vi.iterations}")
+            if gap <= tol * g_est or gap <= 1e-13 * self.cscale:
+                converged = True
+                break
+            p = self.greedy(vi)
+            # the greedy policy's exact line is <= the VI's upper end: if it is no lower than m, the
+            # bracket was only loose (VI stopped at max_iter or at a clipped tolerance)
+            if p.line(lam_x) < m - 0.1 * tol * g_est or step == "bisect":
+                if p.r <= beta + self.meets_tol:  # a new piece of the envelope replaces the end on its side
+                    low, lam_hi = p, lam_x
+                else:
+                    high, lam_lo = p, lam_x
+                tighten = 1.0
+            elif vtol <= _VI_TOL_MIN:
+                break  # cannot tighten further: the certificate will say how far it got
+            else:
+                tighten *= 1e-2
+        lam_star = last[0]
+        self.stats.update({"lambda": float(lam_star), "lambda_interval": [float(lam_lo), float(lam_hi)],
+                           "lambda_steps": self.n_vi, "lambda_search_steps": n_search,
+                           "lambda_secant_steps": kinds["secant"], "lambda_bisect_steps": kinds["bisect"],
+                           "lambda_converged": converged, "search_gap_rel": float(gap_rel)})
+        self.say(f"lambda*={lam_star:.12g} ({'converged' if converged else 'NOT converged'}, gap {gap_rel:.3g})")
+        return high, low, last
 
 
 def _common_greedy(mdp: MDP, row: np.ndarray, beta: float, lam: float, h: np.ndarray, high: _Det, low: _Det,
@@ -391,7 +425,7 @@ def _common_greedy(mdp: MDP, row: np.ndarray, beta: float, lam: float, h: np.nda
         pol[bad & ~take_other] = greedy[bad & ~take_other]
         changed += int(bad.sum())
         try:
-            out.append(_evaluate(mdp, pol, cons, row))
+            out.append(_exact_averages(mdp, pol, cons, row))
         except PolicyError:
             out.append(None)
     h2, l2 = out
@@ -434,7 +468,7 @@ def _walk_and_mix(mdp: MDP, cons, row, beta: float, high: _Det, low: _Det, walk_
                 pol[order[:k]] = low.pol[order[:k]]
                 stats["walk_evaluations"] += 1
                 try:
-                    cache[k] = _evaluate(mdp, pol, cons, row)
+                    cache[k] = _exact_averages(mdp, pol, cons, row)
                     say(f"walk {name} k={k}/{K}: value={cache[k].r:.12g}")
                 except PolicyError:
                     cache[k] = None

@@ -165,6 +165,18 @@ def _verdict_words(sub: dict[str, dict[int, bool | None]]) -> str:
     return "; ".join(parts)
 
 
+def _subclaims_json(sub: dict[str, dict[int, bool | None]]) -> dict[str, dict[str, bool | None]]:
+    """The sub-claims per cap with string keys (JSON)."""
+    return {k: {str(c): v for c, v in per.items()} for k, per in sub.items()}
+
+
+def _grid_numbers(ps: list[float], rows: list[dict], sub: dict, mc_recs: list[dict], mc_cap: int, mc_ok: bool,
+                  slots: int, reps: int) -> dict[str, Any]:
+    """The numbers of a claim over a p grid at several caps, with its Monte Carlo beside them."""
+    return {"p": ps, "exact_by_cap": rows, "subclaims": _subclaims_json(sub), "monte_carlo": mc_recs,
+            "monte_carlo_cap": mc_cap, "monte_carlo_agrees": mc_ok, "mc_slots": slots, "mc_reps": reps}
+
+
 def _mass_evidence(ctx: Context, label: str, file: str, cap: int, grid: dict[float, dict], verdict: str) -> dict:
     """The instance (scenario, cap, whole p grid) with the largest mass at the cap over p."""
     k = max(grid, key=lambda q: grid[q]["mass"])
@@ -286,10 +298,7 @@ def claim_c3(ctx: Context) -> ClaimResult:
                "unless named otherwise). At small caps the truncation hides the states where optimal and static "
                "differ: the gap opens as the cap grows.")
     return ClaimResult("C3", "Fig. 5", "", verdict, summary,
-                       {"p": ps, "exact_by_cap": rows, "subclaims": {k: {str(c): v for c, v in per.items()}
-                                                                    for k, per in sub.items()},
-                        "monte_carlo": mc_recs, "monte_carlo_cap": prof.sweep_cap_2p, "monte_carlo_agrees": mc_ok,
-                        "mc_slots": prof.mc_slots, "mc_reps": prof.mc_reps},
+                       _grid_numbers(ps, rows, sub, mc_recs, prof.sweep_cap_2p, mc_ok, prof.mc_slots, prof.mc_reps),
                        figs, [tab, mct], details, basis=cap_basis(ev, verdict), shown=shown,
                        captions={figs[0]: f"Left: the exact average MSE of each policy at cap {fig_cap}, where optimal "
                                           "and static separate (Monte Carlo 95% bars beside). Right: how far above "
@@ -363,10 +372,8 @@ def claim_c6(ctx: Context) -> ClaimResult:
     if not mc_ok:
         summary += " Monte Carlo disagrees with an exact value (see the table)."
     return ClaimResult("C6", "Fig. 10", "", verdict, summary,
-                       {"p": ps, "exact_by_cap": rows, "subclaims": {k: {str(c): v for c, v in per.items()}
-                                                                    for k, per in sub.items()},
-                        "monte_carlo": mc_recs, "monte_carlo_cap": prof.sweep_cap_3p, "monte_carlo_agrees": mc_ok,
-                        "mc_slots": prof.mc_slots_3p, "mc_reps": prof.mc_reps_3p},
+                       _grid_numbers(ps, rows, sub, mc_recs, prof.sweep_cap_3p, mc_ok, prof.mc_slots_3p,
+                                     prof.mc_reps_3p),
                        figs, [tab, mct],
                        "The static policy is the spec's default assignment; best static is the best of every "
                        "assignment that gives each server a process, evaluated exactly.",
@@ -441,7 +448,7 @@ def claim_c11(ctx: Context) -> ClaimResult:
         summary += (" The effect grows as the cap is raised: the small cap hides it." if grows else
                     " The effect does not grow with the cap.")
     return ClaimResult("C11", "Fig. 13", "", verdict, summary,
-                       {"rows": rows, "subclaims": {k: {str(c): v for c, v in per.items()} for k, per in sub.items()},
+                       {"rows": rows, "subclaims": _subclaims_json(sub),
                         "figure_cap": show}, figs, [tab], basis=cap_basis(ev, verdict), shown=shown,
                        captions={figs[0]: f"Left: optimal average MSE with and without preemption at cap {show}, the "
                                           "cap where preemption helps most. Right: the relative improvement at every "
@@ -539,8 +546,7 @@ def claim_c12(ctx: Context) -> ClaimResult:
     summary = "p = 1, against the best static policy: " + "; ".join(parts) + "."
     if verdict != "HOLDS":
         summary += " " + _verdict_words(sub) + "."
-    return ClaimResult("C12", "Sec. V end", "", verdict, summary, {"rows": rows, "subclaims": {
-        k: {str(c): v for c, v in per.items()} for k, per in sub.items()}}, [], [tab],
+    return ClaimResult("C12", "Sec. V end", "", verdict, summary, {"rows": rows, "subclaims": _subclaims_json(sub)}, [], [tab],
                        "\"The optimal policy is static\" is judged against the best static policy (every assignment "
                        "that gives each server a process, from its best recurrent cycle), at every cap the size "
                        "allows; a sub-claim false at every cap of a scenario makes the claim FAIL." + size_note,

@@ -81,6 +81,13 @@ def _maps_figure(ctx: Context, panels: list[tuple[Solved, Any, dict]], stem: str
     return ctx.save_figure(fig, stem)
 
 
+def _idle_maps(ctx: Context, solves: list[Solved], stem: str, title: str) -> list[str]:
+    """The idle-server maps over (tau_1, tau_2) at the smallest and the largest cap."""
+    panels = [(s, "idle", {"axes": (1, 2)}) for s in (solves[:1] + solves[-1:] if len(solves) > 1 else solves)]
+    return _maps_figure(ctx, panels, stem, f"{title}, caps " + " and ".join(
+        str(s.scenario.tau_caps[0]) for s, _, _ in panels))
+
+
 def _act(solved: Solved, label: Sequence[int], config: Any = None) -> str:
     return action_name(solved.mdp, tuple(int(x) for x in label), config, scenario=solved.scenario)
 
@@ -107,10 +114,7 @@ def claim_c1(ctx: Context) -> ClaimResult:
         solves.append(solved)
         ev.append(solved.evidence(f"processes 1, 4 at cap {cap}", v))
     verdict = combine([r["verdict"] for r in per_cap])
-    panels = [(s, "idle", {"axes": (1, 2)}) for s in (solves[:1] + solves[-1:] if len(solves) > 1 else solves)]
-    figs = _maps_figure(ctx, panels, "c1_fig3_policy_p14",
-                        "Processes 1 and 4, idle servers (Fig. 3), caps " + " and ".join(
-                            str(s.scenario.tau_caps[0]) for s, _, _ in panels))
+    figs = _idle_maps(ctx, solves, "c1_fig3_policy_p14", "Processes 1 and 4, idle servers (Fig. 3)")
     tab = ctx.save_table([{"cap": r["cap"], "idle_states": r["idle_states"], "verdict": r["verdict"],
                            "cap_mass": r["cap_mass"]["total"],
                            **{f"other_{k}": v for k, v in r["other_action_states"].items()}} for r in per_cap],
@@ -171,10 +175,7 @@ def claim_c2(ctx: Context) -> ClaimResult:
         solves.append(solved)
         ev.append(solved.evidence(f"processes 1, 2 at cap {cap}", v))
     verdict = across([r["verdict"] for r in per_cap])
-    panels = [(s, "idle", {"axes": (1, 2)}) for s in (solves[:1] + solves[-1:] if len(solves) > 1 else solves)]
-    figs = _maps_figure(ctx, panels, "c2_fig4_policy_p12",
-                        "Processes 1 and 2, idle servers (Fig. 4), caps " + " and ".join(
-                            str(s.scenario.tau_caps[0]) for s, _, _ in panels))
+    figs = _idle_maps(ctx, solves, "c2_fig4_policy_p12", "Processes 1 and 2, idle servers (Fig. 4)")
 
     def rng(x: list[int]) -> str:
         return f"{x[0]}-{x[1]}" if x else "none"

@@ -131,8 +131,6 @@ def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_
         ``lp_cols``, ``lp_nnz``. ``y`` and ``z_eq`` are NaN when HiGHS holds no primal / dual
         solution (the caller raises :class:`SolverError` then).
     """
-    import highspy
-
     opts = dict(settings or {})
     variant = str(opts.pop("variant", HIGHS_DEFAULT_VARIANT))
     A = sp.csc_matrix(A)
@@ -140,6 +138,18 @@ def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_
     m, L = A.shape
     h = new_highs(verbose)
     h.setOptionValue("output_flag", bool(verbose))
+    _set_options(h, tol, max_iter, variant, opts)
+    _pass_model(h, A, b, q)
+    if prog is not None and prog.enabled:
+        prog.tick(f"[lp] HiGHS ({variant}) running on {m:,} rows x {L:,} columns")
+    h.run()
+    return _read_solution(h, variant, A, q)
+
+
+def _set_options(h, tol: float, max_iter: int, variant: str, opts: dict[str, Any]) -> None:
+    """Our tolerances and the variant's options, then the caller's (any HiGHS option by name)."""
+    import highspy
+
     ftol = max(float(tol), 1e-10)
     base = {"primal_feasibility_tolerance": ftol, "dual_feasibility_tolerance": ftol,
             "ipm_optimality_tolerance": max(float(tol), 1e-12), "ipm_iteration_limit": int(max_iter),
@@ -154,6 +164,13 @@ def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_
             raise SolverError(f"HiGHS option {k!r} rejected value {v!r}: {exc}") from exc
         if st == highspy.HighsStatus.kError:
             raise SolverError(f"unknown HiGHS option {k!r} or bad value {v!r}")
+
+
+def _pass_model(h, A: sp.csc_matrix, b: np.ndarray, q: np.ndarray) -> None:
+    """Hand ``min q^T y  s.t.  A y = b, y >= 0`` to HiGHS column-wise."""
+    import highspy
+
+    m, L = A.shape
     lp = highspy.HighsLp()
     lp.num_col_, lp.num_row_ = int(L), int(m)
     lp.col_cost_ = np.asarray(q, float)
@@ -169,9 +186,11 @@ def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_
     # residual checks on the original LP (full_*) and the certificate see what that costs
     if h.passModel(lp) == highspy.HighsStatus.kError:
         raise SolverError("HiGHS rejected the LP (passModel failed)")
-    if prog is not None and prog.enabled:
-        prog.tick(f"[lp] HiGHS ({variant}) running on {m:,} rows x {L:,} columns")
-    h.run()
+
+
+def _read_solution(h, variant: str, A: sp.csc_matrix, q: np.ndarray):
+    """``(status, solved, y, z_eq, stats)`` of a finished run (see :func:`solve_highs`)."""
+    m, L = A.shape
     native = h.modelStatusToString(h.getModelStatus())
     ms = h.getModelStatus().name
     info = h.getInfo()

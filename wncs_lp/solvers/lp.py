@@ -51,6 +51,23 @@ Formulations (``solve_lp(formulation=...)``, measured in ``benchmarks/run.py``)
 * ``"auto"`` -- reduced when that does not densify the constraint matrix, else primal
   (:func:`choose_lp`).
 
+Polish (``solve_lp(polish=...)``)
+--------------------------------
+* ``True`` (the default): ``"vi"`` for models of at least :data:`POLISH_VI_MIN_STATES` states,
+  else ``"pi"``.
+* ``"pi"``: :func:`~wncs_lp.solvers.dp.policy_iteration` from the LP's policy (exact
+  evaluation, usually 0-2 improvements); ``gain`` = exact gain of the final policy, ``bias`` its
+  exact bias, ``(gain_lower, gain_upper)`` = bracket on that bias. If an iterate is multichain
+  (PolicyError) the dual certificate below is used instead and the policy becomes the
+  dual-greedy one.
+* ``"vi"``: first :func:`~wncs_lp.solvers.dp.value_iteration` warm-started from the LP's dual
+  bias (certified to 1e-9), then policy iteration from its greedy policy (usually stable at the
+  first exact evaluation). Cheaper than ``"pi"`` when the extracted policy is far from optimal
+  (e.g. a loose LP tolerance, large models).
+* ``False``: ``gain`` = LP objective, ``bias`` = dual h, bracket on the dual h. An
+  interior-point dual may keep slack in states that no optimal policy visits, which widens
+  ``hi``; polishing removes that.
+
 Backends (``solve_lp(backend=...)``, measured in ``benchmarks/lp_backends.py``)
 -------------------------------------------------------------------------------
 * ``"clarabel"`` -- the interior point the project is built on (below).
@@ -84,7 +101,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -101,7 +118,7 @@ __all__ = ["LPData", "LPChoice", "build_lp", "build_reduced_lp", "choose_lp", "s
            "FORMULATIONS", "BACKENDS", "REDUCE_MAX_NNZ_RATIO", "HIGHS_ROWS_AT_WIDTH_2", "HIGHS_WIDTH_EXPONENT", "HIGHS_SIMPLEX_MAX_WIDTH",
            "highs_max_rows",
            "CLARABEL_DEFAULTS", "POLISH_VI_MIN_STATES", "FAILED_STATUSES", "clarabel_settings", "clarabel_stats",
-           "cost_scale_of"]
+           "cost_scale_of", "status_from"]
 
 #: A state counts as visited when its scaled frequency n * sum_a x(s, a) exceeds this, i.e.
 #: x(s) > VISIT_TOL / n. Interior-point "zeros" are not tiny: at tol = 1e-9 they were
@@ -209,7 +226,7 @@ def cost_scale_of(cost: np.ndarray) -> float:
 def _occupation_lp(col_state: np.ndarray, T: sp.spmatrix, weights: np.ndarray, cost: np.ndarray, n: int) -> LPData:
     """The scaled LP ``min (c / c_s)^T y`` s.t. rows 1..n-1 of ``(E - T^T) y = 0``,
     ``weights^T y = n``, ``y >= 0``, with ``E[s, l] = [col_state[l] = s]``: the plain LP
-    (T = P, weights 1) and the semi-Markov one of the reduction (T = Q, weights tau)."""
+    (T = P, weights 1) and the semi-Markov one of the reduction (T = Q, weights the sojourn times)."""
     L = int(col_state.size)
     E = sp.csr_matrix((np.ones(L), (col_state, np.arange(L))), shape=(n, L))
     B = (E - T.T.tocsr()).tocsr()
@@ -386,14 +403,14 @@ def build_reduced_lp(mdp: MDP, red=None):
     """The occupation-measure LP of the forced-state reduction (:mod:`~wncs_lp.solvers.reduce`).
 
     Variables y = nD * x over the decision pairs; rows: balance of the decision states 1..nD-1
-    (state D[0]'s row dropped), ``(E_D - Q^T) y = 0``, and the normalisation ``tau^T y = nD``
-    (time, not visits, sums to one); costs ``C / c_s``. Returns ``(LPData, Reduction)``.
+    (state D[0]'s row dropped), ``(E_D - Q^T) y = 0``, and the normalisation ``T^T y = nD``
+    (time, not visits, sums to one; T = the sojourn times); costs ``C / c_s``. Returns ``(LPData, Reduction)``.
     """
     from .reduce import reduce_forced
 
     red = reduce_forced(mdp) if red is None else red
     dloc = np.searchsorted(red.D, mdp.s_indices[red.dpairs])
-    return _occupation_lp(dloc, red.Q, red.tau, red.C, red.n_decision), red
+    return _occupation_lp(dloc, red.Q, red.sojourn, red.C, red.n_decision), red
 
 
 def clarabel_settings(tol: float, max_iter: int, verbose: bool, settings: dict | None):
@@ -444,26 +461,16 @@ def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, set
     B = (E - mdp.P).tocsc()[:, 1:]
     A = sp.hstack([sp.csc_matrix(np.ones((L, 1))), B], format="csc")
     A.eliminate_zeros()
-    q = np.zeros(n)
-    q[0] = -float(n)
-    st = clarabel_settings(tol, max_iter, verbose, settings)
-    solver = clarabel.DefaultSolver(sp.csc_matrix((n, n)), q, A, mdp.cost / cs, [clarabel.NonnegativeConeT(L)], st)
-    _watch(solver, prog)
-    sol = solver.solve()
-    info = solver.get_info()
-    status = str(sol.status)
-    u = np.asarray(sol.x, float)
-    z = np.asarray(sol.z, float)
+    objective = np.zeros(n)
+    objective[0] = -float(n)
+    status, u, z, stats = _run_clarabel(sp.csc_matrix((n, n)), objective, A, mdp.cost / cs, [clarabel.NonnegativeConeT(L)],
+                                        clarabel_settings(tol, max_iter, verbose, settings), prog)
     g = cs * float(u[0]) if u.size else np.nan
     h = np.zeros(n)
     h[1:] = cs * u[1:]
-    stats = {
-        **clarabel_stats(sol, info),
-        "lp_rows": int(L),
-        "lp_cols": int(n),
-        "cost_scale": cs,
-        "lp_nnz": int(A.nnz),
-    }
+    for key in ("obj_scaled", "obj_dual_scaled"):  # the objective of this LP is -n g / c_s: g is reported instead
+        stats.pop(key)
+    stats.update(lp_rows=int(L), lp_cols=int(n), cost_scale=cs, lp_nnz=int(A.nnz))
     return status, status == "Solved", z / float(n), g, h, stats
 
 
@@ -514,8 +521,8 @@ def extract_policy(mdp: MDP, x: np.ndarray, h: np.ndarray, visit_tol: float = VI
     xmax = np.maximum.reduceat(xc, starts)
     cand = np.where(xc == xmax[mdp.s_indices], np.arange(L, dtype=np.int64), np.int64(L))
     by_x = np.minimum.reduceat(cand, starts)
-    q = q_values(mdp, h)
-    policy = np.where(visited, by_x, greedy_first(mdp, q))
+    q_h = q_values(mdp, h)
+    policy = np.where(visited, by_x, greedy_first(mdp, q_h))
     assigned = visited.copy()
     if assigned.any():
         idx = np.arange(L, dtype=np.int64)
@@ -524,7 +531,7 @@ def extract_policy(mdp: MDP, x: np.ndarray, h: np.ndarray, visit_tol: float = VI
             ok = into & ~assigned[mdp.s_indices]
             if not ok.any():
                 break
-            qm = np.where(ok, q, np.inf)
+            qm = np.where(ok, q_h, np.inf)
             best = np.minimum.reduceat(qm, starts)
             new = np.isfinite(best)
             pick = np.minimum.reduceat(np.where(ok & (qm == best[mdp.s_indices]), idx, np.int64(L)), starts)
@@ -552,23 +559,23 @@ def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settin
     A = sp.vstack([lp.A_eq, -sp.identity(L, format="csc")], format="csc")
     b = np.concatenate([lp.b_eq, np.zeros(L)])
     Pz = sp.csc_matrix((L, L))
-    st = clarabel_settings(tol, max_iter, verbose, settings)
-    solver = clarabel.DefaultSolver(Pz, lp.q, A, b, [clarabel.ZeroConeT(m), clarabel.NonnegativeConeT(L)], st)
+    status, y, z, stats = _run_clarabel(Pz, lp.q, A, b, [clarabel.ZeroConeT(m), clarabel.NonnegativeConeT(L)],
+                                        clarabel_settings(tol, max_iter, verbose, settings), prog)
+    stats.update(lp_rows=int(m), lp_cols=int(L), lp_nnz=int(lp.A_eq.nnz))
+    return status, status == "Solved", y, z[:m], stats
+
+
+def _run_clarabel(P, c, A, b, cones, settings, prog: Progress | None):
+    """One Clarabel solve: ``(status, x, z, stats)`` with :func:`clarabel_stats` and the scaled
+    primal and dual objectives."""
+    import clarabel
+
+    solver = clarabel.DefaultSolver(P, c, A, b, cones, settings)
     _watch(solver, prog)
     sol = solver.solve()
-    info = solver.get_info()
-    status = str(sol.status)
-    y = np.asarray(sol.x, float)
-    z = np.asarray(sol.z, float)
-    stats = {
-        **clarabel_stats(sol, info),
-        "obj_scaled": float(sol.obj_val),
-        "obj_dual_scaled": float(sol.obj_val_dual),
-        "lp_rows": int(m),
-        "lp_cols": int(L),
-        "lp_nnz": int(lp.A_eq.nnz),
-    }
-    return status, status == "Solved", y, z[:m], stats
+    stats = {**clarabel_stats(sol, solver.get_info()), "obj_scaled": float(sol.obj_val),
+             "obj_dual_scaled": float(sol.obj_val_dual)}
+    return str(sol.status), np.asarray(sol.x, float), np.asarray(sol.z, float), stats
 
 
 def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings: dict | None,
@@ -608,109 +615,122 @@ def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings:
     return status, status == "optimal", yv, zv, stats
 
 
-def solve_lp(
-    mdp: MDP,
-    *,
-    backend: str = "auto",
-    tol: float = 1e-9,
-    polish: bool = True,
-    max_iter: int = 200,
-    verbose: bool = False,
-    cert_rtol: float = 1e-6,
-    visit_tol: float = VISIT_TOL,
-    polish_max_iter: int = 50,
-    settings: dict | None = None,
-    formulation: str = "auto",
-    progress: bool | Progress = False,
-) -> Solution:
+def solve_lp(mdp: MDP, *, backend: str = "auto", tol: float = 1e-9, polish: bool = True, max_iter: int = 200,
+             verbose: bool = False, cert_rtol: float = 1e-6, visit_tol: float = VISIT_TOL, polish_max_iter: int = 50,
+             settings: dict | None = None, formulation: str = "auto", progress: bool | Progress = False) -> Solution:
     """Solve the occupation-measure LP and certify the answer.
 
-    Steps: choose backend and formulation (:func:`choose_lp`); build the scaled LP
-    (:func:`build_lp` or :func:`build_reduced_lp`); solve it with Clarabel directly
-    (``backend="clarabel"``, ``method="lp"``), with HiGHS (``backend="highs"``,
-    ``method="lp-highs"``) or with Clarabel through cvxpy (``backend="cvxpy"``,
-    ``method="lp-cvxpy"``); unscale x and the dual (g, h); read a deterministic policy off x
-    (:func:`extract_policy`); then
-
-    * ``polish=True``: ``"vi"`` for models of at least :data:`POLISH_VI_MIN_STATES` states,
-      else ``"pi"``.
-    * ``polish="pi"``: run :func:`~wncs_lp.solvers.dp.policy_iteration` from that policy
-      (exact evaluation, usually 0-2 improvements); ``gain`` = exact gain of the final
-      policy, ``bias`` its exact bias, ``(gain_lower, gain_upper)`` = bracket on that bias.
-      If an iterate is multichain (PolicyError) the dual certificate below is used instead
-      and the policy becomes the dual-greedy one.
-    * ``polish="vi"``: first :func:`~wncs_lp.solvers.dp.value_iteration` warm-started from
-      the LP's dual bias (certified to 1e-9), then policy iteration from its greedy policy
-      (usually stable at the first exact evaluation). Cheaper than ``"pi"`` when the
-      extracted policy is far from optimal (e.g. a loose LP tolerance, large models).
-    * ``polish=False``: ``gain`` = LP objective, ``bias`` = dual h, bracket on the dual h.
-      Note that an interior-point dual may keep slack in states that no optimal policy
-      visits, which widens ``hi``; polishing removes that.
+    Phases: choose the backend and formulation (:func:`choose_lp`) -> run it on the scaled LP ->
+    unscale x and the dual (g, h) (lifted to every state from a reduced LP) -> read a policy off x
+    (:func:`extract_policy`) -> polish (module docstring, "Polish") -> certify.
 
     Parameters
     ----------
     mdp : MDP
     backend : {"auto", "clarabel", "highs", "cvxpy"}
-        ``"auto"`` (default): :func:`choose_lp`'s measured rule (``stats["lp_choice"]`` says which
-        rule fired and why). ``"highs"``: :func:`~wncs_lp.solvers.highs.solve_highs`.
+        ``"auto"``: :func:`choose_lp`'s measured rule (``stats["lp_choice"]`` says why).
     tol : float
         Clarabel ``tol_gap_abs = tol_gap_rel = tol_feas`` (on the scaled problem); HiGHS's primal
         and dual feasibility tolerances (at least 1e-10) and IPM optimality tolerance.
     polish : bool or {"pi", "vi"}
         True = "vi" from :data:`POLISH_VI_MIN_STATES` states on, else "pi".
-    max_iter : int
-        Interior-point iteration limit (Clarabel's, or HiGHS IPX's).
+    max_iter, polish_max_iter : int
+        The interior-point iteration limit (Clarabel's, HiGHS IPX's); the most policy-iteration
+        evaluations of the polish.
     verbose : bool
         Solver log to stdout.
     cert_rtol : float
         ``status == "optimal"`` requires the solver's "Solved" and (hi - lo)/|g| <= cert_rtol.
     visit_tol : float
         Visited-state threshold on n * x(s), see :data:`VISIT_TOL`.
-    polish_max_iter : int
-        Cap on the polishing policy-iteration evaluations.
     settings : dict, optional
-        Extra Clarabel settings (``DefaultSettings`` attribute names), e.g.
-        ``{"direct_solve_method": "qdldl"}``. With the direct backend they override
-        :data:`CLARABEL_DEFAULTS` (iterative refinement off); pass
-        ``{"iterative_refinement_enable": True}`` for Clarabel's own default. With
-        ``backend="highs"``: HiGHS options by name plus ``"variant"`` (``"simplex"`` or
-        ``"ipx"``), e.g. ``{"time_limit": 60}``. Given with ``backend="auto"``, they keep it on
-        Clarabel.
+        Clarabel settings by ``DefaultSettings`` name, over :data:`CLARABEL_DEFAULTS` (iterative
+        refinement off; ``{"iterative_refinement_enable": True}`` restores Clarabel's default);
+        with ``backend="highs"``: HiGHS options by name plus ``"variant"`` (``"simplex"`` or
+        ``"ipx"``). Given with ``backend="auto"``, they keep it on Clarabel.
     formulation : {"auto", "primal", "reduced", "dual"}
-        ``"primal"``: the plain occupation-measure LP (:func:`build_lp`). ``"reduced"``: the
-        same LP with the forced states substituted out (:func:`build_reduced_lp`; exact, same
-        optimum; x and h are lifted back to every state). ``"dual"``: the gain-bias LP
-        (max g s.t. g + h(s_l) <= c_l + (P h)_l; Clarabel only), whose multipliers are x.
-        ``"auto"``: ``"reduced"`` when that LP has at most :data:`REDUCE_MAX_NNZ_RATIO` of the
-        plain LP's nonzeros, else ``"primal"`` (``stats["formulation"]`` says which).
+        The LP solved (module docstring, "Formulations"; :func:`build_lp`,
+        :func:`build_reduced_lp`; the dual on Clarabel only); ``stats["formulation"]`` says which.
     progress : bool or Progress
-        Show the phases (building, solving, polishing), Clarabel's interior-point iterations
-        (direct backend; cvxpy hides them) and the polish on stderr (:mod:`wncs_lp.progress`).
+        The phases, Clarabel's interior-point iterations (direct backend) and the polish on
+        stderr (:mod:`wncs_lp.progress`).
 
     Returns
     -------
     Solution
-        ``occupation`` = x (clipped at 0, renormalised to sum 1). ``stats``: ``solver_status``,
+        ``method`` ``"lp"`` (Clarabel), ``"lp-highs"`` or ``"lp-cvxpy"``; ``occupation`` = x
+        (clipped at 0, renormalised to sum 1). ``stats``: the solver's (``solver_status``,
         ``solver_iterations``, ``r_prim``, ``r_dual``, ``duality_gap``, ``solve_time``,
-        ``lp_objective`` (c^T x from the solver's objective, unscaled, not polished),
-        ``lp_dual_gain`` (-c_s z_norm), ``n_visited_states``, ``polish_iterations``,
-        ``kkt_*`` (our own residual check on the LP actually solved), ``full_*`` (the same
-        (x, g, h) checked against the original LP, :func:`_full_residuals`), ``formulation``,
-        ``lp_rows`` / ``lp_cols`` / ``lp_nnz``, ``reduction_*`` (reduced only), ``backend``,
-        ``lp_choice`` (the rule that chose backend and formulation, in words), ``lp_choice_rule``
-        (its short name, :class:`LPChoice`), ``highs_*`` (HiGHS only), ``dual_bias``
-        (array), ``extracted_policy`` (array), ``cost_scale``.
-        ``status``: ``"optimal"``; ``"inaccurate:<solver status>"`` when the solver did not
-        report success (HiGHS's statuses in Clarabel's words, :data:`~wncs_lp.solvers.highs.HIGHS_STATUS`); ``"inaccurate:certificate"`` when the bracket stays wider than
-        cert_rtol; ``"inaccurate:polish_max_iter"``.
+        ``highs_*``), ``lp_objective`` (c^T x, unscaled, not polished), ``lp_dual_gain``,
+        ``kkt_*`` (our residuals on the LP solved), ``full_*`` (on the original LP,
+        :func:`_full_residuals`), ``formulation``, ``lp_rows`` / ``lp_cols`` / ``lp_nnz``,
+        ``reduction_*``, ``backend``, ``lp_choice`` / ``lp_choice_rule`` (:class:`LPChoice`),
+        ``n_visited_states``, ``polish_*``, ``dual_bias``, ``extracted_policy``, ``cost_scale``.
+        ``status``: ``"optimal"``, else ``"inaccurate:<solver status>"`` (HiGHS's in Clarabel's
+        words, :data:`~wncs_lp.solvers.highs.HIGHS_STATUS`), ``"inaccurate:polish_max_iter"``
+        or ``"inaccurate:certificate"`` (bracket wider than cert_rtol), in that precedence.
 
     Raises
     ------
     SolverError
-        Unknown backend, or the solver failed outright (infeasible/unsolved status or
-        non-finite x); the message carries its status and residuals.
+        Bad arguments, or the solver failed outright (infeasible or unsolved, non-finite x).
     """
     t0 = time.perf_counter()
+    polish = _checked_lp_args(mdp, backend, formulation, polish)
+    prog = as_progress(progress)
+    prog.phase(f"[lp] building the occupation-measure LP ({mdp.n_pairs:,} pairs, {mdp.n_states:,} states)")
+    choice = choose_lp(mdp, backend, formulation, settings=settings)
+    backend = choice.backend
+    method = _METHODS[backend]
+    if backend == "clarabel":
+        settings = {**CLARABEL_DEFAULTS, **(settings or {})}
+    status, solved, x, g_dual, h_dual, lp_obj, stats = _run_backend(mdp, choice, method, tol, max_iter, verbose,
+                                                                      settings, prog)
+    stats.update(formulation=choice.formulation, backend=backend, lp_choice=choice.reason,
+                 lp_choice_rule=choice.rule, polish=polish or None)
+    if backend == "clarabel":
+        stats["clarabel_settings"] = dict(settings)
+    h_dual, policy0 = _extract(mdp, x, g_dual, h_dual, lp_obj, visit_tol, stats, t0)
+    prog.done(f"[{method}] solver status {status} after {stats['solver_iterations']} "
+              f"{'interior-point' if backend != 'highs' else 'interior-point + simplex'} iterations")
+    gain, lo, hi, bias, policy, issue = _polish(mdp, polish, policy0, h_dual, lp_obj, polish_max_iter, cert_rtol,
+                                                stats, prog, method)
+    closed = certificate_closed(mdp, lo, hi, gain, cert_rtol)
+    stats.update(certificate_closed=bool(closed), lp_error=lp_obj - gain)
+    occ = np.maximum(x, 0.0)
+    occ = occ / occ.sum() if occ.sum() > 0 else occ
+    return Solution(method=method, status=status_from((None if solved else status, issue,
+                                                       None if closed else "certificate")),
+                    gain=float(gain), gain_lower=float(lo), gain_upper=float(hi), bias=np.asarray(bias, float),
+                    policy=np.asarray(policy, np.int64), occupation=occ, iterations=int(stats["solver_iterations"]),
+                    seconds=time.perf_counter() - t0, stats=stats, pair_actions=mdp.a_indices)
+
+
+def _extract(mdp: MDP, x: np.ndarray, g_dual: float, h_dual: np.ndarray, lp_obj: float, visit_tol: float,
+             stats: dict, t0: float) -> tuple[np.ndarray, np.ndarray]:
+    """The residuals of (x, g, h) on the original LP, the dual bias pinned to h(0) = 0 and the
+    deterministic policy read off x, recorded in ``stats``; returns ``(h, policy)``."""
+    stats.update(_full_residuals(mdp, x, g_dual, h_dual))
+    h_dual = h_dual - h_dual[0]
+    policy0, visited = extract_policy(mdp, x, h_dual, visit_tol)
+    stats.update(lp_objective=lp_obj, lp_dual_gain=g_dual, n_visited_states=int(np.count_nonzero(visited)),
+                 dual_bias=h_dual, extracted_policy=policy0, lp_seconds=time.perf_counter() - t0)
+    return h_dual, policy0
+
+
+#: The method name of a solution by the backend that solved its LP.
+_METHODS = {"clarabel": "lp", "highs": "lp-highs", "cvxpy": "lp-cvxpy"}
+
+
+def status_from(reasons: Sequence[str | None]) -> str:
+    """A solution's status from its possible defects in order of precedence: ``"optimal"`` when
+    every entry is None, else ``"inaccurate:<the first defect>"``."""
+    first = next((r for r in reasons if r is not None), None)
+    return "optimal" if first is None else f"inaccurate:{first}"
+
+
+def _checked_lp_args(mdp: MDP, backend: str, formulation: str, polish: bool | str) -> str | bool:
+    """The polish mode (True resolved by the model's size), after checking the arguments."""
     if backend not in BACKENDS:
         raise SolverError(f"unknown LP backend {backend!r}; expected one of {', '.join(BACKENDS)}")
     if formulation not in FORMULATIONS:
@@ -721,69 +741,55 @@ def solve_lp(
         raise SolverError(f"polish must be True, False, 'pi' or 'vi'; got {polish!r}")
     if formulation == "dual" and backend not in ("clarabel", "auto"):
         raise SolverError("the dual (gain-bias) formulation is solved with backend 'clarabel' only")
-    prog = as_progress(progress)
-    prog.phase(f"[lp] building the occupation-measure LP ({mdp.n_pairs:,} pairs, {mdp.n_states:,} states)")
-    choice = choose_lp(mdp, backend, formulation, settings=settings)
-    backend, form, red, lp_r = choice.backend, choice.formulation, choice.reduction, choice.reduced_lp
-    method = {"clarabel": "lp", "highs": "lp-highs", "cvxpy": "lp-cvxpy"}[backend]
-    if backend == "clarabel":
-        settings = {**CLARABEL_DEFAULTS, **(settings or {})}
+    return polish
+
+
+def _unusable(method: str, status: str, stats: dict) -> SolverError:
+    return SolverError(f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
+                       f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution")
+
+
+def _run_backend(mdp: MDP, choice: LPChoice, method: str, tol: float, max_iter: int, verbose: bool,
+                 settings: dict | None, prog: Progress):
+    """Solve the chosen LP and unscale it: ``(status, solved, x, g, h, lp objective, stats)`` with x
+    the occupation measure and (g, h) the dual gain and bias, lifted back to every state when reduced."""
+    backend, form = choice.backend, choice.formulation
     if form == "dual":
         prog.phase(f"[{method}] solving the gain-bias (dual) LP with Clarabel")
         status, solved, x, g_dual, h_dual, stats = _solve_clarabel_dual(mdp, tol, max_iter, verbose, settings, prog)
         if status in FAILED_STATUSES or not (np.all(np.isfinite(x)) and np.isfinite(g_dual) and np.all(np.isfinite(h_dual))):
-            raise SolverError(f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
-                              f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution")
-        lp_obj = g_dual
+            raise _unusable(method, status, stats)
+        return status, solved, x, g_dual, h_dual, g_dual, stats
+    lp = choice.reduced_lp if form == "reduced" else build_lp(mdp)
+    prog.phase(f"[{method}] solving the {form} LP ({lp.n_eq:,} rows, {lp.n_pairs:,} columns) with "
+               f"{_BACKEND_NAMES[backend]}")
+    if backend == "highs":
+        hs = settings if choice.highs_variant is None else {**(settings or {}), "variant": choice.highs_variant}
+        status, solved, y, z_eq, stats = solve_highs(lp.A_eq, lp.b_eq, lp.q, tol, max_iter, verbose, hs, prog)
     else:
-        lp = lp_r if form == "reduced" else build_lp(mdp)
-        prog.phase(f"[{method}] solving the {form} LP ({lp.n_eq:,} rows, {lp.n_pairs:,} columns) with "
-                   f"{_BACKEND_NAMES[backend]}")
-        if backend == "highs":
-            hs = settings if choice.highs_variant is None else {**(settings or {}), "variant": choice.highs_variant}
-            status, solved, y, z_eq, stats = solve_highs(lp.A_eq, lp.b_eq, lp.q, tol, max_iter, verbose, hs, prog)
-        else:
-            runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
-            status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings, prog)
-        if status in FAILED_STATUSES or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (lp.n_pairs,):
-            raise SolverError(
-                f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
-                f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution"
-            )
-        stats.update(_kkt(lp, y, z_eq))
-        g_dual, h_dual = lp.unscale_duals(z_eq)
-        lp_obj = lp.objective(stats["obj_scaled"])
-        x = lp.unscale_x(y)
-        stats["cost_scale"] = lp.cost_scale
-        if red is not None:
-            x = red.lift_x(x)
-            h_dual = red.lift_h(h_dual, g_dual)
-            stats.update(reduction_decision_states=red.n_decision, reduction_eliminated=red.n_eliminated,
-                         reduction_levels=int(red.level_ptr.size - 1), reduction_seconds=red.seconds)
-    stats["formulation"] = form
-    stats["backend"] = backend
-    stats["lp_choice"] = choice.reason
-    stats["lp_choice_rule"] = choice.rule
-    stats["polish"] = polish or None
-    if backend == "clarabel":
-        stats["clarabel_settings"] = dict(settings)
-    stats.update(_full_residuals(mdp, x, g_dual, h_dual))
-    h_dual = h_dual - h_dual[0]
-    policy0, visited = extract_policy(mdp, x, h_dual, visit_tol)
-    stats.update(
-        lp_objective=lp_obj,
-        lp_dual_gain=g_dual,
-        n_visited_states=int(np.count_nonzero(visited)),
-        dual_bias=h_dual,
-        extracted_policy=policy0,
-        lp_seconds=time.perf_counter() - t0,
-    )
+        runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
+        status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings, prog)
+    if status in FAILED_STATUSES or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (lp.n_pairs,):
+        raise _unusable(method, status, stats)
+    stats.update(_kkt(lp, y, z_eq))
+    g_dual, h_dual = lp.unscale_duals(z_eq)
+    lp_obj = lp.objective(stats["obj_scaled"])
+    x = lp.unscale_x(y)
+    stats["cost_scale"] = lp.cost_scale
+    red = choice.reduction
+    if red is not None:
+        x = red.lift_x(x)
+        h_dual = red.lift_h(h_dual, g_dual)
+        stats.update(reduction_decision_states=red.n_decision, reduction_eliminated=red.n_eliminated,
+                     reduction_levels=int(red.level_ptr.size - 1), reduction_seconds=red.seconds)
+    return status, solved, x, g_dual, h_dual, lp_obj, stats
 
-    issue = None
-    use_dual = not polish
-    iterations = stats["solver_iterations"]
-    prog.done(f"[{method}] solver status {status} after {iterations} "
-              f"{'interior-point' if backend != 'highs' else 'interior-point + simplex'} iterations")
+
+def _polish(mdp: MDP, polish: str | bool, policy0: np.ndarray, h_dual: np.ndarray, lp_obj: float,
+            polish_max_iter: int, cert_rtol: float, stats: dict, prog: Progress, method: str):
+    """The final ``(gain, lo, hi, bias, policy, issue)``: policy iteration from the LP's policy
+    (after value iteration from its dual bias for ``"vi"``), or the LP's own answer with the
+    bracket of its dual bias (no polish, or a multichain iterate)."""
     if polish:
         prog.phase(f"[{method}] polishing the LP's policy ({'value iteration, then ' if polish == 'vi' else ''}"
                    "policy iteration with exact evaluation)")
@@ -798,48 +804,19 @@ def solve_lp(
             pi = policy_iteration(mdp, policy0=start, max_iter=polish_max_iter, cert_rtol=cert_rtol, progress=prog)
         except PolicyError as exc:
             stats["polish_error"] = str(exc)
-            use_dual = True
         else:
-            gain, lo, hi, bias, policy = pi.gain, pi.gain_lower, pi.gain_upper, pi.bias, pi.policy
             stats["polish_iterations"] = int(sum(1 for c in pi.stats["changes"] if c))
-            stats["polish_changed_states"] = int(np.count_nonzero(policy != policy0))
+            stats["polish_changed_states"] = int(np.count_nonzero(pi.policy != policy0))
             if pi.stats.get("fallback"):
                 # a multichain iterate: policy iteration went through value iteration
                 stats["polish_fallback"] = pi.stats["fallback"]
+            issue = None
             if pi.stats.get("multichain_policy"):
                 if pi.status != "optimal":
                     issue = f"polish_{pi.status}"
             elif not pi.stats["stable"]:
                 issue = "polish_max_iter"
-    if use_dual:
-        lo, hi = bracket(mdp, h_dual)
-        gain, bias = lp_obj, h_dual
-        policy = policy0 if not polish else greedy_first(mdp, q_values(mdp, h_dual))
-    closed = certificate_closed(mdp, lo, hi, gain, cert_rtol)
-    stats["certificate_closed"] = bool(closed)
-    stats["lp_error"] = lp_obj - gain
-    if not solved:
-        out_status = f"inaccurate:{status}"
-    elif issue is not None:
-        out_status = f"inaccurate:{issue}"
-    elif not closed:
-        out_status = "inaccurate:certificate"
-    else:
-        out_status = "optimal"
-    occ = np.maximum(x, 0.0)
-    tot = occ.sum()
-    occ = occ / tot if tot > 0 else occ
-    return Solution(
-        method=method,
-        status=out_status,
-        gain=float(gain),
-        gain_lower=float(lo),
-        gain_upper=float(hi),
-        bias=np.asarray(bias, float),
-        policy=np.asarray(policy, np.int64),
-        occupation=occ,
-        iterations=int(iterations),
-        seconds=time.perf_counter() - t0,
-        stats=stats,
-        pair_actions=mdp.a_indices,
-    )
+            return pi.gain, pi.gain_lower, pi.gain_upper, pi.bias, pi.policy, issue
+    lo, hi = bracket(mdp, h_dual)
+    policy = policy0 if not polish else greedy_first(mdp, q_values(mdp, h_dual))
+    return lp_obj, lo, hi, h_dual, policy, None

@@ -5,16 +5,16 @@ Such a *forced* state f has one pair, and in the occupation-measure LP its frequ
 by its predecessors; in the optimality equation its bias is fixed by its successors. Removing
 the forced states that lie on acyclic forced paths leaves a semi-Markov decision problem over
 the *decision* states D: from a decision pair l the chain runs through forced states until it
-next hits D, which takes tau_l slots on average, costs C_l on average and lands in D with
-distribution Q[l, :]:
+next hits D, which takes T_l slots on average (its *sojourn*, not an AoI), costs C_l on average and
+lands in D with distribution Q[l, :]:
 
     Q = P_DD + P_DF Z,   Z = (I - P_FF)^{-1} P_FD,
-    tau = 1 + P_DF (I - P_FF)^{-1} 1,   C = c_D + P_DF (I - P_FF)^{-1} c_F.
+    T = 1 + P_DF (I - P_FF)^{-1} 1,   C = c_D + P_DF (I - P_FF)^{-1} c_F.
 
 The average-cost LP of that problem is the original one with the forced variables and
 balance rows substituted out (Gaussian elimination done once, up front):
 
-    min C^T x  s.t.  (E_D - Q^T) x = 0,  tau^T x = 1,  x >= 0,
+    min C^T x  s.t.  (E_D - Q^T) x = 0,  T^T x = 1,  x >= 0,
 
 with the same optimal value g*; the forced frequencies are X_F = (I - P_FF^T)^{-1} P_DF^T x
 and the forced biases h_F = (I - P_FF)^{-1} (c_F - g 1 + P_FD h_D) (:meth:`Reduction.lift_x`,
@@ -52,7 +52,7 @@ class Reduction:
     level_ptr : (K+1,) the states of level k are ``F[level_ptr[k]:level_ptr[k+1]]``
     dpairs : (LD,) the pairs of the decision states (sorted; state-major as in the MDP)
     Q : (LD, nD) CSR -- where the chain next enters D after pair l
-    tau : (LD,) expected slots until then (>= 1)
+    sojourn : (LD,) expected slots until then (>= 1); ``tau`` is an alias kept for existing callers
     C : (LD,) expected cost until then
     seconds : float
     """
@@ -63,7 +63,7 @@ class Reduction:
     level_ptr: np.ndarray
     dpairs: np.ndarray
     Q: sp.csr_matrix
-    tau: np.ndarray
+    sojourn: np.ndarray
     C: np.ndarray
     seconds: float
     # internals (F-order indexing)
@@ -72,6 +72,11 @@ class Reduction:
     _inv_self: np.ndarray  # 1 / (1 - P(f, f))
     _P_DF: sp.csr_matrix  # (LD, nF)
     _cF: np.ndarray
+
+    @property
+    def tau(self) -> np.ndarray:
+        """Alias of :attr:`sojourn`."""
+        return self.sojourn
 
     @property
     def n_decision(self) -> int:
@@ -208,7 +213,7 @@ def reduce_forced(mdp: MDP) -> Reduction:
     Q = (P_DD + P_DF @ Z).tocsr()
     Q.sum_duplicates()
     Q.sort_indices()
-    tau = 1.0 + P_DF @ w1
+    sojourn = 1.0 + P_DF @ w1
     C = mdp.cost[dpairs] + P_DF @ wc
-    return Reduction(mdp, D, F, level_ptr, dpairs, Q, np.asarray(tau, float), np.asarray(C, float),
+    return Reduction(mdp, D, F, level_ptr, dpairs, Q, np.asarray(sojourn, float), np.asarray(C, float),
                      time.perf_counter() - t0, A_FF, A_FD, inv_self, P_DF, cF)

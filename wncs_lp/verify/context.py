@@ -155,6 +155,22 @@ def policy_context(
     """
     space = require_space(mdp)
     tolerance = tolerance or Tolerance()
+    pol = _checked_policy(mdp, solution)
+    bias = np.asarray(solution.bias, dtype=float)
+    q = q_values(mdp, bias)
+    act = mdp.a_indices[pol]
+    scale = float(bias.max() - bias.min()) if mdp.n_states else 0.0
+    stationary, classes = _stationary_of(mdp, solution, pol, stationary)
+    recurrent, rule = _recurrence(mdp, pol, classes, stationary, stationary_tol)
+    caps = np.asarray(space.caps)
+    at_cap = np.any(np.asarray(space.tau) >= caps[None, :], axis=1)
+    offsets = _action_offsets(mdp, pol, act)
+    return PolicyContext(mdp, solution, q, act, q[pol], tolerance, tolerance.resolve(scale), scale, recurrent,
+                         None if stationary is None else np.asarray(stationary), at_cap, offsets, rule)
+
+
+def _checked_policy(mdp: MDP, solution: Solution) -> np.ndarray:
+    """The solution's policy as int64 pair indices, after checking that bias and policy fit the MDP."""
     n = mdp.n_states
     bias = np.asarray(solution.bias, dtype=float)
     pol = np.asarray(solution.policy)
@@ -166,47 +182,51 @@ def policy_context(
     if pol.min() < 0 or pol.max() >= mdp.n_pairs or np.any(mdp.s_indices[pol] != np.arange(n)):
         bad = int(np.flatnonzero((pol < 0) | (pol >= mdp.n_pairs) | (mdp.s_indices[np.clip(pol, 0, mdp.n_pairs - 1)] != np.arange(n)))[0])
         raise ModelError(f"solution.policy[{bad}] = {int(pol[bad])} is not a pair of state {bad}")
-    q = q_values(mdp, bias)
-    act = mdp.a_indices[pol]
-    scale = float(bias.max() - bias.min()) if n else 0.0
-    tol = tolerance.resolve(scale)
+    return pol
 
-    # recurrence
-    stationary_off = stationary is False
-    if stationary is False:
-        stationary = None
-    elif stationary is None:
-        occ = getattr(solution, "occupation", None)
-        if occ is not None and getattr(solution, "method", "") == "pi":
-            stationary = np.add.reduceat(np.asarray(occ, float), mdp.pair_ptr[:-1])
-        elif n <= STATIONARY_SOLVE_LIMIT:
-            try:
-                stationary = evaluate_policy(mdp, pol).stationary
-            except Exception:  # multichain or numerically hard: recurrence still comes from the graph
-                stationary = None
-    classes = None
-    if stationary is None and n > STATIONARY_SOLVE_LIMIT and not stationary_off:
-        P_pi = mdp.P[pol]
-        classes = recurrent_classes(P_pi)
-        stationary = _unichain_stationary(P_pi, classes)
+
+def _stationary_of(mdp: MDP, solution: Solution, pol: np.ndarray, given: np.ndarray | bool | None
+                   ) -> tuple[np.ndarray | None, list[np.ndarray] | None]:
+    """The policy's stationary law: ``given`` (False: none), a policy-iteration solution's
+    occupation, an exact evaluation up to STATIONARY_SOLVE_LIMIT states, the unichain law above
+    (with the recurrent classes it needed, so they are not found twice; else None)."""
+    if given is False:
+        return None, None
+    if given is not None:
+        return given, None
+    occ = getattr(solution, "occupation", None)
+    if occ is not None and getattr(solution, "method", "") == "pi":
+        return np.add.reduceat(np.asarray(occ, float), mdp.pair_ptr[:-1]), None
+    if mdp.n_states <= STATIONARY_SOLVE_LIMIT:
+        try:
+            return evaluate_policy(mdp, pol).stationary, None
+        except Exception:  # multichain or numerically hard: recurrence still comes from the graph
+            return None, None
+    P_pi = mdp.P[pol]
+    classes = recurrent_classes(P_pi)
+    return _unichain_stationary(P_pi, classes), classes
+
+
+def _recurrence(mdp: MDP, pol: np.ndarray, classes: list[np.ndarray] | None, stationary: np.ndarray | None,
+                stationary_tol: float) -> tuple[np.ndarray, str]:
+    """(recurrent mask, the rule in words): closed classes of the chain, or the stationary law above a threshold."""
     if stationary_tol > 0:
         if stationary is None:
             raise ModelError("stationary_tol > 0 needs the stationary distribution, which could not be computed")
-        recurrent = np.asarray(stationary) > stationary_tol
-        rule = f"stationary probability > {stationary_tol:g}"
-    else:
-        recurrent = np.zeros(n, bool)
-        for cl in (classes if classes is not None else recurrent_classes(mdp.P[pol])):
-            recurrent[cl] = True
-        rule = "in a closed communicating class of the policy's chain (stationary probability > 0)"
+        return np.asarray(stationary) > stationary_tol, f"stationary probability > {stationary_tol:g}"
+    recurrent = np.zeros(mdp.n_states, bool)
+    for cl in (classes if classes is not None else recurrent_classes(mdp.P[pol])):
+        recurrent[cl] = True
+    return recurrent, "in a closed communicating class of the policy's chain (stationary probability > 0)"
 
-    caps = np.asarray(space.caps)
-    at_cap = np.any(np.asarray(space.tau) >= caps[None, :], axis=1)
 
-    # action offsets per configuration (the action list depends on the configuration only)
+def _action_offsets(mdp: MDP, pol: np.ndarray, act: np.ndarray) -> np.ndarray:
+    """``offsets[c, a]``: the position of action a among the pairs of configuration c's states (-1:
+    infeasible); the action list depends on the configuration only, which is checked on the policy."""
+    space = mdp.states
+    n = mdp.n_states
     nC = len(space.configs)
-    nA = int(mdp.action_table.shape[0])
-    offsets = np.full((nC, nA), -1, dtype=np.int64)
+    offsets = np.full((nC, int(mdp.action_table.shape[0])), -1, dtype=np.int64)
     first = np.full(nC, -1, dtype=np.int64)
     cfg = np.asarray(space.config)
     order = np.arange(n)[::-1]
@@ -217,11 +237,10 @@ def policy_context(
             continue
         lo, hi = int(mdp.pair_ptr[s]), int(mdp.pair_ptr[s + 1])
         offsets[c, mdp.a_indices[lo:hi]] = np.arange(hi - lo)
-    # guard: the chosen action's offset must point at the chosen pair in every state
+    # the chosen action's offset must point at the chosen pair in every state
     if n and np.any(mdp.pair_ptr[:-1] + offsets[cfg, act] != pol):
         raise ModelError("the action lists of the states of one configuration differ; structure checks need them equal")
-    return PolicyContext(mdp, solution, q, act, q[pol], tolerance, tol, scale, recurrent,
-                         None if stationary is None else np.asarray(stationary), at_cap, offsets, rule)
+    return offsets
 
 
 def _unichain_stationary(P_pi: Any, classes: list[np.ndarray]) -> np.ndarray | None:

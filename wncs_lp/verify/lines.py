@@ -13,7 +13,7 @@ from ..errors import ModelError
 from .context import PolicyContext
 from .report import Violation
 
-__all__ = ["box_lines", "direction_name", "line_structure", "gap_violations", "gap_violation", "theorem2_direction",
+__all__ = ["box_lines", "states_on_lines", "direction_name", "line_structure", "gap_violations", "gap_violation", "theorem2_direction",
            "switching_orders", "order_violations", "order_violation"]
 
 
@@ -39,6 +39,21 @@ def box_lines(caps: Sequence[int], d: Sequence[int]) -> np.ndarray:
     return np.where(valid, flat, -1)
 
 
+def states_on_lines(space, lines: np.ndarray, c: int, at_least: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The state ids along the lines of :func:`box_lines` in configuration c (-1: unreachable or
+    padding), keeping the lines with at least ``at_least`` reachable states; and the mask of those."""
+    G = space.lookup_grid(c).ravel()
+    S = np.where(lines >= 0, G[np.maximum(lines, 0)], -1)
+    keep = np.count_nonzero(S >= 0, axis=1) >= at_least
+    return S[keep], keep
+
+
+def _direction_lines(space, directions: Sequence[tuple[int, ...]]) -> list[tuple[str, np.ndarray]]:
+    """``(name, lines)`` of each direction: its :func:`direction_name` and :func:`box_lines`."""
+    caps = tuple(int(c) for c in space.caps)
+    return [(direction_name(d), box_lines(caps, d)) for d in directions]
+
+
 def direction_name(d: Sequence[int]) -> str:
     """``"axis tau_k"`` or ``"diagonal tau_i+tau_j..."`` for a direction of the box."""
     ks = [k + 1 for k, x in enumerate(d) if x]
@@ -58,22 +73,15 @@ def line_structure(ctx: PolicyContext, configs: Sequence[int], directions: Seque
     Returns (summary per direction, list of gaps (direction, config, action, first, gap, last,
     size)).
     """
-    mdp = ctx.mdp
-    space = mdp.states
-    caps = tuple(int(c) for c in space.caps)
+    space = ctx.mdp.states
     summary: dict[str, dict] = {}
     gaps: list[tuple] = []
-    for d in directions:
-        lines = box_lines(caps, d)
-        name = direction_name(d)
+    for name, lines in _direction_lines(space, directions):
         entry = summary.setdefault(name, {"lines": 0, "checked": 0, "gaps": 0, "gap_lines_by_action": {}})
         if lines.shape[1] < 3:
             continue
         for c in configs:
-            G = space.lookup_grid(c).ravel()
-            S = np.where(lines >= 0, G[np.maximum(lines, 0)], -1)
-            keep = np.count_nonzero(S >= 0, axis=1) >= 3
-            S = S[keep]
+            S, _ = states_on_lines(space, lines, c, 3)
             if S.shape[0] == 0:
                 continue
             entry["lines"] += int(S.shape[0])
@@ -150,14 +158,11 @@ def switching_orders(ctx: PolicyContext, configs: Sequence[int], directions: Seq
     ``states`` = (minority a-state, minority b-state, majority a-state, majority b-state) and
     ``size`` = the smaller of the two strict preferences on the minority line.
     """
-    mdp = ctx.mdp
-    space = mdp.states
+    space = ctx.mdp.states
     caps = tuple(int(c) for c in space.caps)
     summary: dict[str, dict] = {}
     out: list[tuple] = []
-    for d in directions:
-        lines = box_lines(caps, d)
-        name = direction_name(d)
+    for name, lines in _direction_lines(space, directions):
         entry = summary.setdefault(name, {"ordered_line_pairs": 0, "reversals": 0, "groups_reversed": 0})
         if lines.shape[1] < 2:
             continue
@@ -168,12 +173,10 @@ def switching_orders(ctx: PolicyContext, configs: Sequence[int], directions: Seq
             feas = np.flatnonzero(ctx.offsets[c] >= 0)
             if feas.size < 2:
                 continue
-            G = space.lookup_grid(c).ravel()
-            S = np.where(lines >= 0, G[np.maximum(lines, 0)], -1)
-            keep = np.count_nonzero(S >= 0, axis=1) >= 2
-            if np.count_nonzero(keep) < 2:
+            S, keep = states_on_lines(space, lines, c, 2)
+            if S.shape[0] < 2:
                 continue
-            S, pos = S[keep], starts[keep]
+            pos = starts[keep]
             valid = S >= 0
             Ssafe = np.maximum(S, 0)
             A = np.where(valid, ctx.act[Ssafe], -1)

@@ -12,7 +12,7 @@ from ..models import model_type
 from ..solvers.result import Solution
 from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, idle_configs, use_context
 from .lines import (box_lines, gap_violation, gap_violations, line_structure, order_violation, order_violations,
-                    switching_orders, theorem2_direction)
+                    states_on_lines, switching_orders, theorem2_direction)
 from .report import CheckReport, Tolerance, Violation, pick_examples, split_counts
 
 __all__ = ["check_threshold"]
@@ -80,138 +80,106 @@ def check_threshold(
     """
     t0 = time.perf_counter()
     ctx = use_context(mdp, solution, tolerance, stationary_tol, ctx)
-    space = mdp.states
     model = model_type(mdp)
     form = model.threshold_form
     if form not in ("rays", "intervals"):
         raise ModelError(f"{mdp.name}: unknown threshold form {form!r} of {model.__name__}")
-    caps = tuple(int(c) for c in space.caps)
-    N = len(caps)
-    nfeas = np.count_nonzero(ctx.offsets >= 0, axis=1)
-    if configs is None:
-        configs = model.threshold_configs
-    if isinstance(configs, str):
-        if configs == "idle":
-            cfg_ids = idle_configs(mdp)
-            if not cfg_ids:
-                raise ModelError(f"{mdp.name}: no idle-server configuration (is this a Section II model?)")
-        elif configs == "all":
-            cfg_ids = [c for c in range(len(space.configs)) if nfeas[c] >= 2]
-        else:
-            raise ModelError(f"configs must be 'idle', 'all' or a list of configuration ids, got {configs!r}")
-    else:
-        cfg_ids = [int(c) for c in configs]
-        for c in cfg_ids:
-            if not 0 <= c < len(space.configs):
-                raise ModelError(f"configuration id {c} out of range 0..{len(space.configs) - 1}")
+    cfg_ids = _configurations(mdp, ctx, model.threshold_configs if configs is None else configs)
+    N = len(mdp.states.caps)
     axes_d: list[tuple[int, ...]] = [tuple(int(i == k) for i in range(N)) for k in range(N)]
     diagonals = [tuple(int(i in (a, b)) for i in range(N)) for a in range(N) for b in range(a + 1, N)]
-    directions = axes_d + diagonals
-
     if form == "intervals":
-        # the switching-curve property, along each axis: every action region an interval on every
-        # axis-parallel line (one switch per pair of actions), and the switches in one order on all
-        # parallel lines (a monotone curve); diagonal gaps are a described statistic only
-        axis_summary, gaps = line_structure(ctx, cfg_ids, axes_d)
-        order_summary, revs = switching_orders(ctx, cfg_ids, axes_d)
-        diag_summary, dgaps = line_structure(ctx, cfg_ids, diagonals)
-        grec, gcap, gsize = gap_violations(ctx, gaps)
-        orec, ocap, osize = order_violations(ctx, revs)
-        rec = np.concatenate([grec, orec])
-        cap = np.concatenate([gcap, ocap])
-        size = np.concatenate([gsize, osize])
+        return _switching_curve(ctx, model, cfg_ids, axes_d, diagonals, examples, t0)
+    return _rays(ctx, cfg_ids, axes_d + diagonals, examples, t0)
 
-        def make(i: int) -> Violation:
-            if i < len(gaps):
-                return gap_violation(ctx, gaps[i], grec[i], gcap[i])
-            j = i - len(gaps)
-            return order_violation(ctx, revs[j], orec[j], ocap[j])
 
-        ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples)]
-        worst = make(int(np.argmax(np.abs(size)))) if size.size else None
-        serving = {c for c in cfg_ids if model.job_in_service(space.configs[c]) is not None}
-        g_serv = np.array([g[1] in serving for g in gaps] + [r[1] in serving for r in revs], dtype=bool)
-        drec, dcap, _ = gap_violations(ctx, dgaps)
-        checked = (sum(v["checked"] for v in axis_summary.values())
-                   + sum(v["ordered_line_pairs"] for v in order_summary.values()))
-        details = {
-            "axis_lines": axis_summary,
-            "axis_orders": order_summary,
-            "gaps": {"count": len(gaps), "split": split_counts(grec, gcap)},
-            "reversals": {"count": len(revs), "split": split_counts(orec, ocap)},
-            "by_configuration_kind": {
-                "serving_a_job": {"configurations": len(serving), "violations": int(np.count_nonzero(g_serv)),
-                                  "split": split_counts(rec[g_serv], cap[g_serv])},
-                "server_free": {"configurations": len(cfg_ids) - len(serving),
-                                "violations": int(np.count_nonzero(~g_serv)),
-                                "split": split_counts(rec[~g_serv], cap[~g_serv])},
-            },
-            "diagonal_gaps": {"count": len(dgaps), "split": split_counts(drec, dcap), "lines": diag_summary,
-                              "note": "not violations: a monotone switching curve may cross a diagonal "
-                                      "tau_i + tau_j = const several times"},
-            "configurations": len(cfg_ids),
-            "configurations_serving": len(serving),
-        }
-        notes = ("Preemption model: Theorem 2 is stated for the Section II model; here the C9 reading is checked, the "
-                 "switching-curve (threshold) property along each axis in every configuration with >= 2 feasible "
-                 "actions: each action's region is an interval on every axis-parallel line ('line-gap' violations, "
-                 "one case per (line, action) pair), and the policy switches between two actions in the same order "
-                 "on all parallel lines ('order-reversal' violations, one case per line ordering a pair of actions). "
-                 "Tie-robust. Gaps along the diagonals are counted in details.diagonal_gaps, outside the verdict.")
-        return make_report("threshold", "C9 (Figs. 11-12): preemption policy of threshold (switching-curve) type", ctx,
-                           holds=(len(gaps) + len(revs) == 0), checked=checked, violations=len(gaps) + len(revs),
-                           rec=rec, cap=cap, ties=0, unit="(line, action) pairs and ordered (line, action pair)s",
-                           worst=worst, examples=ex, details=details, notes=notes, t0=t0)
+def _configurations(mdp: MDP, ctx: PolicyContext, configs: str | Sequence[int]) -> list[int]:
+    """The configuration ids named by ``configs`` ("idle", "all" with >= 2 feasible actions, or ids)."""
+    n_configs = len(mdp.states.configs)
+    if not isinstance(configs, str):
+        cfg_ids = [int(c) for c in configs]
+        for c in cfg_ids:
+            if not 0 <= c < n_configs:
+                raise ModelError(f"configuration id {c} out of range 0..{n_configs - 1}")
+        return cfg_ids
+    if configs == "idle":
+        cfg_ids = idle_configs(mdp)
+        if not cfg_ids:
+            raise ModelError(f"{mdp.name}: no idle-server configuration (is this a Section II model?)")
+        return cfg_ids
+    if configs == "all":
+        nfeas = np.count_nonzero(ctx.offsets >= 0, axis=1)
+        return [c for c in range(n_configs) if nfeas[c] >= 2]
+    raise ModelError(f"configs must be 'idle', 'all' or a list of configuration ids, got {configs!r}")
 
+
+def _switching_curve(ctx: PolicyContext, model, cfg_ids: list[int], axes_d: list[tuple[int, ...]],
+                     diagonals: list[tuple[int, ...]], examples: int, t0: float) -> CheckReport:
+    """The C9 reading (preemption model): every action region an interval on every axis-parallel
+    line (one switch per pair of actions), and the switches in one order on all parallel lines (a
+    monotone curve); diagonal gaps are a described statistic only."""
+    space = ctx.mdp.states
+    axis_summary, gaps = line_structure(ctx, cfg_ids, axes_d)
+    order_summary, revs = switching_orders(ctx, cfg_ids, axes_d)
+    diag_summary, dgaps = line_structure(ctx, cfg_ids, diagonals)
+    grec, gcap, gsize = gap_violations(ctx, gaps)
+    orec, ocap, osize = order_violations(ctx, revs)
+    rec = np.concatenate([grec, orec])
+    cap = np.concatenate([gcap, ocap])
+    size = np.concatenate([gsize, osize])
+
+    def make(i: int) -> Violation:
+        if i < len(gaps):
+            return gap_violation(ctx, gaps[i], grec[i], gcap[i])
+        j = i - len(gaps)
+        return order_violation(ctx, revs[j], orec[j], ocap[j])
+
+    ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples)]
+    worst = make(int(np.argmax(np.abs(size)))) if size.size else None
+    serving = {c for c in cfg_ids if model.job_in_service(space.configs[c]) is not None}
+    g_serv = np.array([g[1] in serving for g in gaps] + [r[1] in serving for r in revs], dtype=bool)
+    drec, dcap, _ = gap_violations(ctx, dgaps)
+    checked = (sum(v["checked"] for v in axis_summary.values())
+               + sum(v["ordered_line_pairs"] for v in order_summary.values()))
+    details = {
+        "axis_lines": axis_summary,
+        "axis_orders": order_summary,
+        "gaps": {"count": len(gaps), "split": split_counts(grec, gcap)},
+        "reversals": {"count": len(revs), "split": split_counts(orec, ocap)},
+        "by_configuration_kind": {
+            "serving_a_job": {"configurations": len(serving), "violations": int(np.count_nonzero(g_serv)),
+                              "split": split_counts(rec[g_serv], cap[g_serv])},
+            "server_free": {"configurations": len(cfg_ids) - len(serving),
+                            "violations": int(np.count_nonzero(~g_serv)),
+                            "split": split_counts(rec[~g_serv], cap[~g_serv])},
+        },
+        "diagonal_gaps": {"count": len(dgaps), "split": split_counts(drec, dcap), "lines": diag_summary,
+                          "note": "not violations: a monotone switching curve may cross a diagonal "
+                                  "tau_i + tau_j = const several times"},
+        "configurations": len(cfg_ids),
+        "configurations_serving": len(serving),
+    }
+    notes = ("Preemption model: Theorem 2 is stated for the Section II model; here the C9 reading is checked, the "
+             "switching-curve (threshold) property along each axis in every configuration with >= 2 feasible "
+             "actions: each action's region is an interval on every axis-parallel line ('line-gap' violations, "
+             "one case per (line, action) pair), and the policy switches between two actions in the same order "
+             "on all parallel lines ('order-reversal' violations, one case per line ordering a pair of actions). "
+             "Tie-robust. Gaps along the diagonals are counted in details.diagonal_gaps, outside the verdict.")
+    return make_report("threshold", "C9 (Figs. 11-12): preemption policy of threshold (switching-curve) type", ctx,
+                       holds=(len(gaps) + len(revs) == 0), checked=checked, violations=len(gaps) + len(revs),
+                       rec=rec, cap=cap, ties=0, unit="(line, action) pairs and ordered (line, action pair)s",
+                       worst=worst, examples=ex, details=details, notes=notes, t0=t0)
+
+
+def _rays(ctx: PolicyContext, cfg_ids: list[int], directions: list[tuple[int, ...]], examples: int,
+          t0: float) -> CheckReport:
+    """Theorem 2 (Section II model): along every ray ``s + z sum_{k in K} e_k`` of an idle state s
+    whose action sends the processes K, the same action; the line structure beside it."""
+    space = ctx.mdp.states
     line_summary, gaps = line_structure(ctx, cfg_ids, directions)
     grec, gcap, gsize = gap_violations(ctx, gaps)
-
-    # ---- Theorem 2 rays
-    n_checked = 0
-    n_ties = 0
-    per_action: dict[str, dict[str, int]] = {}
-    recs: list[np.ndarray] = []
-    rows: list[np.ndarray] = []  # columns: s, s', z, a, size
-    table = mdp.action_table
-    dir_of = {a: theorem2_direction(tuple(int(x) for x in np.atleast_1d(table[a])), N) for a in range(table.shape[0])}
-    dirs = sorted({d for d in dir_of.values() if d is not None})
-    n_sources = 0
-    for d in dirs:
-        lines = box_lines(caps, d)
-        L = lines.shape[1]
-        if L < 2:
-            continue
-        iu, ju = np.triu_indices(L, 1)
-        acts_d = np.array([a for a, dd in dir_of.items() if dd == d], dtype=np.int64)
-        for c in cfg_ids:
-            G = space.lookup_grid(c).ravel()
-            S = np.where(lines >= 0, G[np.maximum(lines, 0)], -1)
-            src, tgt = S[:, iu], S[:, ju]
-            zz = np.broadcast_to(ju - iu, src.shape)
-            ok = (src >= 0) & (tgt >= 0)
-            ok[ok] &= np.isin(ctx.act[src[ok]], acts_d)
-            s, t, z = src[ok], tgt[ok], zz[ok]
-            a = ctx.act[s]
-            n_checked += s.size
-            srcs = S[(S >= 0)]
-            n_sources += int(np.count_nonzero(np.isin(ctx.act[srcs], acts_d)))
-            diff_act = ctx.act[t] != a
-            qa = ctx.q_of(t, a)
-            gap = qa - ctx.q_pi[t]
-            tie = diff_act & (np.abs(gap) <= ctx.tol)
-            bad = diff_act & ~tie
-            n_ties += int(np.count_nonzero(tie))
-            for aa in np.unique(a):
-                lab = str(ctx.action(aa))
-                e = per_action.setdefault(lab, {"checked": 0, "violations": 0, "ties": 0})
-                m = a == aa
-                e["checked"] += int(np.count_nonzero(m))
-                e["violations"] += int(np.count_nonzero(bad & m))
-                e["ties"] += int(np.count_nonzero(tie & m))
-            rows.append(np.stack([s[bad], t[bad], z[bad], a[bad]], axis=1))
-            recs.append(gap[bad])
-    R = np.concatenate(rows) if rows else np.zeros((0, 4), np.int64)
-    size = np.concatenate(recs) if recs else np.zeros(0)
+    found = _ray_cases(ctx, cfg_ids)
+    R, size = found["rows"], found["size"]
     rec = (ctx.recurrent[R[:, 0]] & ctx.recurrent[R[:, 1]]) if R.size else np.zeros(0, bool)
     cap = (ctx.at_cap[R[:, 0]] | ctx.at_cap[R[:, 1]]) if R.size else np.zeros(0, bool)
 
@@ -227,17 +195,16 @@ def check_threshold(
 
     ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples)]
     worst = make(int(np.argmax(np.abs(size)))) if size.size else None
-    violating_sources = int(np.unique(R[:, 0]).size) if R.size else 0
     targets = np.unique(R[:, 1]) if R.size else np.zeros(0, np.int64)
     details = {
         "configurations": [space.describe_config(space.configs[c]) for c in cfg_ids],
-        "source_states": n_sources,
-        "violating_source_states": violating_sources,
+        "source_states": found["sources"],
+        "violating_source_states": int(np.unique(R[:, 0]).size) if R.size else 0,
         "violating_target_states": int(targets.size),
         "target_recurrent": int(np.count_nonzero(ctx.recurrent[R[:, 1]])) if R.size else 0,
         "violating_target_stationary_mass": (None if ctx.stationary is None
                                              else float(ctx.stationary[targets].sum())),
-        "per_action": per_action,
+        "per_action": found["per_action"],
         "lines": line_summary,
         "line_gaps": {"count": len(gaps), "split": split_counts(grec, gcap),
                       "examples": [gap_violation(ctx, gaps[int(i)], grec[i], gcap[i]).to_json()
@@ -248,6 +215,53 @@ def check_threshold(
              "every action region is an interval along each tau axis and each diagonal e_i + e_j.")
     return make_report(
         "threshold", "Theorem 2 (C8): pi(s) = (k1, k2) => pi(s + z(e_k1 + e_k2)) = (k1, k2) in idle states",
-        ctx, holds=(R.shape[0] == 0), checked=n_checked, violations=R.shape[0], rec=rec, cap=cap,
-        ties=n_ties, unit="(state, z) pairs", worst=worst, examples=ex, details=details, notes=notes, t0=t0,
+        ctx, holds=(R.shape[0] == 0), checked=found["checked"], violations=R.shape[0], rec=rec, cap=cap,
+        ties=found["ties"], unit="(state, z) pairs", worst=worst, examples=ex, details=details, notes=notes, t0=t0,
     )
+
+
+def _ray_cases(ctx: PolicyContext, cfg_ids: list[int]) -> dict:
+    """Every case (s, z) of Theorem 2: the violations as rows (s, s', z, action at s) with their
+    sizes ``Q(s', a) - Q(s', pi(s'))``, and the counts (cases, ties, sources, per action)."""
+    mdp = ctx.mdp
+    space = mdp.states
+    caps = tuple(int(c) for c in space.caps)
+    table = mdp.action_table
+    dir_of = {a: theorem2_direction(tuple(int(x) for x in np.atleast_1d(table[a])), len(caps))
+              for a in range(table.shape[0])}
+    out = {"checked": 0, "ties": 0, "sources": 0, "per_action": {}}
+    rows: list[np.ndarray] = []  # columns: s, s', z, a
+    sizes: list[np.ndarray] = []
+    for d in sorted({d for d in dir_of.values() if d is not None}):
+        lines = box_lines(caps, d)
+        L = lines.shape[1]
+        if L < 2:
+            continue
+        iu, ju = np.triu_indices(L, 1)
+        acts_d = np.array([a for a, dd in dir_of.items() if dd == d], dtype=np.int64)
+        for c in cfg_ids:
+            S, _ = states_on_lines(space, lines, c)
+            src, tgt = S[:, iu], S[:, ju]
+            zz = np.broadcast_to(ju - iu, src.shape)
+            ok = (src >= 0) & (tgt >= 0)
+            ok[ok] &= np.isin(ctx.act[src[ok]], acts_d)
+            s, t, z = src[ok], tgt[ok], zz[ok]
+            a = ctx.act[s]
+            out["checked"] += s.size
+            out["sources"] += int(np.count_nonzero(np.isin(ctx.act[S[(S >= 0)]], acts_d)))
+            diff_act = ctx.act[t] != a
+            gap = ctx.q_of(t, a) - ctx.q_pi[t]
+            tie = diff_act & (np.abs(gap) <= ctx.tol)
+            bad = diff_act & ~tie
+            out["ties"] += int(np.count_nonzero(tie))
+            for aa in np.unique(a):
+                e = out["per_action"].setdefault(str(ctx.action(aa)), {"checked": 0, "violations": 0, "ties": 0})
+                m = a == aa
+                e["checked"] += int(np.count_nonzero(m))
+                e["violations"] += int(np.count_nonzero(bad & m))
+                e["ties"] += int(np.count_nonzero(tie & m))
+            rows.append(np.stack([s[bad], t[bad], z[bad], a[bad]], axis=1))
+            sizes.append(gap[bad])
+    out["rows"] = np.concatenate(rows) if rows else np.zeros((0, 4), np.int64)
+    out["size"] = np.concatenate(sizes) if sizes else np.zeros(0)
+    return out

@@ -293,7 +293,6 @@ def plot_policy_slice(
     """
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
-    from scipy import ndimage
 
     cid = parse_config_spec(mdp, config)
     probs, pol, chain_pol = _policy_forms(mdp, solution)
@@ -308,46 +307,12 @@ def plot_policy_slice(
     TK = total - TI - TJ
     X, Y = _bary(TI.astype(float), TJ.astype(float), TK.astype(float))
     on = A != -2
-    npts = int(on.sum())
-    side = max(2.0, np.sqrt(2 * npts))
-    ms = max(2.5, min(9.0, 170.0 / side))
-    # outline of the plane inside the box (the convex hull of its lattice points)
-    px, py = X[on], Y[on]
-    ax.plot(px, py, linestyle="none")  # sets the limits
-    if npts >= 3:
-        try:
-            from scipy.spatial import ConvexHull
-
-            hull = ConvexHull(np.c_[px, py])
-            v = np.r_[hull.vertices, hull.vertices[:1]]
-            ax.plot(px[v], py[v], color="0.6", lw=0.8, zorder=0)
-        except Exception:  # degenerate (collinear) slice
-            pass
+    ms = max(2.5, min(9.0, 170.0 / max(2.0, np.sqrt(2 * int(on.sum())))))
+    _plane_outline(ax, X[on], Y[on])
     unr = A == -1
     if unr.any():
         ax.plot(X[unr], Y[unr], linestyle="none", marker=".", color="0.55", markersize=ms * 0.5, zorder=1)
-    handles = []
-    for a in np.unique(A[A >= 0]):
-        mk, col = _style(a)
-        m = A == a
-        rec = m.copy()
-        if rec_mask is not None:
-            rec = m & rec_mask[np.maximum(S, 0)]
-        for sel, alpha in ((rec, _FILLED_ALPHA), (m & ~rec, 0.35)):
-            if sel.any():
-                ax.plot(X[sel], Y[sel], linestyle="none", marker=mk, color=col, markersize=ms, alpha=alpha,
-                        markerfacecolor=col if mk not in ("x", "+") else None,
-                        markeredgewidth=1.2 if mk in ("x", "+") else 0.5, zorder=2)
-        handles.append(Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
-                              label=f"{action_name(mdp, int(a), cid, names=info)}  [{int(m.sum())} points]"))
-        comp, ncomp = ndimage.label(m, structure=NEIGHBOURS["tri6"])
-        for r in range(1, ncomp + 1):
-            sel = comp == r
-            if sel.sum() < 3:
-                continue
-            ax.text(X[sel].mean(), Y[sel].mean(), short_action_name(mdp, int(a), info), ha="center", va="center",
-                    fontsize=9, fontweight="bold", color=col, zorder=4,
-                    bbox=dict(boxstyle="round,pad=0.2", facecolor="white", edgecolor=col, alpha=0.85))
+    handles = [_slice_region(ax, mdp, A, S, a, X, Y, rec_mask, ms, cid, info) for a in np.unique(A[A >= 0])]
     if probs is not None:
         mixed = np.isin(S, mixed_states(mdp, probs)) & (A >= 0)
         off = 0.5 * MIX_OFFSET / total  # the lattice spacing is 1 / total
@@ -360,19 +325,7 @@ def plot_policy_slice(
     if unr.any():
         handles.append(Line2D([], [], linestyle="none", marker=".", color="0.55", markersize=7,
                               label="unreachable state"))
-    pn = info["processes"]
-    # where each tau is largest: a label just outside the points, away from their centre
-    mx, my = px.mean(), py.mean()
-    span = max(px.max() - px.min(), py.max() - py.min(), 1e-9)
-    for name, T_ in ((i, TI), (j, TJ), (k, TK)):
-        vals = np.where(on, T_, -1)
-        top = vals == vals.max()
-        tx, ty = X[top].mean(), Y[top].mean()
-        dx, dy = tx - mx, ty - my
-        nrm = max(np.hypot(dx, dy), 1e-9)
-        ax.annotate(f"{_tau(name, info)} largest (= {int(vals.max())})\nprocess {pn[name - 1]}",
-                    (tx + 0.17 * span * dx / nrm, ty + 0.17 * span * dy / nrm), ha="center", va="center",
-                    fontsize=8.5, color="0.25", annotation_clip=False)
+    _corner_labels(ax, on, X, Y, ((i, TI), (j, TJ), (k, TK)), info)
     ax.margins(0.2)
     ax.set_aspect("equal")
     ax.set_axis_off()
@@ -383,6 +336,66 @@ def plot_policy_slice(
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8.5,
                   title="action" if probs is None else "most likely action", title_fontsize=9)
     return ax
+
+
+def _plane_outline(ax, px: np.ndarray, py: np.ndarray) -> None:
+    """The outline of the plane inside the box (the convex hull of its lattice points); sets the limits."""
+    ax.plot(px, py, linestyle="none")
+    if px.size >= 3:
+        try:
+            from scipy.spatial import ConvexHull
+
+            hull = ConvexHull(np.c_[px, py])
+            v = np.r_[hull.vertices, hull.vertices[:1]]
+            ax.plot(px[v], py[v], color="0.6", lw=0.8, zorder=0)
+        except Exception:  # degenerate (collinear) slice
+            pass
+
+
+def _slice_region(ax, mdp: MDP, A: np.ndarray, S: np.ndarray, a: int, X: np.ndarray, Y: np.ndarray,
+                  rec_mask: np.ndarray | None, ms: float, cid: int, info: dict):
+    """Draw action a's points (faded where transient) and label each of its connected regions
+    (6-neighbour on the triangular lattice) of at least 3 points; returns its legend handle."""
+    from matplotlib.lines import Line2D
+    from scipy import ndimage
+
+    mk, col = _style(a)
+    m = A == a
+    rec = m.copy()
+    if rec_mask is not None:
+        rec = m & rec_mask[np.maximum(S, 0)]
+    for sel, alpha in ((rec, _FILLED_ALPHA), (m & ~rec, 0.35)):
+        if sel.any():
+            ax.plot(X[sel], Y[sel], linestyle="none", marker=mk, color=col, markersize=ms, alpha=alpha,
+                    markerfacecolor=col if mk not in ("x", "+") else None,
+                    markeredgewidth=1.2 if mk in ("x", "+") else 0.5, zorder=2)
+    comp, ncomp = ndimage.label(m, structure=NEIGHBOURS["tri6"])
+    for r in range(1, ncomp + 1):
+        sel = comp == r
+        if sel.sum() < 3:
+            continue
+        ax.text(X[sel].mean(), Y[sel].mean(), short_action_name(mdp, int(a), info), ha="center", va="center",
+                fontsize=9, fontweight="bold", color=col, zorder=4,
+                bbox=dict(boxstyle="round,pad=0.2", facecolor="white", edgecolor=col, alpha=0.85))
+    return Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
+                  label=f"{action_name(mdp, int(a), cid, names=info)}  [{int(m.sum())} points]")
+
+
+def _corner_labels(ax, on: np.ndarray, X: np.ndarray, Y: np.ndarray, corners, info: dict) -> None:
+    """Where each tau is largest: a label just outside the points, away from their centre."""
+    px, py = X[on], Y[on]
+    pn = info["processes"]
+    mx, my = px.mean(), py.mean()
+    span = max(px.max() - px.min(), py.max() - py.min(), 1e-9)
+    for name, T_ in corners:
+        vals = np.where(on, T_, -1)
+        top = vals == vals.max()
+        tx, ty = X[top].mean(), Y[top].mean()
+        dx, dy = tx - mx, ty - my
+        nrm = max(np.hypot(dx, dy), 1e-9)
+        ax.annotate(f"{_tau(name, info)} largest (= {int(vals.max())})\nprocess {pn[name - 1]}",
+                    (tx + 0.17 * span * dx / nrm, ty + 0.17 * span * dy / nrm), ha="center", va="center",
+                    fontsize=8.5, color="0.25", annotation_clip=False)
 
 
 def plot_matrix_free_map(
