@@ -174,6 +174,20 @@ def _grid_numbers(ps: list[float], rows: list[dict], sub: dict, mc_recs: list[di
             "monte_carlo_cap": mc_cap, "monte_carlo_agrees": mc_ok, "mc_slots": slots, "mc_reps": reps}
 
 
+def _comparison_outputs(ctx: Context, prefix: str, figure: str, title: str, fig_cap: int,
+                        exact: dict[int, dict[float, dict]], gaps: dict[int, dict[str, np.ndarray]], extra: tuple[str, ...],
+                        sta_lab: str, ps: list[float], mc: dict, rows: list[dict], mc_recs: list[dict]):
+    """The figure of a comparison of policies over p (optimal, the ``extra`` baselines, the static
+    policies, greedy; the gaps to optimal at every cap) and the CSV tables of its exact values and
+    of its Monte Carlo: ``(figure paths, exact table, Monte Carlo table)``."""
+    lines = ([("optimal", "optimal", "optimal")] + [(k, k, k) for k in extra] + _static_lines(exact, fig_cap)
+             + [("greedy", "greedy", "greedy")])
+    gap_names = {**{k: k for k in extra}, "static": f"static ({sta_lab})",
+                 **({"best_static": "best static"} if _best_differs(exact) else {})}
+    figs = _perf_figure(ctx, f"{prefix}_{figure}", title, fig_cap, exact[fig_cap], lines, gaps, gap_names, ps, mc)
+    return figs, ctx.save_table(rows, f"{prefix}_exact_by_cap"), ctx.save_table(mc_recs, f"{prefix}_monte_carlo")
+
+
 def _mass_evidence(ctx: Context, label: str, file: str, cap: int, grid: dict[float, dict], verdict: str) -> dict:
     """The instance (scenario, cap, whole p grid) with the largest mass at the cap over p."""
     k = max(grid, key=lambda q: grid[q]["mass"])
@@ -249,7 +263,7 @@ def claim_c3(ctx: Context) -> ClaimResult:
     gaps, rows = {}, []
     for cap in caps:
         g = exact[cap]
-        opt, sta, best, gre = (_series(g, k) for k in ("optimal", "static", "best_static", "greedy"))
+        opt, best, gre = (_series(g, k) for k in ("optimal", "best_static", "greedy"))
         gs, gs_lo, gs_hi = _gap_interval(g, "static")
         gb, gg = (best - opt) / opt, (gre - opt) / opt
         gaps[cap] = {"static": gs, "best_static": gb}
@@ -273,12 +287,8 @@ def claim_c3(ctx: Context) -> ClaimResult:
     mc_tab, mc_recs, mc_ok = _mc_table(mc, ps, ["optimal", "static", "greedy"], exact[prof.sweep_cap_2p],
                                        prof.sweep_cap_2p, names)
     fig_cap = prof.sweep_cap_2p
-    figs = _perf_figure(ctx, "c3_fig5_performance_p12", "Processes 1, 2 (Fig. 5)", fig_cap, exact[fig_cap],
-                        [("optimal", "optimal", "optimal")] + _static_lines(exact, fig_cap) + [("greedy", "greedy", "greedy")],
-                        gaps, {"static": f"static ({sta_lab})", **({"best_static": "best static"}
-                                                                   if _best_differs(exact) else {})}, ps, mc)
-    tab = ctx.save_table(rows, "c3_fig5_exact_by_cap")
-    mct = ctx.save_table(mc_recs, "c3_fig5_monte_carlo")
+    figs, tab, mct = _comparison_outputs(ctx, "c3_fig5", "performance_p12", "Processes 1, 2 (Fig. 5)", fig_cap, exact,
+                                         gaps, (), sta_lab, ps, mc, rows, mc_recs)
     shown = [
         _subclaim_table(sub, caps),
         Table("Exact average MSE per cap and p; the static policies named by their assignment; gaps relative to the "
@@ -370,14 +380,8 @@ def claim_c6(ctx: Context) -> ClaimResult:
     mc_tab, mc_recs, mc_ok = _mc_table(mc, ps, ["optimal", "suboptimal", "static", "greedy"],
                                        exact[prof.sweep_cap_3p], prof.sweep_cap_3p, names)
     fig_cap = prof.sweep_cap_3p
-    g = exact[fig_cap]
-    figs = _perf_figure(ctx, "c6_fig10_performance_p123", "Processes 1, 2, 3 (Fig. 10)", fig_cap, g,
-                        [("optimal", "optimal", "optimal"), ("suboptimal", "suboptimal", "suboptimal")]
-                        + _static_lines(exact, fig_cap) + [("greedy", "greedy", "greedy")],
-                        gaps, {"suboptimal": "suboptimal", "static": f"static ({sta_lab})",
-                               **({"best_static": "best static"} if _best_differs(exact) else {})}, ps, mc)
-    tab = ctx.save_table(rows, "c6_fig10_exact_by_cap")
-    mct = ctx.save_table(mc_recs, "c6_fig10_monte_carlo")
+    figs, tab, mct = _comparison_outputs(ctx, "c6_fig10", "performance_p123", "Processes 1, 2, 3 (Fig. 10)", fig_cap,
+                                         exact, gaps, ("suboptimal",), sta_lab, ps, mc, rows, mc_recs)
     shown = [
         _subclaim_table(sub, caps),
         Table("Exact average MSE per cap and p (static policies named by their assignment; mass: the optimal "

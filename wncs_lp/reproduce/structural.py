@@ -11,11 +11,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..maps import NEIGHBOURS, action_name, map_names, region_stats, slice_grid
+from ..maps import NEIGHBOURS, action_name, region_stats, slice_grid
 from ..verify import check_consistency, check_monotonicity, check_threshold, policy_context
 from ..verify.verdict import across, combine, structural_verdict, verdict_of
 from ..viz import plot_policy_map, plot_policy_slice, subplots
-from .context import ClaimResult, Context, Solved, Table, cap_basis, evidence
+from .context import ClaimResult, Context, Solved, Table, cap_basis
 
 CONFIGURATION_NOTE = ("Recurrent: the state lies in a closed class of the optimal policy's chain (positive stationary "
                       "probability); at the cap: some AoI equals its cap.")
