@@ -570,8 +570,8 @@ def _c11_summary(rows: list[dict], sub: dict, caps: list[int], grids: dict[int, 
             bumps.append(f"{pct(rs[i]['improvement_rel'], 3)} at p = {rs[i]['p']:g} to "
                          f"{pct(rs[i + 1]['improvement_rel'], 3)} at p = {rs[i + 1]['p']:g} (cap {c})")
     if bumps:
-        text += ("; its improvement does not shrink steadily as p grows at " + ("every cap" if len(bumps) == len(caps)
-                 else f"{len(bumps)} of {len(caps)} caps") + ", beyond the certificates (" + "; ".join(bumps) + ")")
+        text += ("; " + ("at every cap" if len(bumps) == len(caps) else f"at {len(bumps)} of {len(caps)} caps")
+                 + " its improvement also grows somewhere as p grows, beyond the certificates (" + "; ".join(bumps) + ")")
     else:
         text += "; its improvement shrinks as p grows at every cap"
     return text + "."
@@ -644,8 +644,8 @@ def _c12_instance(ctx: Context, file: str, label: str, cap: int) -> dict[str, An
             "destinations_fixed": None if sends is None else destinations_fixed(sends),
             "static_reading": None if sends is None else static_reading(sends, _rel(best_cycle[0], solved.gain)),
             "destinations": None if sends is None else "; ".join(
-                f"{names[k]}: " + ", ".join(f"{sc.servers[m].name} {n}/{per['cycle_length']}" for m, n in sorted(c.items()))
-                for k, c in enumerate(sends) if c),
+                f"process {names[k]} to " + " and ".join(f"{sc.servers[m].name} {n}x" for m, n in sorted(c.items()))
+                for k, c in enumerate(sends) if c) + f" per {per['cycle_length']} slots",
             "evidence": solved}
 
 

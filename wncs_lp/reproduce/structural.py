@@ -59,6 +59,11 @@ def span_words(values: Sequence[float], digits: int = 2) -> str:
     return lo if lo == hi else f"{lo} to {hi}"
 
 
+def _mass_at_most(m: float | None) -> str:
+    """"stationary mass 0" or "stationary mass at most m"."""
+    return "stationary mass 0" if m == 0 else f"stationary mass at most {mass_words(m)}"
+
+
 def mass_words(m: float | None) -> str:
     """A stationary probability for the text: "0" when exactly none, else three significant digits."""
     if m is None:
@@ -472,8 +477,8 @@ def _c5_summary(per_cap: list[dict]) -> str:
             rbc = sum(c["recurrent_below_cap"] for c in counts)
             parts.append(f"in {fig}'s ({what}) in " + " / ".join(str(c["total"]) for c in counts)
                          + " states at caps " + " / ".join(str(cap) for cap, _ in cases)
-                         + f", {rbc or 'none'} of them recurrent and below the cap (stationary mass at most "
-                         f"{mass_words(max(c['stationary_mass'] for c in counts))})")
+                         + f", {rbc or 'none'} of them recurrent and below the cap ("
+                         + _mass_at_most(max(c["stationary_mass"] for c in counts)) + ")")
     return "The free server is also sent the busy process: " + "; ".join(parts) + "."
 
 
@@ -524,10 +529,13 @@ def _counterexample(example: dict | None) -> str:
     if not example:
         return ""
     stat = example.get("stationary")
-    text = ("Counterexample: " + " vs ".join(f"`{lab}`" for lab in example["labels"])
+    info = example.get("info", {})
+    kind = example.get("kind", "") + (f" along the {info['direction']}" if info.get("direction") else "")
+    text = (f"Counterexample ({kind}): " + " vs ".join(f"`{lab}`" for lab in example["labels"])
             + f" (size {example['size']:.4g}, {'recurrent' if example['recurrent'] else 'transient'}, "
             f"{'at' if example['at_cap'] else 'below'} the cap"
-            + (f"; stationary probability of its states {mass_words(sum(stat))}" if stat else "") + ")")
+            + (f"; stationary probability of its states {mass_words(sum(stat))}" if stat else "") + ")"
+            + (f"; that is, {info['meaning']}" if info.get("meaning") else "") + ".")
     traj = example.get("info", {}).get("trajectory")
     if traj:
         text += "\n\nTrajectory:\n\n" + "\n".join(
@@ -582,16 +590,16 @@ def _theorem_summary(rows: list[dict]) -> str:
     fails = [r for r in rows if r["verdict"] == "FAILS"]
     if fails:
         d = min(fails, key=lambda r: (r["cap_mass"], -r["cap"]))
-        others = [name(r) for r in fails if r is not d]
+        others = [f"{name(r)} ({r['recurrent_below_cap']:,})" for r in fails if r is not d]
         return (f"{d['recurrent_below_cap']:,} violation(s) recurrent and below the cap in {name(d)} (of "
                 f"{d['violations']:,} there; stationary mass of their states "
-                f"{mass_words(d['violating_mass_recurrent_below_cap'])}, {pct(d['cap_mass'])} of the time at the cap)"
-                + (f", and in {', '.join(others)}" if others else "")
+                f"{mass_words(d['violating_mass_recurrent_below_cap'])}, {pct(d['cap_mass'], 3)} of the time at the "
+                "cap)" + (f", and in {', '.join(others)}" if others else "")
                 + f"; {total:,} violation(s) in all in {cases}.")
     at_cap = sum(r["at_cap_violations"] for r in rows)
     masses = [r["violating_mass"] for r in rows if r["violations"] and r["violating_mass"] is not None]
     return (f"{total:,} violation(s) in {cases}, none recurrent and below the cap ({at_cap:,} at the cap, the others "
-            f"transient; stationary mass of their states at most {mass_words(max(masses) if masses else None)}).")
+            f"transient; {_mass_at_most(max(masses) if masses else None)} for their states).")
 
 
 def _two_and_three(ctx: Context) -> list[tuple[str, list[str]]]:
@@ -649,7 +657,7 @@ def claim_c10(ctx: Context) -> ClaimResult:
         res.details = (f"At cap {best[2]}, a job started by preempting is itself preempted or cancelled before it "
                        "completes. " + _counterexample(best[3]))
     idle = [r for r in split_json if r["start"] == "idle_server"]
-    res.details += ("\n\nJobs started on an idle server (not the theorem's case): "
+    res.details += ("\n\n" if res.details else "") + ("Jobs started on an idle server (not the theorem's case): "
                     + ", ".join(f"{r['recurrent_below_cap']} recurrent below the cap at cap {r['cap']}" for r in idle)
                     + ".")
     return res
@@ -697,7 +705,7 @@ def claim_c9(ctx: Context) -> ClaimResult:
                            [[m, a, v["cells"], v["components"], v["holes"], v["simply_connected"]]
                             for m, acts in regions.items() for a, v in acts.items()]))
     diag = sum(r[5] for r in rows)
-    res.details += (f"\n\nAlong the diagonal direction e_1 + e_2 (tau_1 - tau_2 = const) the regions are not intervals "
+    res.details += ("\n\n" if res.details else "") + (f"Along the diagonal direction e_1 + e_2 (tau_1 - tau_2 = const) the regions are not intervals "
                     f"in {diag} line(s) in all; a monotone switching curve may do that, so they are described, not "
                     "counted. A line-gap is judged by its witnesses (two states choosing the action around one that "
                     "strictly prefers another): it is at the cap only when every witness touches the cap.")
