@@ -117,3 +117,8 @@ def test_markdown_anchors_and_tables(made_up):
     assert not re.search(r"\bNone\b", md) and "{'" not in md
     assert "Rests on** caps 12, 30; deciding cap 12 (20.00% at the cap)" in md
     assert "*Figure C1.1. a line*" in md
+    # each section: the paper's own sentence, then the conclusion, then what was checked
+    c3 = md[md.index('<a id="c3"></a>'):md.index('<a id="c4"></a>')]
+    assert c3.index("> \"Compared with the greedy baseline policy") < c3.index("**it depends**") < c3.index(
+        "*Checked as:*")
+    assert "it is vastly improved only when the transmission success probability is low" in c3

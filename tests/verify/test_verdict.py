@@ -206,3 +206,104 @@ def test_one_row_reversed_is_one_reversal(pre8):
     assert taus[0][1] == taus[1][1] == 5  # the reversed row's own switch
     assert abs(taus[2][1] - 5) == 1  # against the nearest row of the majority order
     assert rev.size == pytest.approx(10.0)
+
+
+# ============================================================================ witnesses and weights
+def _gap_witnesses(grid, act, tau, cap):
+    """Plain walk over the axis lines: for each (line, action) with a gap, whether some witness
+    (i < g < j, the action at i and j, another at g) has no state with an AoI at the cap."""
+    out = []
+    for axis in (0, 1):
+        for fixed in range(grid.shape[1 - axis]):
+            cells = [grid[(k, fixed) if axis == 0 else (fixed, k)] for k in range(grid.shape[axis])]
+            cells = [int(s) for s in cells if s >= 0]
+            seq = [int(act[s]) for s in cells]
+            for a in sorted(set(seq)):
+                pos = [k for k, x in enumerate(seq) if x == a]
+                if not any(seq[k] != a for k in range(pos[0], pos[-1] + 1)):
+                    continue
+                below = any(seq[g] != a and all(tau[cells[t]].max() < cap for t in (i, g, j))
+                            for i in pos for j in pos for g in range(i + 1, j))
+                out.append(below)
+    return out
+
+
+def test_a_gap_with_a_witness_below_the_cap_is_filed_below_it(pre8):
+    _, mdp, sol = pre8
+    cap = 8
+    # rows tau_2 != 5 keep going, then preempt from tau_1 = 6 (a monotone curve); the row tau_2 = 5
+    # keeps going at tau_1 = 1, 2, preempts at 3, 4 and keeps going again from 5 to the cap: its last
+    # keep-going state is at the cap, but (2, 3, 5) witnesses the gap well below it
+    ctx, c, grid, act = _planted(mdp, sol, lambda t1, t2: (3 <= t1 <= 4) if t2 == 5 else t1 >= 6)
+    ctx = dataclasses.replace(ctx, recurrent=np.ones(mdp.n_states, bool))  # every state observable
+    tau = mdp.states.tau
+    row5 = [int(grid[i, 4]) for i in range(cap) if grid[i, 4] >= 0]
+    assert tau[row5[-1]][0] == cap and act[row5[-1]] == act[row5[0]]  # the old rule's "last state": at the cap
+    rep = check_threshold(mdp, sol, ctx=ctx, configs=[c])
+    below = _gap_witnesses(grid, act, tau, cap)
+    assert len(below) == rep.details["gaps"]["count"] > 0 and rep.details["reversals"]["count"] == 0
+    assert rep.split["recurrent_below_cap"] == sum(below) > 0
+    assert rep.split["recurrent_at_cap"] == len(below) - sum(below)
+    assert rep.verdict == FAILS
+    # the reported witness of the row tau_2 = 5 is the one below the cap, its outer states next to the gap
+    ex = [e for e in rep.examples if all(tau[s][1] == 5 for s in e.states)]
+    assert ex and [tuple(int(x) for x in tau[s]) for s in ex[0].states] == [(2, 5), (3, 5), (5, 5)]
+    assert not ex[0].at_cap
+
+
+def test_the_weight_is_the_stationary_probability_of_the_witness_states(pre8):
+    _, mdp, sol = pre8
+    ctx, c, grid, act = _planted(mdp, sol, lambda t1, t2: (3 <= t1 <= 4) if t2 == 5 else t1 >= 6)
+    n = mdp.n_states
+    law = np.zeros(n)
+    row5 = [int(s) for s in grid[:, 4] if s >= 0]
+    law[row5] = 1.0 / len(row5)  # a made-up law on the row tau_2 = 5 only
+    ctx = dataclasses.replace(ctx, recurrent=np.ones(n, bool), stationary=law)
+    rep = check_threshold(mdp, sol, ctx=ctx, configs=[c])
+    # the witnesses touching the row: its own gap (2, 3, 5), and the gaps across it at tau_1 = 3, 4, 6, 7, 8,
+    # whose middle state lies on the row: 1 + 5 states of the row carry weight, each 1 / len(row5)
+    tau = mdp.states.tau
+    on_row = {(2, 5), (3, 5), (5, 5)} | {(t1, 5) for t1 in (3, 4, 6, 7, 8)}
+    assert rep.weight["mass"] == pytest.approx(len(on_row) / len(row5))
+    assert rep.weight["states"] >= len(on_row)
+    assert rep.to_json()["weight"]["mass"] == pytest.approx(rep.weight["mass"])
+    assert {tuple(int(x) for x in tau[s]) for s in row5} >= on_row  # the whole row is reachable
+
+
+# ============================================================================ the rules of sub-claims
+def test_a_bump_inside_the_certificates_is_not_a_violation():
+    from wncs_lp.verify.verdict import nonincreasing
+
+    gaps = [0.0500, 0.0501, 0.0400]  # a bump of 1e-4 from p_1 to p_2
+    assert not nonincreasing(gaps)  # exact numbers: a bump
+    assert nonincreasing(gaps, lower=[0.0499, 0.0500, 0.0399], upper=[0.0502, 0.0502, 0.0401])  # inside: overlap
+    assert not nonincreasing(gaps, lower=[0.04995, 0.05005, 0.0399], upper=[0.05004, 0.0502, 0.0401])  # beyond
+    assert nonincreasing([0.05, 0.05 + 1e-9])  # round-off of "equal"
+    assert nonincreasing([]) and nonincreasing([0.3])
+
+
+def test_destinations_fixed_but_another_order():
+    from wncs_lp.verify.verdict import (FIXED_DESTINATIONS_ONLY, NOT_STATIC, STATIC_RULE, destinations,
+                                        destinations_fixed, static_reading)
+
+    # processes 1 and 3 alternate on the remote server (0), 2 always to the edge (1): fixed destinations
+    cycle = [(1, 2), (0, 0), (3, 2), (0, 0), (1, 0), (3, 2)]
+    counts = destinations(cycle, 3)
+    assert counts == [{0: 2}, {1: 3}, {0: 2}] and destinations_fixed(counts)
+    assert static_reading(counts, 0.096) == FIXED_DESTINATIONS_ONLY  # every static rule costs 9.6% more
+    assert static_reading(counts, 1e-12) == STATIC_RULE
+    # process 1 goes to the edge once in twelve slots: not static, whatever the costs
+    p14 = [(1, 2)] * 11 + [(2, 1)]
+    counts = destinations(p14, 2)
+    assert counts == [{0: 11, 1: 1}, {1: 11, 0: 1}] and not destinations_fixed(counts)
+    assert static_reading(counts, 0.0) == NOT_STATIC
+
+
+def test_magnitude_and_compound_rules():
+    from wncs_lp.verify.verdict import MUCH, across, subclaims_verdict
+
+    # "vastly improved" read with the bar of "much better": 1.94% at best fails at every cap
+    vast = {cap: gap >= MUCH for cap, gap in ((12, 0.0), (20, 0.0003), (30, 0.0194))}
+    assert subclaims_verdict({"vastly": vast, "equal at p = 1": {12: True, 20: True, 30: True}}) == FAILS
+    assert subclaims_verdict({"vastly": {12: False, 30: True}}) == DEPENDS
+    assert across([HOLDS, FAILS]) == DEPENDS and across([FAILS, FAILS]) == FAILS

@@ -21,6 +21,7 @@ from ..methods import EXACT_METHOD_MAX_STATES, exact_method
 from ..solvers.result import Solution
 from ..solvers.route import solve_scenario
 from ..truncation import CAP_MASS_WARN, CapMass, cap_mass
+from ..verify.verdict import subclaims_verdict  # the compound-claim rule lives with the other verdict rules
 from ..viz import save_figure
 from .cache import StepCache
 
@@ -226,25 +227,6 @@ def cap_basis(entries: Sequence[dict[str, Any]], verdict: str, note: str = "", d
     worst = max(e["mass"] for e in deciding)
     return {**out, "deciding": [e["label"] for e in deciding], "deciding_caps": sorted({e["cap"] for e in deciding}),
             "deciding_mass": worst, "flag": bool(worst > CAP_MASS_WARN)}
-
-
-def subclaims_verdict(results: dict[str, dict[Any, bool | None]]) -> str:
-    """The verdict of a claim made of sub-claims, each checked at several instances (caps).
-
-    HOLDS: every sub-claim holds at every instance; FAILS: some sub-claim fails at every instance
-    where it is checked (it is false whatever the truncation); DEPENDS: otherwise (some sub-claim
-    fails at some instances only). ``None`` marks a sub-claim not checked at an instance.
-    """
-    any_fail, everywhere = False, False
-    for per in results.values():
-        vals = [v for v in per.values() if v is not None]
-        if not vals:
-            continue
-        if not all(vals):
-            any_fail = True
-        if not any(vals):
-            everywhere = True
-    return "FAILS" if everywhere else ("DEPENDS" if any_fail else "HOLDS")
 
 
 def one_verdict(holds: bool | None, fails: bool | None = None) -> str:

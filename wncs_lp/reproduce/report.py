@@ -19,21 +19,68 @@ from typing import Any, Sequence
 
 from ..files import atomic_write_text, json_ready
 from ..truncation import CAP_MASS_WARN
-from ..verify.verdict import RULE
+from ..verify.verdict import CLOSE, MUCH, RULE, SIGNIFICANT
 from .context import ClaimResult, Table
 
-#: The paper's statement of each claim (the specification's claims C1-C13), shown beside the verdict.
+#: The paper's own sentences for each claim (math in plain text), quoted at the head of its section.
+QUOTES = {
+    "C1": ("Sec. V, Fig. 3", "Fig. 3 is the optimal scheduling policy when only process 1 and process 4 in system. It is "
+           "obvious that all the actions are a = (1, 4), which means the status information from process 1 always "
+           "send to remote controller and the status information from process 4 always send to edge server."),
+    "C2": ("Sec. V, Fig. 4", "Fig. 4 is the optimal scheduling policy when only process 1 and process 2 in system. "
+           "Different from Fig. 3, there are different actions in different states, and a* = (2, 1) appears in the "
+           "upper left corner of Fig. 4."),
+    "C3": ("Sec. V, Fig. 5", "Compared with the greedy baseline policy, the performance of optimal policy is greatly "
+           "improved. While for the static policy, it is vastly improved only when the transmission success "
+           "probability is low. [...] When the transmission success probability is 1, these states will not be "
+           "reached at all."),
+    "C4": ("Sec. V, Figs. 6-7", "There are four regions in the graph. It is a threshold policy, which is similar to the "
+           "optimal policy in a two-dimensional case. When the action is given, the set of actions in the optimal "
+           "policy is a simply connected region."),
+    "C5": ("Sec. II and Sec. V, Figs. 8-9", "when the status information of process k is transmitting to the remote "
+           "server, or the remote server is computing the status information of process k, the edge server will serve "
+           "other processes except process k."),
+    "C6": ("Sec. V, Fig. 10", "It can be observed that compared with the greedy baseline policy, the proposed optimal "
+           "policy still has a significant improvement. When the transmission success probability is closer to 1, the "
+           "performance of optimal policy, sub-optimal policy, and static policy tend to be the same. It is also "
+           "observed that the performance of sub-optimal policy is close to optimal policy."),
+    "C7": ("Sec. II, Theorem 1", "For any state s^1 = (tau^1, C_r^1, C_e^1), s^2 = (tau^2, C_r^2, C_e^2), satisfy that "
+           "tau_1^1 >= tau_1^2, tau_2^1 >= tau_2^2, tau_3^1 >= tau_3^2, C_e^2 = C_e^1 and C_r^2 = C_r^1, we have "
+           "V(s^1) >= V(s^2)."),
+    "C8": ("Sec. II, Theorem 2", "For the state s = (tau, C_r, C_e) which satisfies C_r = 0 and C_e = 0 have the "
+           "following type policy: If pi*(s) = (k_1, k_2), then pi*(s') = (k_1, k_2). Where k_1 != k_2 and s' is the "
+           "same with s except tau'_k1 = tau_k1 + z, tau'_k2 = tau_k2 + z. z is any positive integer number."),
+    "C9": ("Sec. V, Figs. 11-12", "Fig. 11 and Fig. 12 are the optimal preemption policy when the remote server "
+           "processes the tasks of process 1 and process 2, respectively. It is a threshold policy, which is the same "
+           "as the theory in Section IV."),
+    "C10": ("Sec. IV, Theorem 3", "Theorem 3 shows that the process status will not be preempted until it is processed "
+            "completely when the server takes the optimal action a*(t) = pi*(s) = i, i = 1, 2 successfully."),
+    "C11": ("Sec. V, Fig. 13", "It can be found that the higher transmission success probability, the more minor "
+            "performance improvement, and the overall performance improvement is not significant. [...] although the "
+            "preemption mechanism will not reduce system performance, it will not significantly improve the system "
+            "performance."),
+    "C12": ("Sec. V, end", "the performance of the optimal policy is the same as that of the static policy when the "
+            "wireless channel is perfect [...]. This is because the optimal policy is the same as static policy when "
+            "the wireless channel is perfect, and the AoI of all processes will change periodically. (Sec. V: \"The "
+            "static policy means that each process will only transmit the status information to the corresponding "
+            "controller and will not transmit it to other controllers.\")"),
+    "C13": ("Sec. III", "So we proposed a suboptimal policy, which sacrifices a small amount of performance in exchange "
+            "for a significant reduction in computational complexity. [...] the proposed suboptimal algorithm is "
+            "superior to other random algorithms."),
+}
+
+#: What each claim is checked as (the specification's claims C1-C13), shown under the conclusion.
 STATEMENTS = {
     "C1": "Processes 1 and 4: the optimal action in idle-server states is always (1 to remote, 4 to edge).",
     "C2": "Processes 1 and 2: mostly (1, 2), with (2, 1) in the upper-left corner (small tau_1, large tau_2).",
     "C3": "Processes 1 and 2, p in [0.8, 1]: optimal better than static and much better than greedy; the gap to "
-          "static larger at low p; optimal equal to static at p = 1.",
+          "static larger at low p, and vast there; optimal equal to static at p = 1.",
     "C4": "Processes 1, 2, 3: on the plane tau_1 + tau_2 + tau_3 = const, the optimal policy has four regions, "
           "each simply connected (threshold type).",
     "C5": "Processes 1, 2, 3: optimal policy of one server while the other is busy (edge busy with process 3 / "
           "remote busy with process 1); the free server serves the other processes.",
     "C6": "Processes 1, 2, 3, p in [0.8, 1]: optimal <= suboptimal <= static <= greedy in average MSE, suboptimal "
-          "close to optimal, all but greedy equal at p = 1.",
+          "close to optimal, all but greedy tending to the same value as p nears 1.",
     "C7": "Theorem 1: the value function is nondecreasing in each tau_k with the server states fixed.",
     "C8": "Theorem 2: in idle-server states, if pi*(s) = (k1, k2) then the same action at s + z(e_k1 + e_k2) "
           "for every z >= 1.",
@@ -42,14 +89,26 @@ STATEMENTS = {
     "C10": "Theorem 3: once the optimal policy starts a job by preempting, it is not preempted again before it "
            "completes.",
     "C11": "Preemption never hurts, and helps less as p grows; overall not significant.",
-    "C12": "With a perfect channel (p = 1) the optimal policy is static and the AoI is periodic.",
+    "C12": "With a perfect channel (p = 1) the optimal policy is static (each process to a fixed server; and equal to "
+           "a static rule) and the AoI is periodic.",
     "C13": "The suboptimal policy costs no more than its base policy and far less to compute.",
 }
 
+
+def quote(cid: str) -> str:
+    """The paper's sentence for a claim, in quotes with where it stands ("" for an unknown claim)."""
+    where, text = QUOTES.get(cid, ("", ""))
+    return f"\"{text}\" ({where})" if text else ""
+
+
 READING = (
-    "How to read a verdict. HOLDS: the claim holds at every cap tried. FAILS: for a structural claim, a violation "
-    "in states the optimal policy visits in the long run and away from the AoI cap (" + RULE + "; the same rule as "
-    "`wncs-lp verify`); for a claim made of sub-claims, one sub-claim false at every cap. DEPENDS: the claim holds "
+    "How to read a section: the paper's own sentence, then the conclusion with the numbers that decide it, then the "
+    "detail. How to read a verdict. HOLDS: the claim holds at every cap tried. FAILS: for a structural claim, a "
+    "violation with a witness in states the optimal policy visits in the long run and away from the AoI cap ("
+    + RULE + "; the same rule as `wncs-lp verify`), given with the stationary probability of its states (its "
+    "weight); for a claim made of sub-claims, one sub-claim false at every cap (the paper's words read with fixed "
+    f"bars: \"much better\" and \"vastly\" {MUCH:.0%} or more, \"close\" within {CLOSE:.0%}, \"not significant\" "
+    f"below {SIGNIFICANT:.0%}; a trend in p broken only beyond the certificates). DEPENDS: the claim holds "
     "only at some caps or p, or fails only in transient states or at the cap. The cap is a truncation of the "
     "paper's unbounded AoI: each verdict names the instances it rests on with the share of the long-run time the "
     f"optimal policy spends with some AoI at the cap, and is flagged (⚠) when its deciding instance has more than "
@@ -177,7 +236,7 @@ def write_report(out: Path, claims: list[ClaimResult], provenance: dict[str, Any
     """Write the report; ``extras`` are the "beyond the paper" sections (no verdict, after the claims)."""
     out = Path(out)
     for c in claims:
-        c.statement = c.statement or STATEMENTS.get(c.id, "")
+        c.statement = c.statement or quote(c.id)
     doc = {"claims": [c.to_dict() for c in claims], "beyond": list(extras), "provenance": provenance}
     atomic_write_text(out / "report.json", json.dumps(json_ready(doc), indent=1))
     atomic_write_text(out / "report.md", _markdown(claims, provenance, list(extras)))
@@ -206,7 +265,9 @@ def _markdown(claims: list[ClaimResult], prov: dict[str, Any], extras: list[dict
     md += [READING, ""]
     for c in claims:
         md += [f'<a id="{_anchor(c.id)}"></a>', "", f"## {c.id} ({c.paper}): {c.verdict}", "",
-               f"> {c.statement}", "", c.summary, ""]
+               f"> {c.statement}", "", f"**{c.summary}**", ""]
+        if STATEMENTS.get(c.id):
+            md += [f"*Checked as:* {STATEMENTS[c.id]}", ""]
         note = basis_note(c.basis)
         if note:
             md += [note, ""]
@@ -393,7 +454,9 @@ def _html_page(claims: list[ClaimResult], prov: dict[str, Any], extras: list[dic
     b.append(f'<p class="reading">{_inline(READING)}</p>')
     for c in claims:
         b.append(f'<section id="{_anchor(c.id)}"><h2>{c.id} ({html.escape(c.paper)}) {_badge(c.verdict)}</h2>')
-        b.append(f"<blockquote>{_inline(c.statement)}</blockquote><p>{_inline(c.summary)}</p>")
+        b.append(f"<blockquote>{_inline(c.statement)}</blockquote><p><b>{_inline(c.summary)}</b></p>")
+        if STATEMENTS.get(c.id):
+            b.append(f"<p><i>Checked as:</i> {_inline(STATEMENTS[c.id])}</p>")
         note = basis_note(c.basis)
         if note:
             cls = "basis flagged" if c.basis.get("flag") else "basis"

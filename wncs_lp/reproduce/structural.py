@@ -11,20 +11,14 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..maps import action_name, map_names, region_stats, slice_grid
+from ..maps import NEIGHBOURS, action_name, region_stats, slice_grid
 from ..verify import check_consistency, check_monotonicity, check_threshold, policy_context
-from ..verify.verdict import combine, structural_verdict, verdict_of
+from ..verify.verdict import across, combine, structural_verdict, verdict_of
 from ..viz import plot_policy_map, plot_policy_slice, subplots
-from .context import ClaimResult, Context, Solved, Table, cap_basis, evidence
+from .context import ClaimResult, Context, Solved, Table, cap_basis
 
 CONFIGURATION_NOTE = ("Recurrent: the state lies in a closed class of the optimal policy's chain (positive stationary "
                       "probability); at the cap: some AoI equals its cap.")
-
-
-def across(verdicts: Sequence[str]) -> str:
-    """A descriptive claim over several instances: the common verdict, or DEPENDS when they differ."""
-    vs = list(verdicts)
-    return vs[0] if vs and all(v == vs[0] for v in vs) else "DEPENDS"
 
 
 def pct(x: float | None, digits: int = 2) -> str:
@@ -42,7 +36,10 @@ def _idle_ids(solved: Solved) -> np.ndarray:
     return grid[grid >= 0]
 
 
-def _split(solved: Solved, states: np.ndarray) -> dict[str, int]:
+def _split(solved: Solved, states: np.ndarray) -> dict[str, Any]:
+    """The states where a map claim fails: how many, recurrent / transient, at the cap, and their
+    stationary probability under the optimal policy (the weight of the counterexample)."""
+    states = np.asarray(states, np.int64)
     rec = solved.recurrent[states]
     caps = np.asarray(solved.mdp.states.caps)
     at_cap = np.any(solved.mdp.states.tau[states] == caps, axis=1)
@@ -52,7 +49,26 @@ def _split(solved: Solved, states: np.ndarray) -> dict[str, int]:
         "transient": int((~rec).sum()),
         "at_cap": int(at_cap.sum()),
         "recurrent_below_cap": int((rec & ~at_cap).sum()),
+        "stationary_mass": float(np.asarray(solved.stationary)[states].sum()),
     }
+
+
+def span_words(values: Sequence[float], digits: int = 2) -> str:
+    """``"a% to b%"``, or one percentage when all are equal at the shown digits."""
+    lo, hi = pct(min(values), digits), pct(max(values), digits)
+    return lo if lo == hi else f"{lo} to {hi}"
+
+
+def _mass_at_most(m: float | None) -> str:
+    """"stationary mass 0" or "stationary mass at most m"."""
+    return "stationary mass 0" if m == 0 else f"stationary mass at most {mass_words(m)}"
+
+
+def mass_words(m: float | None) -> str:
+    """A stationary probability for the text: "0" when exactly none, else three significant digits."""
+    if m is None:
+        return "n/a"
+    return "0" if m == 0 else f"{m:.3g}"
 
 
 def tidy_ticks(ax, cap_x: int, cap_y: int) -> None:
@@ -119,19 +135,27 @@ def claim_c1(ctx: Context) -> ClaimResult:
                            "cap_mass": r["cap_mass"]["total"],
                            **{f"other_{k}": v for k, v in r["other_action_states"].items()}} for r in per_cap],
                          "c1_fig3_counts")
-    shown = [Table("Idle-server states that do not choose (1 to remote, 4 to edge), per cap.",
+    shown = [Table("Idle-server states that do not choose (1 to remote, 4 to edge), per cap, with their stationary "
+                   "probability under the optimal policy.",
                    ["cap", "idle states", "other action", "recurrent", "transient", "at the cap",
-                    "recurrent below the cap", "verdict at this cap", "mass at the cap"],
+                    "recurrent below the cap", "stationary mass", "verdict at this cap", "mass at the cap"],
                    [[r["cap"], r["idle_states"], r["other_action_states"]["total"],
                      r["other_action_states"]["recurrent"], r["other_action_states"]["transient"],
                      r["other_action_states"]["at_cap"], r["other_action_states"]["recurrent_below_cap"],
-                     r["verdict"], pct(r["cap_mass"]["total"])] for r in per_cap])]
-    parts = []
+                     mass_words(r["other_action_states"]["stationary_mass"]), r["verdict"],
+                     pct(r["cap_mass"]["total"])] for r in per_cap])]
+    clean = [r["cap"] for r in per_cap if not r["other_action_states"]["total"]]
+    parts = [f"every idle-server state chooses (1 to remote, 4 to edge) at cap{'s' if len(clean) > 1 else ''} "
+             + ", ".join(map(str, clean))] if clean else []
     for r in per_cap:
         s = r["other_action_states"]
-        parts.append(f"cap {r['cap']}: {s['total']} of {r['idle_states']} idle states choose another action"
-                     + (f" (action {', '.join(r['other_actions'])}; {s['recurrent']} recurrent)" if s["total"] else ""))
-    return ClaimResult("C1", "Fig. 3", "", verdict, "; ".join(parts) + ".", {"per_cap": per_cap}, figs, [tab],
+        if s["total"]:
+            parts.append(f"at cap {r['cap']}, {s['total']} of {r['idle_states']} idle-server states choose "
+                         f"{', '.join(r['other_actions'])}, "
+                         f"{s['recurrent_below_cap'] or 'none'} of them recurrent and below the cap (stationary mass "
+                         f"{mass_words(s['stationary_mass'])}; {pct(r['cap_mass']['total'])} of the time at the cap)")
+    summary = "; ".join(parts) + "."
+    return ClaimResult("C1", "Fig. 3", "", verdict, summary[0].upper() + summary[1:], {"per_cap": per_cap}, figs, [tab],
                        details="Action (1, 2) here means paper process 1 to the remote server and paper process 4 "
                                "(our process 2 of this scenario) to the edge. " + CONFIGURATION_NOTE,
                        basis=cap_basis(ev, verdict), shown=shown,
@@ -167,6 +191,7 @@ def claim_c2(ctx: Context) -> ClaimResult:
             "tau1_range_21": [int(t21[:, 0].min()), int(t21[:, 0].max())] if s21.size else [],
             "tau2_range_21": [int(t21[:, 1].min()), int(t21[:, 1].max())] if s21.size else [],
             "all_upper_left_21": upper_left,
+            "outside_upper_left_21": _split(solved, s21[t21[:, 1] <= t21[:, 0]]),
             "gain": solved.gain,
             "verdict": v,
             "cap_mass": solved.cap_mass.to_dict(),
@@ -182,26 +207,32 @@ def claim_c2(ctx: Context) -> ClaimResult:
 
     tab = ctx.save_table([{"cap": r["cap"], "idle_states": r["idle_states"], "share_12": r["share_12"],
                            "count_21": r["count_21"], "recurrent_21": r["split_21"]["recurrent"],
+                           "stationary_mass_21": r["split_21"]["stationary_mass"],
+                           "outside_upper_left_21": r["outside_upper_left_21"]["total"],
                            "tau1_range_21": rng(r["tau1_range_21"]), "tau2_range_21": rng(r["tau2_range_21"]),
                            "all_upper_left_21": r["all_upper_left_21"], "verdict": r["verdict"],
                            "cap_mass": r["cap_mass"]["total"]} for r in per_cap], "c2_fig4_counts")
-    shown = [Table("The (2 to remote, 1 to edge) region of the idle-server map, per cap.",
+    shown = [Table("The (2 to remote, 1 to edge) region of the idle-server map, per cap: where it lies, how much of "
+                   "it is recurrent, its stationary probability under the optimal policy, and its states outside the "
+                   "upper-left corner (tau_2 <= tau_1).",
                    ["cap", "share of (1,2)", "(2,1) states", "tau_1 range", "tau_2 range", "all tau_2 > tau_1",
-                    "recurrent", "verdict at this cap", "mass at the cap"],
+                    "recurrent", "stationary mass", "outside the corner", "verdict at this cap", "mass at the cap"],
                    [[r["cap"], pct(r["share_12"], 1), r["count_21"], rng(r["tau1_range_21"]), rng(r["tau2_range_21"]),
-                     r["all_upper_left_21"] if r["count_21"] else "n/a", r["split_21"]["recurrent"], r["verdict"],
+                     r["all_upper_left_21"] if r["count_21"] else "n/a", r["split_21"]["recurrent"],
+                     mass_words(r["split_21"]["stationary_mass"]), r["outside_upper_left_21"]["total"], r["verdict"],
                      pct(r["cap_mass"]["total"])] for r in per_cap])]
-    parts = [f"cap {r['cap']}: (1,2) in {r['share_12']:.0%} of idle states, (2,1) in {r['count_21']}"
-             + (f" (tau_1 {rng(r['tau1_range_21'])}, tau_2 {rng(r['tau2_range_21'])}; "
-                f"{r['split_21']['recurrent']} recurrent)" if r["count_21"] else "") for r in per_cap]
-    summary = "; ".join(parts) + "."
-    if verdict == "DEPENDS":
-        summary += (" The upper-left (2,1) corner is a matter of the cap: "
-                    + ", ".join(f"{r['verdict']} at cap {r['cap']}" for r in per_cap) + ".")
+    shares = [r["share_12"] for r in per_cap]
+    parts = [f"no (2,1) state at cap {r['cap']}" if not r["count_21"] else
+             f"(2,1) in {r['count_21']} states at cap {r['cap']} ({'all' if r['all_upper_left_21'] else 'not all'} "
+             f"with tau_2 > tau_1; {r['split_21']['recurrent']} recurrent, stationary mass "
+             f"{mass_words(r['split_21']['stationary_mass'])})" for r in per_cap]
+    summary = (f"Mostly (1,2) ({span_words(shares, 0)} of the idle states); " + "; ".join(parts)
+               + (": the upper-left corner is a matter of the cap." if verdict == "DEPENDS" else "."))
     return ClaimResult("C2", "Fig. 4", "", verdict, summary, {"per_cap": per_cap}, figs, [tab],
                        details="Per cap: HOLDS when (1,2) is the majority and a (2,1) region exists with every state "
                                "above the diagonal (tau_2 > tau_1); FAILS when no (2,1) state exists or (1,2) is not "
-                               "the majority. Across caps: DEPENDS when the caps disagree.",
+                               "the majority. Across caps: DEPENDS when the caps disagree. " + ", ".join(
+                                   f"{r['verdict']} at cap {r['cap']}" for r in per_cap) + ". " + CONFIGURATION_NOTE,
                        basis=cap_basis(ev, verdict), shown=shown,
                        captions={figs[0]: "The optimal action in the idle-server states over (tau_1, tau_2) at the "
                                           "smallest and the largest cap; grey background: transient states."})
@@ -212,33 +243,109 @@ def _planes(prof, cap: int) -> list[int]:
     return [t for t in prof.c4_planes if 3 <= t <= 2.25 * cap]
 
 
+def _c4_slice(solved: Solved, total: int) -> dict[str, Any]:
+    """One plane tau_1 + tau_2 + tau_3 = total of the idle-server policy: its regions, and what keeps
+    it from four simply connected regions (a fifth action; an action in several pieces or with a
+    hole), with the offending cells split recurrent / transient and weighed by the stationary law."""
+    from scipy import ndimage
+
+    sol = solved.as_solution()
+    stats = region_stats(solved.mdp, sol, "idle", total=total, axes=(1, 2, 3), scenario=solved.scenario)
+    A, S, _ = slice_grid(solved.mdp, sol, "idle", total, (1, 2, 3))
+    at_cap = np.zeros(S.shape, bool)
+    ok = S >= 0
+    at_cap[ok] = np.any(solved.mdp.states.tau[S[ok]] == np.asarray(solved.mdp.states.caps), axis=1)
+    regions = {name: {"cells": v["cells"], "components": v["components"], "holes": v["holes"],
+                      "simply_connected": v["simply_connected"],
+                      "cells_at_cap": int(np.count_nonzero((A == v["action"]) & at_cap))}
+               for name, v in stats["per_action"].items()}
+    # offending cells: every action beyond the four largest, and every piece but the largest of an action
+    by_size = sorted(stats["per_action"].values(), key=lambda v: -v["cells"])
+    extra = np.isin(A, [v["action"] for v in by_size[4:]])
+    for v in by_size[:4]:
+        comp, n = ndimage.label(A == v["action"], structure=NEIGHBOURS["tri6"])
+        if n > 1:
+            sizes = np.bincount(comp.ravel())[1:]
+            extra |= (comp > 0) & (comp != 1 + int(np.argmax(sizes)))
+    good = stats["regions_total"] == 4 and all(r["simply_connected"] for r in regions.values())
+    return {"cap": max(solved.scenario.tau_caps), "plane_total": total, "cells": stats["cells"],
+            "unreachable": stats["unreachable"], "actions_present": stats["actions_present"],
+            "regions_total": stats["regions_total"], "fifth_action": stats["actions_present"] > 4,
+            "split_actions": [k for k, v in regions.items() if v["components"] > 1],
+            "holed_actions": [k for k, v in regions.items() if v["holes"] > 0],
+            "offending_cells": _split(solved, S[extra & ok]), "regions": regions,
+            "verdict": "HOLDS" if good else "FAILS", "cap_mass": solved.cap_mass.total}
+
+
 def claim_c4(ctx: Context) -> ClaimResult:
     prof = ctx.profile
     rows, ev, by_cap = [], [], {}
     for cap in prof.caps_3p:
         solved = ctx.solve(ctx.scenario("paper_p123.toml", [f"tau_cap={cap}"]))
         by_cap[cap] = solved
-        sol = solved.as_solution()
         for total in _planes(prof, cap):
-            stats = region_stats(solved.mdp, sol, "idle", total=total, axes=(1, 2, 3), scenario=solved.scenario)
-            A, S, _ = slice_grid(solved.mdp, sol, "idle", total, (1, 2, 3))
-            at_cap = np.zeros(S.shape, bool)
-            ok = S >= 0
-            at_cap[ok] = np.any(solved.mdp.states.tau[S[ok]] == np.asarray(solved.mdp.states.caps), axis=1)
-            regions = {}
-            for name, v in stats["per_action"].items():
-                cells = A == v["action"]
-                regions[name] = {"cells": v["cells"], "components": v["components"], "holes": v["holes"],
-                                 "simply_connected": v["simply_connected"],
-                                 "cells_at_cap": int(np.count_nonzero(cells & at_cap))}
-            good = stats["regions_total"] == 4 and all(r["simply_connected"] for r in regions.values())
-            v = "HOLDS" if good else "FAILS"
-            rows.append({"cap": cap, "plane_total": total, "cells": stats["cells"], "unreachable": stats["unreachable"],
-                         "actions_present": stats["actions_present"], "regions_total": stats["regions_total"],
-                         "regions": regions, "verdict": v, "cap_mass": solved.cap_mass.total})
-            ev.append(solved.evidence(f"processes 1, 2, 3 at cap {cap}, plane {total}", v))
+            rows.append(_c4_slice(solved, total))
+            ev.append(solved.evidence(f"processes 1, 2, 3 at cap {cap}, plane {total}", rows[-1]["verdict"]))
     verdict = across([r["verdict"] for r in rows])
-    # figures: one plane at every cap (cap effect), every plane at the largest cap (plane effect)
+    figs, captions = _c4_figures(ctx, by_cap)
+    tab = ctx.save_table([{"cap": r["cap"], "plane_total": r["plane_total"], "action": name, **v}
+                          for r in rows for name, v in r["regions"].items()], "c4_fig7_regions")
+    shown = [
+        Table("Per cap and plane: the actions present, the number of regions (connected components of one action, "
+              "6-neighbour on the plane), whether each is simply connected, and the offending cells (of an action "
+              "beyond the four largest, or of a piece but the largest of an action) split recurrent / transient with "
+              "their stationary probability.",
+              ["cap", "plane sum", "cells", "actions", "regions", "all simply connected", "offending cells",
+               "recurrent", "transient", "stationary mass", "verdict", "mass at the cap"],
+              [[r["cap"], r["plane_total"], r["cells"], r["actions_present"], r["regions_total"],
+                all(v["simply_connected"] for v in r["regions"].values()), r["offending_cells"]["total"],
+                r["offending_cells"]["recurrent"], r["offending_cells"]["transient"],
+                mass_words(r["offending_cells"]["stationary_mass"]), r["verdict"], pct(r["cap_mass"])]
+               for r in rows]),
+        Table("Each region: cells, components, holes and how many of its cells touch the cap (some tau_k = cap).",
+              ["cap", "plane sum", "action", "cells", "components", "holes", "simply connected", "cells at the cap"],
+              [[r["cap"], r["plane_total"], name, v["cells"], v["components"], v["holes"], v["simply_connected"],
+                v["cells_at_cap"]] for r in rows for name, v in r["regions"].items()]),
+    ]
+    return ClaimResult("C4", "Figs. 6-7", "", verdict, _c4_summary(rows), {"slices": rows}, figs, [tab],
+                       details="Per slice: HOLDS when exactly four regions, each simply connected; across slices: "
+                               "DEPENDS when they disagree. Planes up to 2.25 x cap are used (beyond, most of the "
+                               "plane touches the cap). Slices that fail: " + "; ".join(
+                                   f"plane {r['plane_total']} at cap {r['cap']}: {r['actions_present']} actions, "
+                                   f"{r['regions_total']} regions"
+                                   + (f", in several pieces: {', '.join(r['split_actions'])}" if r["split_actions"] else "")
+                                   + (f", with a hole: {', '.join(r['holed_actions'])}" if r["holed_actions"] else "")
+                                   for r in rows if r["verdict"] != "HOLDS") + ".",
+                       basis=cap_basis(ev, verdict), shown=shown, captions=captions)
+
+
+def _c4_summary(rows: list[dict]) -> str:
+    """One sentence: how many slices show four simply connected regions, and why the others do not."""
+    good = [r for r in rows if r["verdict"] == "HOLDS"]
+    fifth = [f"{r['plane_total']}@{r['cap']}" for r in rows if r["fifth_action"]]
+    pieces = [f"{r['plane_total']}@{r['cap']}" for r in rows
+              if r["verdict"] != "HOLDS" and (r["split_actions"] or r["holed_actions"])]
+    off = [r["offending_cells"] for r in rows if r["verdict"] != "HOLDS"]
+    names = [f"{r['plane_total']}@{r['cap']}" for r in good]
+    text = (f"{len(good)} of {len(rows)} (plane@cap) slices show four simply connected regions"
+            + (f" ({', '.join(names)})" if good else ""))
+    few = [f"{r['plane_total']}@{r['cap']}" for r in rows if r["regions_total"] < 4]
+    if few:
+        text += f"; fewer than four regions on {len(few)} ({', '.join(few)})"
+    if fifth:
+        text += f"; a fifth action appears on {len(fifth)} ({', '.join(fifth)})"
+    if pieces:
+        text += f"; an action's region is not simply connected (several pieces or a hole) on {len(pieces)} ({', '.join(pieces)})"
+    if off:
+        text += (f"; the offending cells are {sum(o['recurrent'] for o in off)} recurrent and "
+                 f"{sum(o['transient'] for o in off)} transient (stationary mass "
+                 f"{mass_words(sum(o['stationary_mass'] for o in off))})")
+    return text + "."
+
+
+def _c4_figures(ctx: Context, by_cap: dict[int, Solved]) -> tuple[list[str], dict[str, str]]:
+    """One plane at every cap (the cap's effect) and every plane at the largest cap (the plane's)."""
+    prof = ctx.profile
     figs: list[str] = []
     captions = {}
     common = [t for t in prof.c4_planes if all(t in _planes(prof, c) for c in prof.caps_3p)]
@@ -274,32 +381,7 @@ def claim_c4(ctx: Context) -> ClaimResult:
     figs += f
     captions[f[0]] = (f"Several planes at the same cap {cap}, so the plane's effect is not confounded with the "
                       "cap's; faded markers: transient states.")
-    tab = ctx.save_table([{"cap": r["cap"], "plane_total": r["plane_total"], "action": name, **v}
-                          for r in rows for name, v in r["regions"].items()], "c4_fig7_regions")
-    shown = [
-        Table("Per cap and plane: the number of regions (connected components of one action, 6-neighbour on the "
-              "plane) and whether each is simply connected.",
-              ["cap", "plane sum", "cells", "actions", "regions", "all simply connected", "cells at the cap",
-               "verdict", "mass at the cap"],
-              [[r["cap"], r["plane_total"], r["cells"], r["actions_present"], r["regions_total"],
-                all(v["simply_connected"] for v in r["regions"].values()),
-                sum(v["cells_at_cap"] for v in r["regions"].values()), r["verdict"], pct(r["cap_mass"])]
-               for r in rows]),
-        Table("Each region: cells, components, holes and how many of its cells touch the cap (some tau_k = cap).",
-              ["cap", "plane sum", "action", "cells", "components", "holes", "simply connected", "cells at the cap"],
-              [[r["cap"], r["plane_total"], name, v["cells"], v["components"], v["holes"], v["simply_connected"],
-                v["cells_at_cap"]] for r in rows for name, v in r["regions"].items()]),
-    ]
-    good = [f"{r['plane_total']}@{r['cap']}" for r in rows if r["verdict"] == "HOLDS"]
-    bad = [f"{r['plane_total']}@{r['cap']} ({r['regions_total']} regions"
-           + ("" if all(v["simply_connected"] for v in r["regions"].values()) else ", not all simply connected") + ")"
-           for r in rows if r["verdict"] != "HOLDS"]
-    summary = (f"{len(good)} of {len(rows)} (plane@cap) slices show four simply connected regions"
-               + (f" ({', '.join(good)})" if good else "") + (f"; the others: {', '.join(bad)}" if bad else "") + ".")
-    return ClaimResult("C4", "Figs. 6-7", "", verdict, summary, {"slices": rows}, figs, [tab],
-                       details="Per slice: HOLDS when exactly four regions, each simply connected; across slices: "
-                               "DEPENDS when they disagree. Planes up to 2.25 x cap are used (beyond, most of the "
-                               "plane touches the cap).", basis=cap_basis(ev, verdict), shown=shown, captions=captions)
+    return figs, captions
 
 
 def claim_c5(ctx: Context) -> ClaimResult:
@@ -335,7 +417,8 @@ def claim_c5(ctx: Context) -> ClaimResult:
                 key = _act(solved, a, c)
                 counts[key] = counts.get(key, 0) + 1
             cfgs[name] = {"reachable": True, "config": c, "states": int(ids.size), "action_counts": counts,
-                          "busy_process_also_sent": split}
+                          "busy_process_also_sent": split,
+                          "verdict": structural_verdict(split["total"] == 0, split["recurrent_below_cap"])}
         v = (combine([structural_verdict(s["total"] == 0, s["recurrent_below_cap"]) for s in splits])
              if splits else "ERROR")
         per_cap.append({"cap": cap, "cases": cfgs, "verdict": v, "cap_mass": solved.cap_mass.total})
@@ -351,31 +434,52 @@ def claim_c5(ctx: Context) -> ClaimResult:
     for r in per_cap:
         for name, v in r["cases"].items():
             if not v.get("reachable"):
-                rows.append([r["cap"], name, "unreachable", "", "", "", "", r["verdict"], pct(r["cap_mass"])])
+                rows.append([r["cap"], name, "unreachable", "", "", "", "", "", "", pct(r["cap_mass"])])
                 continue
             s = v["busy_process_also_sent"]
             rows.append([r["cap"], name, v["states"], s["total"], s["recurrent"], s["at_cap"], s["recurrent_below_cap"],
-                         r["verdict"], pct(r["cap_mass"])])
+                         mass_words(s["stationary_mass"]), v["verdict"], pct(r["cap_mass"])])
     shown = [Table("States of each configuration where the free server is also sent the busy process (the paper: it "
-                   "serves the other processes), per cap.",
+                   "serves the other processes), per cap, with their stationary probability; the verdict of each "
+                   "configuration by the structural rule.",
                    ["cap", "configuration", "states", "busy process also sent", "recurrent", "at the cap",
-                    "recurrent below the cap", "verdict at this cap", "mass at the cap"], rows)]
+                    "recurrent below the cap", "stationary mass", "verdict", "mass at the cap"], rows)]
     actions = [Table(f"The free server's actions at cap {cap} (states per action).", ["configuration", "action", "states"],
                      [[name, a, n] for name, v in cfgs.items() if v.get("reachable")
                       for a, n in sorted(v["action_counts"].items(), key=lambda kv: -kv[1])])]
-    parts = [f"cap {r['cap']}: " + "; ".join(
-        f"{name.split(':')[0]} {v['busy_process_also_sent']['total']} of {v['states']} states "
-        f"({v['busy_process_also_sent']['recurrent']} recurrent)" if v.get("reachable") else f"{name}: unreachable"
-        for name, v in r["cases"].items()) for r in per_cap]
-    return ClaimResult("C5", "Figs. 8-9", "", verdict,
-                       "The free server is also sent the busy process in: " + "; ".join(parts) + ".",
-                       {"per_cap": per_cap}, figs, [],
+    return ClaimResult("C5", "Figs. 8-9", "", verdict, _c5_summary(per_cap), {"per_cap": per_cap}, figs, [],
                        details="The paper's remark (end of Sec. II): while one server holds process k, the other "
                                "serves processes other than k. Counted over every reachable AoI vector of each "
-                               "configuration; the verdict follows the structural rule. " + CONFIGURATION_NOTE,
+                               "configuration; the verdict follows the structural rule. " + "; ".join(
+                                   f"cap {r['cap']}: " + ", ".join(
+                                       f"{name.split(':')[0]} {v['busy_process_also_sent']['total']} of {v['states']} "
+                                       "states" if v.get("reachable") else f"{name.split(':')[0]} unreachable"
+                                       for name, v in r["cases"].items()) for r in per_cap) + ". " + CONFIGURATION_NOTE,
                        basis=cap_basis(ev, verdict), shown=shown + actions,
                        captions={figs[0]: f"The optimal action of the free server over (tau_1, tau_2) at cap {cap}, "
                                           "with tau_3 at its most frequent value."})
+
+
+def _c5_summary(per_cap: list[dict]) -> str:
+    """One sentence per configuration: in how many states (and of what weight) the free server is
+    also sent the busy process, over the caps."""
+    names = list(per_cap[0]["cases"]) if per_cap else []
+    parts = []
+    for name in names:
+        cases = [(r["cap"], r["cases"][name]) for r in per_cap if r["cases"][name].get("reachable")]
+        counts = [v["busy_process_also_sent"] for _, v in cases]
+        fig, what = name.split(": ", 1)
+        if not cases:
+            parts.append(f"{fig}'s configuration ({what}) is never reachable")
+        elif not any(c["total"] for c in counts):
+            parts.append(f"never in {fig}'s configuration ({what}), at any cap")
+        else:
+            rbc = sum(c["recurrent_below_cap"] for c in counts)
+            parts.append(f"in {fig}'s ({what}) in " + " / ".join(str(c["total"]) for c in counts)
+                         + " states at caps " + " / ".join(str(cap) for cap, _ in cases)
+                         + f", {rbc or 'none'} of them recurrent and below the cap ("
+                         + _mass_at_most(max(c["stationary_mass"] for c in counts)) + ")")
+    return "The free server is also sent the busy process: " + "; ".join(parts) + "."
 
 
 # ============================================================================ C7-C10: theorems
@@ -398,6 +502,7 @@ def _check_instances(ctx: Context, cid: str, check, instances: list[tuple[str, l
         reports.append(rep)
         solves.append(solved)
         worst = rep.get("worst") or {}
+        weight = rep.get("weight") or {}
         rows.append({
             "scenario": Path(file).stem,
             "cap": max(sc.tau_caps),
@@ -408,7 +513,9 @@ def _check_instances(ctx: Context, cid: str, check, instances: list[tuple[str, l
             "at_cap_violations": rep["at_cap_violations"],
             "recurrent_below_cap": rep["split"].get("recurrent_below_cap", 0),
             "ties": rep.get("ties", 0),
-            "worst_size": worst.get("size", float("nan")),
+            "worst_size": worst.get("size") if rep["violations"] else None,  # empty, never "nan", without a violation
+            "violating_mass": weight.get("mass"),
+            "violating_mass_recurrent_below_cap": weight.get("mass_recurrent_below_cap"),
             "cap_mass": solved.cap_mass.total,
         })
     return reports, rows, solves
@@ -421,9 +528,14 @@ NAMES = {"paper_p12": "processes 1, 2", "paper_p14": "processes 1, 4", "paper_p1
 def _counterexample(example: dict | None) -> str:
     if not example:
         return ""
-    text = ("Counterexample: " + " vs ".join(f"`{lab}`" for lab in example["labels"])
+    stat = example.get("stationary")
+    info = example.get("info", {})
+    kind = example.get("kind", "") + (f" along the {info['direction']}" if info.get("direction") else "")
+    text = (f"Counterexample ({kind}): " + " vs ".join(f"`{lab}`" for lab in example["labels"])
             + f" (size {example['size']:.4g}, {'recurrent' if example['recurrent'] else 'transient'}, "
-            f"{'at' if example['at_cap'] else 'below'} the cap)")
+            f"{'at' if example['at_cap'] else 'below'} the cap"
+            + (f"; stationary probability of its states {mass_words(sum(stat))}" if stat else "") + ")"
+            + (f"; that is, {info['meaning']}" if info.get("meaning") else "") + ".")
     traj = example.get("info", {}).get("trajectory")
     if traj:
         text += "\n\nTrajectory:\n\n" + "\n".join(
@@ -440,22 +552,16 @@ def _theorem(ctx: Context, cid: str, paper: str, check, instances: list[tuple[st
     ev = [s.evidence(f"{NAMES.get(r['scenario'], r['scenario'])} at cap {r['cap']}", r["verdict"])
           for r, s in zip(rows, solves)]
     tab = ctx.save_table(rows, f"{cid.lower()}_verifier")
-    shown = [Table(f"The check per scenario and cap{unit_note}.",
+    shown = [Table(f"The check per scenario and cap{unit_note}; stationary mass: the stationary probability of the "
+                   "states of the violations' witnesses (all of them / those recurrent and below the cap).",
                    ["scenario", "cap", "checked", "violations", "recurrent", "at the cap", "recurrent below the cap",
-                    "worst size", "verdict", "mass at the cap"],
+                    "worst size", "stationary mass", "verdict", "mass at the cap"],
                    [[NAMES.get(r["scenario"], r["scenario"]), r["cap"], r["checked"], r["violations"],
                      r["recurrent_violations"], r["at_cap_violations"], r["recurrent_below_cap"],
-                     r["worst_size"] if r["violations"] else "", r["verdict"], pct(r["cap_mass"])] for r in rows])]
-    fails = [f"{NAMES.get(r['scenario'], r['scenario'])} at cap {r['cap']} ({r['recurrent_below_cap']})"
-             for r in rows if r["verdict"] == "FAILS"]
-    depends = [f"{NAMES.get(r['scenario'], r['scenario'])} at cap {r['cap']}" for r in rows if r["verdict"] == "DEPENDS"]
-    total = sum(r["violations"] for r in rows)
-    summary = f"{total:,} violation(s) in {sum(r['checked'] for r in rows):,} cases over {len(rows)} instances"
-    if fails:
-        summary += "; recurrent and below the cap in " + ", ".join(fails)
-    if depends:
-        summary += "; only transient or at the cap in " + ", ".join(depends)
-    summary += "."
+                     r["worst_size"] if r["violations"] else "",
+                     f"{mass_words(r['violating_mass'])} / {mass_words(r['violating_mass_recurrent_below_cap'])}"
+                     if r["violations"] else "", r["verdict"], pct(r["cap_mass"])] for r in rows])]
+    summary = _theorem_summary(rows)
     # the counterexample: recurrent and below the cap first, then from the least-truncated instance
     ex = [(not e["recurrent"] or e["at_cap"], r["cap_mass"], k, e) for k, (rep, r) in enumerate(zip(reports, rows))
           for e in rep.get("examples", [])]
@@ -469,6 +575,31 @@ def _theorem(ctx: Context, cid: str, paper: str, check, instances: list[tuple[st
     res = ClaimResult(cid, paper, "", verdict, summary, numbers, [], [tab], details=details,
                       basis=cap_basis(ev, verdict), shown=shown)
     return res, reports, solves
+
+
+def _theorem_summary(rows: list[dict]) -> str:
+    """One sentence: the deciding instance with its counts and the weight of its counterexamples,
+    then the totals."""
+    def name(r: dict) -> str:
+        return f"{NAMES.get(r['scenario'], r['scenario'])} at cap {r['cap']}"
+
+    total = sum(r["violations"] for r in rows)
+    cases = f"{sum(r['checked'] for r in rows):,} cases over {len(rows)} instances"
+    if not total:
+        return f"No violation in {cases}."
+    fails = [r for r in rows if r["verdict"] == "FAILS"]
+    if fails:
+        d = min(fails, key=lambda r: (r["cap_mass"], -r["cap"]))
+        others = [f"{name(r)} ({r['recurrent_below_cap']:,})" for r in fails if r is not d]
+        return (f"{d['recurrent_below_cap']:,} violation(s) recurrent and below the cap in {name(d)} (of "
+                f"{d['violations']:,} there; stationary mass of their states "
+                f"{mass_words(d['violating_mass_recurrent_below_cap'])}, {pct(d['cap_mass'], 3)} of the time at the "
+                "cap)" + (f", and in {', '.join(others)}" if others else "")
+                + f"; {total:,} violation(s) in all in {cases}.")
+    at_cap = sum(r["at_cap_violations"] for r in rows)
+    masses = [r["violating_mass"] for r in rows if r["violations"] and r["violating_mass"] is not None]
+    return (f"{total:,} violation(s) in {cases}, none recurrent and below the cap ({at_cap:,} at the cap, the others "
+            f"transient; {_mass_at_most(max(masses) if masses else None)} for their states).")
 
 
 def _two_and_three(ctx: Context) -> list[tuple[str, list[str]]]:
@@ -526,7 +657,7 @@ def claim_c10(ctx: Context) -> ClaimResult:
         res.details = (f"At cap {best[2]}, a job started by preempting is itself preempted or cancelled before it "
                        "completes. " + _counterexample(best[3]))
     idle = [r for r in split_json if r["start"] == "idle_server"]
-    res.summary += (" Jobs started on an idle server (not the theorem's case): "
+    res.details += ("\n\n" if res.details else "") + ("Jobs started on an idle server (not the theorem's case): "
                     + ", ".join(f"{r['recurrent_below_cap']} recurrent below the cap at cap {r['cap']}" for r in idle)
                     + ".")
     return res
@@ -574,6 +705,8 @@ def claim_c9(ctx: Context) -> ClaimResult:
                            [[m, a, v["cells"], v["components"], v["holes"], v["simply_connected"]]
                             for m, acts in regions.items() for a, v in acts.items()]))
     diag = sum(r[5] for r in rows)
-    res.summary += (f" Along the diagonal direction e_1 + e_2 (tau_1 - tau_2 = const) the regions are not intervals in {diag} "
-                    "line(s) in all; a monotone switching curve may do that, so they are described, not counted.")
+    res.details += ("\n\n" if res.details else "") + (f"Along the diagonal direction e_1 + e_2 (tau_1 - tau_2 = const) the regions are not intervals "
+                    f"in {diag} line(s) in all; a monotone switching curve may do that, so they are described, not "
+                    "counted. A line-gap is judged by its witnesses (two states choosing the action around one that "
+                    "strictly prefers another): it is at the cap only when every witness touches the cap.")
     return res

@@ -93,7 +93,7 @@ def check_consistency(
         ctx, holds=vidx.size == 0, checked=int(np.count_nonzero(in_scope)), violations=int(vidx.size), rec=rec,
         cap=cap, ties=details["tie_nodes"],
         unit="preempting start states" if starts == "preempting" else "start states", worst=worst, examples=ex,
-        details=details, notes=_notes(starts), t0=t0,
+        details=details, notes=_notes(starts), t0=t0, witnesses=st["states"][vidx, None],
     )
 
 

@@ -25,6 +25,7 @@ __all__ = [
     "require_space",
     "idle_configs",
     "make_report",
+    "violation_weight",
 ]
 
 #: Default number of example violations kept in a report.
@@ -272,11 +273,26 @@ def use_context(mdp: MDP, solution: Solution, tolerance: Tolerance | None, stati
     return policy_context(mdp, solution, tolerance, stationary_tol=stationary_tol)
 
 
+def violation_weight(ctx: PolicyContext, witnesses: Sequence[Sequence[int]], rec: np.ndarray,
+                     cap: np.ndarray) -> dict[str, Any]:
+    """The stationary probability of the states of the violations' witnesses (all of them, and
+    those of the violations recurrent and below the cap); masses None without a stationary law."""
+    def mass(sel: list[Sequence[int]]) -> tuple[int, float | None]:
+        states = np.unique(np.concatenate([np.asarray(w, np.int64) for w in sel])) if sel else np.zeros(0, np.int64)
+        return int(states.size), (None if ctx.stationary is None else float(ctx.stationary[states].sum()))
+
+    n_all, m_all = mass(list(witnesses))
+    n_rbc, m_rbc = mass([w for w, r, c in zip(witnesses, rec, cap) if r and not c])
+    return {"states": n_all, "mass": m_all, "states_recurrent_below_cap": n_rbc, "mass_recurrent_below_cap": m_rbc}
+
+
 def make_report(name: str, claim: str, ctx: PolicyContext, *, holds: bool, checked: int, violations: int,
                 rec: np.ndarray, cap: np.ndarray, ties: int, unit: str, worst: Violation | None,
-                examples: Iterable[Violation], details: dict, notes: str, t0: float) -> CheckReport:
+                examples: Iterable[Violation], details: dict, notes: str, t0: float,
+                witnesses: Sequence[Sequence[int]] = ()) -> CheckReport:
     """A :class:`CheckReport` with the tolerance, recurrence rule and model of ``ctx`` (``rec``,
-    ``cap``: per violation; ``t0``: the check's start, from :func:`time.perf_counter`)."""
+    ``cap``, ``witnesses``: per violation, the witness's flags and states; ``t0``: the check's
+    start, from :func:`time.perf_counter`)."""
     return CheckReport(
         name=name,
         claim=claim,
@@ -299,4 +315,5 @@ def make_report(name: str, claim: str, ctx: PolicyContext, *, holds: bool, check
         notes=notes,
         model=ctx.mdp.name,
         seconds=time.perf_counter() - t0,
+        weight=violation_weight(ctx, witnesses, rec, cap),
     )

@@ -12,6 +12,7 @@ import numpy as np
 from ..errors import ModelError
 from .context import PolicyContext
 from .report import Violation
+from .verdict import witness_class
 
 __all__ = ["box_lines", "states_on_lines", "direction_name", "line_structure", "gap_violations", "gap_violation", "theorem2_direction",
            "switching_orders", "order_violations", "order_violation"]
@@ -68,7 +69,10 @@ def line_structure(ctx: PolicyContext, configs: Sequence[int], directions: Seque
 
     Tie-robust: a state x is *compatible* with action a when pi(x) = a or
     ``|Q(x, a) - Q(x, pi(x))| <= tol``. A line has a gap for action a when two states with
-    pi = a enclose a reachable state not compatible with a.
+    pi = a enclose a reachable state not compatible with a. Every such triple is a *witness*
+    of the gap; the one reported is the best by :func:`~wncs_lp.verify.verdict.witness_class`
+    (all three states recurrent and below the cap if there is one, ...), its outer states the
+    nearest ones choosing a on either side of its middle state.
 
     Returns (summary per direction, list of gaps (direction, config, action, first, gap, last,
     size)).
@@ -93,6 +97,7 @@ def line_structure(ctx: PolicyContext, configs: Sequence[int], directions: Seque
                 continue
             L = S.shape[1]
             idx = np.arange(L)[None, :]
+            classes = [valid & m[Ssafe] for m in witness_class(ctx.recurrent, ctx.at_cap)]
             for a in feas:
                 isA = A == a
                 has = isA.any(axis=1)
@@ -103,17 +108,32 @@ def line_structure(ctx: PolicyContext, configs: Sequence[int], directions: Seque
                 qp = np.where(valid, ctx.q_pi[Ssafe], np.nan)
                 incompatible = valid & (A != a) & (np.abs(qa - qp) > ctx.tol)
                 inside = (idx > first[:, None]) & (idx < last[:, None]) & has[:, None]
-                bad = incompatible & inside
-                rows = np.flatnonzero(bad.any(axis=1))
+                rows = np.flatnonzero((incompatible & inside).any(axis=1))
                 if rows.size:
                     lab = str(ctx.action(a))
                     entry["gaps"] += int(rows.size)
                     entry["gap_lines_by_action"][lab] = entry["gap_lines_by_action"].get(lab, 0) + int(rows.size)
                     for r in rows:
-                        j = int(np.argmax(bad[r]))
-                        gaps.append((name, c, int(a), int(S[r, first[r]]), int(S[r, j]), int(S[r, last[r]]),
-                                     float(qa[r, j] - qp[r, j])))
+                        i, g, j = _gap_witness(isA[r], incompatible[r], [x[r] for x in classes])
+                        gaps.append((name, c, int(a), int(S[r, i]), int(S[r, g]), int(S[r, j]),
+                                     float(qa[r, g] - qp[r, g])))
     return summary, gaps
+
+
+def _gap_witness(is_a: np.ndarray, incompatible: np.ndarray, classes: list[np.ndarray]) -> tuple[int, int, int]:
+    """Positions ``(i, g, j)`` on one line, ``i < g < j``, of the best witness of a gap: the first
+    class (state masks along the line) holding two states choosing the action around a state
+    that strictly prefers another; the first such middle state and its nearest such neighbours."""
+    for X in classes:
+        a_ok = is_a & X
+        n_before = np.cumsum(a_ok) - a_ok  # states choosing the action strictly before each position
+        n_after = a_ok.sum() - np.cumsum(a_ok)
+        mid = np.flatnonzero(incompatible & X & (n_before > 0) & (n_after > 0))
+        if mid.size:
+            g = int(mid[0])
+            pos = np.flatnonzero(a_ok)
+            return int(pos[pos < g][-1]), g, int(pos[pos > g][0])
+    raise ModelError("internal error: a line gap without a witness")
 
 
 def gap_violations(ctx: PolicyContext, gaps: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -152,7 +172,9 @@ def switching_orders(ctx: PolicyContext, configs: Sequence[int], directions: Seq
     before, or all after, the states strictly preferring b (interleaved lines are gaps of
     :func:`line_structure`, not counted here). When both orders occur, each line of the minority
     order is a *reversal*, witnessed by its switch pair (the last state of the first action and the
-    first of the second) and the switch pair of the nearest line of the majority order.
+    first of the second) and the switch pair of the nearest line of the majority order; among the
+    witnesses, the best by :func:`~wncs_lp.verify.verdict.witness_class` (all four states
+    recurrent and below the cap if any majority line allows it, ...).
 
     Returns (summary per direction, list of reversals (direction, config, a, b, states, size)),
     ``states`` = (minority a-state, minority b-state, majority a-state, majority b-state) and
@@ -167,8 +189,6 @@ def switching_orders(ctx: PolicyContext, configs: Sequence[int], directions: Seq
         if lines.shape[1] < 2:
             continue
         starts = np.stack(np.unravel_index(lines[:, 0], caps), axis=1)  # the line's position across d
-        L = lines.shape[1]
-        idx = np.arange(L)[None, :]
         for c in configs:
             feas = np.flatnonzero(ctx.offsets[c] >= 0)
             if feas.size < 2:
@@ -176,49 +196,77 @@ def switching_orders(ctx: PolicyContext, configs: Sequence[int], directions: Seq
             S, keep = states_on_lines(space, lines, c, 2)
             if S.shape[0] < 2:
                 continue
-            pos = starts[keep]
-            valid = S >= 0
-            Ssafe = np.maximum(S, 0)
-            A = np.where(valid, ctx.act[Ssafe], -1)
-            Q = {int(a): np.where(valid, ctx.q_of(Ssafe.ravel(), np.full(Ssafe.size, a)).reshape(S.shape), np.nan)
-                 for a in feas}
+            lines_c = _LinesOfConfig(ctx, S, starts[keep], feas)
             for i, a in enumerate(feas):
                 for b in feas[i + 1:]:
-                    a, b = int(a), int(b)
-                    with np.errstate(invalid="ignore"):
-                        sa = valid & (A == a) & (Q[b] - Q[a] > ctx.tol)
-                        sb = valid & (A == b) & (Q[a] - Q[b] > ctx.tol)
-                    both = sa.any(axis=1) & sb.any(axis=1)
-                    if np.count_nonzero(both) < 2:
-                        continue
-                    big = L + 1
-                    fa = np.where(sa, idx, big).min(axis=1)
-                    la = np.where(sa, idx, -1).max(axis=1)
-                    fb = np.where(sb, idx, big).min(axis=1)
-                    lb = np.where(sb, idx, -1).max(axis=1)
-                    ab = both & (la < fb)
-                    ba = both & (lb < fa)
-                    n_ab, n_ba = int(np.count_nonzero(ab)), int(np.count_nonzero(ba))
-                    entry["ordered_line_pairs"] += n_ab + n_ba
-                    if not (n_ab and n_ba):
-                        continue
-                    entry["groups_reversed"] += 1
-                    minority, majority = (ba, ab) if n_ab >= n_ba else (ab, ba)
-                    maj_rows = np.flatnonzero(majority)
-
-                    def switch(r: int) -> tuple[int, int]:  # positions of the (a, b) states at line r's switch
-                        return (int(la[r]), int(fb[r])) if ab[r] else (int(fa[r]), int(lb[r]))
-
-                    for r in np.flatnonzero(minority):
-                        r = int(r)
-                        r2 = int(maj_rows[np.argmin(np.abs(pos[maj_rows] - pos[r]).sum(axis=1))])
-                        ia, ib = switch(r)
-                        ja, jb = switch(r2)
-                        size = float(min(Q[b][r, ia] - Q[a][r, ia], Q[a][r, ib] - Q[b][r, ib]))
-                        out.append((name, int(c), a, b, (int(S[r, ia]), int(S[r, ib]), int(S[r2, ja]), int(S[r2, jb])),
-                                    size))
-                        entry["reversals"] += 1
+                    found, n_ordered = lines_c.reversals(int(a), int(b))
+                    entry["ordered_line_pairs"] += n_ordered
+                    entry["groups_reversed"] += bool(found)
+                    entry["reversals"] += len(found)
+                    out += [(name, int(c), int(a), int(b), states, size) for states, size in found]
     return summary, out
+
+
+class _LinesOfConfig:
+    """The parallel lines of one direction in one configuration: states, actions, Q-values of the
+    feasible actions and the witness classes of :func:`~wncs_lp.verify.verdict.witness_class`."""
+
+    def __init__(self, ctx: PolicyContext, S: np.ndarray, pos: np.ndarray, feas: np.ndarray) -> None:
+        self.S, self.pos, self.tol = S, pos, ctx.tol
+        self.valid = S >= 0
+        Ssafe = np.maximum(S, 0)
+        self.A = np.where(self.valid, ctx.act[Ssafe], -1)
+        self.Q = {int(a): np.where(self.valid, ctx.q_of(Ssafe.ravel(), np.full(Ssafe.size, a)).reshape(S.shape),
+                                   np.nan) for a in feas}
+        self.classes = [self.valid & m[Ssafe] for m in witness_class(ctx.recurrent, ctx.at_cap)]
+
+    def reversals(self, a: int, b: int) -> tuple[list[tuple[tuple[int, ...], float]], int]:
+        """The lines of the minority order of (a, b), each with its best witness (its own switch
+        pair and that of the nearest majority line, both in one witness class) and size; and the
+        number of lines that order the two actions."""
+        Q, L = self.Q, self.S.shape[1]
+        idx = np.arange(L)[None, :]
+        with np.errstate(invalid="ignore"):
+            sa = self.valid & (self.A == a) & (Q[b] - Q[a] > self.tol)
+            sb = self.valid & (self.A == b) & (Q[a] - Q[b] > self.tol)
+        both = sa.any(axis=1) & sb.any(axis=1)
+        if np.count_nonzero(both) < 2:
+            return [], 0
+        fa = np.where(sa, idx, L + 1).min(axis=1)
+        la = np.where(sa, idx, -1).max(axis=1)
+        fb = np.where(sb, idx, L + 1).min(axis=1)
+        lb = np.where(sb, idx, -1).max(axis=1)
+        ab = both & (la < fb)
+        ba = both & (lb < fa)
+        n_ab, n_ba = int(np.count_nonzero(ab)), int(np.count_nonzero(ba))
+        if not (n_ab and n_ba):
+            return [], n_ab + n_ba
+        minority, majority = (ba, ab) if n_ab >= n_ba else (ab, ba)
+        maj_rows = np.flatnonzero(majority)
+
+        def switch(r: int, X: np.ndarray) -> tuple[int, int] | None:
+            """The (a, b) positions of line r's switch among the states of X (None: no such pair)."""
+            pa, pb = np.flatnonzero(sa[r] & X[r]), np.flatnonzero(sb[r] & X[r])
+            if not (pa.size and pb.size):
+                return None
+            return (int(pa[-1]), int(pb[0])) if ab[r] else (int(pa[0]), int(pb[-1]))
+
+        found = []
+        for r in np.flatnonzero(minority):
+            r = int(r)
+            for X in self.classes:
+                mine = switch(r, X)
+                others = [(int(r2), switch(int(r2), X)) for r2 in maj_rows]
+                others = [(r2, sw) for r2, sw in others if sw is not None]
+                if mine is None or not others:
+                    continue
+                r2, (ja, jb) = min(others, key=lambda t: int(np.abs(self.pos[t[0]] - self.pos[r]).sum()))
+                ia, ib = mine
+                size = float(min(Q[b][r, ia] - Q[a][r, ia], Q[a][r, ib] - Q[b][r, ib]))
+                S = self.S
+                found.append(((int(S[r, ia]), int(S[r, ib]), int(S[r2, ja]), int(S[r2, jb])), size))
+                break
+        return found, n_ab + n_ba
 
 
 def order_violations(ctx: PolicyContext, reversals: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -93,7 +93,7 @@ def check_monotonicity(
         "monotonicity", "Theorem 1 (C7): V nondecreasing in each tau_k, configuration fixed", ctx,
         holds=(size.size == 0 and dom["violating_states"] == 0), checked=pairs["checked"], violations=size.size,
         rec=rec, cap=cap, ties=0, unit="adjacent comparable pairs", worst=worst, examples=ex, details=details,
-        notes=notes, t0=t0,
+        notes=notes, t0=t0, witnesses=np.stack([s1, s2], axis=1),
     )
 
 

@@ -129,6 +129,11 @@ class CheckReport:
     notes : str
     model : str
     seconds : float
+    weight : dict
+        The stationary probability, under the solution's policy, of the states of the violations'
+        witnesses (``mass``, over ``states`` distinct states) and of those of the violations
+        counted recurrent and below the cap (``mass_recurrent_below_cap``): the weight of the
+        counterexamples. None when the stationary law is not known.
     """
 
     name: str
@@ -152,6 +157,7 @@ class CheckReport:
     notes: str
     model: str
     seconds: float
+    weight: dict = field(default_factory=dict)
 
     @property
     def verdict(self) -> str:
@@ -184,11 +190,14 @@ class CheckReport:
             "notes": self.notes,
             "model": self.model,
             "seconds": float(self.seconds),
+            "weight": json_ready(self.weight),
         }
 
     def summary(self) -> str:
         """One line: verdict and counts."""
         w = "" if self.worst is None else f", worst {self.worst.size:.4g}"
+        if self.weight.get("mass") is not None and self.violations:
+            w += f", stationary mass {self.weight['mass']:.3g}"
         return (
             f"{self.name}: {self.verdict} -- {self.violations} violation(s) in {self.checked} {self.unit} "
             f"({self.recurrent_violations} recurrent, {self.at_cap_violations} at cap, {self.ties} ties{w}; "

@@ -168,7 +168,8 @@ def _switching_curve(ctx: PolicyContext, model, cfg_ids: list[int], axes_d: list
     return make_report("threshold", "C9 (Figs. 11-12): preemption policy of threshold (switching-curve) type", ctx,
                        holds=(len(gaps) + len(revs) == 0), checked=checked, violations=len(gaps) + len(revs),
                        rec=rec, cap=cap, ties=0, unit="(line, action) pairs and ordered (line, action pair)s",
-                       worst=worst, examples=ex, details=details, notes=notes, t0=t0)
+                       worst=worst, examples=ex, details=details, notes=notes, t0=t0,
+                       witnesses=[g[3:6] for g in gaps] + [r[4] for r in revs])
 
 
 def _rays(ctx: PolicyContext, cfg_ids: list[int], directions: list[tuple[int, ...]], examples: int,
@@ -217,6 +218,7 @@ def _rays(ctx: PolicyContext, cfg_ids: list[int], directions: list[tuple[int, ..
         "threshold", "Theorem 2 (C8): pi(s) = (k1, k2) => pi(s + z(e_k1 + e_k2)) = (k1, k2) in idle states",
         ctx, holds=(R.shape[0] == 0), checked=found["checked"], violations=R.shape[0], rec=rec, cap=cap,
         ties=found["ties"], unit="(state, z) pairs", worst=worst, examples=ex, details=details, notes=notes, t0=t0,
+        witnesses=R[:, :2],
     )
 
 
