@@ -38,7 +38,8 @@ from __future__ import annotations
 
 from ..models.system import OutcomeTables, System
 from ..policy_forms import pairs_to_sigma, policy_array, sigma_to_pairs
-from .base import Configuration, FunctionPolicy, Policy, TablePolicy, as_policy, as_rng, system_of
+from .base import Configuration, FunctionPolicy, Policy, TablePolicy, as_rng, system_of
+from .convert import as_policy
 from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
