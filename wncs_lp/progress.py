@@ -16,7 +16,7 @@ import sys
 import time
 from typing import Any, TextIO
 
-__all__ = ["Progress", "as_progress", "wanted"]
+__all__ = ["Progress", "as_progress", "wanted", "eta", "duration"]
 
 
 def _isatty(stream: Any) -> bool:
@@ -32,6 +32,25 @@ def wanted(flag: bool | None, json: bool = False, stream: Any = None) -> bool:
     if flag is not None:
         return bool(flag)
     return not json and _isatty(sys.stderr if stream is None else stream)
+
+
+def duration(seconds: float) -> str:
+    """``"42 s"``, ``"3 min 20 s"``, ``"2 h 05 min"``: a duration as a person reads it."""
+    s = max(0, int(round(seconds)))
+    if s < 60:
+        return f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60:02d} s"
+    return f"{s // 3600} h {(s % 3600) // 60:02d} min"
+
+
+def eta(done: int, total: int, elapsed: float) -> str:
+    """``"3/40, 12 s elapsed, ETA 2 min 28 s"``: how far a job of ``total`` equal steps is, and
+    the time left if the remaining steps take as long as the average of the ``done`` ones."""
+    text = f"{done}/{total}, {duration(elapsed)} elapsed"
+    if 0 < done < total:
+        text += f", ETA {duration(elapsed * (total - done) / done)}"
+    return text
 
 
 class Progress:

@@ -6,7 +6,7 @@ import time
 
 from ..methods import DEFAULT_METHOD, METHOD_HELP
 from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_threads_arg, emit_json, head,
-                     load, output_file, progress_for, write_after_work)
+                     load, output_file, progress_for, solution_json, write_after_work)
 
 
 def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
@@ -16,7 +16,8 @@ def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
     if args.out is not None:  # one byte a state: wncs_lp.solvers.matrix_free.load_solution reads it back
         progress_for(args).phase(f"writing the policy to {args.out}")
         _, failed = write_after_work(lambda: sol.save(args.out), args.out)
-    payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)), **sol.summary(),
+    payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)),
+               **solution_json(sol),
                "matrix_free_reason": run.route, "seconds": time.perf_counter() - t0}
     if args.json:
         emit_json(payload)
@@ -100,7 +101,8 @@ def _save(args: argparse.Namespace, scenario, mdp, sol, prog):
 
 def _payload(args: argparse.Namespace, scenario, mdp, sol, cap, t0: float, t_build: float, **extra) -> dict:
     """The JSON of a solve: the head, the solution's summary, the mass at the cap, the timings."""
-    return {**head(args, scenario, mdp), "nnz": int(mdp.P.nnz), **sol.summary(), **extra, "cap_mass": cap.to_dict(),
+    return {**head(args, scenario, mdp), "nnz": int(mdp.P.nnz), **solution_json(sol), **extra,
+            "cap_mass": cap.to_dict(),
             "build_seconds": t_build, "solve_seconds": sol.seconds, "seconds": time.perf_counter() - t0}
 
 

@@ -39,7 +39,7 @@ from __future__ import annotations
 from ..models.system import OutcomeTables, System
 from ..policy_forms import pairs_to_sigma, policy_array, sigma_to_pairs
 from .base import Configuration, FunctionPolicy, Policy, TablePolicy, as_rng, system_of
-from .convert import as_policy
+from .convert import as_policy, policy_from_file
 from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
@@ -63,6 +63,7 @@ __all__ = [
     "Policy",
     "as_rng",
     "as_policy",
+    "policy_from_file",
     "system_of",
     "Configuration",
     "FunctionPolicy",

@@ -14,7 +14,7 @@ from .base import Policy, TablePolicy, system_of
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
 
-__all__ = ["as_policy"]
+__all__ = ["as_policy", "policy_from_file"]
 
 
 def as_policy(policy: Any = None, mdp: MDP | None = None, *, sigma: Any = None, system: System | None = None,
@@ -61,3 +61,38 @@ def as_policy(policy: Any = None, mdp: MDP | None = None, *, sigma: Any = None, 
     if name is None:
         name = "sigma" if sigma is not None else ("optimal" if hasattr(policy, "gain_lower") else "pairs")
     return TablePolicy(system, mdp, arr, name=name)
+
+
+def policy_from_file(path: Any, mdp: MDP, *, name: str | None = None) -> Policy:
+    """The policy saved in a ``.npz`` file (``wncs-lp solve --out``, :func:`wncs_lp.export.save_policy_npz`),
+    on the MDP it was saved for.
+
+    Parameters
+    ----------
+    path : file name
+    mdp : MDP
+        The MDP of the scenario the policy was solved on (its pairs and fingerprint must match).
+    name : str, optional
+        Default: the file's stem.
+
+    Returns
+    -------
+    Policy
+        A deterministic :class:`TablePolicy` when every state has one pair of probability 1,
+        else a :class:`MixedPolicy`.
+
+    Raises
+    ------
+    ExportError
+        Not such a file, or a policy of another MDP (the message says which).
+    """
+    from pathlib import Path
+
+    from ..export import load_policy_npz  # export reads policies.mixed: imported on use
+
+    probs = load_policy_npz(path, mdp)
+    name = name or Path(path).stem
+    pairs = np.flatnonzero(probs == 1.0)
+    if pairs.size == mdp.n_states and np.array_equal(np.asarray(mdp.s_indices)[pairs], np.arange(mdp.n_states)):
+        return TablePolicy(system_of(mdp), mdp, pairs, name=name)
+    return MixedPolicy(system_of(mdp), mdp, probs, name=name)
