@@ -35,10 +35,11 @@ JSON_SCHEMA_VERSION = 2
 def emit_json(payload: dict) -> None:
     """Print one JSON object on stdout (strict JSON: NaN/inf written as null, see :func:`wncs_lp.files.dumps`),
     starting with ``schema_version`` (:data:`JSON_SCHEMA_VERSION`) and the toolkit's ``version``."""
-    from .. import __version__
+    import wncs_lp
+
     from ..files import dumps
 
-    print(dumps({"schema_version": JSON_SCHEMA_VERSION, "version": __version__, **payload}, indent=2))
+    print(dumps({"schema_version": JSON_SCHEMA_VERSION, "version": wncs_lp.__version__, **payload}, indent=2))
 
 
 def solution_json(sol) -> dict:
