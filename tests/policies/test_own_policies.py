@@ -186,3 +186,25 @@ def test_an_unknown_label_names_the_state_and_the_allowed_labels(p12):
         Policy.from_function(system, lambda tau, conf: "remote").on_mdp(mdp)
     with pytest.raises(PolicyError, match="needs a function"):
         Policy.from_function(system, 3)
+
+
+# ----------------------------------------------------------------------------- a saved policy
+def test_a_saved_policy_reads_back_in_its_form(p12, tmp_path):
+    from wncs_lp.export import ExportError, save_policy_npz
+    from wncs_lp.policies import MixedPolicy, TablePolicy, policy_from_file
+
+    sc, _, mdp, sol = p12
+    det = policy_from_file(save_policy_npz(tmp_path / "det.npz", mdp, sol.policy, scenario=sc), mdp)
+    assert isinstance(det, TablePolicy) and det.name == "det"
+    np.testing.assert_array_equal(det.on_mdp(mdp), sol.policy)
+    # a half-half mix of the optimal and the first action of every state: its exact gain is that of
+    # the same probabilities evaluated directly
+    probs = np.zeros(mdp.n_pairs)
+    probs[sol.policy] += 0.5
+    probs[mdp.pair_ptr[:-1]] += 0.5
+    mixed = policy_from_file(save_policy_npz(tmp_path / "mix.npz", mdp, probs, scenario=sc), mdp)
+    assert isinstance(mixed, MixedPolicy)
+    assert evaluate(mdp, mixed).gain == pytest.approx(evaluate(mdp, probs, System.from_scenario(sc)).gain, rel=1e-12)
+    other = build(load_scenario(scenario_path("paper_p12"), ["tau_cap=8"]))
+    with pytest.raises(ExportError, match="are not those of"):
+        policy_from_file(tmp_path / "det.npz", other)
