@@ -49,6 +49,16 @@ def test_validate_gives_the_size_without_solving(capsys, reference):
     assert code == 0 and f"{est['states']:,} states" in out and "a solve would build it" in out
 
 
+def test_solve_dry_run_is_validate(capsys, monkeypatch):
+    import wncs_lp.solvers.route as route
+
+    monkeypatch.setattr(route, "solve_scenario", lambda *a, **k: pytest.fail("a dry run solved"))
+    code, out, _ = run(capsys, "solve", "paper_p12", *CAP, "--dry-run", "--json")
+    d = json.loads(out)
+    assert code == 0 and d["valid"] is True and "gain" not in d
+    assert d["estimate"] == json.loads(run(capsys, "validate", "paper_p12", *CAP, "--json")[1])["estimate"]
+
+
 def test_validate_names_the_bad_field(capsys):
     code, out, err = run(capsys, "validate", "paper_p12", "--set", "p=2")
     assert code == 2 and "channel.success_probability" in err and "expected a probability" in err

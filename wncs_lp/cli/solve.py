@@ -42,6 +42,11 @@ def _write_failed(message: str | None) -> int:
 def cmd_solve(args: argparse.Namespace) -> int:
     from ..solvers.route import solve_scenario
 
+    if args.dry_run:  # what wncs-lp validate says: the checks and the size, nothing built
+        from .validate import cmd_validate
+
+        args.list = False
+        return cmd_validate(args)
     if args.out is not None:
         output_file(args.out, "--out")  # before any work: its folder must exist
     scenario = load(args)
@@ -155,6 +160,9 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
         "[[constraint]] tables: auto, lp, lp-cvxpy or lagrangian (one bound: multiplier search with certified "
         "value iteration)",
     )
+    p.add_argument("--dry-run", action="store_true",
+                   help="check the scenario and print the size of its MDP and the memory a solve needs, as wncs-lp "
+                        "validate does; build and solve nothing")
     p.add_argument("--ignore-constraints", action="store_true",
                    help="solve the unconstrained problem even if the scenario has [[constraint]] tables")
     p.add_argument("--out", default=None, metavar="FILE.npz",
