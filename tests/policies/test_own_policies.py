@@ -208,3 +208,14 @@ def test_a_saved_policy_reads_back_in_its_form(p12, tmp_path):
     other = build(load_scenario(scenario_path("paper_p12"), ["tau_cap=8"]))
     with pytest.raises(ExportError, match="are not those of"):
         policy_from_file(tmp_path / "det.npz", other)
+
+
+def test_a_function_policy_on_the_preemption_model():
+    # the preemption model's labels have one entry; the last allowed label of every state is its
+    # last pair (the labels are listed in the MDP's action order)
+    sc = load_scenario(scenario_path("paper_preemption_p12"), ["tau_cap=7"])
+    mdp = build(sc)
+    pol = Policy.from_function(sc, lambda tau, conf: conf.actions[-1])
+    np.testing.assert_array_equal(pol.on_mdp(mdp), mdp.pair_ptr[1:] - 1)
+    one = Policy.from_function(sc, lambda tau, conf: conf.actions[0][0])  # a bare int is a one-entry label
+    np.testing.assert_array_equal(one.on_mdp(mdp), mdp.pair_ptr[:-1])
