@@ -12,7 +12,7 @@ import pytest
 import wncs_lp
 from wncs_lp.cli import main
 from wncs_lp.models import build
-from wncs_lp.progress import duration, eta
+from wncs_lp.progress import convergence_eta, duration, eta
 from wncs_lp.scenario import load_scenario
 from wncs_lp.solvers import solve
 
@@ -161,3 +161,26 @@ def test_eta_by_hand():
     assert eta(1, 4, 10.0) == "1/4, 10 s elapsed, ETA 30 s"
     assert eta(0, 4, 0.0) == "0/4, 0 s elapsed" and eta(4, 4, 50.0) == "4/4, 50 s elapsed"
     assert duration(200) == "3 min 20 s" and duration(7500) == "2 h 05 min"
+
+
+def test_convergence_eta_by_hand():
+    # a gap halving every second from 1e-2: at t = 10 it is 1e-2 / 1024; to reach 1e-9 it needs
+    # log2(1e-2 / 1024 / 1e-9) = 13.25 more seconds
+    points = [(float(t), 1e-2 * 0.5**t) for t in range(11)]
+    assert convergence_eta(points, 1e-9) == ", ETA 13 s"
+    assert convergence_eta(points[:1], 1e-9) == ""  # one point: no rate
+    assert convergence_eta([(0.0, 1e-3), (1.0, 2e-3)], 1e-9) == ""  # not shrinking
+    assert convergence_eta(points, 1.0) == ""  # already there
+
+
+def test_value_iteration_progress_lines_carry_an_eta():
+    import io
+
+    from wncs_lp.progress import Progress
+    from wncs_lp.solvers.dp import value_iteration
+
+    mdp = build(load_scenario(wncs_lp.scenario_path("paper_p12"), ["tau_cap=10"]))
+    buf = io.StringIO()
+    value_iteration(mdp, progress=Progress(True, stream=buf, every=0.0), tol=1e-12)
+    lines = [x for x in buf.getvalue().splitlines() if "<= g* <=" in x]
+    assert len(lines) >= 3 and any("ETA" in x for x in lines)
