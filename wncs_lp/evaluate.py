@@ -178,11 +178,16 @@ def _policy_array(mdp: MDP, policy: Any, system: System | None, name: str | None
     if hasattr(policy, "on_mdp") and hasattr(policy, "system") and sigma is None:
         arr = policy.on_mdp(mdp)
         arr = arr if isinstance(arr, np.ndarray) else policy_array(mdp, arr)
-        return arr, system or policy.system, name or policy.name
+        return arr, system or policy.system, name or _name_of(policy) or "array"
     system = system if system is not None else _system_of(mdp)
     system.check_mdp(mdp)
-    default = "sigma" if sigma is not None else getattr(policy, "name", None) or getattr(policy, "method", None)
+    default = "sigma" if sigma is not None else _name_of(policy)
     return policy_array(mdp, policy, sigma), system, name or default or "array"
+
+
+def _name_of(policy: Any) -> str | None:
+    """A policy's name, or the method of a solution (which has no name)."""
+    return getattr(policy, "name", None) or getattr(policy, "method", None)
 
 
 def _system_of(mdp: MDP) -> System:

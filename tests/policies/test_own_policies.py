@@ -219,3 +219,19 @@ def test_a_function_policy_on_the_preemption_model():
     np.testing.assert_array_equal(pol.on_mdp(mdp), mdp.pair_ptr[1:] - 1)
     one = Policy.from_function(sc, lambda tau, conf: conf.actions[0][0])  # a bare int is a one-entry label
     np.testing.assert_array_equal(one.on_mdp(mdp), mdp.pair_ptr[:-1])
+
+
+def test_a_matrix_free_solution_is_a_policy_too(p12):
+    import wncs_lp
+
+    sc, _, mdp, sol = p12
+    mf = wncs_lp.solve(sc, "matrix-free")
+    ev = evaluate(mdp, mf)
+    # the exact gain of the matrix-free policy on the enumerated MDP lies in both certificates
+    assert ev.policy == "matrix-free" and within(mf, ev.gain) and within(sol, ev.gain)
+    run = simulate(mf, slots=3000, reps=8, seed=2, burn_in=300, progress=False)
+    assert abs(run.mean - ev.gain) <= 4 * run.stderr
+
+
+def within(sol, g: float) -> bool:
+    return sol.gain_lower - 1e-9 * sol.gain <= g <= sol.gain_upper + 1e-9 * sol.gain
