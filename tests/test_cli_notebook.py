@@ -84,6 +84,28 @@ def test_an_unknown_name_still_says_cannot_be_read(capsys):
     assert code == 2 and "cannot be read" in err
 
 
+# ----------------------------------------------------------------------------- --discount
+def test_solve_discount(capsys, reference):
+    _, sol = reference
+    beta = 0.9
+    d = {m: json.loads(run(capsys, "solve", "paper_p12", *CAP, "--discount", str(beta), "--method", m, "--json")[1])
+         for m in ("pi", "lp")}
+    assert all(x["status"] == "optimal" and x["criterion"] == "discounted" for x in d.values())
+    assert d["lp"]["value_initial"] == pytest.approx(d["pi"]["value_initial"], rel=1e-9)  # two methods
+    # for every beta, (1 - beta) min v* <= g* <= (1 - beta) max v*: pi* v* <= g* / (1 - beta) from
+    # v* <= c_{d*} + beta P_{d*} v*, and g* <= g of the discounted-optimal policy = (1 - beta) pi v
+    assert (1 - beta) * d["pi"]["value_min"] <= sol.gain <= (1 - beta) * d["pi"]["value_max"]
+
+
+def test_solve_discount_refuses_what_it_cannot_do(capsys):
+    code, _, err = run(capsys, "solve", "paper_p12", "--discount", "1")
+    assert code == 2 and "beta must be in [0, 1)" in err
+    code, _, err = run(capsys, "solve", "paper_p12", "--discount", "0.9", "--method", "matrix-free")
+    assert code == 2 and "--discount solves with" in err
+    code, _, err = run(capsys, "solve", "paper_p12_cloud_budget", "--discount", "0.9")
+    assert code == 2 and "--ignore-constraints" in err
+
+
 # ----------------------------------------------------------------------------- --json layout
 def test_json_has_a_schema_version_and_nested_stats(capsys):
     code, out, _ = run(capsys, "solve", "paper_p12", *CAP, "--method", "vi", "--json")

@@ -47,6 +47,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
         args.list = False
         return cmd_validate(args)
+    if args.discount is not None:
+        return _discounted(args)
     if args.out is not None:
         output_file(args.out, "--out")  # before any work: its folder must exist
     scenario = load(args)
@@ -87,6 +89,45 @@ def _unconstrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> 
     if "out" in extra:
         print(f"policy and bias written to {extra['out']} (format: see wncs_lp.export)")
     return _write_failed(failed) or (0 if sol.ok else 1)
+
+
+#: The discounted method of each --method (the average-cost vocabulary, read for --discount).
+_DISCOUNTED = {"auto": "pi", "pi": "pi", "vi": "vi", "rvi": "vi", "lp": "lp", "lp-highs": "lp", "lp-cvxpy": "lp"}
+
+
+def _discounted(args: argparse.Namespace) -> int:
+    """``--discount BETA``: the discounted problem, certified (:mod:`wncs_lp.solvers.discounted`)."""
+    from ..errors import WncsError
+    from ..export import initial_state
+    from ..solvers.discounted import solve_discounted
+    from ..solvers.route import build_scenario
+
+    if args.method not in _DISCOUNTED:
+        raise WncsError(f"--discount solves with {', '.join(sorted(set(_DISCOUNTED.values())))} (--method "
+                        f"{', '.join(_DISCOUNTED)}); got --method {args.method}")
+    scenario = load(args)
+    if scenario.constraints and not args.ignore_constraints:
+        raise WncsError(f"{scenario.source}: --discount solves the unconstrained problem, and this scenario has "
+                        "[[constraint]] tables; add --ignore-constraints to solve it without them")
+    t0 = time.perf_counter()
+    mdp, t_build = build_scenario(scenario, force=args.force, progress=progress_for(args))
+    d = solve_discounted(mdp, args.discount, _DISCOUNTED[args.method])
+    s0 = initial_state(mdp)
+    payload = {**head(args, scenario, mdp), "criterion": "discounted", "beta": d.beta, "method": d.method,
+               "status": d.status, "gap": d.gap, "initial_state": mdp.state_label(s0),
+               "value_initial": float(d.value[s0]), "lower_initial": float(d.lower[s0]),
+               "value_min": float(d.value.min()), "value_max": float(d.value.max()), "iterations": d.iterations,
+               "build_seconds": t_build, "seconds": time.perf_counter() - t0}
+    if args.json:
+        emit_json(payload)
+    else:
+        _header(scenario, mdp, t_build)
+        print(f"discounted (beta = {d.beta:g}) by {d.method}: status {d.status}, {d.iterations} iterations")
+        print(f"value from the initial state {payload['initial_state']}: {d.value[s0]:.10g} "
+              f"(certified: {d.lower[s0]:.10g} <= v*, gap in any state {d.gap:.2e})")
+        print(f"(1 - beta) v over the states: {(1 - d.beta) * d.value.min():.8g} .. {(1 - d.beta) * d.value.max():.8g} "
+              "(-> the average cost g* as beta -> 1)")
+    return 0 if d.status == "optimal" else 1
 
 
 def _print_auto(st: dict) -> None:
@@ -163,6 +204,10 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dry-run", action="store_true",
                    help="check the scenario and print the size of its MDP and the memory a solve needs, as wncs-lp "
                         "validate does; build and solve nothing")
+    p.add_argument("--discount", type=float, default=None, metavar="BETA",
+                   help="solve the discounted problem with this discount factor in [0, 1) instead of the average "
+                        "cost (--method auto/pi: policy iteration, vi/rvi: value iteration, lp/lp-highs: the LP on "
+                        "HiGHS; certified by MacQueen's bounds)")
     p.add_argument("--ignore-constraints", action="store_true",
                    help="solve the unconstrained problem even if the scenario has [[constraint]] tables")
     p.add_argument("--out", default=None, metavar="FILE.npz",
