@@ -28,12 +28,20 @@ Policies (``make_policy`` builds them by name):
 ``relaxation``   the greedy policy of the certified lower bound (:mod:`wncs_lp.bounds`), a
                  :class:`SeparableGreedyPolicy` on the relaxation's value tables.
 
+Policies of one's own: :meth:`Policy.from_function` (a function of (tau, configuration) returning
+an action label), :meth:`Policy.from_sigma` (an action per state of an enumerated MDP) and
+:meth:`Policy.from_pairs` (pair indices); :func:`as_policy` makes a policy of any of these forms.
+The two array forms and their converters (:func:`pairs_to_sigma`, :func:`sigma_to_pairs`) are
+described in :mod:`wncs_lp.policy_forms`.
+
 The exact rules are in ``docs/policies.md``.
 """
 from __future__ import annotations
 
 from ..models.system import OutcomeTables, System
-from .base import Policy, as_rng
+from ..policy_forms import pairs_to_sigma, policy_array, sigma_to_pairs
+from .base import Configuration, FunctionPolicy, Policy, TablePolicy, as_rng, system_of
+from .convert import as_policy, policy_from_file
 from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
@@ -56,6 +64,15 @@ __all__ = [
     "OutcomeTables",
     "Policy",
     "as_rng",
+    "as_policy",
+    "policy_from_file",
+    "system_of",
+    "Configuration",
+    "FunctionPolicy",
+    "TablePolicy",
+    "pairs_to_sigma",
+    "sigma_to_pairs",
+    "policy_array",
     "OptimalPolicy",
     "CappedPolicy",
     "MixedPolicy",
