@@ -13,9 +13,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import wncs_lp
-from wncs_lp.evaluate import evaluate
 from wncs_lp.interop import InteropError, from_mdptoolbox_policy, to_mdptoolbox, to_quantecon
 from wncs_lp.mdp import MDP
+from wncs_lp.solvers.dp import evaluate_policy
 
 P12 = str(wncs_lp.scenario_path("paper_p12"))
 PRE = str(wncs_lp.scenario_path("paper_preemption_p12"))
@@ -87,7 +87,7 @@ def test_pymdptoolbox_relative_value_iteration_finds_our_gain(solved):
     # its policy, mapped back to our pairs and evaluated exactly, is optimal
     pairs = from_mdptoolbox_policy(mdp, np.asarray(rvi.policy))
     assert np.array_equal(mdp.s_indices[pairs], np.arange(mdp.n_states))
-    assert evaluate(mdp, pairs).gain == pytest.approx(sol.gain, rel=1e-8)
+    assert evaluate_policy(mdp, pairs).gain == pytest.approx(sol.gain, rel=1e-8)
 
 
 def test_the_padding_changes_nothing(solved):
@@ -129,3 +129,14 @@ def test_bad_inputs_are_one_clear_error(solved):
         from_mdptoolbox_policy(mdp, np.zeros(3, dtype=int))
     with pytest.raises(InteropError, match="one action index"):
         from_mdptoolbox_policy(mdp, np.full(mdp.n_states, 99))
+
+
+def test_a_missing_package_is_one_clear_import_error(solved, monkeypatch):
+    """Without QuantEcon (its import blocked), to_quantecon says what it needs and how to install it."""
+    import sys
+
+    mdp, _ = solved
+    monkeypatch.setitem(sys.modules, "quantecon.markov", None)  # import of it raises ImportError
+    with pytest.raises(ImportError, match=r"to_quantecon needs the optional package 'quantecon'.*"
+                                          r"pip install 'wncs_lp\[interop\]'"):
+        to_quantecon(mdp, 0.9)

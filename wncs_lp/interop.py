@@ -34,6 +34,8 @@ slow on large ones (5.8 s for 2,703 states and 7 actions).
 """
 from __future__ import annotations
 
+import importlib
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -42,11 +44,23 @@ import scipy.sparse as sp
 from .errors import WncsError
 from .mdp import MDP
 
-__all__ = ["InteropError", "to_quantecon", "to_mdptoolbox", "from_mdptoolbox_policy", "n_action_labels"]
+__all__ = ["InteropError", "to_quantecon", "to_mdptoolbox", "from_mdptoolbox_policy", "n_action_labels",
+           "require_package"]
 
 
 class InteropError(WncsError):
     """An MDP or a policy cannot be handed to, or taken back from, another toolkit."""
+
+
+def require_package(module: str, pip_name: str, purpose: str) -> ModuleType:
+    """Import an optional package, or raise one ImportError saying what needs it and how to
+    install it (``pip install 'wncs_lp[interop]'``)."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise ImportError(f"{purpose} needs the optional package {pip_name!r}, which is not installed "
+                          f"({exc}); install it with: pip install 'wncs_lp[interop]' (or pip install {pip_name})"
+                          ) from exc
 
 
 def _check_mdp(mdp: Any) -> MDP:
@@ -87,8 +101,7 @@ def to_quantecon(mdp: MDP, beta: float) -> Any:
     mdp = _check_mdp(mdp)
     if not (isinstance(beta, (int, float, np.floating)) and 0.0 <= float(beta) < 1.0):
         raise InteropError(f"beta must be a number in [0, 1) (a discounted problem), got {beta!r}")
-    from quantecon.markov import DiscreteDP
-
+    DiscreteDP = require_package("quantecon.markov", "quantecon", "to_quantecon").DiscreteDP
     return DiscreteDP(-np.asarray(mdp.cost, dtype=np.float64), mdp.P.tocsr(), float(beta),
                       np.asarray(mdp.s_indices), np.asarray(mdp.a_indices))
 
