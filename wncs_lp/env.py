@@ -49,7 +49,11 @@ from .scenario import Scenario, load_scenario
 gym = require_package("gymnasium", "gymnasium", "wncs_lp.env (the Gymnasium environment)")
 spaces = gym.spaces
 
-__all__ = ["EnvError", "WncsEnv", "INVALID_ACTION_RULES"]
+__all__ = ["EnvError", "WncsEnv", "INVALID_ACTION_RULES", "ENV_ID"]
+
+#: The id under which importing this module registers :class:`WncsEnv` with Gymnasium:
+#: ``gymnasium.make(ENV_ID, scenario="paper_p12", overrides=["tau_cap=10"], max_episode_steps=...)``.
+ENV_ID = "wncs_lp/Wncs-v0"
 
 #: What :class:`WncsEnv` does with an action outside the mask.
 INVALID_ACTION_RULES = ("first", "raise")
@@ -165,7 +169,7 @@ class WncsEnv(gym.Env):
 
     def cost(self) -> float:
         """c(s) = sum_k q_k(tau_k) of the current state."""
-        return float(self.system.state_cost(self._tau[None, :])[0])
+        return float(sum(q[t - 1] for q, t in zip(self.system.q, self._tau.tolist())))
 
     def describe_config(self, config: int) -> str:
         """The configuration ``config`` (an observation's ``"config"``) in words."""
@@ -228,3 +232,7 @@ class WncsEnv(gym.Env):
                            f"({self.describe_config(self._config)}), which has actions "
                            f"0..{self.system.n_actions[self._config] - 1}; see env.action_masks()")
         return 0, True
+
+
+if ENV_ID not in gym.registry:
+    gym.register(id=ENV_ID, entry_point=WncsEnv)
