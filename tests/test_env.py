@@ -155,3 +155,16 @@ def test_without_gymnasium_the_import_says_what_to_install():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0
     assert "needs the optional package 'gymnasium'" in proc.stderr and "pip install 'wncs_lp[interop]'" in proc.stderr
+
+
+def test_the_optimum_of_a_constrained_scenario_is_the_environments():
+    """The environment has no constraints: its optimum is the unconstrained one (here by the LP
+    route, checked against policy iteration on the built MDP); the constrained optimum, asked for,
+    is dearer."""
+    env = WncsEnv("paper_p12_cloud_budget", CAP)
+    free, held = env.optimum(), env.optimum(constrained=True)
+    assert free.status == held.status == "optimal"
+    pi = wncs_lp.solve(wncs_lp.build(env.system.scenario), "pi")
+    assert free.gain == pytest.approx(pi.gain, rel=1e-9)
+    assert held.gain_lower > free.gain_upper
+    assert env.optimum() is free  # kept

@@ -132,7 +132,7 @@ class WncsEnv(gym.Env):
         self._tau = sysm.caps.copy()
         self._config = sysm.initial_config
         self._steps = 0
-        self._optimum = None
+        self._optima: dict = {}
 
     # ------------------------------------------------------------------ the Gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
@@ -186,15 +186,21 @@ class WncsEnv(gym.Env):
 
     # ------------------------------------------------------------------ reference values
     def optimum(self, method: str = "auto", **solve_kwargs: Any) -> Any:
-        """The certified average-cost optimum of the scenario (:func:`wncs_lp.solve`, once; the
-        answer is kept): ``.gain`` is g*, ``[.gain_lower, .gain_upper]`` its certified bracket,
-        ``.status`` ``"optimal"`` when the certificate closed. The best long-run average reward
-        any agent can reach is ``-g*``."""
-        if self._optimum is None:
+        """The certified average-cost optimum of the environment's problem (:func:`wncs_lp.solve`;
+        each answer is kept): ``.gain`` is g*, ``[.gain_lower, .gain_upper]`` its certified
+        bracket, ``.status`` ``"optimal"`` when the certificate closed. The best long-run average
+        reward any agent can reach is ``-g*``.
+
+        The environment has no constraints, so a scenario's ``[[constraint]]`` tables are
+        ignored unless ``constrained=True`` is passed (then the constrained optimum, a bound no
+        unconstrained agent is held to)."""
+        solve_kwargs.setdefault("constrained", False)
+        key = (method, repr(sorted(solve_kwargs.items())))
+        if key not in self._optima:
             from . import solve
 
-            self._optimum = solve(self.system.scenario, method, **solve_kwargs)
-        return self._optimum
+            self._optima[key] = solve(self.system.scenario, method, **solve_kwargs)
+        return self._optima[key]
 
     def lower_bound(self, relaxation: str | int = "auto", **options: Any) -> Any:
         """A certified lower bound on g* (:func:`wncs_lp.bounds.lower_bound`, a ``BoundResult``
