@@ -225,10 +225,10 @@ class WncsEnv(gym.Env):
 
     def _local_action(self, action: Any) -> tuple[int, bool]:
         """(the local action taken, whether ``action`` was outside the mask)."""
-        if isinstance(action, (bool, np.bool_)) or not isinstance(action, (int, np.integer)) \
-                and not (isinstance(action, np.ndarray) and action.shape == () and np.issubdtype(action.dtype, np.integer)):
+        a = action[()] if isinstance(action, np.ndarray) and action.shape == () else action  # a 0-d array
+        if isinstance(a, (bool, np.bool_)) or not isinstance(a, (int, np.integer)):
             raise EnvError(f"an action is an integer in 0..{self.system.max_actions - 1}, got {action!r}")
-        j = int(action)
+        j = int(a)
         if not 0 <= j < self.system.max_actions:
             raise EnvError(f"action {j} is outside the action space 0..{self.system.max_actions - 1}")
         if j < self.system.n_actions[self._config]:
