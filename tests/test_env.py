@@ -168,3 +168,15 @@ def test_the_optimum_of_a_constrained_scenario_is_the_environments():
     assert free.gain == pytest.approx(pi.gain, rel=1e-9)
     assert held.gain_lower > free.gain_upper
     assert env.optimum() is free  # kept
+
+
+def test_the_papers_full_scale_runs_without_enumeration():
+    """Four processes at cap 30 (2.5e8 states, never built): the checker passes and the rewards
+    are minus the sum of the processes' costs, which grow with the AoI."""
+    env = WncsEnv("paper_p1234", ["tau_cap=30"])
+    check_env(env)
+    obs, _ = env.reset(seed=0, options={"tau": [1, 2, 3, 4]})
+    _, r_low, *_ = env.step(0)
+    env.reset(seed=0)
+    _, r_cap, *_ = env.step(0)
+    assert r_cap < r_low < 0
