@@ -24,7 +24,9 @@ Policies (``make_policy`` builds them by name):
 ``static``       :class:`StaticPolicy` with :func:`default_assignment`;
 ``best_static``  :func:`best_static`, the static assignment of least exact average cost;
 ``greedy``       :class:`GreedyPolicy`, the paper's greedy baseline;
-``random``       :class:`RandomPolicy`, uniform over the feasible actions (tau-independent).
+``random``       :class:`RandomPolicy`, uniform over the feasible actions (tau-independent);
+``relaxation``   the greedy policy of the certified lower bound (:mod:`wncs_lp.bounds`), a
+                 :class:`SeparableGreedyPolicy` on the relaxation's value tables.
 
 The exact rules are in ``docs/policies.md``.
 """
@@ -46,7 +48,7 @@ from .rules import (
     static_assignments,
 )
 from .search import best_static
-from .suboptimal import ProcessPoisson, SuboptimalPolicy
+from .suboptimal import ProcessPoisson, SeparableGreedyPolicy, SuboptimalPolicy
 
 __all__ = [
     "POLICY_NAMES",
@@ -64,6 +66,7 @@ __all__ = [
     "StaticPolicy",
     "GreedyPolicy",
     "SuboptimalPolicy",
+    "SeparableGreedyPolicy",
     "ProcessPoisson",
     "default_assignment",
     "static_assignments",
