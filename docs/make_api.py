@@ -60,6 +60,8 @@ MODULES = [
     ("wncs_lp.maps", "Policy maps (data)"),
     ("wncs_lp.viz", "Figures"),
     ("wncs_lp.export", "Export"),
+    ("wncs_lp.interop", "Other toolkits: QuantEcon, pymdptoolbox"),
+    ("wncs_lp.env", "Gymnasium environment"),
     ("wncs_lp.files", "Files and JSON"),
     ("wncs_lp.reproduce", "Reproduction"),
 ]
