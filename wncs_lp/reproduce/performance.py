@@ -70,6 +70,9 @@ def _monte_carlo(ctx: Context, name: str, file: str, cap: int, policies: list[st
     res = run_sweep(sc, "p", list(prof.p_grid), policies, ctx.out / "sweeps" / name, method=_method(ctx, sc),
                     simulate_slots=slots, reps=reps, seed=prof.seed, burn_in=min(1000, slots // 10), plot=False,
                     log=ctx.log)
+    for r in res.rows:  # a row's solve or evaluation that did not end "ok" is said in the section
+        if not r.status.startswith("ok"):
+            ctx.note_status(f"Monte Carlo sweep {name}, {file} cap {cap} p={r.value:g} {r.policy}", r.status)
     return {(r.policy, _key(r.value)): r for r in res.rows}
 
 
@@ -136,10 +139,11 @@ def _mc_table(rows_by: dict, ps: list[float], policies: list[str], exact: dict[f
             recs.append({"policy": names.get(pol, pol), "p": p, "exact": ex, "mc_mean": r.sim_mean,
                          "mc_stderr": r.sim_stderr, "agrees": ok, "status": r.status})
             out.append([names.get(pol, pol), p, ex, r.sim_mean, r.sim_stderr,
-                        "n/a" if ok is None else ("yes" if ok else "**no**")])
+                        "n/a" if ok is None else ("yes" if ok else "**no**"),
+                        r.status if r.status.startswith("ok") else f"**{r.status}**"])
     return Table(f"Monte Carlo at cap {cap} beside the exact values (agreement: within {MC_K:g} standard errors, "
-                 f"or {MC_FLOOR:.1%} for a row without variance).",
-                 ["policy", "p", "exact", "Monte Carlo mean", "standard error", "agrees"], out), recs, ok_all
+                 f"or {MC_FLOOR:.1%} for a row without variance; status: the sweep row's solve and evaluation).",
+                 ["policy", "p", "exact", "Monte Carlo mean", "standard error", "agrees", "status"], out), recs, ok_all
 
 
 def _subclaim_table(sub: dict[str, dict[int, bool | None]], caps,
