@@ -191,3 +191,25 @@ def test_cli_sweep_json(capsys, tmp_path):
     data = _json_out(capsys)
     assert rc == 0 and len(data["rows"]) == 4 and data["computed"] == 4
     assert (tmp_path / "s" / "sweep.csv").exists()
+
+
+def test_a_warm_started_sweep_closes_every_certificate_like_a_cold_solve():
+    """The reproduction's C3 sweep walks p on processes 1, 2 by relative value iteration, each
+    point warm-started from the previous bias. At cap 16, p = 0.85 the warm start used to end
+    "inaccurate:precision" (the progress line's "error:") where a cold solve closed: the computed
+    width had just crossed the tolerance while width + round-off band had not, and the closing
+    rule sent that to the precision stop although the band (2 delta / g ~ 1e-13) was far below
+    the tolerance (1e-9). The closing rule now goes on until width + band fits (iteration.py).
+    Every row must be "ok" and its gain that of a cold solve by another scheme (Gauss-Seidel
+    value iteration, as ``wncs-lp solve`` runs it), within both certificates (1e-9)."""
+    from wncs_lp import build
+    from wncs_lp.solvers import solve
+
+    sc = load_scenario(P12, ["tau_cap=16"])
+    res = run_sweep(sc, "p", [0.8, 0.85], ["optimal"], method="rvi")
+    assert [r.warm_start for r in res.rows] == [False, True]
+    for r in res.rows:
+        assert r.status == "ok", (r.value, r.status)
+        ref = solve(build(sc.with_overrides({"p": r.value})), "vi")
+        assert ref.status == "optimal"
+        assert r.gain == pytest.approx(ref.gain, rel=2e-9)

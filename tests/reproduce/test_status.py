@@ -1,0 +1,79 @@
+"""No solver status becomes "yes": a solve that did not close its certificate is said in the report.
+
+The status under test is planted (a wrapped solver, hand-made sweep rows); the expectations are
+that very status, read back from every place the report shows the row or the claim.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import pytest
+
+import wncs_lp.reproduce as rep
+from wncs_lp.cli import main
+from wncs_lp.reproduce import context, performance
+from wncs_lp.reproduce.context import PROFILES, Context
+from wncs_lp.reproduce.report import md_table
+from wncs_lp.studies.sweep import SweepRow
+
+PRECISION = "error: solver status inaccurate:precision"
+
+
+def test_the_monte_carlo_table_shows_a_row_status_that_is_not_ok():
+    exact = {0.9: {"optimal": 907.647708415537}, 1.0: {"optimal": 586.7527477593271}}
+    rows = {("optimal", 0.9): SweepRow("p", 0.9, "optimal", 907.647708415537, 905.65, 2.58, status=PRECISION),
+            ("optimal", 1.0): SweepRow("p", 1.0, "optimal", 586.7527477593271, 586.7527, 0.0, status="ok")}
+    table, recs, ok_all = performance._mc_table(rows, [0.9, 1.0], ["optimal"], exact, 30, {})
+    assert ok_all  # the Monte Carlo means agree ...
+    assert table.header[-1] == "status"
+    assert table.rows[0][-2] == "yes" and PRECISION in table.rows[0][-1]  # ... and the status is beside it
+    assert table.rows[1][-1] == "ok"
+    assert [r["status"] for r in recs] == [PRECISION, "ok"]
+    assert PRECISION in md_table(table.header, table.rows).splitlines()[2]
+
+
+@pytest.fixture()
+def inaccurate(monkeypatch):
+    """Every solve of the reproduction ends "inaccurate:precision" (the numbers of the real solve)."""
+    real = context.solve_scenario
+
+    def solve(*a, **k):
+        run = real(*a, **k)
+        return dataclasses.replace(run, solution=dataclasses.replace(run.solution, status="inaccurate:precision"))
+
+    monkeypatch.setattr(context, "solve_scenario", solve)
+
+
+def test_a_solve_that_did_not_close_keeps_its_status_and_is_noted(tmp_path, inaccurate):
+    ctx = Context(tmp_path, PROFILES["quick"])
+    sc = ctx.scenario("paper_p12.toml", ["tau_cap=7", "p=0.9"])
+    solved = ctx.solve(sc)
+    assert solved.status == "inaccurate:precision" and solved.as_solution().status == "inaccurate:precision"
+    (note,) = ctx.status_notes
+    assert "paper_p12.toml" in note and note.endswith(": inaccurate:precision")
+    again = Context(tmp_path, PROFILES["quick"]).solve(sc)  # from the disk cache: the status too
+    assert again.status == "inaccurate:precision" and math.isclose(again.gain, solved.gain)
+
+
+def test_the_claim_says_which_solves_did_not_close(tmp_path, inaccurate, monkeypatch, capsys):
+    def claim(ctx):
+        s = ctx.solve(ctx.scenario("paper_p12.toml", ["tau_cap=7", "p=0.9"]))
+        return rep.ClaimResult("C3", "Fig. 5", "", "HOLDS", f"g* = {s.gain:.6g}")
+
+    monkeypatch.setattr(rep, "_claims", lambda: {"C3": claim})
+    out = tmp_path / "r"
+    assert main(["reproduce", "--out", str(out), "--profile", "quick", "--claims", "C3"]) == 0
+    cap = capsys.readouterr()
+    assert "not optimal:" in cap.out and "inaccurate:precision" in cap.out
+    assert "C3 HOLDS (1 solve(s) not optimal)" in cap.err
+    (c3,) = json.loads((out / "report.json").read_text())["claims"]
+    assert len(c3["solver_notes"]) == 1 and c3["solver_notes"][0].endswith("inaccurate:precision")
+    md = (out / "report.md").read_text()
+    contents, sections = md.split('<a id="c3"></a>', 1)
+    assert "⚠ 1 solve(s) not optimal" in contents
+    assert "Not every solve of this section closed its certificate" in sections
+    assert "inaccurate:precision" in sections.split("## Where the exact model")[0]
+    page = (out / "report.html").read_text()
+    assert 'class="notes"' in page and "inaccurate:precision" in page
