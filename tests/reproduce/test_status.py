@@ -77,3 +77,33 @@ def test_the_claim_says_which_solves_did_not_close(tmp_path, inaccurate, monkeyp
     assert "inaccurate:precision" in sections.split("## Where the exact model")[0]
     page = (out / "report.html").read_text()
     assert 'class="notes"' in page and "inaccurate:precision" in page
+
+
+def test_the_exact_table_shows_the_status_beside_an_optimal_gain_that_did_not_close():
+    assert performance.optimal_cell({"optimal": 907.647708415537, "optimal_status": "optimal"}) == 907.647708415537
+    cell = performance.optimal_cell({"optimal": 907.647708415537, "optimal_status": "inaccurate:precision"})
+    assert cell == "907.6477084 (**inaccurate:precision**)"
+
+
+def test_c3_shows_every_planted_status_in_its_tables_and_section(tmp_path, inaccurate, monkeypatch):
+    """The issue's case end to end on a tiny profile: every solve of C3 (its exact grid and its
+    Monte Carlo sweep) ends "inaccurate:precision"; no row of its tables may read as if it closed."""
+    import wncs_lp.studies.sweep as sweep_mod
+
+    real = sweep_mod.solve_scenario
+
+    def solve(*a, **k):
+        run = real(*a, **k)
+        return dataclasses.replace(run, solution=dataclasses.replace(run.solution, status="inaccurate:precision"))
+
+    monkeypatch.setattr(sweep_mod, "solve_scenario", solve)
+    prof = dataclasses.replace(PROFILES["quick"], name="tiny-status", caps_2p=(7,), p_grid=(0.9, 1.0),
+                               sweep_cap_2p=7, mc_slots=200, mc_reps=2)
+    ctx = Context(tmp_path, prof)
+    res = performance.claim_c3(ctx)
+    exact_tab, mc_tab = res.shown[1], res.shown[2]
+    assert all("inaccurate:precision" in str(row[2]) for row in exact_tab.rows)  # the optimal column
+    opt_rows = [row for row in mc_tab.rows if row[0] == "optimal"]
+    assert len(opt_rows) == 2 and all(PRECISION in row[-1] for row in opt_rows)
+    assert all(row[-1].startswith("ok") for row in mc_tab.rows if row[0] != "optimal")
+    assert len(ctx.status_notes) == 4  # two exact solves, two sweep rows
