@@ -96,3 +96,18 @@ def test_a_partial_run_keeps_an_earlier_error_first_and_exits_1(tmp_path, monkey
     md = (out / "report.md").read_text()
     first = md.split("## Contents and verdicts")[0]
     assert "ERROR: 1 part(s) of this report could not be computed" in first and "[B2: " in first
+
+
+def test_an_error_of_an_older_report_without_a_status_stays_an_error(tmp_path, monkeypatch):
+    """A report.json written before sections had a status (its B2 titled "could not be computed")."""
+    from wncs_lp.reproduce.beyond import TITLES
+
+    out = tmp_path / "r"
+    out.mkdir()
+    old = {"id": "B2", "title": "could not be computed", "summary": "could not be computed: SolverError: no numba",
+           "numbers": {}, "figures": [], "tables": [], "details": "", "seconds": 0.1}
+    (out / "report.json").write_text(json.dumps({"claims": [], "beyond": [old], "provenance": {}}))
+    monkeypatch.setattr(rep, "_claims", lambda: {"C1": lambda ctx: rep.ClaimResult("C1", "Fig. 3", "", "HOLDS", "ok")})
+    assert main(["reproduce", "--out", str(out), "--profile", "quick", "--claims", "C1"]) == 1
+    (b2,) = json.loads((out / "report.json").read_text())["beyond"]
+    assert b2["status"] == "ERROR" and b2["title"] == TITLES["B2"]

@@ -103,6 +103,11 @@ def _merge_previous_extras(path: Path, extras: list[dict], ids: Sequence[str]) -
         old = {e["id"]: e for e in json.loads(path.read_text()).get("beyond", []) if e.get("id") in ids}
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         old = {}
+    for e in old.values():  # a report written before sections had a status: its errors are errors
+        if "status" not in e and str(e.get("summary", "")).startswith("could not be computed"):
+            from .beyond import TITLES
+
+            e.update(status="ERROR", title=TITLES.get(e["id"], e.get("title", "")))
     merged = {**old, **fresh}
     return [merged[i] for i in ids if i in merged]
 
