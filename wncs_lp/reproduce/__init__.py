@@ -3,7 +3,10 @@
 :func:`run_reproduction` computes each claim step by step, caching every step on disk (keyed by
 scenario fingerprint and parameters) so an interrupted run resumes and a second run is fast, and
 writes ``report.md``, a self-contained ``report.html``, ``report.json``, figures (PNG and SVG) and
-the tables behind them (CSV) into the output folder.
+the tables behind them (CSV) into the output folder. A claim or section that cannot be computed is
+an ERROR (never a finding), listed first in the report; a solve that did not close its certificate
+is named, with its status, in the section that used it. The estimate of the run is printed before
+the first section and one line after each (:mod:`~wncs_lp.reproduce.plan`).
 """
 from __future__ import annotations
 
