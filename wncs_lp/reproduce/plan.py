@@ -13,12 +13,14 @@ from typing import Sequence
 
 __all__ = ["ESTIMATE_SECONDS", "ESTIMATE_WHERE", "Plan", "duration"]
 
-#: Seconds of each section with a cold cache, per profile. Measured before the speed-up of issue
-#: 28 (claims and B1: one default run on 2 cores under load; B2 and the quick profile: quiet
-#: 2-core runs); sections without their own measurement share the rest of the run's total evenly.
-#: The lead re-measures these on a quiet 2-core machine after the speed-up (benchmarks/).
+#: Seconds of each section with a cold cache, per profile, measured before the speed-up of issue
+#: 28: default claims and B1 from one run on 2 cores under load (sections without their own figure
+#: share the rest of its total evenly), B2 from a quiet run; quick: its total without B2 (93 s)
+#: split in the proportions of one run under load, B2 from a quiet run. To be re-measured by the
+#: lead on a quiet 2-core machine after the speed-up (report.json's ``timings_seconds``).
 ESTIMATE_SECONDS: dict[str, dict[str, float]] = {
-    "quick": {**{f"C{i}": 7.0 for i in range(1, 14)}, "B1": 2.0, "B2": 38.0},
+    "quick": {"C1": 2.0, "C2": 2.0, "C3": 8.0, "C4": 3.0, "C5": 2.0, "C6": 15.0, "C7": 2.0, "C8": 1.0,
+              "C9": 5.0, "C10": 1.0, "C11": 5.0, "C12": 4.0, "C13": 17.0, "B1": 28.0, "B2": 38.0},
     "default": {"C1": 19.0, "C2": 19.0, "C3": 161.0, "C4": 62.0, "C5": 19.0, "C6": 761.0, "C7": 19.0,
                 "C8": 19.0, "C9": 19.0, "C10": 19.0, "C11": 57.0, "C12": 18.0, "C13": 18.0, "B1": 361.0,
                 "B2": 574.0},
