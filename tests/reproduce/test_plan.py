@@ -15,7 +15,7 @@ def test_duration(seconds, text):
 
 def test_every_profile_estimates_every_section():
     for profile, table in ESTIMATE_SECONDS.items():
-        assert set(table) == set(CLAIMS) | set(BEYOND), profile
+        assert set(CLAIMS) | set(BEYOND) <= set(table), profile
         assert all(v > 0 for v in table.values()), profile
 
 
