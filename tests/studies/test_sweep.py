@@ -213,3 +213,31 @@ def test_a_warm_started_sweep_closes_every_certificate_like_a_cold_solve():
         ref = solve(build(sc.with_overrides({"p": r.value})), "vi")
         assert ref.status == "optimal"
         assert r.gain == pytest.approx(ref.gain, rel=2e-9)
+
+
+def test_a_resumed_sweep_computes_an_error_row_again(tmp_path, monkeypatch):
+    """A row kept with an error status (here a planted "inaccurate:precision" stop) is not reused on
+    resume: the next run solves it again and its status is the new solve's."""
+    import dataclasses
+
+    import wncs_lp.studies.sweep as sweep_mod
+
+    sc = load_scenario(P12, ["tau_cap=7"])
+    out = tmp_path / "sw"
+    real = sweep_mod.solve_scenario
+
+    def stops_short(*a, **k):
+        run = real(*a, **k)
+        return dataclasses.replace(run, solution=dataclasses.replace(run.solution, status="inaccurate:precision"))
+
+    monkeypatch.setattr(sweep_mod, "solve_scenario", stops_short)
+    first = run_sweep(sc, "p", [0.9], ["optimal", "static"], out, method="vi", plot=False)
+    assert [r.status for r in first.rows] == ["error: solver status inaccurate:precision", "ok"]
+    monkeypatch.setattr(sweep_mod, "solve_scenario", real)
+    lines = []
+    again = run_sweep(sc, "p", [0.9], ["optimal", "static"], out, method="vi", plot=False, log=lines.append)
+    assert again.computed == 1 and again.reused == 1
+    assert [r.status for r in again.rows] == ["ok", "ok"]
+    assert again.rows[0].gain == pytest.approx(first.rows[0].gain, rel=1e-9)  # the same solve, now closed
+    assert any("error status computed again" in line for line in lines)
+    assert [r.status for r in read_rows(out / "sweep.csv")] == ["ok", "ok"]
