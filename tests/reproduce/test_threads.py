@@ -60,7 +60,8 @@ def test_reproduce_threads_reach_every_solve_and_the_provenance(tmp_path, monkey
     prov = json.loads((out / "report.json").read_text())["provenance"]
     assert prov["threads"] == {"at most": want, "cores": cores}
     err = capsys.readouterr().err
-    assert f"solves on up to {want} thread(s) of {cores} core(s)" in err.splitlines()[0]  # the opening line: the estimate
+    # the opening line: the threads and the estimate
+    assert f"solves on up to {want} thread(s) of {cores} core(s)" in err.splitlines()[0]
     assert "estimate about" in err.splitlines()[0]
     assert LIMIT_ENV not in os.environ
 

@@ -36,7 +36,8 @@ from ..truncation import CAP_MASS_WARN
 from ..viz import subplots
 from .context import Context, ExtraResult, Profile, assignment_label
 
-__all__ = ["TITLE", "FullScaleSettings", "SETTINGS", "POLICIES", "settings_for", "section_b2", "fullscale_findings", "summary_text"]
+__all__ = ["TITLE", "FullScaleSettings", "SETTINGS", "POLICIES", "settings_for", "section_b2", "fullscale_findings",
+           "summary_text"]
 
 SCENARIO = "paper_p1234.toml"
 #: The baselines, in the order of the paper's Fig. 10.

@@ -69,8 +69,8 @@ class Plan:
     def opening(self, threads: int, cores: int, cached_steps: int) -> str:
         """The line printed before the first section."""
         ids = ", ".join(self.sections)
-        text = (f"reproduce: profile {self.profile}, {len(self.sections)} section(s) ({ids}), solves on up to {threads} thread(s) of "
-                f"{cores} core(s); estimate about {duration(self.total())} ({ESTIMATE_WHERE})")
+        text = (f"reproduce: profile {self.profile}, {len(self.sections)} section(s) ({ids}), solves on up to "
+                f"{threads} thread(s) of {cores} core(s); estimate about {duration(self.total())} ({ESTIMATE_WHERE})")
         if cached_steps:
             text += f"; {cached_steps} step(s) already in the cache are read, not recomputed: it will take less"
         return text
