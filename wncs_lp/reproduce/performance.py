@@ -402,8 +402,9 @@ def claim_c6(ctx: Context) -> ClaimResult:
               "policy's long-run time with some AoI at the cap).",
               ["cap", "p", "optimal", "suboptimal", "static", "assignment", "best static", "assignment", "greedy",
                "suboptimal <= static", "mass at the cap"],
-              [[r["cap"], r["p"], optimal_cell(r), r["suboptimal"], r["static"], r["static_assignment"], r["best_static"],
-                r["best_static_assignment"], r["greedy"], r["suboptimal_le_static"], pct(r["cap_mass"])]
+              [[r["cap"], r["p"], optimal_cell(r), r["suboptimal"], r["static"], r["static_assignment"],
+                r["best_static"], r["best_static_assignment"], r["greedy"], r["suboptimal_le_static"],
+                pct(r["cap_mass"])]
                for r in rows]),
         mc_tab,
     ]
