@@ -107,3 +107,20 @@ def test_c3_shows_every_planted_status_in_its_tables_and_section(tmp_path, inacc
     assert len(opt_rows) == 2 and all(PRECISION in row[-1] for row in opt_rows)
     assert all(row[-1].startswith("ok") for row in mc_tab.rows if row[0] != "optimal")
     assert len(ctx.status_notes) == 4  # two exact solves, two sweep rows
+
+
+def test_b1_says_when_a_point_did_not_close():
+    from wncs_lp.reproduce import beyond
+    from wncs_lp.studies.tradeoff import TradeoffPoint, TradeoffResult
+
+    def curve(status):
+        pts = tuple(TradeoffPoint(bound=b, gain=g, gain_lower=g, gain_upper=g, multiplier=lam,
+                                  randomized_states=1 if 0 < b < 0.3 else 0, status=s, method="lagrangian")
+                    for (b, g, lam), s in zip([(0.0, 170.0, 400.0), (0.1, 130.0, 400.0), (0.3, 100.0, 0.0)],
+                                              ["optimal", status, "optimal"]))
+        return TradeoffResult("send_rate[remote]", "send_rate", 0, "max", pts, 100.0, 100.0, 100.0, 0.3, 0.0)
+
+    for status, said in (("optimal", False), ("inaccurate:precision", True)):
+        c = curve(status)
+        text = beyond._text({12: c}, {12: beyond.tradeoff_findings(c)})
+        assert ("NOT every point closed its certificate" in text) is said, status

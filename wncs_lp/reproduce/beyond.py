@@ -224,6 +224,8 @@ def _text(curves: dict[int, TradeoffResult], found: dict[int, dict[str, Any]]) -
                  f"{'(yes)' if checks else '(NO: see the numbers)'}, at most "
                  f"{max(found[c]['max_randomized_states'] for c in caps)} randomised state per point "
                  "(theory: at most one for one active bound).")
+    if not all(found[c]["all_optimal"] for c in caps):
+        parts.append("NOT every point closed its certificate: see the status column.")
     return " ".join(parts)
 
 
