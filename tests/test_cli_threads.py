@@ -11,7 +11,7 @@ from wncs_lp.solvers import dp
 from wncs_lp.solvers import matrix_free as mf
 
 P12 = str(wncs_lp.scenario_path("paper_p12"))
-SOLVING = ["solve", "evaluate", "simulate", "sweep", "verify", "map", "capstudy", "tradeoff"]
+SOLVING = ["solve", "evaluate", "simulate", "sweep", "verify", "map", "capstudy", "tradeoff", "reproduce"]
 
 
 def _record(monkeypatch, module, name):

@@ -191,3 +191,53 @@ def test_cli_sweep_json(capsys, tmp_path):
     data = _json_out(capsys)
     assert rc == 0 and len(data["rows"]) == 4 and data["computed"] == 4
     assert (tmp_path / "s" / "sweep.csv").exists()
+
+
+def test_a_warm_started_sweep_closes_every_certificate_like_a_cold_solve():
+    """The reproduction's C3 sweep walks p on processes 1, 2 by relative value iteration, each
+    point warm-started from the previous bias. At cap 16, p = 0.85 the warm start used to end
+    "inaccurate:precision" (the progress line's "error:") where a cold solve closed: the computed
+    width had just crossed the tolerance while width + round-off band had not, and the closing
+    rule sent that to the precision stop although the band (2 delta / g ~ 1e-13) was far below
+    the tolerance (1e-9). The closing rule now goes on until width + band fits (iteration.py).
+    Every row must be "ok" and its gain that of a cold solve by another scheme (Gauss-Seidel
+    value iteration, as ``wncs-lp solve`` runs it), within both certificates (1e-9)."""
+    from wncs_lp import build
+    from wncs_lp.solvers import solve
+
+    sc = load_scenario(P12, ["tau_cap=16"])
+    res = run_sweep(sc, "p", [0.8, 0.85], ["optimal"], method="rvi")
+    assert [r.warm_start for r in res.rows] == [False, True]
+    for r in res.rows:
+        assert r.status == "ok", (r.value, r.status)
+        ref = solve(build(sc.with_overrides({"p": r.value})), "vi")
+        assert ref.status == "optimal"
+        assert r.gain == pytest.approx(ref.gain, rel=2e-9)
+
+
+def test_a_resumed_sweep_computes_an_error_row_again(tmp_path, monkeypatch):
+    """A row kept with an error status (here a planted "inaccurate:precision" stop) is not reused on
+    resume: the next run solves it again and its status is the new solve's."""
+    import dataclasses
+
+    import wncs_lp.studies.sweep as sweep_mod
+
+    sc = load_scenario(P12, ["tau_cap=7"])
+    out = tmp_path / "sw"
+    real = sweep_mod.solve_scenario
+
+    def stops_short(*a, **k):
+        run = real(*a, **k)
+        return dataclasses.replace(run, solution=dataclasses.replace(run.solution, status="inaccurate:precision"))
+
+    monkeypatch.setattr(sweep_mod, "solve_scenario", stops_short)
+    first = run_sweep(sc, "p", [0.9], ["optimal", "static"], out, method="vi", plot=False)
+    assert [r.status for r in first.rows] == ["error: solver status inaccurate:precision", "ok"]
+    monkeypatch.setattr(sweep_mod, "solve_scenario", real)
+    lines = []
+    again = run_sweep(sc, "p", [0.9], ["optimal", "static"], out, method="vi", plot=False, log=lines.append)
+    assert again.computed == 1 and again.reused == 1
+    assert [r.status for r in again.rows] == ["ok", "ok"]
+    assert again.rows[0].gain == pytest.approx(first.rows[0].gain, rel=1e-9)  # the same solve, now closed
+    assert any("error status computed again" in line for line in lines)
+    assert [r.status for r in read_rows(out / "sweep.csv")] == ["ok", "ok"]

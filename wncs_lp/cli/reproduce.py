@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from .common import Command, emit_json, output_folder
+from .common import Command, add_threads_arg, emit_json, output_folder
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
@@ -13,22 +13,33 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     output_folder(args.out)  # before any work
     result = run_reproduction(args.out, args.profile, force=args.recompute,
                               claims=[c.strip().upper() for c in args.claims.split(",")] if args.claims else None,
-                              progress=not args.json)
+                              progress=not args.json, threads=args.threads)
     if args.json:
-        emit_json({"files": result["files"], "seconds": result["seconds"],
+        emit_json({"files": result["files"], "seconds": result["seconds"], "errors": result["errors"],
                    "claims": [{**{k: c[k] for k in ("id", "verdict", "summary")},
                                "rests_on": basis_words(c.get("basis") or {}),
-                               "leans_on_truncation": bool((c.get("basis") or {}).get("flag"))}
-                              for c in result["claims"]]})
+                               "leans_on_truncation": bool((c.get("basis") or {}).get("flag")),
+                               "solves_not_optimal": c.get("solver_notes", [])}
+                              for c in result["claims"]],
+                   "beyond": [{k: e.get(k) for k in ("id", "title", "status", "summary")} for e in result["beyond"]]})
     else:
         for c in result["claims"]:
             print(f"{c['id']:>4} {c['verdict']:<8} [{basis_words(c.get('basis') or {})}] {c['summary']}")
+            for note in c.get("solver_notes", []):
+                print(f"{'':>4} {'':<8} not optimal: {note}")
+        for e in result["beyond"]:
+            word = "ERROR" if e.get("status") == "ERROR" else "done"
+            print(f"{e['id']:>4} {word:<8} {e['title']}" + (f": {e['summary']}" if word == "ERROR" else ""))
         print(f"report: {result['files']['md']} and {result['files']['html']} ({result['seconds']:.0f} s)")
-    errors = [c["id"] for c in result["claims"] if c["verdict"] == "ERROR"]
-    if errors:
+    if result["errors"]:
         import sys
 
-        print(f"error: {len(errors)} claim(s) could not be computed ({', '.join(errors)}); see the report", file=sys.stderr)
+        claims = [i for i in result["errors"] if i.startswith("C")]
+        sections = [i for i in result["errors"] if not i.startswith("C")]
+        parts = ([f"{len(claims)} claim(s) could not be computed ({', '.join(claims)})"] if claims else []) + (
+            [f"{len(sections)} section(s) beyond the paper could not be computed ({', '.join(sections)})"]
+            if sections else [])
+        print(f"error: {'; '.join(parts)}; see the report", file=sys.stderr)
         return 1
     return 0
 
@@ -36,13 +47,14 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 def _configure_reproduce(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="output folder (figures, tables, report.md/.html/.json, cache)")
     p.add_argument("--profile", default="default", choices=["quick", "default", "full"],
-                   help="quick: small caps, about a minute; default: caps 12/20/30 where the size allows "
-                        "(about 20 minutes); full: default plus the paper's four processes at caps 25 and 30 "
-                        "(about 45 minutes more)")
+                   help="quick: small caps and grids; default: caps 12/20/30 where the size allows; full: default "
+                        "plus the paper's four processes at caps 25 and 30 (the estimate of each is printed "
+                        "before the first section)")
     p.add_argument("--recompute", action="store_true", help="recompute every step instead of using the cache")
     # the old name, kept working: --force means "build past the size guard" on every other command
     p.add_argument("--force", dest="recompute", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--claims", default="", help="only these claims, e.g. C1,C7 (default: all)")
+    add_threads_arg(p)
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 

@@ -3,7 +3,10 @@
 :func:`run_reproduction` computes each claim step by step, caching every step on disk (keyed by
 scenario fingerprint and parameters) so an interrupted run resumes and a second run is fast, and
 writes ``report.md``, a self-contained ``report.html``, ``report.json``, figures (PNG and SVG) and
-the tables behind them (CSV) into the output folder.
+the tables behind them (CSV) into the output folder. A claim or section that cannot be computed is
+an ERROR (never a finding), listed first in the report; a solve that did not close its certificate
+is named, with its status, in the section that used it. The estimate of the run is printed before
+the first section and one line after each (:mod:`~wncs_lp.reproduce.plan`).
 """
 from __future__ import annotations
 
@@ -14,7 +17,11 @@ import traceback
 from pathlib import Path
 from typing import Callable, Sequence
 
+from ..errors import WncsError
+from ..solvers.threads import usable_cores
+from .beyond import BEYOND
 from .context import PROFILES, ClaimResult, Context, Profile
+from .plan import Plan
 from .report import write_report
 
 __all__ = ["run_reproduction", "PROFILES", "Profile", "CLAIMS"]
@@ -99,6 +106,11 @@ def _merge_previous_extras(path: Path, extras: list[dict], ids: Sequence[str]) -
         old = {e["id"]: e for e in json.loads(path.read_text()).get("beyond", []) if e.get("id") in ids}
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         old = {}
+    for e in old.values():  # a report written before sections had a status: its errors are errors
+        if "status" not in e and str(e.get("summary", "")).startswith("could not be computed"):
+            from .beyond import TITLES
+
+            e.update(status="ERROR", title=TITLES.get(e["id"], e.get("title", "")))
     merged = {**old, **fresh}
     return [merged[i] for i in ids if i in merged]
 
@@ -111,6 +123,7 @@ def run_reproduction(
     claims: Sequence[str] | None = None,
     progress: bool = True,
     log: Callable[[str], None] | None = None,
+    threads: int | None = None,
 ) -> dict:
     """Compute the paper's claims and write the report into ``out``.
 
@@ -120,78 +133,124 @@ def run_reproduction(
         Output folder (created). Its ``cache/`` makes a second run fast and an interrupted run
         resumable.
     profile : {"quick", "default", "full"} or Profile
-        ``quick`` (about a minute: small caps and grids), ``default`` (the caps of claims.md:
-        12, 20, 30 where the size allows, and the paper's four processes at caps 12 and 20; about
-        20 minutes on 2 cores) or ``full`` (``default`` plus the four processes at caps 25 and 30
-        and their sweep over p at cap 20). Every verdict says which
-        caps it rests on and whether its deciding cap leans on the truncation (``basis``).
+        ``quick`` (small caps and grids), ``default`` (the caps of claims.md: 12, 20, 30 where
+        the size allows, and the paper's four processes at caps 12 and 20) or ``full``
+        (``default`` plus the four processes at caps 25 and 30 and their sweep over p at cap 20).
+        Every verdict says which caps it rests on and whether its deciding cap leans on the
+        truncation (``basis``). The estimate of each (:mod:`~wncs_lp.reproduce.plan`) is printed
+        before the first section.
     force : bool
         Recompute every step, ignoring the cache.
     claims : sequence of str, optional
         Only these claims (default all, C1-C13, and the "beyond the paper" sections, B1, B2 and
         B3; name one of them here to compute it in a partial run).
     progress : bool
-        A progress bar over the claims on stderr.
+        The estimate up front and one line per section (its time, the time elapsed and left) on
+        stderr, with the sections' own lines between.
+    log : callable, optional
+        Receives those lines instead of stderr.
+    threads : int, optional
+        The most threads any solve uses (:func:`wncs_lp.solvers.threads.thread_limit`); default:
+        the machine's cores.
 
     Returns
     -------
     dict
-        ``{"files": {...}, "claims": [ClaimResult.to_dict(), ...], "beyond": [...], "seconds": float}``
-        (``beyond``: the extra results of :mod:`~wncs_lp.reproduce.beyond`, without verdicts).
+        ``{"files": {...}, "claims": [ClaimResult.to_dict(), ...], "beyond": [...], "seconds": float,
+        "errors": [ids]}`` (``beyond``: the extra results of :mod:`~wncs_lp.reproduce.beyond`,
+        without verdicts, each with its ``status``; ``errors``: every claim and section that could
+        not be computed).
     """
-    from .beyond import BEYOND, run_beyond
+    from ..solvers.threads import thread_limit
 
-    # arguments are checked before anything is computed or created
-    unknown = [c for c in (claims or ()) if c not in CLAIMS and c not in BEYOND]
-    if unknown:
-        from ..errors import WncsError
-
-        raise WncsError(f"unknown claim(s) {', '.join(unknown)}: expected some of {', '.join(CLAIMS + tuple(BEYOND))}")
-    prof = PROFILES[profile] if isinstance(profile, str) else profile
+    prof, todo, extra_ids = _arguments(profile, claims)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    say = log or (lambda m: print(m, file=sys.stderr))
+    say = log or (lambda m: print(m, file=sys.stderr, flush=True))
     ctx = Context(out, prof, force=force, log=(lambda m: say(f"  {m}")) if progress else (lambda m: None))
+    plan = Plan(prof.name, [*todo, *extra_ids])
+    if progress:
+        say(plan.opening(_threads_used(threads), usable_cores(), 0 if force else _cached_steps(out)))
+    t_all = time.perf_counter()
+    with thread_limit(threads):
+        results = [_run_claim(ctx, cid, plan, say if progress else None, t_all) for cid in todo]
+        extras = [_run_section(ctx, sid, plan, say if progress else None, t_all) for sid in extra_ids]
+    provenance = _provenance(ctx, prof, _threads_used(threads), time.perf_counter() - t_all)
+    if claims is not None:  # a partial run keeps the other claims of an earlier report in this folder
+        results = _merge_previous(out / "report.json", results)
+        extras = _merge_previous_extras(out / "report.json", extras, BEYOND)
+    files = write_report(out, results, provenance, extras)
+    errors = [r.id for r in results if r.verdict == "ERROR"] + [e["id"] for e in extras if e.get("status") == "ERROR"]
+    return {"files": files, "claims": [r.to_dict() for r in results], "beyond": extras,
+            "seconds": provenance["total_seconds"], "errors": errors}
 
+
+def _arguments(profile: str | Profile, claims: Sequence[str] | None) -> tuple[Profile, list[str], list[str]]:
+    """The profile, the claims and the sections to run; checked before anything is created."""
+    unknown = [c for c in (claims or ()) if c not in CLAIMS and c not in BEYOND]
+    if unknown:
+        raise WncsError(f"unknown claim(s) {', '.join(unknown)}: expected some of {', '.join(CLAIMS + tuple(BEYOND))}")
+    if isinstance(profile, str) and profile not in PROFILES:
+        raise WncsError(f"unknown profile {profile!r}: expected one of {', '.join(PROFILES)}")
+    prof = PROFILES[profile] if isinstance(profile, str) else profile
     todo = [c for c in (claims or CLAIMS) if c not in BEYOND]
     extra_ids = list(BEYOND) if claims is None else [c for c in claims if c in BEYOND]
-    table = _claims()
-    results: list[ClaimResult] = []
-    t_all = time.perf_counter()
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    return prof, todo, extra_ids
 
-        bar = tqdm(total=len(todo), desc="reproduce", unit="claim", file=sys.stderr, disable=None)
-        if bar.disable:  # not a terminal: one line per step instead of a bar
-            bar = None
-    for cid in todo:
-        if bar is not None:
-            bar.set_postfix_str(cid)
-        t0 = time.perf_counter()
-        try:
-            res = table[cid](ctx)
-        except KeyboardInterrupt:
-            raise
-        except Exception as exc:  # a claim that cannot be computed is reported as an ERROR, never as a finding
-            res = ClaimResult(cid, PAPER[cid], "", "ERROR",
-                              f"could not be computed: {type(exc).__name__}: {exc}",
-                              {"error": traceback.format_exc()})
-            say(f"{cid}: error: {exc}")
-        res.paper = res.paper or PAPER[cid]
-        res.seconds = time.perf_counter() - t0
-        ctx.timings[cid] = res.seconds
-        results.append(res)
-        if bar is not None:
-            bar.update(1)
-        elif progress:
-            say(f"{cid}: {res.verdict} ({res.seconds:.1f} s)")
-    if bar is not None:
-        bar.close()
-    extras = run_beyond(ctx, extra_ids, say if progress else None)  # extra results, no verdict
+
+def _threads_used(threads: int | None) -> int:
+    return usable_cores() if threads is None else int(threads)
+
+
+def _cached_steps(out: Path) -> int:
+    """Steps already in the output folder's cache (a resumed or repeated run)."""
+    try:
+        return sum(1 for f in (out / "cache").rglob("*.json"))
+    except OSError:
+        return 0
+
+
+def _run_claim(ctx: Context, cid: str, plan: Plan, say: Callable[[str], None] | None, t_all: float) -> ClaimResult:
+    """One claim: its result, an ERROR (never a finding) when it raises, the solves it used that
+    did not close their certificate."""
+    t0 = time.perf_counter()
+    notes_before = len(ctx.status_notes)
+    try:
+        res = _claims()[cid](ctx)
+    except KeyboardInterrupt:
+        raise
+    except Exception as exc:  # a claim that cannot be computed is reported as an ERROR, never as a finding
+        res = ClaimResult(cid, PAPER[cid], "", "ERROR", f"could not be computed: {type(exc).__name__}: {exc}",
+                          {"error": traceback.format_exc()})
+        if say is not None:
+            say(f"  {cid}: error: {exc}")
+    res.paper = res.paper or PAPER[cid]
+    res.seconds = time.perf_counter() - t0
+    res.solver_notes = list(dict.fromkeys([*res.solver_notes, *ctx.status_notes[notes_before:]]))
+    ctx.timings[cid] = res.seconds
+    if say is not None:
+        outcome = res.verdict + (f" ({len(res.solver_notes)} solve(s) not optimal)" if res.solver_notes else "")
+        say(plan.finished(cid, outcome, res.seconds, time.perf_counter() - t_all))
+    return res
+
+
+def _run_section(ctx: Context, sid: str, plan: Plan, say: Callable[[str], None] | None, t_all: float) -> dict:
+    """One "beyond the paper" section (:func:`~wncs_lp.reproduce.beyond.run_beyond`)."""
+    from .beyond import run_beyond
+
+    (res,) = run_beyond(ctx, [sid], None)
+    if say is not None:
+        if res.get("status") == "ERROR":
+            say(f"  {sid}: error: {res['summary']}")
+        outcome = "ERROR" if res.get("status") == "ERROR" else "done (beyond the paper, no verdict)"
+        say(plan.finished(sid, outcome, res["seconds"], time.perf_counter() - t_all))
+    return res
+
+
+def _provenance(ctx: Context, prof: Profile, threads: int, seconds: float) -> dict:
     from datetime import datetime, timezone
 
-    provenance = {
+    return {
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "commit": _commit(),
         "profile": prof.name,
@@ -204,14 +263,9 @@ def run_reproduction(
         "versions": _versions(),
         "solver": "policy iteration (exact evaluation, Bellman certificate) up to 60,000 states, "
                   "relative value iteration above; LP results in the solver benchmarks",
+        "threads": {"at most": threads, "cores": usable_cores()},
         "timings_seconds": ctx.timings,
-        "total_seconds": time.perf_counter() - t_all,
+        "total_seconds": seconds,
         "cache": {"hits": ctx.cache.hits, "misses": ctx.cache.misses},
         "platform": platform.platform(),
     }
-    if claims is not None:  # a partial run keeps the other claims of an earlier report in this folder
-        results = _merge_previous(out / "report.json", results)
-        extras = _merge_previous_extras(out / "report.json", extras, BEYOND)
-    files = write_report(out, results, provenance, extras)
-    return {"files": files, "claims": [r.to_dict() for r in results], "beyond": extras,
-            "seconds": provenance["total_seconds"]}

@@ -30,14 +30,19 @@ from ..studies.tradeoff import TradeoffResult, tradeoff
 from ..scenario import ConstraintSpec
 from ..viz import plot_tradeoff, subplots
 from .context import Context, ExtraResult, Profile
+from .beyondexact import TITLE as TITLE_B3
 from .beyondexact import section_b3
+from .fullscale import TITLE as TITLE_B2
 from .fullscale import section_b2
 
-__all__ = ["BEYOND", "BeyondSettings", "SETTINGS", "ExtraResult", "run_beyond", "section_b1", "settings_for",
+__all__ = ["BEYOND", "TITLES", "BeyondSettings", "SETTINGS", "ExtraResult", "run_beyond", "section_b1", "settings_for",
            "tradeoff_findings"]
 
 #: The sections of "beyond the paper", in report order.
 BEYOND = ("B1", "B2", "B3")
+#: Their titles (kept when a section cannot be computed).
+TITLES = {"B1": "What it costs to use the cloud less (processes 1, 2; remote send rate)", "B2": TITLE_B2,
+          "B3": TITLE_B3}
 
 SCENARIO = "paper_p12.toml"
 SERVER = "remote"
@@ -223,6 +228,8 @@ def _text(curves: dict[int, TradeoffResult], found: dict[int, dict[str, Any]]) -
                  f"{'(yes)' if checks else '(NO: see the numbers)'}, at most "
                  f"{max(found[c]['max_randomized_states'] for c in caps)} randomised state per point "
                  "(theory: at most one for one active bound).")
+    if not all(found[c]["all_optimal"] for c in caps):
+        parts.append("NOT every point closed its certificate: see the status column.")
     return " ".join(parts)
 
 
@@ -291,8 +298,7 @@ def section_b1(ctx: Context) -> ExtraResult:
                "curves": {str(c): {**curves[c].summary(), "states": docs[c].get("states"),
                                    "pairs": docs[c].get("pairs"), "fallback": docs[c].get("fallback"),
                                    "seconds_cold": docs[c].get("seconds")} for c in st.caps}}
-    return ExtraResult("B1", "What it costs to use the cloud less (processes 1, 2; remote send rate)", summary,
-                       numbers, figs, [tab], details)
+    return ExtraResult("B1", TITLES["B1"], summary, numbers, figs, [tab], details)
 
 
 _SECTIONS: dict[str, Callable[[Context], ExtraResult]] = {"B1": section_b1, "B2": section_b2, "B3": section_b3}
@@ -308,8 +314,8 @@ def run_beyond(ctx: Context, ids: Sequence[str] = BEYOND, say: Callable[[str], N
         except KeyboardInterrupt:
             raise
         except Exception as exc:  # noqa: BLE001 - reported in the section
-            res = ExtraResult(sid, "could not be computed", f"could not be computed: {type(exc).__name__}: {exc}",
-                              {"error": traceback.format_exc()})
+            res = ExtraResult(sid, TITLES.get(sid, sid), f"could not be computed: {type(exc).__name__}: {exc}",
+                              {"error": traceback.format_exc()}, status="ERROR")
             if say is not None:
                 say(f"{sid}: error: {exc}")
         res.seconds = time.perf_counter() - t0

@@ -142,6 +142,9 @@ class ClaimResult:
     basis: dict[str, Any] = field(default_factory=dict)
     shown: list[Table] = field(default_factory=list)
     captions: dict[str, str] = field(default_factory=dict)
+    #: The solves this claim used that did not close their certificate (status in words); shown
+    #: at the head of its section and beside its verdict.
+    solver_notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -158,6 +161,7 @@ class ClaimResult:
             "shown": [t.to_dict() for t in self.shown],
             "details": self.details,
             "seconds": self.seconds,
+            "solver_notes": list(self.solver_notes),
         }
 
     @classmethod
@@ -165,7 +169,7 @@ class ClaimResult:
         return cls(c["id"], c.get("paper", ""), c.get("statement", ""), c["verdict"], c["summary"],
                    c.get("numbers", {}), c.get("figures", []), c.get("tables", []), c.get("details", ""),
                    c.get("seconds", 0.0), c.get("basis", {}), [Table.from_dict(t) for t in c.get("shown", [])],
-                   c.get("captions", {}))
+                   c.get("captions", {}), list(c.get("solver_notes", [])))
 
 
 @dataclass
@@ -180,10 +184,12 @@ class ExtraResult:
     tables: list[str] = field(default_factory=list)
     details: str = ""  # markdown
     seconds: float = 0.0
+    status: str = "ok"  # ok | ERROR (could not be computed: the summary says why)
 
     def to_dict(self) -> dict[str, Any]:
         return {"id": self.id, "title": self.title, "summary": self.summary, "numbers": self.numbers,
-                "figures": self.figures, "tables": self.tables, "details": self.details, "seconds": self.seconds}
+                "figures": self.figures, "tables": self.tables, "details": self.details, "seconds": self.seconds,
+                "status": self.status}
 
 
 def evidence(label: str, cap: int, mass: float, verdict: str, scenario: str = "", p: float | None = None,
@@ -266,6 +272,7 @@ class Solved:
     stationary: np.ndarray
     method: str
     seconds: float
+    status: str = "optimal"  # the solver's; anything else is said in the claim's section
 
     @cached_property
     def recurrent(self) -> np.ndarray:
@@ -294,7 +301,7 @@ class Solved:
     def as_solution(self) -> Solution:
         return Solution(
             method=self.method,
-            status="optimal",
+            status=self.status,
             gain=self.gain,
             gain_lower=self.gain_lower,
             gain_upper=self.gain_upper,
@@ -319,6 +326,14 @@ class Context:
         self._solved: dict[str, Solved] = {}
         self.timings: dict[str, float] = {}
         self.scenario_files: set[str] = set()
+        #: Every solve of this run that did not close its certificate, in words (:meth:`note_status`).
+        self.status_notes: list[str] = []
+
+    def note_status(self, what: str, status: str) -> None:
+        """Record a solve whose status is not optimal: the section that used it says so."""
+        line = f"{what}: {status}"
+        if line not in self.status_notes:
+            self.status_notes.append(line)
 
     # ------------------------------------------------------------------ scenarios and solves
     def scenario(self, name: str, overrides: Sequence[str] = ()) -> Scenario:
@@ -335,8 +350,16 @@ class Context:
     def solve(self, scenario: Scenario) -> Solved:
         """Optimal solution of a scenario: cached on disk (policy, bias, stationary law)."""
         key = scenario.fingerprint()
-        if key in self._solved:
-            return self._solved[key]
+        if key not in self._solved:
+            self._solved[key] = self._solve(scenario, key)
+        solved = self._solved[key]
+        if solved.status != "optimal":
+            self.note_status(f"{Path(str(scenario.source)).name} caps {scenario.tau_caps} p={scenario.p:g} "
+                             f"({solved.method}, certificate [{solved.gain_lower:.10g}, {solved.gain_upper:.10g}])",
+                             solved.status)
+        return solved
+
+    def _solve(self, scenario: Scenario, key: str) -> Solved:
         mdp = self.mdp(scenario)
 
         def compute():
@@ -376,8 +399,8 @@ class Context:
             arr["stationary"],
             res["method"],
             res["seconds"],
+            res.get("status", "optimal"),
         )
-        self._solved[key] = solved
         return solved
 
     def evaluate(self, scenario: Scenario, policy: str, assignment: Sequence[int] | None = None) -> dict[str, Any]:

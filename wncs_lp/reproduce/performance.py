@@ -27,6 +27,7 @@ from ..verify.verdict import (CLOSE, EQ_RTOL, MUCH, NOT_STATIC, SIGNIFICANT, STA
                               destinations_fixed, nonincreasing, static_reading, subclaims_verdict)
 from .context import ClaimResult, Context, Table, assignment_label, cap_basis, evidence, short_name
 from .structural import pct, span_words
+from .report import fmt
 
 #: The bars of the paper's words ("equal", "much better", "not significant", "close") are those of
 #: :mod:`wncs_lp.verify.verdict`: EQ_RTOL, MUCH, SIGNIFICANT, CLOSE.
@@ -70,6 +71,9 @@ def _monte_carlo(ctx: Context, name: str, file: str, cap: int, policies: list[st
     res = run_sweep(sc, "p", list(prof.p_grid), policies, ctx.out / "sweeps" / name, method=_method(ctx, sc),
                     simulate_slots=slots, reps=reps, seed=prof.seed, burn_in=min(1000, slots // 10), plot=False,
                     log=ctx.log)
+    for r in res.rows:  # a row's solve or evaluation that did not end "ok" is said in the section
+        if not r.status.startswith("ok"):
+            ctx.note_status(f"Monte Carlo sweep {name}, {file} cap {cap} p={r.value:g} {r.policy}", r.status)
     return {(r.policy, _key(r.value)): r for r in res.rows}
 
 
@@ -83,6 +87,7 @@ def _exact_grid(ctx: Context, file: str, caps, policies: tuple[str, ...]) -> dic
             solved = ctx.solve(sc)
             search = ctx.static_search(sc)
             row = {"optimal": solved.gain, "optimal_lower": solved.gain_lower, "optimal_upper": solved.gain_upper,
+                   "optimal_status": solved.status,
                    "mass": solved.cap_mass.total, "per_process": solved.cap_mass.per_process,
                    "static": search["default"]["gain"], "static_label": assignment_label(sc, search["default"]["assignment"]),
                    "best_static": search["best"]["gain"],
@@ -106,6 +111,12 @@ def _static_lines(exact: dict[int, dict[float, dict]], cap: int) -> list[tuple[s
         return [("static", f"static ({_labels(g, 'static_label')}) = best static", "static")]
     return [("static", f"static ({_labels(g, 'static_label')})", "static"),
             ("best_static", f"best static ({_labels(g, 'best_static_label')})", "")]
+
+
+def optimal_cell(row: dict[str, Any]) -> Any:
+    """The optimal gain of a table row, with its solver status beside it when not optimal."""
+    status = row.get("optimal_status", "optimal")
+    return row["optimal"] if status == "optimal" else f"{fmt(row['optimal'])} (**{status}**)"
 
 
 def _series(grid: dict[float, dict], key: str) -> np.ndarray:
@@ -136,10 +147,11 @@ def _mc_table(rows_by: dict, ps: list[float], policies: list[str], exact: dict[f
             recs.append({"policy": names.get(pol, pol), "p": p, "exact": ex, "mc_mean": r.sim_mean,
                          "mc_stderr": r.sim_stderr, "agrees": ok, "status": r.status})
             out.append([names.get(pol, pol), p, ex, r.sim_mean, r.sim_stderr,
-                        "n/a" if ok is None else ("yes" if ok else "**no**")])
+                        "n/a" if ok is None else ("yes" if ok else "**no**"),
+                        r.status if r.status.startswith("ok") else f"**{r.status}**"])
     return Table(f"Monte Carlo at cap {cap} beside the exact values (agreement: within {MC_K:g} standard errors, "
-                 f"or {MC_FLOOR:.1%} for a row without variance).",
-                 ["policy", "p", "exact", "Monte Carlo mean", "standard error", "agrees"], out), recs, ok_all
+                 f"or {MC_FLOOR:.1%} for a row without variance; status: the sweep row's solve and evaluation).",
+                 ["policy", "p", "exact", "Monte Carlo mean", "standard error", "agrees", "status"], out), recs, ok_all
 
 
 def _subclaim_table(sub: dict[str, dict[int, bool | None]], caps,
@@ -275,7 +287,8 @@ def claim_c3(ctx: Context) -> ClaimResult:
         sub[f"greedy >= {MUCH:.0%} above optimal"][cap] = bool(np.all(gg >= MUCH))
         for i, p in enumerate(ps):
             r = g[_key(p)]
-            rows.append({"cap": cap, "p": p, "optimal": r["optimal"], "static": r["static"],
+            rows.append({"cap": cap, "p": p, "optimal": r["optimal"], "optimal_status": r["optimal_status"],
+                         "static": r["static"],
                          "static_assignment": r["static_label"], "best_static": r["best_static"],
                          "best_static_assignment": r["best_static_label"], "greedy": r["greedy"],
                          "gap_static": gs[i], "gap_best_static": gb[i], "gap_greedy": gg[i], "cap_mass": r["mass"]})
@@ -295,7 +308,7 @@ def claim_c3(ctx: Context) -> ClaimResult:
               "optimal policy; mass: the optimal policy's long-run time with some AoI at the cap.",
               ["cap", "p", "optimal", "static", "assignment", "best static", "assignment", "greedy", "static gap",
                "best static gap", "greedy gap", "mass at the cap"],
-              [[r["cap"], r["p"], r["optimal"], r["static"], r["static_assignment"], r["best_static"],
+              [[r["cap"], r["p"], optimal_cell(r), r["static"], r["static_assignment"], r["best_static"],
                 r["best_static_assignment"], r["greedy"], pct(r["gap_static"], 3), pct(r["gap_best_static"], 3),
                 pct(r["gap_greedy"], 1), pct(r["cap_mass"])] for r in rows]),
         mc_tab,
@@ -366,7 +379,8 @@ def claim_c6(ctx: Context) -> ClaimResult:
         sub["greedy differs at p = 1"][cap] = bool(abs(_rel(gr[-1], o[-1])) > EQ_RTOL) if p1 else None
         for i, p in enumerate(ps):
             r = g[_key(p)]
-            rows.append({"cap": cap, "p": p, "optimal": r["optimal"], "suboptimal": r["suboptimal"], "static": r["static"],
+            rows.append({"cap": cap, "p": p, "optimal": r["optimal"], "optimal_status": r["optimal_status"],
+                         "suboptimal": r["suboptimal"], "static": r["static"],
                          "static_assignment": r["static_label"], "best_static": r["best_static"],
                          "best_static_assignment": r["best_static_label"], "greedy": r["greedy"],
                          "suboptimal_le_static": bool(r["suboptimal"] <= r["static"] * tol),
@@ -388,8 +402,9 @@ def claim_c6(ctx: Context) -> ClaimResult:
               "policy's long-run time with some AoI at the cap).",
               ["cap", "p", "optimal", "suboptimal", "static", "assignment", "best static", "assignment", "greedy",
                "suboptimal <= static", "mass at the cap"],
-              [[r["cap"], r["p"], r["optimal"], r["suboptimal"], r["static"], r["static_assignment"], r["best_static"],
-                r["best_static_assignment"], r["greedy"], r["suboptimal_le_static"], pct(r["cap_mass"])]
+              [[r["cap"], r["p"], optimal_cell(r), r["suboptimal"], r["static"], r["static_assignment"],
+                r["best_static"], r["best_static_assignment"], r["greedy"], r["suboptimal_le_static"],
+                pct(r["cap_mass"])]
                for r in rows]),
         mc_tab,
     ]

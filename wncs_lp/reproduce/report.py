@@ -253,21 +253,55 @@ def _headline(prov: dict[str, Any]) -> str:
 
 
 def _toc_rows(claims: list[ClaimResult], link) -> list[list[str]]:
-    return [[link(c), c.paper, f"**{c.verdict}**", basis_words(c.basis), c.summary] for c in claims]
+    return [[link(c), c.paper, f"**{c.verdict}**", basis_words(c.basis), c.summary + _notes_mark(c)] for c in claims]
+
+
+def _notes_mark(c: ClaimResult) -> str:
+    """The contents table's mark of a claim resting on solves that did not close their certificate."""
+    n = len(c.solver_notes)
+    return f" ⚠ {n} solve(s) not optimal: see the section." if n else ""
+
+
+def errors_first(claims: list[ClaimResult], extras: list[dict[str, Any]]) -> list[tuple[str, str, str]]:
+    """Every claim and section that could not be computed, as (id, title, why), claims first."""
+    out = [(c.id, f"{c.id} ({c.paper})", c.summary) for c in claims if c.verdict == "ERROR"]
+    out += [(e["id"], f"{e['id']}: {e.get('title', '')}", e.get("summary", "")) for e in extras
+            if e.get("status") == "ERROR"]
+    return out
+
+
+def _errors_md(claims: list[ClaimResult], extras: list[dict[str, Any]]) -> list[str]:
+    errs = errors_first(claims, extras)
+    if not errs:
+        return []
+    md = [f"**ERROR: {len(errs)} part(s) of this report could not be computed** (the command exited with status 1; "
+          "nothing below stands in for them):", ""]
+    md += [f"{i + 1}. [{title}](#{_anchor(sid)}): {why}" for i, (sid, title, why) in enumerate(errs)]
+    return md + [""]
+
+
+def notes_text(notes: Sequence[str]) -> str:
+    """The paragraph at the head of a section whose solves did not all close their certificate."""
+    return ("⚠ **Not every solve of this section closed its certificate** (the numbers come from the bracket "
+            "the solver ended with; the status says why it stopped): " + "; ".join(notes) + ".")
 
 
 def _markdown(claims: list[ClaimResult], prov: dict[str, Any], extras: list[dict[str, Any]]) -> str:
-    md = [f"# {TITLE}", "", _headline(prov), "", "## Contents and verdicts", "",
+    md = [f"# {TITLE}", "", _headline(prov), "", *_errors_md(claims, extras), "## Contents and verdicts", "",
           md_table(["claim", "paper", "verdict", "rests on", "numbers"],
                    _toc_rows(claims, lambda c: f"[{c.id}](#{_anchor(c.id)})")), ""]
     if extras:
-        md += ["Beyond the paper: " + ", ".join(f"[{e['id']}](#{_anchor(e['id'])}) {e['title']}" for e in extras), ""]
+        md += ["Beyond the paper: " + ", ".join(f"[{e['id']}](#{_anchor(e['id'])}) {e['title']}"
+                                              + (" (**ERROR**)" if e.get("status") == "ERROR" else "")
+                                              for e in extras), ""]
     md += [READING, ""]
     for c in claims:
         md += [f'<a id="{_anchor(c.id)}"></a>', "", f"## {c.id} ({c.paper}): {c.verdict}", "",
                f"> {c.statement}", "", f"**{c.summary}**", ""]
         if STATEMENTS.get(c.id):
             md += [f"*Checked as:* {STATEMENTS[c.id]}", ""]
+        if c.solver_notes:
+            md += [notes_text(c.solver_notes), ""]
         note = basis_note(c.basis)
         if note:
             md += [note, ""]
@@ -296,7 +330,8 @@ def _extras_md(extras: list[dict[str, Any]]) -> list[str]:
     md = ["## Beyond the paper", "", "Results the paper does not state, computed with the same certificates. "
           "They are not claims: no verdict.", ""]
     for e in extras:
-        md += [f'<a id="{_anchor(e["id"])}"></a>', "", f"### {e['id']}: {e['title']}", "", e["summary"], ""]
+        error = " (ERROR: could not be computed)" if e.get("status") == "ERROR" else ""
+        md += [f'<a id="{_anchor(e["id"])}"></a>', "", f"### {e['id']}: {e['title']}{error}", "", e["summary"], ""]
         if e.get("details"):
             md += [e["details"], ""]
         n = 0
@@ -432,22 +467,28 @@ blockquote{border-left:4px solid #ccc;margin:0 0 .8em;padding-left:1em;color:#44
 .basis{background:#f7f7fb;border:1px solid #dde;padding:6px 10px;border-radius:4px;font-size:14px}
 .basis.flagged{background:#fff7e0;border-color:#e6c36a}
 .reading{font-size:13px;color:#444}
+.errors{background:#fbd9d7;border:2px solid #a4161a;padding:4px 12px;border-radius:4px}
+.notes{background:#fff7e0;border:1px solid #e6c36a;padding:6px 10px;border-radius:4px}
 """
 
 
 def _html_page(claims: list[ClaimResult], prov: dict[str, Any], extras: list[dict[str, Any]], root: Path) -> str:
-    b: list[str] = [f"<h1>{html.escape(TITLE)}</h1>", f"<p>{_inline(_headline(prov))}</p>",
-                    '<h2 id="contents">Contents and verdicts</h2>']
+    b: list[str] = [f"<h1>{html.escape(TITLE)}</h1>", f"<p>{_inline(_headline(prov))}</p>"]
+    errs = _errors_md(claims, extras)
+    if errs:
+        b.append('<div class="errors">' + md_to_html("\n".join(errs)) + "</div>")
+    b.append('<h2 id="contents">Contents and verdicts</h2>')
     rows = []
     for c in claims:
         flag = ' <span class="flag" title="the deciding cap leans on the truncation">⚠</span>' \
             if c.basis.get("flag") else ""
         rows.append(f'<tr><td><a href="#{_anchor(c.id)}">{c.id}</a></td><td>{html.escape(c.paper)}</td>'
                     f"<td>{_badge(c.verdict)}{flag}</td><td>{_inline(basis_words(c.basis).removeprefix('⚠ '))}</td>"
-                    f"<td>{_inline(c.summary)}</td></tr>")
+                    f"<td>{_inline(c.summary + _notes_mark(c))}</td></tr>")
     b.append('<table class="toc"><thead><tr><th>claim</th><th>paper</th><th>verdict</th><th>rests on</th>'
              "<th>numbers</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table>")
-    links = [f'<a href="#{_anchor(e["id"])}">{html.escape(e["id"])}: {html.escape(e["title"])}</a>' for e in extras]
+    links = [f'<a href="#{_anchor(e["id"])}">{html.escape(e["id"])}: {html.escape(e["title"])}</a>'
+             + (" " + _badge("ERROR") if e.get("status") == "ERROR" else "") for e in extras]
     links += ['<a href="#departures">Where the exact model departs from the paper</a>',
               '<a href="#provenance">Provenance</a>']
     b.append("<p>Also: " + " · ".join(links) + "</p>")
@@ -457,6 +498,8 @@ def _html_page(claims: list[ClaimResult], prov: dict[str, Any], extras: list[dic
         b.append(f"<blockquote>{_inline(c.statement)}</blockquote><p><b>{_inline(c.summary)}</b></p>")
         if STATEMENTS.get(c.id):
             b.append(f"<p><i>Checked as:</i> {_inline(STATEMENTS[c.id])}</p>")
+        if c.solver_notes:
+            b.append(f'<p class="notes">{_inline(notes_text(c.solver_notes))}</p>')
         note = basis_note(c.basis)
         if note:
             cls = "basis flagged" if c.basis.get("flag") else "basis"
@@ -482,8 +525,9 @@ def _html_page(claims: list[ClaimResult], prov: dict[str, Any], extras: list[dic
         b.append('<h2 id="beyond">Beyond the paper</h2><p>Results the paper does not state, computed with the same '
                  "certificates. They are not claims: no verdict.</p>")
         for e in extras:
-            b.append(f'<section id="{_anchor(e["id"])}"><h3>{html.escape(e["id"])}: {html.escape(e["title"])}</h3>'
-                     f"<p>{_inline(e['summary'])}</p>")
+            badge = " " + _badge("ERROR") if e.get("status") == "ERROR" else ""
+            b.append(f'<section id="{_anchor(e["id"])}"><h3>{html.escape(e["id"])}: {html.escape(e["title"])}{badge}'
+                     f"</h3><p>{_inline(e['summary'])}</p>")
             if e.get("details"):
                 b.append(md_to_html(e["details"]))
             n = 0

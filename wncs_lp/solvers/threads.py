@@ -17,16 +17,20 @@ So every solver asks :func:`resolve_threads`:
 * :func:`run_parallel` records the pid and the layer of the first parallel call; in a fork of
   that process (another pid) under ``omp``, every solve runs its serial kernels instead (one
   thread, ``stats["threads"] == 1``), so parameter sweeps can fork workers after the main
-  process used its threads.
+  process used its threads;
+* :func:`thread_limit` caps every solve of a whole job (``wncs-lp reproduce --threads N``),
+  explicit counts included, through the environment variable :data:`LIMIT_ENV`, so worker
+  processes (forked or spawned) inherit the cap.
 """
 from __future__ import annotations
 
 import os
 import types
-from typing import Any, Callable
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
 
-__all__ = ["usable_cores", "resolve_threads", "run_parallel", "fork_unsafe", "twins", "FORK_UNSAFE_LAYERS",
-           "PARALLEL_MIN_STATES"]
+__all__ = ["usable_cores", "resolve_threads", "run_parallel", "fork_unsafe", "twins", "thread_limit",
+           "threads_limit", "FORK_UNSAFE_LAYERS", "PARALLEL_MIN_STATES", "LIMIT_ENV"]
 
 #: Below this many states a solve uses one thread unless ``threads`` says otherwise: a parallel
 #: region costs 5-25 ms on a loaded 2-core machine (both threads must be scheduled), more than a
@@ -36,6 +40,9 @@ PARALLEL_MIN_STATES = 1_000_000
 
 #: Threading layers that a forked child cannot enter once its parent has.
 FORK_UNSAFE_LAYERS = ("omp",)
+
+#: The environment variable holding the most threads any solve may use (:func:`thread_limit`).
+LIMIT_ENV = "WNCS_LP_THREADS"
 
 #: (pid, threading layer) of the first parallel kernel call of this process tree, or None.
 _FIRST_PARALLEL: tuple[int, str] | None = None
@@ -55,10 +62,43 @@ def fork_unsafe() -> bool:
             and _FIRST_PARALLEL[1] in FORK_UNSAFE_LAYERS)
 
 
+def threads_limit() -> int | None:
+    """The cap :func:`thread_limit` set (the environment variable :data:`LIMIT_ENV`), or None."""
+    text = os.environ.get(LIMIT_ENV, "").strip()
+    try:
+        n = int(text)
+    except ValueError:
+        return None
+    return n if n >= 1 else None
+
+
+@contextmanager
+def thread_limit(threads: int | None) -> Iterator[None]:
+    """Within the block, no solve uses more than ``threads`` threads (None: no cap), in this
+    process and in the worker processes it starts (they inherit the environment)."""
+    if threads is None:
+        yield
+        return
+    if not (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1):
+        from ..errors import SolverError
+
+        raise SolverError(f"threads must be a whole number >= 1, got {threads!r}")
+    old = os.environ.get(LIMIT_ENV)
+    os.environ[LIMIT_ENV] = str(threads)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(LIMIT_ENV, None)
+        else:
+            os.environ[LIMIT_ENV] = old
+
+
 def resolve_threads(threads: int | None, n_states: int | None = None) -> int:
     """The threads of a solve over ``n_states`` states: ``threads`` when given, else
     :func:`usable_cores` (one below :data:`PARALLEL_MIN_STATES` states); capped at numba's
-    ``NUMBA_NUM_THREADS``; 1 in a fork of a process that used GNU OpenMP (module docstring)."""
+    ``NUMBA_NUM_THREADS`` and at :func:`thread_limit`'s cap; 1 in a fork of a process that used
+    GNU OpenMP (module docstring)."""
     if fork_unsafe():
         return 1
     import numba
@@ -66,6 +106,9 @@ def resolve_threads(threads: int | None, n_states: int | None = None) -> int:
     if threads is None:
         small = n_states is not None and n_states < PARALLEL_MIN_STATES
         threads = 1 if small else usable_cores()
+    cap = threads_limit()
+    if cap is not None:
+        threads = min(int(threads), cap)
     return max(1, min(int(threads), int(numba.config.NUMBA_NUM_THREADS)))
 
 

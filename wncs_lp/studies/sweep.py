@@ -25,7 +25,9 @@ Output folder (:class:`~wncs_lp.studies.folder.StudyFolder`): ``sweep.csv`` and 
 ``sweep.svg``. One run writes a folder at a time (a second waits for it).
 
 Resume: rows already in ``sweep.csv`` whose fingerprint checks out are kept and not recomputed;
-a deleted, truncated, edited or foreign row is recomputed.
+a deleted, truncated, edited or foreign row is recomputed, and so is a row whose status is an
+error (a solve that stopped short of its certificate, a failed evaluation): a later run, or a
+fixed solver, may close it, and a kept error row would carry an older run's status for good.
 
 Warm start: with one worker the grid is walked in order and the optimal solve of value v_i
 starts from the solution at v_{i-1} when the state space is the same (the method's warm start
@@ -253,6 +255,11 @@ class _Table:
                  log: Callable[[str], None] | None):
         self.grid, self.names, self.folder, self.settings, self.log = grid, names, folder, settings, log
         self.done: dict[str, SweepRow] = folder.rows(SweepRow.from_csv, _row_key) if folder is not None else {}
+        errors = [k for k in self.keys() if k in self.done and self.done[k].status.startswith("error")]
+        for k in errors:  # computed again (module docstring)
+            del self.done[k]
+        if errors and log is not None:
+            log(f"{len(errors)} row(s) of the folder with an error status computed again")
         self.reused = sum(1 for k in self.keys() if k in self.done)
         self.computed = 0
         self.files: dict[str, str] = {}

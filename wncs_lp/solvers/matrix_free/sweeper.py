@@ -22,9 +22,10 @@ def load_kernels() -> Any:
         raise SolverError("the matrix-free solver needs numba, disabled here by WNCS_LP_NO_NUMBA")
     try:
         from . import kernels as K
-    except ImportError as exc:  # pragma: no cover - numba is installed in the test environment
+    except ImportError as exc:  # pragma: no cover - numba is a core dependency
         raise SolverError(
-            f"the matrix-free solver needs numba (pip install 'wncs_lp[fast]'): {exc}"
+            f"the matrix-free solver needs numba, a dependency of wncs_lp that did not import here "
+            f"(pip install 'numba>=0.58'): {exc}"
         ) from None
     return K
 
