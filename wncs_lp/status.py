@@ -277,8 +277,10 @@ def status_message(status: Any) -> str:
 
 def _message(st: Status) -> str:
     code, reason = st.code, st.reason
-    if code is FAILED:
+    if code is FAILED and reason is None:
         return f"the solve failed: {st}"
+    if code in (FAILED, INFEASIBLE) and reason is not None and reason not in REASONS:
+        return f"the solver ended with its own status {reason!r} ({code.value}): no usable answer"
     if reason is None:
         return _CODE_MESSAGES[code]
     if reason in REASONS:

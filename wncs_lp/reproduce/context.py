@@ -266,6 +266,7 @@ class Solved:
     stationary: np.ndarray
     method: str
     seconds: float
+    status: str = "optimal"  # the solve's status as cached (a text of wncs_lp.status)
 
     @cached_property
     def recurrent(self) -> np.ndarray:
@@ -292,14 +293,17 @@ class Solved:
         return tuple(int(x) for x in self.mdp.action_table[self.mdp.a_indices[self.policy[s]]])
 
     def as_solution(self) -> Solution:
+        """This solve as a :class:`Solution`, with the status the solve had (never assumed optimal)."""
         return Solution(
             method=self.method,
-            status="optimal",
+            status=self.status,
             gain=self.gain,
             gain_lower=self.gain_lower,
             gain_upper=self.gain_upper,
             bias=self.bias,
             policy=self.policy,
+            seconds=self.seconds,
+            pair_actions=self.mdp.a_indices,
         )
 
 
@@ -351,7 +355,7 @@ class Context:
                 "gain_lower": float(sol.gain_lower),
                 "gain_upper": float(sol.gain_upper),
                 "method": sol.method,
-                "status": sol.status,
+                "status": str(sol.status),
                 "states": mdp.n_states,
                 "pairs": mdp.n_pairs,
                 "unichain": unichain,
@@ -376,6 +380,7 @@ class Context:
             arr["stationary"],
             res["method"],
             res["seconds"],
+            str(res.get("status", "failed")),
         )
         self._solved[key] = solved
         return solved

@@ -184,6 +184,11 @@ class Certified(Display):
         return self.status.code is OPTIMAL
 
     @property
+    def success(self) -> bool:
+        """scipy's name for :attr:`ok` (``OptimizeResult.success``): the certificate closed."""
+        return self.ok
+
+    @property
     def status_code(self) -> Code:
         """The status's code, one of :data:`wncs_lp.status.STATUS_CODES`."""
         return self.status.code
