@@ -219,3 +219,16 @@ def test_a_status_given_as_text_is_parsed_when_the_result_is_made():
     back = replace(sol, status="max_iter:kTimeLimit")
     assert isinstance(back.status, Status) and back.status_code is MAX_ITER and back.status_reason == "kTimeLimit"
     assert back.summary()["status"] == "max_iter:kTimeLimit" and back.summary()["status_code"] == "max_iter"
+
+
+def test_a_reproduction_solve_carries_its_status_into_as_solution():
+    from wncs_lp.reproduce.context import Solved
+
+    mdp = _mdp()
+    sol = value_iteration(mdp, max_iter=2)
+    assert not sol.ok
+    solved = Solved(None, mdp, sol.gain, sol.gain_lower, sol.gain_upper, sol.policy, sol.bias,
+                    np.full(mdp.n_states, 1.0 / mdp.n_states), sol.method, sol.seconds, str(sol.status))
+    back = solved.as_solution()
+    assert back.status == sol.status and back.status_code is sol.status_code and not back.ok
+    assert back.certificate == sol.certificate

