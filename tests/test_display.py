@@ -131,3 +131,27 @@ def test_to_frame_without_pandas_is_one_clear_error(small, monkeypatch):
         sol.to_frame(mdp)
     assert PANDAS_HINT in str(exc.value)
     assert sol._repr_html_().startswith("<div")  # the HTML form does not need pandas
+
+
+def test_a_constrained_solution_is_certified_and_shows_its_mix():
+    from wncs_lp.constrained import solve_constrained
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p12_cloud_budget"), ["tau_cap=6"])
+    mdp = wncs_lp.build(sc)
+    sol = solve_constrained(mdp, sc.constraints, "lp")
+    assert isinstance(sol.certificate, Certificate) and sol.ok and sol.success
+    assert sol.certificate.contains(sol.gain, rtol=1e-12)
+    text = repr(sol)
+    assert text.startswith("ConstrainedSolution of") and len(text) < 2000 and "array(" not in text
+    assert sum(line.strip().startswith("constraint:") for line in text.splitlines()) == len(sc.constraints)
+    assert "<table>" in sol._repr_html_()  # without the MDP: the rows alone
+    df = sol.to_frame(mdp)
+    assert list(df.columns)[-3:] == ["action", "sigma", "probability"]
+    # every state appears, its probabilities sum to one, and each row is a pair the policy plays
+    sums = df.groupby("state")["probability"].sum()
+    assert len(sums) == mdp.n_states and np.allclose(sums, 1.0)
+    assert (df.groupby("state").size() > 1).sum() == sol.n_randomized
+    with pytest.raises(WncsError, match="needs its MDP"):
+        sol.to_frame()
