@@ -304,3 +304,25 @@ def test_an_unfinished_run_returns_the_iterate_of_its_certificate(options):
         tol = 1e-9 * abs(sol.gain)
         assert sol.gain_lower - tol <= lo <= hi <= sol.gain_upper + tol, (budget, lo, hi, sol.gain_lower,
                                                                            sol.gain_upper)
+
+
+def test_readable_repr_html_and_table_of_a_matrix_free_solution():
+    # issue 23 §3 / 26: the printout is short (it was tens of thousands of characters), the table
+    # names the same action in every state as the table of the same policy on the enumerated MDP
+    sc = paper("paper_p12", "tau_cap=8")
+    mf = matrix_free_value_iteration(sc)
+    mdp = wncs_lp.build(sc)
+    text = repr(mf)
+    assert text.startswith(f"MatrixFreeSolution of {mf.local_actions.size:,} layout states") and len(text) < 2000
+    assert "array(" not in text and "status: optimal" in text
+    assert mf._repr_html_().count("<table>") == 2
+    df = mf.to_frame()
+    assert list(df.columns)[:4] == ["state", "tau_1", "tau_2", "configuration"] and len(df) == mf.layout.n_states
+    np.testing.assert_array_equal(df["local_action"], mf.local_actions)
+    idx = mf.layout_index_of(mdp)
+    on = mf.on_mdp(mdp).to_frame(mdp)  # the enumerated MDP's path: pair indices, action table
+    assert list(df["action"].to_numpy()[idx]) == list(on["action"])
+    assert list(df["configuration"].to_numpy()[idx]) == list(on["configuration"])
+    np.testing.assert_array_equal(df[["tau_1", "tau_2"]].to_numpy()[idx], mdp.states.tau)
+    ev = matrix_free_evaluate(sc, mf)
+    assert len(repr(ev)) < 2000 and list(ev.to_frame()["status"]) == [str(ev.status)]

@@ -32,7 +32,7 @@ from ..chain import PolicyChain
 from ..errors import PolicyError
 from ..mdp import MDP
 from ..solvers.certify import certificate_closed
-from ..solvers.lp import status_from
+from ..status import CERTIFICATE, INFEASIBLE_POLICY, status_from
 from .problem import LinearConstraint, Rows, max_form, with_cost
 from .result import ConstrainedSolution, ConstraintReport
 
@@ -183,9 +183,10 @@ def certify(
         The policy (:func:`policy_from_occupation`).
     row_multipliers : (K_rows,) array
         lambda >= 0 per row of :func:`max_form` (the solver's duals).
-    solver_status : str
-        ``"optimal"`` or the solver's own word for what went wrong (becomes
-        ``"inaccurate:<status>"``).
+    solver_status : Status or str
+        The backend's status mapped by its table (a :class:`~wncs_lp.status.Status`, e.g.
+        ``max_iter:MaxIterations``, which stands as it is), or ``"optimal"``, or a word for what
+        went wrong (becomes ``"inaccurate:<word>"``).
     lower : (bound, vi), optional
         An already computed :func:`lagrangian_bound` (the Lagrangian route has it).
     """
@@ -201,7 +202,7 @@ def certify(
     hi = gain
     closed = certificate_closed(mdp, lo, hi, gain, cert_rtol)
     status = status_from((None if solver_status == "optimal" else solver_status,
-                          None if viol_max <= feas_rtol else "infeasible_policy", None if closed else "certificate"))
+                          None if viol_max <= feas_rtol else INFEASIBLE_POLICY, None if closed else CERTIFICATE))
     st = dict(stats or {})
     st.update(
         evaluation_residual=ev["residual"],

@@ -89,6 +89,8 @@ from ..chain import PolicyChain
 from ..errors import InfeasibleConstraintsError, ModelError, SolverError
 from ..mdp import MDP
 from ..scenario import ConstraintSpec
+from ..solvers.lp import cvxpy_status
+from ..status import CERTIFICATE, INFEASIBLE_POLICY, OBJECTIVE_NOT_EVALUATED, status_from
 from .certify import CERT_RTOL, FEAS_RTOL, certify, evaluate_rows, lagrangian_bound, policy_from_occupation
 from .lp import basic_solution
 from .problem import LinearConstraint, max_form, with_cost
@@ -519,7 +521,7 @@ class OccupationProgram:
         stats["certificate"] = "lagrangian"
         stats["row_multipliers"] = [float(v) for v in lam_rows]
         sol = certify(mdp_d, lcons, probs, randomized, lam_rows, method="convex",
-                      solver_status="optimal" if solved else status,
+                      solver_status=cvxpy_status(status),
                       solver_gain=sense * (stats["solver_objective"] - c0), lp_values=lp_values, h0=h,
                       cert_rtol=cert_rtol, feas_rtol=feas_rtol, iterations=stats["solver_iterations"], t0=t0,
                       stats=stats)
@@ -598,16 +600,8 @@ class OccupationProgram:
         width = hi - lo
         closed = math.isfinite(width) and width <= cert_rtol * max(abs(f_exact), 1e-300)
         feasible = viol_max <= feas_rtol
-        if not solved:
-            st_out = f"inaccurate:{status}"
-        elif not aux_ok:
-            st_out = "inaccurate:objective_not_evaluated"
-        elif not feasible:
-            st_out = "inaccurate:infeasible_policy"
-        elif not closed:
-            st_out = "inaccurate:certificate"
-        else:
-            st_out = "optimal"
+        st_out = status_from((cvxpy_status(status), None if aux_ok else OBJECTIVE_NOT_EVALUATED,
+                              None if feasible else INFEASIBLE_POLICY, None if closed else CERTIFICATE))
         stats.update(certificate="solver_dual" if sub is None else "subgradient", objective_exact=f_exact, objective_exact_method=how,
                      cost_exact=float(ev["gain"]), evaluation_residual=ev["residual"], max_violation=float(viol_max))
         mult = np.array([r.multiplier for r in reports], dtype=float)

@@ -41,7 +41,8 @@ import scipy.sparse as sp
 from ..errors import InfeasibleConstraintsError, SolverError
 from ..mdp import MDP
 from ..solvers.certify import greedy_first
-from ..solvers.lp import LPData, build_lp, clarabel_settings, clarabel_stats
+from ..solvers.lp import LPData, build_lp, clarabel_settings, clarabel_stats, clarabel_status, cvxpy_status
+from ..status import FAILED, INFEASIBLE
 from .certify import CERT_RTOL, certify, policy_from_occupation
 from .problem import LinearConstraint, Rows, max_form, with_cost
 from .result import ConstrainedSolution
@@ -52,7 +53,8 @@ __all__ = ["solve_constrained_lp", "reachable_range", "check_reachable", "basic_
 #: Crossover: a pair stays in play when its scaled reduced cost is at most RC_TOL * (1 + max|q|).
 RC_TOL = 1e-6
 
-_INFEASIBLE = {"PrimalInfeasible", "AlmostPrimalInfeasible", "infeasible", "infeasible_inaccurate"}
+#: Each backend's status table, kept in one place (:mod:`wncs_lp.solvers.lp`).
+_STATUS_OF = {"clarabel": clarabel_status, "cvxpy": cvxpy_status}
 
 
 def scaled_rows(lp: LPData, rows: Rows) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
@@ -113,7 +115,7 @@ def _run_cvxpy(lp: LPData, G, h, tol, max_iter, verbose, settings):
     except cp.error.SolverError as exc:
         raise SolverError(f"cvxpy/Clarabel failed: {exc}") from exc
     status = str(prob.status)
-    if status in _INFEASIBLE:
+    if cvxpy_status(status).code is INFEASIBLE:
         return status, False, None, None, None, None, {"solver": "cvxpy+clarabel", "solver_status": status}
     if y.value is None or eq.dual_value is None:
         raise SolverError(f"cvxpy/Clarabel returned no solution (status {status})")
@@ -259,9 +261,10 @@ def solve_constrained_lp(
     else:
         status, solved, y, z_eq, z_in, mu, stats = _run_cvxpy(lp, G, h, tol, max_iter, verbose, settings)
     method = "lp" if backend == "clarabel" else "lp-cvxpy"
-    if status in _INFEASIBLE:
+    mapped = _STATUS_OF[backend](status)
+    if mapped.code is INFEASIBLE:
         check_reachable(mdp, constraints, joint_status=status)
-    if status in ("DualInfeasible", "AlmostDualInfeasible", "Unsolved", "unbounded") or y is None \
+    if mapped.code is FAILED or y is None \
             or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq)) and np.all(np.isfinite(z_in))):
         raise SolverError(f"{method}: the constrained LP failed with status {status} "
                           f"(iterations={stats.get('solver_iterations')}); no usable solution")
@@ -276,7 +279,7 @@ def solve_constrained_lp(
     else:
         stats["crossover"] = "off"
     return certify_lp_solution(mdp, constraints, lp, s, yb, z_eq, z_in, method=method,
-                               solver_status="optimal" if solved else status, stats=stats, t0=t0,
+                               solver_status=mapped, stats=stats, t0=t0,
                                cert_rtol=cert_rtol)
 
 

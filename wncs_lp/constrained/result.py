@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 
 from ..files import scalars
-from ..solvers.result import certificate_summary
-from ..status import status_code, status_message
+from ..solvers.result import Certificate, Certified, certificate_rows, certificate_summary, describe_array, takes_bounds
+from ..status import Status
 
 __all__ = ["ConstraintReport", "ConstrainedSolution"]
 
@@ -65,8 +65,9 @@ class ConstraintReport:
         }
 
 
-@dataclass(frozen=True, eq=False)
-class ConstrainedSolution:
+@takes_bounds
+@dataclass(frozen=True, eq=False, repr=False)
+class ConstrainedSolution(Certified):
     r"""The optimum of ``min g`` subject to linear bounds on other long-run averages.
 
     Attributes
@@ -75,17 +76,18 @@ class ConstrainedSolution:
         ``"lp"`` (Clarabel direct), ``"lp-cvxpy"``, ``"lp-highs"`` / ``"lp-warm"`` (a trade-off point
         solved by HiGHS from scratch / re-solved from the previous point's basis), ``"lagrangian"`` (certified value
         iteration and a one-state mix) or ``"convex"`` (:class:`OccupationProgram`).
-    status : str
+    status : Status
         ``"optimal"`` when the certificate closes to the requested tolerance and the returned
         policy meets every bound within the feasibility tolerance; otherwise
         ``"inaccurate:<why>"`` (``certificate``, ``infeasible_policy``, ``multichain``, the
-        solver's own status...). As for :class:`~wncs_lp.solvers.result.Solution`,
-        :attr:`status_code` is one of the codes of :mod:`wncs_lp.status` and :attr:`message`
-        says it in words.
+        solver's own status mapped by its backend's table, e.g. ``max_iter:MaxIterations``...). As
+        for :class:`~wncs_lp.solvers.result.Solution`, :attr:`status_code` is one of the codes of
+        :mod:`wncs_lp.status`, :attr:`status_reason` says why and :attr:`message` says it in words.
     gain : float
         The exact average cost of the returned policy (= ``gain_upper`` when it is feasible).
-    gain_lower, gain_upper : float
-        The certificate ``gain_lower <= g*_C <= gain_upper``: the Lagrangian bound
+    certificate : Certificate
+        ``gain_lower <= g*_C <= gain_upper`` (read as :attr:`gain_lower` / :attr:`gain_upper`, and
+        given so when one is made): the Lagrangian bound
         :math:`L(\lambda) = \underline g_\lambda - \lambda^T b` (weak duality, with
         :math:`\underline g_\lambda` the lower end of a certified Bellman bracket for the cost
         :math:`c + \lambda^T D`) and the exact cost of the returned feasible policy.
@@ -109,10 +111,9 @@ class ConstrainedSolution:
     """
 
     method: str
-    status: str
+    status: Status
     gain: float
-    gain_lower: float
-    gain_upper: float
+    certificate: Certificate
     solver_gain: float
     policy: np.ndarray
     occupation: np.ndarray
@@ -122,25 +123,6 @@ class ConstrainedSolution:
     iterations: int = 0
     seconds: float = 0.0
     stats: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def ok(self) -> bool:
-        return self.status == "optimal"
-
-    @property
-    def gap(self) -> float:
-        """Relative width of the certificate, (hi - lo) / max(|gain|, 1e-300)."""
-        return (self.gain_upper - self.gain_lower) / max(abs(self.gain), 1e-300)
-
-    @property
-    def status_code(self) -> str:
-        """The status as one of :data:`wncs_lp.status.STATUS_CODES`."""
-        return status_code(self.status)
-
-    @property
-    def message(self) -> str:
-        """What the status means, in words."""
-        return status_message(self.status)
 
     @property
     def n_randomized(self) -> int:
@@ -182,8 +164,30 @@ class ConstrainedSolution:
         out.update({k: v for k, v in scalars(self.stats).items() if k not in out})
         return out
 
-    def __repr__(self) -> str:
-        cons = "; ".join(f"{c.label}: {c.value:.6g}{' (active)' if c.active else ''}" for c in self.constraints)
-        return (f"ConstrainedSolution(method={self.method!r}, status={self.status!r}, gain={self.gain:.10g}, "
-                f"bracket=[{self.gain_lower:.10g}, {self.gain_upper:.10g}], randomized_states={self.n_randomized}, "
-                f"constraints=[{cons}])")
+    def _display_head(self) -> str:
+        n = np.asarray(self.policy).size
+        return f"{type(self).__name__} of {n:,} pairs by {self.method}, {len(self.constraints)} constraint(s)"
+
+    def _display_rows(self) -> list[tuple[str, str]]:
+        rows = certificate_rows(self) + [("solver_gain", f"{self.solver_gain:.12g}")]
+        rows += [("constraint", f"{c.label}: {c.value:.6g}"
+                  + (f", active, multiplier {c.multiplier:.6g}" if c.active else ", slack")
+                  + (f", VIOLATED by {c.violation:.3g}" if c.violation > 0 else "")) for c in self.constraints]
+        return rows + [
+            ("policy", describe_array(self.policy, "pair probabilities")),
+            ("randomized", f"{self.n_randomized:,} state(s) mix two or more actions"),
+        ]
+
+    def _frame_records(self, mdp=None):
+        from ..tables import mixed_policy_records
+
+        return mixed_policy_records(mdp, self.policy)
+
+    def to_frame(self, mdp=None):
+        """The policy as a :class:`pandas.DataFrame` (pandas: the ``notebook`` extra): one row per
+        state and action played (``probability``; a state's rows sum to 1), with the state decoded
+        and the action named; needs the ``mdp`` it was solved on."""
+        from ..display import frame
+
+        cols, recs = self._frame_records(mdp)
+        return frame(cols, recs)

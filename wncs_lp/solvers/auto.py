@@ -28,6 +28,7 @@ from typing import Any, Callable
 from ..errors import SolverError
 from ..mdp import MDP
 from ..progress import Progress, as_progress
+from ..status import CROSS_CHECK, INACCURATE, of
 from .result import Solution
 
 __all__ = ["solve_auto", "LP_SMALL_PAIRS", "LP_MAX_PAIRS", "CROSS_CHECK_MAX_PAIRS"]
@@ -87,7 +88,7 @@ def _cross_check(sol: Solution, run: Callable[[str], Solution], choice: str, rto
     except SolverError as exc:
         return dict(cross_check_method=other, cross_check_error=str(exc), cross_check_agree=None)
     ok, diff = _agree(sol, o, rtol)
-    return dict(cross_check_method=other, cross_check_status=o.status, cross_check_gain=float(o.gain),
+    return dict(cross_check_method=other, cross_check_status=str(o.status), cross_check_gain=float(o.gain),
                 cross_check_gain_lower=float(o.gain_lower), cross_check_gain_upper=float(o.gain_upper),
                 cross_check_seconds=float(o.seconds), cross_check_rel_diff=float(diff), cross_check_agree=ok)
 
@@ -160,8 +161,8 @@ def solve_auto(
         prog.phase(f"[auto] {L} pairs <= {cross_check_max_pairs}: cross-checking with "
                    f"{_name('vi' if choice == 'lp' else 'lp')}")
         stats.update(_cross_check(sol, run, choice, cross_check_rtol))
-        if stats["cross_check_agree"] is False and status == "optimal":
-            status = "inaccurate:cross_check"
+        if stats["cross_check_agree"] is False and status.ok:
+            status = of(INACCURATE, CROSS_CHECK)
     else:
         stats.update(cross_check_method=None, cross_check_agree=None,
                      cross_check_skipped=f"{L} pairs > {cross_check_max_pairs}")

@@ -17,10 +17,11 @@ from ..errors import PolicyError, SolverError
 from ..mdp import MDP
 from ..policy_forms import policy_array
 from ..progress import Progress, as_progress
+from ..status import INACCURATE, MAX_ITER, OPTIMAL, Status, of
 from .certify import bracket, certificate_closed, greedy_first, q_values
 from .iteration import (PRECISION_STALL_SWEEPS, VI_TOL, IterationOptions, IterationOutcome, IterationScheme,
                         cert_line, certified_iteration, gamma, is_int, max_abs)
-from .result import Solution
+from .result import Certificate, Certified, Solution, certificate_rows, certificate_summary, describe_array
 
 __all__ = [
     "MultichainPolicyError",
@@ -59,9 +60,14 @@ class MultichainPolicyError(PolicyError):
     """The evaluated policy induces more than one recurrent class (a :class:`PolicyError`)."""
 
 
-@dataclass(frozen=True, eq=False)
-class PolicyEvaluation:
+@dataclass(frozen=True, eq=False, repr=False)
+class PolicyEvaluation(Certified):
     """Exact average-cost evaluation of a unichain stationary policy.
+
+    Its :attr:`certificate` is ``[gain - residual, gain + residual]``: with ``r = c_pi + P_pi h - h
+    - g`` the Poisson residual, ``g_pi = pi . c_pi = g + pi . r``, so ``|g - g_pi| <= max|r| <=
+    residual``. Its status is always ``optimal`` (an evaluation that misses its residual
+    tolerance raises instead).
 
     Attributes
     ----------
@@ -83,6 +89,41 @@ class PolicyEvaluation:
     stationary: np.ndarray
     residual: float
     solver: str = "splu"
+
+    method = "evaluate"
+
+    def __post_init__(self) -> None:  # nothing to normalise: the status and certificate are derived
+        pass
+
+    @property
+    def certificate(self) -> Certificate:
+        """``[gain - residual, gain + residual]`` (the class docstring)."""
+        r = abs(float(self.residual))
+        return Certificate(self.gain - r, self.gain + r)
+
+    @property
+    def status(self) -> Status:
+        return of(OPTIMAL)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready scalars: :func:`~wncs_lp.solvers.result.certificate_summary`, residual, solver."""
+        return {**certificate_summary(self), "residual": float(self.residual), "solver": self.solver}
+
+    def _display_head(self) -> str:
+        return f"PolicyEvaluation of {np.asarray(self.bias).size:,} states ({self.solver})"
+
+    def _display_rows(self) -> list[tuple[str, str]]:
+        return certificate_rows(self) + [
+            ("residual", f"{self.residual:.3g}"),
+            ("bias", describe_array(self.bias, "floats") + ", h[0] = 0"),
+            ("stationary", describe_array(self.stationary, "probabilities") + f", "
+                           f"{int(np.count_nonzero(self.stationary)):,} recurrent states"),
+        ]
+
+    def _frame_records(self):
+        n = np.asarray(self.bias).size
+        return ["state", "bias", "stationary"], {"state": np.arange(n), "bias": np.asarray(self.bias, float),
+                                                 "stationary": np.asarray(self.stationary, float)}
 
 
 def evaluate_policy(mdp: MDP, policy: Any = None, *, sigma: Any = None, method: str = "auto",
@@ -468,7 +509,7 @@ def _finish(mdp: MDP, method: str, sweeps: _PairSweeps, out: IterationOutcome, t
 
 
 def _iteration_solution(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: float, converged: bool,
-                        iterations: int, t0: float, stats: dict, status: str | None = None) -> Solution:
+                        iterations: int, t0: float, stats: dict, status: Status | None = None) -> Solution:
     """The Solution of a value-iteration run: the certificate [lo, hi] computed on ``h``, its
     midpoint as the gain, ``h - h[0]`` as the bias and h's greedy policy (first minimiser);
     ``stats`` gains ``span``, ``rel_gap`` and ``converged``. ``status`` overrides the default
@@ -477,7 +518,7 @@ def _iteration_solution(mdp: MDP, method: str, h: np.ndarray, lo: float, hi: flo
     gain = 0.5 * (lo + hi)
     return Solution(
         method=method,
-        status=status or ("optimal" if converged else "max_iter"),
+        status=status or of(OPTIMAL if converged else MAX_ITER),
         gain=gain,
         gain_lower=lo,
         gain_upper=hi,
@@ -810,11 +851,11 @@ def _pi_solution(mdp: MDP, run: _HowardRun, t0: float, cert_rtol: float, prog: P
     lo, hi = bracket(mdp, ev.bias)
     rel = (hi - lo) / max(abs(ev.gain), 1e-300)
     if not run.stable:
-        status = "max_iter"
+        status = of(MAX_ITER)
     elif certificate_closed(mdp, lo, hi, ev.gain, cert_rtol):
-        status = "optimal"
+        status = of(OPTIMAL)
     else:
-        status = "inaccurate"
+        status = of(INACCURATE)
     occ = np.zeros(mdp.n_pairs)
     occ[run.d] = ev.stationary
     prog.done(f"[pi] {run.it} evaluation(s): {lo:.10g} <= g* <= {hi:.10g}, gap {rel:.2e} ({status})")
@@ -829,10 +870,10 @@ def _pi_solution(mdp: MDP, run: _HowardRun, t0: float, cert_rtol: float, prog: P
 
 
 def _vi_as_pi(mdp: MDP, vi: Solution, t0: float, it: int, changes: list, fallback: str, cert_rtol: float) -> Solution:
-    closed = vi.status == "optimal" and certificate_closed(mdp, vi.gain_lower, vi.gain_upper, vi.gain, cert_rtol)
+    closed = vi.ok and certificate_closed(mdp, vi.gain_lower, vi.gain_upper, vi.gain, cert_rtol)
     return Solution(
         method="pi",
-        status="optimal" if closed else (vi.status if vi.status != "optimal" else "inaccurate"),
+        status=of(OPTIMAL) if closed else (vi.status if not vi.ok else of(INACCURATE)),
         gain=vi.gain,
         gain_lower=vi.gain_lower,
         gain_upper=vi.gain_upper,

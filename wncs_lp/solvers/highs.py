@@ -15,9 +15,11 @@ Variants (``HIGHS_VARIANTS``; measured in ``benchmarks/lp_backends.py``):
   "highs-ipm")`` runs), then crossover to a vertex.
 * ``"simplex"`` -- the dual simplex (``linprog(method="highs-ds")``).
 
-Statuses are mapped into Clarabel's vocabulary (:data:`HIGHS_STATUS`), so that
-``FAILED_STATUSES`` and ``"inaccurate:<status>"`` of :func:`~wncs_lp.solvers.lp.solve_lp` mean the
-same thing whichever backend ran; the native HiGHS status is kept in ``stats["highs_status"]``.
+HiGHS's own model status (``highspy.HighsModelStatus``, by its name: ``kOptimal``, ``kTimeLimit``,
+...) maps into the toolkit's codes by :data:`HIGHS_STATUS`, this backend's table (as cvxpy keeps
+one ``STATUS_MAP`` per solver); the name itself is kept verbatim, as ``stats["solver_status"]``
+and as the reason of a status that is not optimal (``max_iter:kTimeLimit``), never translated into
+another backend's words. ``stats["highs_status"]`` adds HiGHS's sentence for it.
 """
 from __future__ import annotations
 
@@ -30,28 +32,49 @@ import scipy.sparse as sp
 
 from ..errors import SolverError
 from ..progress import Progress
+from ..status import FAILED, INFEASIBLE, INTERRUPTED, MAX_ITER, OPTIMAL, Code, Status, from_backend
 
-__all__ = ["HIGHS_VARIANTS", "HIGHS_DEFAULT_VARIANT", "HIGHS_STATUS", "new_highs", "solve_highs"]
+__all__ = ["HIGHS_VARIANTS", "HIGHS_DEFAULT_VARIANT", "HIGHS_STATUS", "highs_status", "new_highs", "solve_highs"]
 
 #: The HiGHS solver variants :func:`solve_highs` accepts.
 HIGHS_VARIANTS = ("ipx", "simplex")
 #: The variant ``backend="highs"`` runs unless ``settings={"variant": ...}`` says otherwise.
 HIGHS_DEFAULT_VARIANT = "ipx"
 
-#: HiGHS model status (``highspy.HighsModelStatus`` name) -> the Clarabel status of the same
-#: meaning. Only ``kOptimal`` counts as solved; a limit maps to Clarabel's limit statuses
-#: ("inaccurate:MaxTime" / "inaccurate:MaxIterations" when HiGHS still returns a primal-dual
-#: point); infeasibility and every error to the failed statuses (a :class:`SolverError`).
-HIGHS_STATUS = {
-    "kOptimal": "Solved",
-    "kInfeasible": "PrimalInfeasible",
-    "kUnbounded": "DualInfeasible",
-    "kUnboundedOrInfeasible": "DualInfeasible",
-    "kTimeLimit": "MaxTime",
-    "kIterationLimit": "MaxIterations",
-    "kInterrupt": "CallbackTerminated",
-    "kHighsInterrupt": "CallbackTerminated",
+#: HiGHS model status (``highspy.HighsModelStatus`` name) -> code of :mod:`wncs_lp.status`.
+#: Only ``kOptimal`` is solved. A limit (time, iterations, an objective bound or target asked
+#: for) is ``MAX_ITER``: the point HiGHS holds then is used and certified, its status says which
+#: limit (``max_iter:kIterationLimit``). ``INFEASIBLE`` and ``FAILED`` leave no usable solution (a
+#: :class:`SolverError`). Every LP of the toolkit has a bounded feasible set (x is a probability
+#: vector), so "unbounded or infeasible" is infeasible and "unbounded" a numerical failure. A
+#: status missing here (a newer HiGHS) is ``FAILED``, its name kept.
+HIGHS_STATUS: dict[str, Code] = {
+    "kOptimal": OPTIMAL,
+    "kInfeasible": INFEASIBLE,
+    "kUnboundedOrInfeasible": INFEASIBLE,
+    "kUnbounded": FAILED,
+    "kTimeLimit": MAX_ITER,
+    "kIterationLimit": MAX_ITER,
+    "kObjectiveBound": MAX_ITER,
+    "kObjectiveTarget": MAX_ITER,
+    "kSolutionLimit": MAX_ITER,
+    "kInterrupt": INTERRUPTED,
+    "kHighsInterrupt": INTERRUPTED,
+    "kMemoryLimit": FAILED,
+    "kNotset": FAILED,
+    "kLoadError": FAILED,
+    "kModelError": FAILED,
+    "kPresolveError": FAILED,
+    "kSolveError": FAILED,
+    "kPostsolveError": FAILED,
+    "kModelEmpty": FAILED,
+    "kUnknown": FAILED,
 }
+
+
+def highs_status(model_status: str) -> Status:
+    """The status of a HiGHS model status name (:data:`HIGHS_STATUS`; the name is the reason)."""
+    return from_backend(HIGHS_STATUS, model_status)
 
 
 def _variant_options(variant: str) -> dict[str, Any]:
@@ -121,10 +144,10 @@ def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_
 
     Returns
     -------
-    (status, solved, y, z_eq, stats)
-        ``status`` in Clarabel's vocabulary (:data:`HIGHS_STATUS`; unknown HiGHS statuses map to
-        ``"Unsolved"``), ``solved = status == "Solved"``, ``y`` the primal, ``z_eq = -row_dual``
-        (Clarabel's sign), ``stats`` with ``solver``, ``solver_status``, ``highs_status``,
+    (status, y, z_eq, stats)
+        ``status`` the :class:`~wncs_lp.status.Status` of HiGHS's model status
+        (:func:`highs_status`), ``y`` the primal, ``z_eq = -row_dual`` (Clarabel's sign),
+        ``stats`` with ``solver``, ``solver_status`` (the ``HighsModelStatus`` name), ``highs_status``,
         ``highs_variant``, ``solver_iterations`` (IPM + simplex/crossover iterations),
         ``ipm_iterations``, ``simplex_iterations``, ``r_prim`` / ``r_dual`` (HiGHS's max primal /
         dual infeasibility), ``duality_gap``, ``solve_time``, ``obj_scaled``, ``lp_rows``,
@@ -189,7 +212,8 @@ def _pass_model(h, A: sp.csc_matrix, b: np.ndarray, q: np.ndarray) -> None:
 
 
 def _read_solution(h, variant: str, A: sp.csc_matrix, q: np.ndarray):
-    """``(status, solved, y, z_eq, stats)`` of a finished run (see :func:`solve_highs`)."""
+    """``(status, y, z_eq, stats)`` of a finished run (see :func:`solve_highs`): the invert step,
+    where HiGHS's model status becomes a :class:`~wncs_lp.status.Status` (:data:`HIGHS_STATUS`)."""
     m, L = A.shape
     native = h.modelStatusToString(h.getModelStatus())
     ms = h.getModelStatus().name
@@ -197,14 +221,14 @@ def _read_solution(h, variant: str, A: sp.csc_matrix, q: np.ndarray):
     sol = h.getSolution()
     y = np.asarray(sol.col_value, float) if sol.value_valid and len(sol.col_value) == L else np.full(L, np.nan)
     z = -np.asarray(sol.row_dual, float) if sol.dual_valid and len(sol.row_dual) == m else np.full(m, np.nan)
-    status = HIGHS_STATUS.get(ms, "Unsolved")
+    status = highs_status(ms)
     ipm_it = max(int(info.ipm_iteration_count), 0)
     spx_it = max(int(info.simplex_iteration_count), 0) + max(int(info.crossover_iteration_count), 0)
     pobj = float(info.objective_function_value)
     gap = float(info.primal_dual_objective_error) if hasattr(info, "primal_dual_objective_error") else np.nan
     stats = {
         "solver": "highs",
-        "solver_status": status,
+        "solver_status": ms,
         "highs_status": f"{ms} ({native})",
         "highs_variant": variant,
         "solver_iterations": ipm_it + spx_it,
@@ -219,4 +243,4 @@ def _read_solution(h, variant: str, A: sp.csc_matrix, q: np.ndarray):
         "lp_cols": int(L),
         "lp_nnz": int(A.nnz),
     }
-    return status, status == "Solved", y, z, stats
+    return status, y, z, stats

@@ -64,6 +64,7 @@ import numpy as np
 
 from ..errors import SolverError
 from ..progress import Progress, convergence_eta
+from ..status import INACCURATE, INTERRUPTED, MAX_ITER, OPTIMAL, PRECISION, START_DEPENDENT, Status, of
 from .certify import width_closed
 
 __all__ = ["IterationOptions", "IterationScheme", "IterationOutcome", "certified_iteration", "check_options",
@@ -254,9 +255,9 @@ class IterationOutcome:
     ----------
     lo, hi : float
         The last certificate, as computed (not widened).
-    status : str
+    status : Status
         ``"optimal"``, ``"max_iter"``, ``"interrupted"``, ``"inaccurate:precision"`` or
-        ``"inaccurate:start_dependent"``.
+        ``"inaccurate:start_dependent"`` (:mod:`wncs_lp.status`).
     delta : float
         The round-off bound of the last certificate when it was needed (closing rule, precision
         stop), else 0.
@@ -272,7 +273,7 @@ class IterationOutcome:
 
     lo: float = math.nan
     hi: float = math.nan
-    status: str = "max_iter"
+    status: Status = field(default_factory=lambda: of(MAX_ITER))
     delta: float = 0.0
     stop: str | None = None
     used: int = 0
@@ -283,11 +284,11 @@ class IterationOutcome:
 
     @property
     def converged(self) -> bool:
-        return self.status == "optimal"
+        return self.status.code is OPTIMAL
 
     @property
     def at_floor(self) -> bool:
-        return self.status == "inaccurate:precision"
+        return self.status.reason == PRECISION
 
 
 def gamma(k: int) -> float:
@@ -332,13 +333,13 @@ class _Judge:
         scale = self.scale if abs(mid) <= ROUNDOFF_FLOOR * self.scale else 0.0
         return width_closed(lo, hi, mid, o.tol, atol=o.atol, cost_scale=scale)
 
-    def __call__(self, lo: float, hi: float, used: int) -> str | None:
+    def __call__(self, lo: float, hi: float, used: int) -> Status | None:
         """The status the certificate (lo, hi) after ``used`` sweeps ends the run with, or None."""
         width = hi - lo
         if self._closed(lo, hi):
             self.delta = d = self.scheme.roundoff()
             if self._closed(lo - d, hi + d):
-                return "optimal"
+                return of(OPTIMAL)
             mid = 0.5 * (lo + hi)
             if not self._closed(mid - d, mid + d):  # the band alone is wider than the tolerance
                 return self._precision(lo, hi)
@@ -357,14 +358,14 @@ class _Judge:
         self.delta, self._delta_at = self.scheme.roundoff(), used
         return width <= 2.0 * self.delta
 
-    def _precision(self, lo: float, hi: float) -> str:
+    def _precision(self, lo: float, hi: float) -> Status:
         mid = max(abs(0.5 * (lo + hi)), 1e-300)
         self.stop = (f"tolerance below attainable precision: reached {(hi - lo) / mid:.3g} "
                      f"(round-off floor 2 delta / |g| = {2 * self.delta / mid:.3g}; asked {self.opts.tol:.3g}); "
                      f"bracket widened by delta = {self.delta:.3g} to cover the round-off")
-        return "inaccurate:precision"
+        return of(INACCURATE, PRECISION)
 
-    def _settled(self, lo: float, hi: float) -> str | None:
+    def _settled(self, lo: float, hi: float) -> Status | None:
         if not self.scheme.aperiodic_jacobi:
             self.ends = []
             return None
@@ -385,7 +386,7 @@ class _Judge:
                      f"{moved:.3g} over {k} Jacobi certificates): the optimal gain depends on the start state "
                      "(the MDP has several closed classes with different gains), so no single gain closes it; "
                      "every start state's optimal gain lies in the bracket")
-        return "inaccurate:start_dependent"
+        return of(INACCURATE, START_DEPENDENT)
 
 
 def _finite(lo: float, hi: float, h: np.ndarray) -> bool:
@@ -435,8 +436,8 @@ def certified_iteration(scheme: IterationScheme, opts: IterationOptions, *, cost
         out.checks += 1
         if not _finite(out.lo, out.hi, scheme.h):
             raise scheme.overflow(out.lo, out.hi, out.used) from None
-        closed = judge(out.lo, out.hi, out.used) == "optimal"
-        out.status = "optimal" if closed else "interrupted"
+        verdict = judge(out.lo, out.hi, out.used)
+        out.status = of(OPTIMAL) if verdict is not None and verdict.code is OPTIMAL else of(INTERRUPTED)
         judge.stop = None
     scheme.settle()
     out.delta, out.stop = judge.delta, judge.stop

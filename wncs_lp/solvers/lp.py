@@ -101,7 +101,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -109,15 +109,18 @@ import scipy.sparse as sp
 from ..errors import PolicyError, SolverError
 from ..mdp import MDP
 from ..progress import Progress, as_progress
+from ..status import (CERTIFICATE, FAILED, INACCURATE, INFEASIBLE, INTERRUPTED, MAX_ITER, OPTIMAL, POLISH_MAX_ITER, Code, Status,
+                      from_backend, polish_reason, status_from)
 from .certify import bracket, certificate_closed, greedy_first, q_values
 from .dp import policy_iteration
-from .highs import solve_highs
+from .highs import highs_status, solve_highs
 from .result import Solution
 
 __all__ = ["LPData", "LPChoice", "build_lp", "build_reduced_lp", "choose_lp", "solve_lp", "extract_policy", "VISIT_TOL",
            "FORMULATIONS", "BACKENDS", "REDUCE_MAX_NNZ_RATIO", "HIGHS_ROWS_AT_WIDTH_2", "HIGHS_WIDTH_EXPONENT", "HIGHS_SIMPLEX_MAX_WIDTH",
            "highs_max_rows",
-           "CLARABEL_DEFAULTS", "POLISH_VI_MIN_STATES", "FAILED_STATUSES", "clarabel_settings", "clarabel_stats",
+           "CLARABEL_DEFAULTS", "POLISH_VI_MIN_STATES", "FAILED_STATUSES", "CLARABEL_STATUS", "CVXPY_STATUS",
+           "clarabel_status", "cvxpy_status", "backend_status", "usable", "clarabel_settings", "clarabel_stats",
            "cost_scale_of", "status_from"]
 
 #: A state counts as visited when its scaled frequency n * sum_a x(s, a) exceeds this, i.e.
@@ -129,8 +132,67 @@ __all__ = ["LPData", "LPChoice", "build_lp", "build_reduced_lp", "choose_lp", "s
 #: iteration) then corrects whatever is wrong, so the threshold affects speed, not answers.
 VISIT_TOL = 1e-5
 
-#: Clarabel statuses after which no usable solution exists.
-FAILED_STATUSES = {"PrimalInfeasible", "DualInfeasible", "AlmostPrimalInfeasible", "AlmostDualInfeasible", "Unsolved"}
+#: Clarabel's ``SolverStatus`` (by name) -> code of :mod:`wncs_lp.status`: Clarabel's table, as
+#: cvxpy keeps one ``STATUS_MAP`` per solver. ``Solved`` is optimal; ``AlmostSolved`` and the
+#: numerical troubles (``NumericalError``, ``InsufficientProgress``) are inaccurate: the point is
+#: used, and the certificate computed on it says what it is worth; the limits are ``MAX_ITER``;
+#: infeasibility and the rest leave no usable solution (every LP here has a bounded feasible set,
+#: so "dual infeasible", i.e. unbounded, is a numerical failure). A status missing here is
+#: ``FAILED``, its name kept.
+CLARABEL_STATUS: dict[str, Code] = {
+    "Solved": OPTIMAL,
+    "AlmostSolved": INACCURATE,
+    "NumericalError": INACCURATE,
+    "InsufficientProgress": INACCURATE,
+    "MaxIterations": MAX_ITER,
+    "MaxTime": MAX_ITER,
+    "CallbackTerminated": INTERRUPTED,
+    "PrimalInfeasible": INFEASIBLE,
+    "AlmostPrimalInfeasible": INFEASIBLE,
+    "DualInfeasible": FAILED,
+    "AlmostDualInfeasible": FAILED,
+    "Unsolved": FAILED,
+}
+
+#: cvxpy's problem status -> code of :mod:`wncs_lp.status` (cvxpy's own words: ``optimal``,
+#: ``optimal_inaccurate``, ``user_limit`` for an iteration or time limit, ...; the same rules as
+#: :data:`CLARABEL_STATUS`).
+CVXPY_STATUS: dict[str, Code] = {
+    "optimal": OPTIMAL,
+    "optimal_inaccurate": INACCURATE,
+    "user_limit": MAX_ITER,
+    "infeasible": INFEASIBLE,
+    "infeasible_inaccurate": INFEASIBLE,
+    "infeasible_or_unbounded": INFEASIBLE,
+    "unbounded": FAILED,
+    "unbounded_inaccurate": FAILED,
+    "solver_error": FAILED,
+}
+
+#: Clarabel statuses after which no usable solution exists (``INFEASIBLE`` or ``FAILED`` in
+#: :data:`CLARABEL_STATUS`).
+FAILED_STATUSES = {w for w, c in CLARABEL_STATUS.items() if c in (INFEASIBLE, FAILED)}
+
+
+def clarabel_status(native: Any) -> Status:
+    """The status of a Clarabel ``SolverStatus`` (:data:`CLARABEL_STATUS`; its name is the reason)."""
+    return from_backend(CLARABEL_STATUS, native)
+
+
+def cvxpy_status(native: Any) -> Status:
+    """The status of a cvxpy problem status (:data:`CVXPY_STATUS`; the word is the reason)."""
+    return from_backend(CVXPY_STATUS, native)
+
+
+def backend_status(backend: str, native: Any) -> Status:
+    """The status of a backend's own status word, by that backend's table."""
+    table = {"clarabel": clarabel_status, "highs": highs_status, "cvxpy": cvxpy_status}
+    return table[backend](native)
+
+
+def usable(status: Status) -> bool:
+    """A backend's status after which its point is worth certifying (not infeasible, not failed)."""
+    return status.code not in (INFEASIBLE, FAILED)
 
 
 @dataclass(frozen=True, eq=False)
@@ -471,7 +533,7 @@ def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, set
     for key in ("obj_scaled", "obj_dual_scaled"):  # the objective of this LP is -n g / c_s: g is reported instead
         stats.pop(key)
     stats.update(lp_rows=int(L), lp_cols=int(n), cost_scale=cs, lp_nnz=int(A.nnz))
-    return status, status == "Solved", z / float(n), g, h, stats
+    return status, z / float(n), g, h, stats
 
 
 def _full_residuals(mdp: MDP, x: np.ndarray, g: float, h: np.ndarray) -> dict[str, float]:
@@ -562,12 +624,13 @@ def _solve_clarabel(lp: LPData, tol: float, max_iter: int, verbose: bool, settin
     status, y, z, stats = _run_clarabel(Pz, lp.q, A, b, [clarabel.ZeroConeT(m), clarabel.NonnegativeConeT(L)],
                                         clarabel_settings(tol, max_iter, verbose, settings), prog)
     stats.update(lp_rows=int(m), lp_cols=int(L), lp_nnz=int(lp.A_eq.nnz))
-    return status, status == "Solved", y, z[:m], stats
+    return status, y, z[:m], stats
 
 
 def _run_clarabel(P, c, A, b, cones, settings, prog: Progress | None):
-    """One Clarabel solve: ``(status, x, z, stats)`` with :func:`clarabel_stats` and the scaled
-    primal and dual objectives."""
+    """One Clarabel solve: ``(status, x, z, stats)``, the status mapped by :data:`CLARABEL_STATUS`,
+    with :func:`clarabel_stats` (the native word as ``solver_status``) and the scaled primal and
+    dual objectives."""
     import clarabel
 
     solver = clarabel.DefaultSolver(P, c, A, b, cones, settings)
@@ -575,7 +638,7 @@ def _run_clarabel(P, c, A, b, cones, settings, prog: Progress | None):
     sol = solver.solve()
     stats = {**clarabel_stats(sol, solver.get_info()), "obj_scaled": float(sol.obj_val),
              "obj_dual_scaled": float(sol.obj_val_dual)}
-    return str(sol.status), np.asarray(sol.x, float), np.asarray(sol.z, float), stats
+    return clarabel_status(sol.status), np.asarray(sol.x, float), np.asarray(sol.z, float), stats
 
 
 def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings: dict | None,
@@ -595,16 +658,17 @@ def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings:
             prob.solve(solver=cp.CLARABEL, verbose=bool(verbose), **opts)
     except cp.error.SolverError as exc:
         raise SolverError(f"cvxpy/Clarabel failed: {exc}") from exc
-    status = str(prob.status)
+    native = str(prob.status)
+    status = cvxpy_status(native)
     if y.value is None or eq.dual_value is None:
-        raise SolverError(f"cvxpy/Clarabel returned no solution (status {status})")
+        raise SolverError(f"cvxpy/Clarabel returned no solution (status {native})")
     yv = np.asarray(y.value, float)
     zv = np.asarray(eq.dual_value, float).ravel()
     ss = prob.solver_stats
     k = _kkt(lp, yv, zv)
     stats = {
         "solver": "cvxpy+clarabel",
-        "solver_status": status,
+        "solver_status": native,
         "solver_iterations": int(ss.num_iters or 0),
         "r_prim": k["kkt_primal_residual"],
         "r_dual": k["kkt_dual_residual"],
@@ -612,7 +676,7 @@ def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings:
         "solve_time": float(ss.solve_time or 0.0),
         "obj_scaled": float(prob.value),
     }
-    return status, status == "optimal", yv, zv, stats
+    return status, yv, zv, stats
 
 
 def solve_lp(mdp: MDP, *, backend: str = "auto", tol: float = 1e-9, polish: bool = True, max_iter: int = 200,
@@ -640,7 +704,8 @@ def solve_lp(mdp: MDP, *, backend: str = "auto", tol: float = 1e-9, polish: bool
     verbose : bool
         Solver log to stdout.
     cert_rtol : float
-        ``status == "optimal"`` requires the solver's "Solved" and (hi - lo)/|g| <= cert_rtol.
+        ``status`` is optimal only when the backend's own status is (Clarabel's ``Solved``, HiGHS's
+        ``kOptimal``, cvxpy's ``optimal``) and the certificate closed: (hi - lo)/|g| <= cert_rtol.
     visit_tol : float
         Visited-state threshold on n * x(s), see :data:`VISIT_TOL`.
     settings : dict, optional
@@ -666,9 +731,13 @@ def solve_lp(mdp: MDP, *, backend: str = "auto", tol: float = 1e-9, polish: bool
         :func:`_full_residuals`), ``formulation``, ``lp_rows`` / ``lp_cols`` / ``lp_nnz``,
         ``reduction_*``, ``backend``, ``lp_choice`` / ``lp_choice_rule`` (:class:`LPChoice`),
         ``n_visited_states``, ``polish_*``, ``dual_bias``, ``extracted_policy``, ``cost_scale``.
-        ``status``: ``"optimal"``, else ``"inaccurate:<solver status>"`` (HiGHS's in Clarabel's
-        words, :data:`~wncs_lp.solvers.highs.HIGHS_STATUS`), ``"inaccurate:polish_max_iter"``
-        or ``"inaccurate:certificate"`` (bracket wider than cert_rtol), in that precedence.
+        ``status`` (:func:`~wncs_lp.status.status_from`, in this precedence): the backend's own
+        status when it did not succeed, mapped by its table (:data:`CLARABEL_STATUS`,
+        :data:`~wncs_lp.solvers.highs.HIGHS_STATUS`, :data:`CVXPY_STATUS`) with its word as the
+        reason (``"max_iter:MaxIterations"``, ``"max_iter:kTimeLimit"``,
+        ``"inaccurate:AlmostSolved"``); ``"inaccurate:polish_max_iter"`` (or another
+        ``polish_*``); ``"inaccurate:certificate"`` (bracket wider than cert_rtol); else
+        ``"optimal"``.
 
     Raises
     ------
@@ -684,14 +753,14 @@ def solve_lp(mdp: MDP, *, backend: str = "auto", tol: float = 1e-9, polish: bool
     method = _METHODS[backend]
     if backend == "clarabel":
         settings = {**CLARABEL_DEFAULTS, **(settings or {})}
-    status, solved, x, g_dual, h_dual, lp_obj, stats = _run_backend(mdp, choice, method, tol, max_iter, verbose,
+    status, x, g_dual, h_dual, lp_obj, stats = _run_backend(mdp, choice, method, tol, max_iter, verbose,
                                                                       settings, prog)
     stats.update(formulation=choice.formulation, backend=backend, lp_choice=choice.reason,
                  lp_choice_rule=choice.rule, polish=polish or None)
     if backend == "clarabel":
         stats["clarabel_settings"] = dict(settings)
     h_dual, policy0 = _extract(mdp, x, g_dual, h_dual, lp_obj, visit_tol, stats, t0)
-    prog.done(f"[{method}] solver status {status} after {stats['solver_iterations']} "
+    prog.done(f"[{method}] solver status {stats['solver_status']} after {stats['solver_iterations']} "
               f"{'interior-point' if backend != 'highs' else 'interior-point + simplex'} iterations")
     gain, lo, hi, bias, policy, issue = _polish(mdp, polish, policy0, h_dual, lp_obj, polish_max_iter, cert_rtol,
                                                 stats, prog, method)
@@ -699,8 +768,7 @@ def solve_lp(mdp: MDP, *, backend: str = "auto", tol: float = 1e-9, polish: bool
     stats.update(certificate_closed=bool(closed), lp_error=lp_obj - gain)
     occ = np.maximum(x, 0.0)
     occ = occ / occ.sum() if occ.sum() > 0 else occ
-    return Solution(method=method, status=status_from((None if solved else status, issue,
-                                                       None if closed else "certificate")),
+    return Solution(method=method, status=status_from((status, issue, None if closed else CERTIFICATE)),
                     gain=float(gain), gain_lower=float(lo), gain_upper=float(hi), bias=np.asarray(bias, float),
                     policy=np.asarray(policy, np.int64), occupation=occ, iterations=int(stats["solver_iterations"]),
                     seconds=time.perf_counter() - t0, stats=stats, pair_actions=mdp.a_indices)
@@ -722,13 +790,6 @@ def _extract(mdp: MDP, x: np.ndarray, g_dual: float, h_dual: np.ndarray, lp_obj:
 _METHODS = {"clarabel": "lp", "highs": "lp-highs", "cvxpy": "lp-cvxpy"}
 
 
-def status_from(reasons: Sequence[str | None]) -> str:
-    """A solution's status from its possible defects in order of precedence: ``"optimal"`` when
-    every entry is None, else ``"inaccurate:<the first defect>"``."""
-    first = next((r for r in reasons if r is not None), None)
-    return "optimal" if first is None else f"inaccurate:{first}"
-
-
 def _checked_lp_args(mdp: MDP, backend: str, formulation: str, polish: bool | str) -> str | bool:
     """The polish mode (True resolved by the model's size), after checking the arguments."""
     if backend not in BACKENDS:
@@ -744,33 +805,33 @@ def _checked_lp_args(mdp: MDP, backend: str, formulation: str, polish: bool | st
     return polish
 
 
-def _unusable(method: str, status: str, stats: dict) -> SolverError:
-    return SolverError(f"{method}: solver failed with status {status} (r_prim={stats.get('r_prim')}, "
+def _unusable(method: str, stats: dict) -> SolverError:
+    return SolverError(f"{method}: solver failed with status {stats.get('solver_status')} (r_prim={stats.get('r_prim')}, "
                        f"r_dual={stats.get('r_dual')}, iterations={stats.get('solver_iterations')}); no usable solution")
 
 
 def _run_backend(mdp: MDP, choice: LPChoice, method: str, tol: float, max_iter: int, verbose: bool,
                  settings: dict | None, prog: Progress):
-    """Solve the chosen LP and unscale it: ``(status, solved, x, g, h, lp objective, stats)`` with x
+    """Solve the chosen LP and unscale it: ``(status, x, g, h, lp objective, stats)`` with x
     the occupation measure and (g, h) the dual gain and bias, lifted back to every state when reduced."""
     backend, form = choice.backend, choice.formulation
     if form == "dual":
         prog.phase(f"[{method}] solving the gain-bias (dual) LP with Clarabel")
-        status, solved, x, g_dual, h_dual, stats = _solve_clarabel_dual(mdp, tol, max_iter, verbose, settings, prog)
-        if status in FAILED_STATUSES or not (np.all(np.isfinite(x)) and np.isfinite(g_dual) and np.all(np.isfinite(h_dual))):
-            raise _unusable(method, status, stats)
-        return status, solved, x, g_dual, h_dual, g_dual, stats
+        status, x, g_dual, h_dual, stats = _solve_clarabel_dual(mdp, tol, max_iter, verbose, settings, prog)
+        if not usable(status) or not (np.all(np.isfinite(x)) and np.isfinite(g_dual) and np.all(np.isfinite(h_dual))):
+            raise _unusable(method, stats)
+        return status, x, g_dual, h_dual, g_dual, stats
     lp = choice.reduced_lp if form == "reduced" else build_lp(mdp)
     prog.phase(f"[{method}] solving the {form} LP ({lp.n_eq:,} rows, {lp.n_pairs:,} columns) with "
                f"{_BACKEND_NAMES[backend]}")
     if backend == "highs":
         hs = settings if choice.highs_variant is None else {**(settings or {}), "variant": choice.highs_variant}
-        status, solved, y, z_eq, stats = solve_highs(lp.A_eq, lp.b_eq, lp.q, tol, max_iter, verbose, hs, prog)
+        status, y, z_eq, stats = solve_highs(lp.A_eq, lp.b_eq, lp.q, tol, max_iter, verbose, hs, prog)
     else:
         runner = _solve_clarabel if backend == "clarabel" else _solve_cvxpy
-        status, solved, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings, prog)
-    if status in FAILED_STATUSES or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (lp.n_pairs,):
-        raise _unusable(method, status, stats)
+        status, y, z_eq, stats = runner(lp, tol, max_iter, verbose, settings, prog)
+    if not usable(status) or not (np.all(np.isfinite(y)) and np.all(np.isfinite(z_eq))) or y.shape != (lp.n_pairs,):
+        raise _unusable(method, stats)
     stats.update(_kkt(lp, y, z_eq))
     g_dual, h_dual = lp.unscale_duals(z_eq)
     lp_obj = lp.objective(stats["obj_scaled"])
@@ -782,7 +843,7 @@ def _run_backend(mdp: MDP, choice: LPChoice, method: str, tol: float, max_iter: 
         h_dual = red.lift_h(h_dual, g_dual)
         stats.update(reduction_decision_states=red.n_decision, reduction_eliminated=red.n_eliminated,
                      reduction_levels=int(red.level_ptr.size - 1), reduction_seconds=red.seconds)
-    return status, solved, x, g_dual, h_dual, lp_obj, stats
+    return status, x, g_dual, h_dual, lp_obj, stats
 
 
 def _polish(mdp: MDP, polish: str | bool, policy0: np.ndarray, h_dual: np.ndarray, lp_obj: float,
@@ -812,10 +873,10 @@ def _polish(mdp: MDP, polish: str | bool, policy0: np.ndarray, h_dual: np.ndarra
                 stats["polish_fallback"] = pi.stats["fallback"]
             issue = None
             if pi.stats.get("multichain_policy"):
-                if pi.status != "optimal":
-                    issue = f"polish_{pi.status}"
+                if not pi.ok:
+                    issue = polish_reason(pi.status)
             elif not pi.stats["stable"]:
-                issue = "polish_max_iter"
+                issue = POLISH_MAX_ITER
             return pi.gain, pi.gain_lower, pi.gain_upper, pi.bias, pi.policy, issue
     lo, hi = bracket(mdp, h_dual)
     policy = policy0 if not polish else greedy_first(mdp, q_values(mdp, h_dual))

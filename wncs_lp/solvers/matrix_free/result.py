@@ -20,7 +20,8 @@ import numpy as np
 from ...errors import PolicyError, SolverError
 from ...models.system import System
 from ...scenario import Scenario
-from ..result import Certified, Solution, certificate_rows, describe_array, result_repr, stats_row
+from ...status import Status
+from ..result import Certificate, Certified, Solution, certificate_rows, describe_array, stats_row, takes_bounds
 from .layout import DOMAINS_OF_LAYOUT, BoxLayout, check_local_actions
 
 __all__ = ["MatrixFreeSolution", "MatrixFreeEvaluation", "load_solution", "as_system"]
@@ -35,22 +36,26 @@ def as_system(obj: Any) -> System:
     raise SolverError(f"expected a Scenario or a System, got {type(obj).__name__}")
 
 
-@dataclass(frozen=True, eq=False)
+@takes_bounds
+@dataclass(frozen=True, eq=False, repr=False)
 class MatrixFreeSolution(Certified):
     """A certified solution of the matrix-free solver, over the states of a :class:`BoxLayout`.
 
-    Printing one shows its scalars, scipy ``OptimizeResult`` style.
+    Printing one shows its scalars, scipy ``OptimizeResult`` style; :meth:`to_frame` gives the
+    policy state by state.
 
     Attributes
     ----------
     method : str
         ``"matrix-free"``.
-    status : str
+    status : Status
         As :attr:`Solution.status <wncs_lp.solvers.result.Solution.status>` (``status_code``,
-        ``message``, ``ok`` likewise).
-    gain, gain_lower, gain_upper : float
-        The certificate ``gain_lower <= g* <= gain_upper`` (min / max of T h - h over the layout,
-        or over its reachable states) and its midpoint.
+        ``status_reason``, ``message``, ``ok`` likewise).
+    gain : float
+        The midpoint of the certificate.
+    certificate : Certificate
+        ``gain_lower <= g* <= gain_upper`` (min / max of T h - h over the layout, or over its
+        reachable states); :attr:`gain_lower` / :attr:`gain_upper` read its ends.
     bias : (n,) float array
         h over the *layout* states, the one the certificate was computed on (h = 0 at the first
         state: tau = 1 in the first initial configuration). Empty for a solution loaded without it.
@@ -71,10 +76,9 @@ class MatrixFreeSolution(Certified):
     """
 
     method: str
-    status: str
+    status: Status
     gain: float
-    gain_lower: float
-    gain_upper: float
+    certificate: Certificate
     bias: np.ndarray
     local_actions: np.ndarray
     iterations: int
@@ -121,23 +125,37 @@ class MatrixFreeSolution(Certified):
         arrays = dict(policy=self.local_actions, lo=self.layout.lo, dims=self.layout.dims, caps=self.layout.caps)
         if bias:
             arrays["bias"] = self.bias
-        meta = dict(method=self.method, status=self.status, gain=self.gain, gain_lower=self.gain_lower,
+        meta = dict(method=self.method, status=str(self.status), gain=self.gain, gain_lower=self.gain_lower,
                     gain_upper=self.gain_upper, iterations=self.iterations, seconds=self.seconds,
                     domain=self.layout.domain, fingerprint=self.system.scenario.fingerprint())
         buf = io.BytesIO()  # written whole or not at all (an interrupt leaves no half file)
         np.savez(buf, meta=np.array(json.dumps(meta)), **arrays)
         atomic_write_bytes(path, buf.getvalue())
 
-    def __repr__(self) -> str:
-        n = self.local_actions.size
-        rows = certificate_rows(self) + [
+    def _display_head(self) -> str:
+        return f"{type(self).__name__} of {self.local_actions.size:,} layout states by {self.method}"
+
+    def _display_rows(self) -> list[tuple[str, str]]:
+        return certificate_rows(self) + [
             ("bias", describe_array(self.bias, "floats") + " over the layout"),
             ("local_actions", describe_array(self.local_actions, "local action indices") + ", one per layout state"),
             ("layout", f"{self.layout.n_configs:,} configurations x AoI boxes ({self.layout.domain})"),
             ("mask", "None" if self.mask is None else f"{int(self.mask.sum()):,} reachable states"),
             stats_row(self.stats),
         ]
-        return result_repr(f"{type(self).__name__} of {n:,} layout states by {self.method}", rows)
+
+    def _frame_records(self):
+        from ...tables import layout_columns
+
+        return layout_columns(self.system, self.layout, self.local_actions, self.bias, self.mask)
+
+    def to_frame(self):
+        """The policy state by state over the layout, as a :class:`pandas.DataFrame`: ``state``,
+        ``tau_1`` ... ``tau_N``, ``configuration``, ``action`` (its name), ``local_action``,
+        ``bias`` (when kept) and ``reachable`` (when the solve knew the reachable set); at most
+        :data:`wncs_lp.tables.MAX_TABLE_ROWS` rows (a layout at the paper's full scale is larger:
+        :meth:`on_mdp` on a smaller cap, or the policy maps)."""
+        return super().to_frame()
 
 
 # ----------------------------------------------------------------------------- load
@@ -219,7 +237,8 @@ def _check_meta(path, raw: np.ndarray) -> dict[str, Any]:
 
 
 # ----------------------------------------------------------------------------- evaluation
-@dataclass(frozen=True, eq=False)
+@takes_bounds
+@dataclass(frozen=True, eq=False, repr=False)
 class MatrixFreeEvaluation(Certified):
     """Exact (certified) average cost of a fixed policy, from :func:`matrix_free_evaluate`.
 
@@ -231,15 +250,16 @@ class MatrixFreeEvaluation(Certified):
     ----------
     policy : str
         The name of the policy evaluated (``summary()["policy"]``).
+    certificate : Certificate
+        ``gain_lower <= g_pi <= gain_upper``.
     method : str
         ``"matrix-free-evaluate"``.
     """
 
     policy: str
-    status: str
+    status: Status
     gain: float
-    gain_lower: float
-    gain_upper: float
+    certificate: Certificate
     bias: np.ndarray
     iterations: int
     seconds: float
@@ -250,8 +270,17 @@ class MatrixFreeEvaluation(Certified):
         """JSON-ready scalars: the policy's name, then as :meth:`Certified.summary`."""
         return {"policy": self.policy, **super().summary()}
 
-    def __repr__(self) -> str:
-        rows = certificate_rows(self) + [("policy", self.policy),
+    def _display_head(self) -> str:
+        return f"{type(self).__name__} of {self.bias.size:,} layout states by {self.method}"
+
+    def _display_rows(self) -> list[tuple[str, str]]:
+        return certificate_rows(self) + [("policy", self.policy),
                                          ("bias", describe_array(self.bias, "floats") + " over the layout"),
                                          stats_row(self.stats)]
-        return result_repr(f"{type(self).__name__} of {self.bias.size:,} layout states by {self.method}", rows)
+
+    def _frame_records(self):
+        """One row: the policy, its certified gain and certificate."""
+        cols = ["policy", "gain", "gain_lower", "gain_upper", "gap", "status", "iterations", "seconds"]
+        return cols, [{"policy": self.policy, "gain": self.gain, "gain_lower": self.gain_lower,
+                       "gain_upper": self.gain_upper, "gap": self.gap, "status": str(self.status),
+                       "iterations": int(self.iterations), "seconds": float(self.seconds)}]
