@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SolverError
+from ..errors import SolverError, WncsError
 from ..models.system import System
 from ..progress import Progress, as_progress
 from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
@@ -66,9 +66,10 @@ from .joint_bundle import PriceBundle
 from .joint_chains import (Certificate, ChainSolution, JointData, Kernels, certify_tables, column,
                            kernels_available, policy_weights, solve_chain, stationary)
 from .joint_lp import HalpernPDHG, JointLP, lp_shape, pin_tables
+from .private import private_bound
 from .result import BoundResult, ValueTables
 
-__all__ = ["joint_bound", "joint_size", "JOINT_METHODS", "REACH_MAX_NNZ", "REACH_MAX_BYTES"]
+__all__ = ["joint_bound", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS", "REACH_MAX_NNZ", "REACH_MAX_BYTES"]
 
 #: ``method`` values of :func:`joint_bound`.
 JOINT_METHODS = ("auto", "pdhg", "bundle")
@@ -118,6 +119,12 @@ def joint_size(system: System) -> dict:
         "rule": (f"LP nonzeros {shape['nnz']:,} <= {REACH_MAX_NNZ:,}, estimated memory {mem / 2**30:.2f} GiB "
                  f"<= {REACH_MAX_BYTES / 2**30:.0f} GiB, numba {'available' if numba else 'missing'}"),
     }
+
+
+def joint_reach(system: System) -> str | None:
+    """None when relaxation 2 is within reach of this machine (:func:`joint_size`'s rule), else why not."""
+    size = joint_size(system)
+    return None if size["within_reach"] else f"relaxation 2 is out of reach: {size['rule']}"
 
 
 def _memory_estimate(shape: dict, caps: np.ndarray, n_c: int, n_p: int) -> int:
@@ -237,12 +244,15 @@ def _randomised_cuts(run: _Run, lp: JointLP, z: np.ndarray) -> list[tuple[int, f
 
 
 # ---------------------------------------------------------------------------- phases
-def _start(run: _Run) -> tuple[np.ndarray, np.ndarray]:
-    """Zero prices: every process alone on the joint configuration. Returns the PDHG's warm start
-    (the chains' stationary occupations, their mean marginal; the certified dual)."""
+def _start(run: _Run, warm: tuple | None) -> tuple[list, np.ndarray]:
+    """Zero prices (every process alone on the joint configuration), then relaxation 1's tables and
+    prices when given. Returns the PDHG's warm start: the last chains' stationary occupations
+    and their mean (C, a) marginal."""
     data = run.data
-    zero = np.zeros((data.n_processes, data.n_pairs))
-    _evaluate(run, zero, "start")
+    _evaluate(run, np.zeros((data.n_processes, data.n_pairs)), "start")
+    if warm is not None:
+        _offer(run, warm[0], None, "relaxation 1's tables")
+        _evaluate(run, warm[1], "relaxation 1's prices")
     occ, xs = [], []
     for k, s in enumerate(run.chains):
         w = policy_weights(data, k, s.policy)
@@ -253,6 +263,43 @@ def _start(run: _Run) -> tuple[np.ndarray, np.ndarray]:
     return occ, np.mean(xs, axis=0)
 
 
+def _offer(run: _Run, tables: list, prices: np.ndarray | None, phase: str) -> None:
+    """Certify ``tables`` and keep them when they beat the best so far (prices: the zero-sum prices
+    that make them sub-solutions of every chain, when none are given)."""
+    cert = certify_tables(run.data, tables)
+    run.history.append((round(time.monotonic() - run.t0, 3), phase, cert.lower_bound))
+    if cert.lower_bound > run.best.lower_bound:
+        mu = _prices_from_tables(run.data, tables) if prices is None else prices
+        run.best = _Best(cert.lower_bound, cert, [np.array(h, float) for h in tables], mu,
+                         -cert.u.max(axis=1), phase)
+
+
+def relaxation1_start(system: System, r1: BoundResult) -> tuple[list, np.ndarray] | None:
+    r"""Relaxation 1's tables and prices carried to relaxation 2 (None when the model has no claims).
+
+    Tables: h_k(tau, C) = h^1_k(tau, column_k(C)), the private bias read on k's projection.
+    Prices: mu_k(p) = \sum_m \lambda_m claim_{m,k}(p) - (1/N) \sum_j \sum_m \lambda_m claim_{m,j}(p),
+    zero-sum over k. Where the claims sum to 1 the priced joint chain of process k is at least
+    its priced private chain (every joint action projects to a private one with the same
+    transition of (tau_k, C_k)), so relaxation 2 at these prices is at least relaxation 1's bound.
+    """
+    try:
+        claims = _joint_claims(system)
+    except WncsError:
+        return None
+    lam = np.asarray(r1.multipliers, float).ravel()
+    mu = np.einsum("m,pmk->kp", lam, claims)
+    tables = [np.asarray(h)[np.asarray(col)] for h, col in zip(r1.tables.h, r1.tables.column)]
+    return tables, mu - mu.mean(axis=0)
+
+
+def _joint_claims(system: System) -> np.ndarray:
+    """(|C x A|, M, N) claims of every joint pair, pairs in the automaton's flat order."""
+    model = system.model
+    return np.concatenate([model.claims(cfg, system.labels[c, : system.n_actions[c]])
+                           for c, cfg in enumerate(system.automaton.configs)]).astype(float)
+
+
 def _dual_of(lp: JointLP, tables) -> np.ndarray:
     """A feasible dual of the LP from tables: h_k (pinned), u_k(h) plus slack shares, g(h)."""
     tables = pin_tables(tables)
@@ -261,11 +308,12 @@ def _dual_of(lp: JointLP, tables) -> np.ndarray:
     return lp.dual_from(tables, u, cert.raw)
 
 
-def _pdhg_phase(run: _Run, max_iter: int, share: float) -> tuple[JointLP, np.ndarray, dict]:
-    """PDHG with periodic repairs, until it stalls, ``max_iter`` iterations or its time share."""
+def _pdhg_phase(run: _Run, start: tuple, max_iter: int, share: float, patience: int) -> tuple[JointLP, np.ndarray, dict]:
+    """PDHG with periodic repairs, until ``patience`` repairs in a row gained nothing, ``max_iter``
+    iterations or its time share."""
     data = run.data
-    occ, x = _start(run)
-    run.prog.phase(f"relaxation 2: zero prices give {run.best.lower_bound:.6g}; building the LP")
+    occ, x = start
+    run.prog.phase(f"relaxation 2: the start gives {run.best.lower_bound:.6g}; building the LP")
     t = time.monotonic()
     lp = JointLP.build(data, run.kern)
     run.clock("lp_build", t)
@@ -285,7 +333,7 @@ def _pdhg_phase(run: _Run, max_iter: int, share: float) -> tuple[JointLP, np.nda
         chunk = int(min(2000, max(200, 3.0 * (time.monotonic() - t_rep) / max(per_it, 1e-9))))
         run.prog.tick(f"PDHG {pd.iterations} its: certified {run.best.lower_bound:.8g} "
                       f"(restarts {pd.restarts}, w {pd.w:.2g})")
-        if len(recent) >= 4 and sum(recent[-4:]) <= 0.0:
+        if len(recent) >= patience and sum(recent[-patience:]) <= 0.0:
             break
     return lp, pd.primal, {"pdhg_iterations": pd.iterations, "pdhg_restarts": pd.restarts,
                            "pdhg_primal_weight": pd.w, **{f"pdhg_{k}": v for k, v in pd.residuals().items()}}
@@ -321,7 +369,8 @@ def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int,
 
 # ---------------------------------------------------------------------------- entry point
 def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = None, max_iter: int = 200,
-                pdhg_iter: int = 20_000, method: str = "auto", kernel: str = "auto", threads: int = 1,
+                pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "auto", warm_start: bool = True,
+                kernel: str = "auto", threads: int = 1,
                 progress: bool | Progress | None = None) -> BoundResult:
     """A certified lower bound on g* from relaxation 2 (joint configuration, per-process AoI).
 
@@ -340,9 +389,14 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         Bundle steps (each one certified evaluation: N priced chains and the separable check).
     pdhg_iter : int
         PDHG iterations at most.
+    pdhg_patience : int
+        The PDHG hands over after this many repairs in a row that did not raise the bound.
     method : {"auto", "pdhg", "bundle"}
         ``"auto"``: PDHG then bundle; ``"pdhg"``: PDHG with repairs only; ``"bundle"``: bundle
-        from zero prices only (slow from far away; for comparison).
+        from the start only.
+    warm_start : bool
+        Solve relaxation 1 first and start from its tables and prices (:func:`relaxation1_start`);
+        where its claims sum to 1 this makes relaxation 2's bound at least relaxation 1's.
     kernel : {"auto", "numba", "numpy"}
     threads : int
         numba threads (default 1: numba's OpenMP layer does not survive a fork).
@@ -371,24 +425,10 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     prog.phase(f"relaxation 2: {data.n_processes} processes, {data.n_configs:,} configurations, "
                f"{data.n_pairs:,} pairs, caps {tuple(int(c) for c in data.caps)}")
     stats: dict = {"method": method, "kernel": run.kern.name, "threads": run.kern.threads}
-    status, closed, it = MAX_ITER, False, 0
+    status, it = MAX_ITER, 0
     try:
-        seed = []
-        if method in ("auto", "pdhg"):
-            lp, z, pstats = _pdhg_phase(run, pdhg_iter, 0.6 if method == "auto" else 1.0)
-            stats.update(pstats)
-            stats["lp_shape"] = lp.shape
-            if method == "auto":
-                seed = _randomised_cuts(run, lp, z)
-            del lp, z
-        else:
-            _start(run)
-        if method in ("auto", "bundle"):
-            closed, it, bundle = _bundle_phase(run, max_iter, seed)
-            stats.update(bundle_serious=bundle.serious_steps, bundle_null=bundle.null_steps,
-                         bundle_predicted=bundle.predicted, bundle_t=bundle.t,
-                         bundle_disagreement=bundle.disagreement,
-                         bundle_linearisation_error=bundle.linearisation_error)
+        warm = _warm_start(system, run, stats) if warm_start else None
+        closed, it = _phases(run, _start(run, warm), method, stats, pdhg_iter, pdhg_patience, max_iter)
         status = OPTIMAL if closed else MAX_ITER
     except KeyboardInterrupt:
         status = INTERRUPTED
@@ -398,22 +438,56 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     return _result(run, status, it, stats, time.monotonic() - t0)
 
 
+def _warm_start(system: System, run: _Run, stats: dict) -> tuple | None:
+    """Relaxation 1 solved, its tables and prices carried over (:func:`relaxation1_start`)."""
+    t = time.monotonic()
+    try:
+        r1 = private_bound(system)
+    except WncsError as exc:
+        stats["warm_start"] = f"none: {exc}"
+        return None
+    run.clock("relaxation_1", t)
+    stats["relaxation_1_bound"] = r1.lower_bound
+    warm = relaxation1_start(system, r1)
+    stats["warm_start"] = "relaxation 1" if warm is not None else "none: the model defines no claims"
+    return warm
+
+
+def _phases(run: _Run, start: tuple, method: str, stats: dict, pdhg_iter: int, patience: int,
+            max_iter: int) -> tuple[bool, int]:
+    """The PDHG and / or bundle phases of ``method``: (the bundle's stopping test met, its steps)."""
+    seed = []
+    if method in ("auto", "pdhg"):
+        lp, z, pstats = _pdhg_phase(run, start, pdhg_iter, 0.6 if method == "auto" else 1.0, patience)
+        stats.update(pstats, lp_shape=lp.shape)
+        if method == "auto":
+            seed = _randomised_cuts(run, lp, z)
+    if method not in ("auto", "bundle"):
+        return False, 0
+    closed, it, bundle = _bundle_phase(run, max_iter, seed)
+    stats.update(bundle_serious=bundle.serious_steps, bundle_null=bundle.null_steps,
+                 bundle_predicted=bundle.predicted, bundle_t=bundle.t, bundle_disagreement=bundle.disagreement,
+                 bundle_linearisation_error=bundle.linearisation_error)
+    return closed, it
+
+
 def _result(run: _Run, status: str, bundle_steps: int, stats: dict, seconds: float) -> BoundResult:
+    """The best tables, checked once more from scratch: the bound returned is that check's."""
     best, data = run.best, run.data
-    cert = best.certificate
+    cert = certify_tables(data, best.tables)
     n_c = data.n_configs
     tables = ValueTables(h=tuple(np.ascontiguousarray(h) for h in best.tables),
                          column=tuple(np.arange(n_c) for _ in range(data.n_processes)))
     stats.update(evaluations=run.evaluations, chain_sweeps=run.chain_sweeps, bundle_steps=bundle_steps,
                  roundoff=cert.roundoff, raw_bound=cert.raw, binding_pair=cert.binding_pair,
-                 found_in=best.found_at, history=run.history,
+                 found_in=best.found_at, history=run.history, certified=bool(np.isfinite(cert.lower_bound)),
                  seconds_in={k: round(v, 3) for k, v in run.seconds.items()})
     how = ("separable check of the tables h_k(tau, C) over all sum_k tau_hat_k |C x A| = "
            f"{int(data.caps.sum()) * data.n_pairs:,} constraints: g(h) = -max_(C,a) sum_k max_tau "
            f"[h_k - q_k - E h_k] = {cert.raw:.12g}, minus a round-off bound {cert.roundoff:.2g}; the tables "
-           "are the relative-value-iteration solutions of each process's chain (tau_k, C) priced at the "
-           "multipliers")
-    return BoundResult(relaxation="joint-configuration", lower_bound=float(best.lower_bound),
+           f"came from {best.found_at} (each process's chain (tau_k, C) priced at the multipliers, solved "
+           "by relative value iteration); how they were found does not enter the bound")
+    return BoundResult(relaxation="joint-configuration", lower_bound=float(cert.lower_bound),
                        relaxation_upper=float("inf"), status=status, certified_by=how,
                        multipliers=best.prices, process_gains=best.gains, tables=tables, seconds=float(seconds),
                        iterations=int(run.evaluations), stats=stats)

@@ -36,6 +36,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
+from ..errors import SolverError
 from ..models.system import System
 
 __all__ = ["JointData", "Certificate", "ChainSolution", "Kernels", "certify_tables", "solve_chain",
@@ -176,20 +177,34 @@ class Certificate:
 
 
 def certify_tables(data: JointData, tables) -> Certificate:
-    """The certified lower bound g(h) of separable tables ``tables[k]`` of shape (|C|, tau_hat_k).
+    r"""The certified lower bound g(h) of separable tables ``tables[k]`` of shape (|C|, tau_hat_k).
 
-    Valid for *any* tables: g(h) + sum_k h_k(tau_k, C) <= c(tau) + E[sum_k h_k(tau'_k, C')] holds for
-    every (tau, C, a) by construction, and summing it over the stationary law of an optimal
-    policy of the joint MDP gives g(h) <= g*. Each table is first shifted by a constant (which
-    changes no constraint) to make its magnitudes, and so the round-off, small.
+    Valid for *any* tables: with u_k(p) = max_tau [h_k(tau, C_p) - q_k(tau) - E h_k(tau', C')],
+    the pair (g(h), h), g(h) = -max_p sum_k u_k(p), satisfies
+
+    .. math:: g(h) + \sum_k h_k(\tau_k, C) \le c(\tau) + \sum_o P(o|C,a) \sum_k h_k(\tau'_k, C')
+
+    for every (tau, C, a) of the box by construction, and telescoping it along any policy of the
+    joint MDP gives g(h) <= g*. Each table is first shifted by a constant (which changes no
+    constraint beyond the outcome tables' defect from stochastic, accounted for) to make its
+    magnitudes, and so the round-off, small. Tables with a non-finite entry certify nothing
+    (``lower_bound`` = -inf).
+
+    Raises
+    ------
+    SolverError
+        ``tables`` is not one (|C|, tau_hat_k) array per process.
     """
     n = data.n_processes
+    tables = _checked_tables(data, tables)
+    if not all(np.isfinite(h).all() for h in tables):
+        return Certificate(lower_bound=-np.inf, raw=-np.inf, roundoff=np.inf, u=np.full((n, data.n_pairs), np.inf),
+                           binding_pair=-1)
     u = np.empty((n, data.n_pairs))
     err = 0.0
     m = data.max_outcomes
     for k in range(n):
-        h = np.asarray(tables[k], dtype=float)
-        h = h - 0.5 * (h.max() + h.min())
+        h = tables[k] - 0.5 * (tables[k].max() + tables[k].min())
         hk = float(np.abs(h).max())
         r = h[data.pair_c] - data.q[k][None, :] - data.expect(k, h)
         u[k] = r.max(axis=1)
@@ -199,6 +214,22 @@ def certify_tables(data: JointData, tables) -> Certificate:
     err += _gamma(n) * float(np.abs(u).max(axis=1).sum())
     raw = -float(total[p])
     return Certificate(lower_bound=raw - err, raw=raw, roundoff=err, u=u, binding_pair=p)
+
+
+def _checked_tables(data: JointData, tables) -> list[np.ndarray]:
+    """The tables as float arrays, one (|C|, tau_hat_k) per process, or one clear error."""
+    if len(tables) != data.n_processes:
+        raise SolverError(f"relaxation 2's certificate needs {data.n_processes} value tables (one per process), "
+                          f"got {len(tables)}")
+    out = []
+    for k, h in enumerate(tables):
+        h = np.asarray(h, dtype=float)
+        want = (data.n_configs, int(data.caps[k]))
+        if h.shape != want:
+            raise SolverError(f"value table of process {k + 1} has shape {h.shape}; expected {want} "
+                              "(configurations x tau_hat)")
+        out.append(h)
+    return out
 
 
 # ---------------------------------------------------------------------------- kernels
