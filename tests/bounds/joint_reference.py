@@ -91,7 +91,7 @@ def box_alp(system) -> float:
     A = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(r0, offs[-1]))
     obj = np.zeros(offs[-1])
     obj[0] = -1.0
-    res = linprog(obj, A_ub=A, b_ub=np.concatenate(rhs), bounds=(None, None), method="highs")
+    res = linprog(obj, A_ub=A, b_ub=np.concatenate(rhs), bounds=(None, None), method="highs-ipm")
     assert res.status == 0, res.message
     return -float(res.fun)
 
@@ -116,3 +116,16 @@ def box_value_iteration(system, sweeps: int = 20_000, tol: float = 1e-11) -> tup
         h = h + 0.5 * d  # damped: the chain may be periodic
         h -= h[0, 0]
     return float(d.min()), float(d.max()), h
+
+
+def three_processes(tau_cap: int = 5):
+    """Three processes on an edge (U = 0) and a remote (U = 1) server: a joint configuration small
+    enough (30 configurations) for the box tests, with unequal processing times and weights."""
+    from wncs_lp.scenario import scenario_from_dict
+
+    return scenario_from_dict({
+        "model": {"kind": "wncs", "tau_cap": tau_cap}, "channel": {"success_probability": 0.9},
+        "process": [{"A": [[1.1]]}, {"A": [[1.05]]}, {"A": [[1.2]], "weight": 2.0}],
+        "server": [{"name": "edge", "uplink_delay": 0, "downlink_delay": 0, "processing_time": [1, 2, 1]},
+                   {"name": "remote", "uplink_delay": 1, "downlink_delay": 1, "processing_time": [1, 1, 2]}],
+    }, source="<three processes>")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from bounds_reference import shape
-from joint_reference import box_gain, box_value_iteration, mdp_gain
+from joint_reference import box_gain, box_value_iteration, mdp_gain, three_processes
 
 from wncs_lp import scenario_path
 from wncs_lp.errors import SolverError
@@ -18,12 +18,12 @@ from wncs_lp.bounds.joint_chains import JointData, certify_tables
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
 
-SHAPES = ("paper", "u2", "3x3", "idle")
+SHAPES = ("paper", "u2", "idle", "three processes")
 
 
 @pytest.fixture(scope="module", params=SHAPES)
 def case(request):
-    sc = shape(request.param)
+    sc = three_processes() if request.param == "three processes" else shape(request.param)
     system = System.from_scenario(sc)
     mdp = build(sc)
     return system, JointData.from_system(system), mdp, solve(mdp).gain_upper

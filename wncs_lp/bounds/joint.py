@@ -73,6 +73,8 @@ __all__ = ["joint_bound", "joint_size", "joint_reach", "relaxation1_start", "JOI
 
 #: ``method`` values of :func:`joint_bound`.
 JOINT_METHODS = ("auto", "pdhg", "bundle")
+#: The bundle stops after this many null steps in a row (its model no longer finds ascent).
+STALL = 20
 #: :func:`joint_size`'s reach rule: at most this many nonzeros in the LP ...
 REACH_MAX_NNZ = 40_000_000
 #: ... and at most this many bytes of estimated peak memory.
@@ -340,17 +342,19 @@ def _pdhg_phase(run: _Run, start: tuple, max_iter: int, share: float, patience: 
 
 
 def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int, PriceBundle]:
-    """Proximal bundle from the best prices; True when the model's predicted ascent fell below tol."""
+    """Proximal bundle from the best prices, until its stopping test (True), :data:`STALL` null
+    steps in a row, ``max_iter`` steps or the deadline (False)."""
     data = run.data
     centre = run.best.prices
     value = _evaluate(run, centre, "bundle")
     cuts = seed_cuts + _cuts(run, run.chains)
     X = np.array([x for _, _, x in cuts[-data.n_processes:]])
     spread = float(((X - X.mean(axis=0)) ** 2).sum())
-    bundle = PriceBundle(centre, value, t=1e-3 * max(abs(value), 1.0) / max(spread, 1e-12))
+    # a first step the linear model prices at ~1% of L: t ||PZ||^2 ~ 0.01 |L|, PZ ~ the spread of the cuts
+    bundle = PriceBundle(centre, value, t=1e-2 * max(abs(value), 1.0) / max(spread, 1e-12))
     for k, a, x in cuts:
         bundle.add_cut(k, a, x)
-    it = 0
+    it = nulls = 0
     while it < max_iter and not run.out_of_time():
         t = time.monotonic()
         mu = bundle.candidate()
@@ -361,7 +365,9 @@ def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int,
         it += 1
         for k, a, x in _cuts(run, run.chains):
             bundle.add_cut(k, a, x)
-        bundle.report(mu, value)
+        nulls = 0 if bundle.report(mu, value) else nulls + 1
+        if nulls >= STALL:
+            break
         run.prog.tick(f"bundle {it}: certified {run.best.lower_bound:.8g}, L(centre) {bundle.value:.8g}, "
                       f"predicted +{bundle.predicted:.3g}, disagreement {bundle.disagreement:.2g}, t {bundle.t:.3g}")
     return False, it, bundle
