@@ -104,3 +104,28 @@ def test_bad_tables_certify_nothing_or_are_refused():
         certify_tables(data, [tables[0], tables[1][:, :-1]])
     with pytest.raises(SolverError, match="2 value tables"):
         certify_tables(data, tables[:1])
+
+
+def test_numba_and_numpy_kernels_agree(case):
+    """The priced chain's Bellman operator and the stationary push: numba against numpy / scipy."""
+    from wncs_lp.bounds.joint_chains import Kernels, kernels_available
+
+    if not kernels_available():
+        pytest.fail("numba is a test dependency of relaxation 2")
+    system, data, _, _ = case
+    rng = np.random.default_rng(5)
+    fast, slow = Kernels("numba"), Kernels("numpy")
+    for k in range(data.n_processes):
+        shape_k = (data.n_configs, int(data.caps[k]))
+        h, price = rng.standard_normal(shape_k), rng.standard_normal(data.n_pairs)
+        out = [np.empty(shape_k), np.empty(shape_k)]
+        pols = [np.empty(shape_k, np.int64), np.empty(shape_k, np.int64)]
+        fast.bellman(data, k, h, price, out[0], pols[0])
+        slow.bellman(data, k, h, price, out[1], pols[1])
+        np.testing.assert_allclose(out[0], out[1], rtol=1e-12, atol=1e-12)
+        w = rng.random((data.n_pairs, shape_k[1]))
+        y = rng.random(shape_k)
+        pushed = [np.empty(shape_k), np.empty(shape_k)]
+        fast.push(data, k, y, w, pushed[0])
+        slow.push(data, k, y, w, pushed[1])
+        np.testing.assert_allclose(pushed[0], pushed[1], rtol=1e-12, atol=1e-12)
