@@ -74,7 +74,7 @@ __all__ = ["joint_bound", "joint_size", "joint_reach", "relaxation1_start", "JOI
 #: ``method`` values of :func:`joint_bound`.
 JOINT_METHODS = ("auto", "pdhg", "bundle")
 #: The bundle stops after this many null steps in a row (its model no longer finds ascent).
-STALL = 20
+STALL = 50
 #: :func:`joint_size`'s reach rule: at most this many nonzeros in the LP ...
 REACH_MAX_NNZ = 40_000_000
 #: ... and at most this many bytes of estimated peak memory.
