@@ -30,26 +30,26 @@ The LP has N tau_hat |C| + N |C x A| + 1 variables and N tau_hat |C x A| constra
 at cap 20: 44k and 101k; the paper's four process types twice at cap 20: 567k and 1.96M), and
 its optimum mixes the per-process policies at about |C x A| states, so a simplex is slow even on
 four processes (HiGHS: minutes at cap 20) and a pure cutting-plane method needs about |C x A|
-cuts per process. The method here combines three pieces:
+cuts per process. The method here:
 
 1. **Lagrangian (price) form.** Dualising the shared marginal x(C, a) with prices mu_k(p) that
    sum to zero over k gives L(mu) = sum_k g_k(q_k + mu_k) <= optimum of the LP, g_k the optimal
    gain of process k's chain (tau_k, C) priced by mu_k: a small MDP solved by relative value
    iteration (:func:`~wncs_lp.bounds.joint_chains.solve_chain`). Its bias tables h_k satisfy
-   g(h) >= L(mu): *any* prices give certified tables, and errors in the prices only cost where
-   a process's optimal policy goes.
-2. **A first-order method proposes the prices** (:class:`~wncs_lp.bounds.joint_lp.HalpernPDHG`,
-   restarted Halpern PDHG on the equilibrated LP, warm-started from the chains at zero prices).
-   Every few hundred iterations its duals are turned into prices -- mu_k = u_k(h) plus an equal
-   share of each pair's slack -- and *repaired*: the priced chains are solved and their tables
-   certified. The best certified tables are kept.
-3. **A proximal bundle method polishes the prices**
-   (:class:`~wncs_lp.bounds.joint_bundle.PriceBundle`): cuts from the chains' optimal
-   policies and from the randomised policies of the PDHG's occupation measures, one certified
-   evaluation per step, until the model predicts less than ``tol`` relative ascent.
+   g(h) >= L(mu) up to the chains' bracket widths: *any* prices give certified tables.
+2. **Relaxation 1's prices start it** (:func:`relaxation1_start`): mu_k = lambda* . claim_k,
+   centred over k, where process k's joint chain is at least its priced private chain, so the
+   start certifies at least relaxation 1's bound.
+3. **A proximal bundle method raises L**
+   (:class:`~wncs_lp.bounds.joint_bundle.PriceBundle`): cuts from the chains' greedy policies,
+   one certified evaluation per step, until its stopping test, :data:`STALL` null steps in a
+   row, ``max_iter`` steps or ``time_limit``.
 
-Each evaluation warm-starts the chains from the last tables. Ctrl-C and ``time_limit`` return the
-best certified bound so far.
+``method="auto"`` puts a first-order method first (:class:`~wncs_lp.bounds.joint_lp.HalpernPDHG`,
+restarted Halpern PDHG on the equilibrated LP, whose duals are turned into prices -- mu_k =
+u_k(h) plus an equal share of each pair's slack -- and repaired by the chains); from relaxation
+1's prices it did not help where measured. Each evaluation warm-starts the chains from the last
+tables. Ctrl-C and ``time_limit`` return the best certified bound so far.
 """
 from __future__ import annotations
 
@@ -374,7 +374,7 @@ def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int,
 
 
 # ---------------------------------------------------------------------------- entry point
-def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = None, max_iter: int = 200,
+def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = None, max_iter: int = 1000,
                 pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "bundle", warm_start: bool = True,
                 kernel: str = "auto", threads: int = 1,
                 progress: bool | Progress | None = None) -> BoundResult:

@@ -284,14 +284,9 @@ class HalpernPDHG:
     def _restart(self) -> None:
         dz = np.linalg.norm(self.zt - self.zs)
         dl = np.linalg.norm(self.lt - self.ls)
-        import os
-        mode = os.environ.get("JOINT_WMODE", "down")
-        band = float(os.environ.get("JOINT_WBAND", "1e9"))
-        if dz > 1e-12 and dl > 1e-12 and mode != "fixed":
-            w = np.exp(0.5 * np.log(dl / dz) + 0.5 * np.log(self.w))
-            if mode == "down":
-                w = min(w, self.w)
-            self.w = float(min(max(w, self.w0 / band), self.w0 * band))
+        if dz > 1e-12 and dl > 1e-12:
+            w = min(float(np.exp(0.5 * np.log(dl / dz) + 0.5 * np.log(self.w))), self.w)  # only downwards
+            self.w = max(w, self.w0 * 1e-9)
         self.z[:] = self.zt
         self.lam[:] = self.lt
         self.restarts += 1
