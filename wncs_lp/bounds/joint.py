@@ -374,7 +374,7 @@ def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int,
 
 
 # ---------------------------------------------------------------------------- entry point
-def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = None, max_iter: int = 1000,
+def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = 600.0, max_iter: int = 1000,
                 pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "bundle", warm_start: bool = True,
                 kernel: str = "auto", threads: int = 1,
                 progress: bool | Progress | None = None) -> BoundResult:
@@ -388,8 +388,9 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     tol : float
         Relative accuracy asked of the relaxation: the bundle stops when its model predicts less
         than ``tol * |L|`` more; the PDHG hands over when two repairs gained less than that.
-    time_limit : float, optional
-        Seconds; the PDHG gets at most 60% of it. The bound returned is certified whatever stops
+    time_limit : float or None
+        Seconds (default 10 minutes, so that ``wncs-lp bound`` with ``auto`` ends; None: no
+        limit); the PDHG gets at most 60% of it. The bound returned is certified whatever stops
         the run.
     max_iter : int
         Bundle steps (each one certified evaluation: N priced chains and the separable check).
