@@ -79,3 +79,12 @@ def test_scenario_or_system(p12):
     assert a.lower_bound == b.lower_bound
     with pytest.raises(WncsError, match="Scenario or a System"):
         lower_bound("paper_p12.toml", "auto")
+
+
+def test_auto_takes_relaxation_1_when_relaxation_2_stopped_below_it(monkeypatch, p12):
+    base = private_bound(p12)
+    worse = replace(base, relaxation="joint-configuration", lower_bound=base.lower_bound - 1.0, stats={})
+    monkeypatch.setitem(__import__("sys").modules, JOINT, _fake_joint(lambda s: None, lambda s, **kw: worse))
+    res = lower_bound(p12, "auto")
+    assert res.relaxation == "private-servers" and res.lower_bound == base.lower_bound
+    assert "beats relaxation 2's" in res.stats["auto_reason"]

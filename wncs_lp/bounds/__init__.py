@@ -72,9 +72,9 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     ----------
     scenario_or_system : Scenario or System
     relaxation : {"auto", "private-servers", "joint-configuration"} or 1 / 2
-        ``"auto"``: relaxation 2 (the tighter) when it is installed and the instance is within
-        its reach, else relaxation 1; ``stats["auto_choice"]`` and ``stats["auto_reason"]`` say
-        which fired and why.
+        ``"auto"``: the larger of the two certified bounds when relaxation 2 is installed and
+        the instance is within its reach (relaxation 2 on a tie), else relaxation 1;
+        ``stats["auto_choice"]`` and ``stats["auto_reason"]`` say which was taken and why.
     **options
         Keyword arguments of the relaxation's function (e.g. ``tol``, ``progress``).
 
@@ -98,14 +98,27 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         if joint is None:
             raise WncsError(f"relaxation joint-configuration asked for, but {why_not}")
         return joint.joint_bound(_as_system(scenario_or_system), **options)
+    res1 = None
     if joint is not None:
         system = _as_system(scenario_or_system)
         res, why_not = _try_joint(joint, system, options)
         if res is not None:
-            return res
+            res1 = _try_private(system, options)
+            if res1 is None or res.lower_bound >= res1.lower_bound:
+                return res
+            why_not = (f"relaxation 1's certified bound {res1.lower_bound:.10g} beats relaxation 2's "
+                       f"{res.lower_bound:.10g} (its search stopped early)")
         scenario_or_system = system
-    res = private_bound(scenario_or_system, **options)
+    res = res1 if res1 is not None else private_bound(scenario_or_system, **options)
     return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": why_not})
+
+
+def _try_private(system: System, options: dict) -> BoundResult | None:
+    """Relaxation 1 for comparison with relaxation 2 (None where the model has no relaxation 1)."""
+    try:
+        return private_bound(system, **{k: v for k, v in options.items() if k in ("tol", "progress")})
+    except WncsError:
+        return None
 
 
 def _try_joint(joint: Any, system: System, options: dict) -> tuple[BoundResult | None, str]:
@@ -118,7 +131,7 @@ def _try_joint(joint: Any, system: System, options: dict) -> tuple[BoundResult |
         res = joint.joint_bound(system, **options)
     except WncsError as exc:
         return None, f"relaxation 2 could not run: {exc}"
-    reason = "relaxation 2 is installed and the instance is within its reach"
+    reason = "relaxation 2 is within reach and its certified bound is at least relaxation 1's"
     return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": reason}), ""
 
 

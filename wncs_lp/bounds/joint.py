@@ -1,0 +1,502 @@
+r"""Relaxation 2 of issue 24: joint server configuration, per-process AoI -- a certified lower bound
+on g* that scales to many processes.
+
+The relaxation
+--------------
+States s = (tau, C) of the joint MDP; pairs p = (C, a). Given p, each outcome o (probability
+P(o|p)) leads to C'(o) and a delivery age per process, and tau'_k = min(tau_k + 1, delta_k if
+> 0, tau_hat_k). The average-cost approximate LP with separable value functions
+h(s) = sum_k h_k(tau_k, C) is
+
+.. math::
+
+    \max_{g, h}\; g \quad\text{s.t.}\quad g + \sum_k h_k(\tau_k, C)
+    \le \sum_k q_k(\tau_k) + \sum_o P(o|C,a) \sum_k h_k(\tau'_k, C') \quad \forall (\tau, C, a).
+
+Every feasible (g, h) has g <= g* (sum the constraint over the stationary law of an optimal
+policy). For fixed p the constraint is a sum of terms in one tau_k each, so it holds for all tau
+iff sum_k u_k(p) <= -g with u_k(p) = max_tau [h_k(tau, C) - q_k(tau) - E h_k(tau', C')]. Hence,
+for **any** tables h,
+
+.. math::  g(h) = -\max_p \sum_k u_k(p) \le g^*,
+
+checked in N * tau_hat * |C x A| evaluations (:func:`~wncs_lp.bounds.joint_chains.certify_tables`,
+which also bounds and subtracts the round-off). That check is the only thing the returned
+bound rests on; how the tables were found does not matter.
+
+Finding good tables
+-------------------
+The LP has N tau_hat |C| + N |C x A| + 1 variables and N tau_hat |C x A| constraints (processes 1-4
+at cap 20: 44k and 101k; the paper's four process types twice at cap 20: 567k and 1.96M), and
+its optimum mixes the per-process policies at about |C x A| states, so a simplex is slow even on
+four processes (HiGHS: minutes at cap 20) and a pure cutting-plane method needs about |C x A|
+cuts per process. The method here:
+
+1. **Lagrangian (price) form.** Dualising the shared marginal x(C, a) with prices mu_k(p) that
+   sum to zero over k gives L(mu) = sum_k g_k(q_k + mu_k) <= optimum of the LP, g_k the optimal
+   gain of process k's chain (tau_k, C) priced by mu_k: a small MDP solved by relative value
+   iteration (:func:`~wncs_lp.bounds.joint_chains.solve_chain`). Its bias tables h_k satisfy
+   g(h) >= L(mu) up to the chains' bracket widths: *any* prices give certified tables.
+2. **Relaxation 1's prices start it** (:func:`relaxation1_start`): mu_k = lambda* . claim_k,
+   centred over k, where process k's joint chain is at least its priced private chain, so the
+   start certifies at least relaxation 1's bound.
+3. **A proximal bundle method raises L**
+   (:class:`~wncs_lp.bounds.joint_bundle.PriceBundle`): cuts from the chains' greedy policies,
+   one certified evaluation per step, until its stopping test, :data:`STALL` null steps in a
+   row, ``max_iter`` steps or ``time_limit``.
+
+``method="auto"`` puts a first-order method first (:class:`~wncs_lp.bounds.joint_lp.HalpernPDHG`,
+restarted Halpern PDHG on the equilibrated LP, whose duals are turned into prices -- mu_k =
+u_k(h) plus an equal share of each pair's slack -- and repaired by the chains); from relaxation
+1's prices it did not help where measured. Each evaluation warm-starts the chains from the last
+tables. Ctrl-C and ``time_limit`` return the best certified bound so far.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import SolverError, WncsError
+from ..models.system import System
+from ..progress import Progress, as_progress
+from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
+from .joint_bundle import PriceBundle
+from .joint_chains import (Certificate, ChainSolution, JointData, Kernels, certify_tables, column,
+                           kernels_available, policy_weights, solve_chain, stationary)
+from .joint_lp import HalpernPDHG, JointLP, lp_shape, pin_tables
+from .private import private_bound
+from .result import BoundResult, ValueTables
+
+__all__ = ["joint_bound", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS", "REACH_MAX_NNZ", "REACH_MAX_BYTES"]
+
+#: ``method`` values of :func:`joint_bound`.
+JOINT_METHODS = ("auto", "pdhg", "bundle")
+#: The bundle stops after this many null steps in a row (its model no longer finds ascent).
+STALL = 50
+#: :func:`joint_size`'s reach rule: at most this many nonzeros in the LP ...
+REACH_MAX_NNZ = 40_000_000
+#: ... and at most this many bytes of estimated peak memory.
+REACH_MAX_BYTES = 6 * 2**30
+
+
+# ---------------------------------------------------------------------------- size
+def joint_size(system: System) -> dict:
+    """Size of relaxation 2 for ``system``, and whether it is within reach (cheap: no LP is built).
+
+    Returns
+    -------
+    dict
+        ``processes``, ``configurations``, ``pairs`` (|C x A|), ``outcomes`` (edges of the
+        automaton), ``alp_variables`` (N tau_hat |C| + N |C x A| + 1), ``alp_constraints``
+        (sum_k tau_hat_k |C x A|), ``lp_rows`` / ``lp_cols`` / ``lp_nnz`` (the occupation-measure
+        LP the first-order method runs on), ``memory_bytes`` (estimated peak),
+        ``numba`` (whether the fast kernels import), ``within_reach`` and ``rule``.
+
+    Notes
+    -----
+    The rule: relaxation 2 is within reach when the LP has at most :data:`REACH_MAX_NNZ`
+    nonzeros and the estimated peak memory is at most :data:`REACH_MAX_BYTES`, and numba is
+    available. One PDHG iteration streams the LP matrix twice, a few thousand iterations are
+    what a bound within ~0.3% of the relaxation's optimum took (benchmarks/bounds_joint.py), so
+    40M nonzeros is about 10 minutes on two cores; the paper's four process types twice (8
+    processes) at cap 20 is 8.6M. Without numba the loops run in numpy / scipy, several times
+    slower: the rule then says no, and ``lower_bound(relaxation="auto")`` should fall back to
+    relaxation 1.
+    """
+    n = system.n_processes
+    fl = system.automaton.flat(n)
+    n_c, n_p, n_e = system.n_configs, int(fl.act_ptr[-1]), int(fl.out_nxt.size)
+    caps = np.asarray(system.caps, dtype=np.int64)
+    shape = lp_shape(caps, n_c, n_p, n_e)
+    mem = _memory_estimate(shape, caps, n_c, n_p)
+    numba = kernels_available()
+    ok = shape["nnz"] <= REACH_MAX_NNZ and mem <= REACH_MAX_BYTES and numba
+    return {
+        "processes": n, "configurations": n_c, "pairs": n_p, "outcomes": n_e,
+        "alp_variables": int(caps.sum()) * n_c + n * n_p + 1, "alp_constraints": int(caps.sum()) * n_p,
+        "lp_rows": shape["rows"], "lp_cols": shape["cols"], "lp_nnz": shape["nnz"], "memory_bytes": mem,
+        "numba": numba, "within_reach": bool(ok),
+        "rule": (f"LP nonzeros {shape['nnz']:,} <= {REACH_MAX_NNZ:,}, estimated memory {mem / 2**30:.2f} GiB "
+                 f"<= {REACH_MAX_BYTES / 2**30:.0f} GiB, numba {'available' if numba else 'missing'}"),
+    }
+
+
+def joint_reach(system: System) -> str | None:
+    """None when relaxation 2 is within reach of this machine (:func:`joint_size`'s rule), else why not."""
+    size = joint_size(system)
+    return None if size["within_reach"] else f"relaxation 2 is out of reach: {size['rule']}"
+
+
+def _memory_estimate(shape: dict, caps: np.ndarray, n_c: int, n_p: int) -> int:
+    """Peak bytes: assembling and equilibrating the LP (~100 bytes a nonzero, measured), the PDHG's
+    vectors, the chains' tables and the bundle's cuts."""
+    vectors = 12 * 8 * (shape["rows"] + shape["cols"])
+    chains = int(caps.sum()) * (8 * 8 * n_c + 2 * 8 * n_p)
+    cuts = 2 * caps.size * 60 * 8 * n_p
+    return int(100 * shape["nnz"] + vectors + chains + cuts)
+
+
+# ---------------------------------------------------------------------------- bookkeeping
+@dataclass
+class _Best:
+    lower_bound: float = -np.inf
+    certificate: Certificate | None = None
+    tables: list | None = None
+    prices: np.ndarray | None = None
+    gains: np.ndarray | None = None
+    found_at: str = ""
+
+
+@dataclass
+class _Run:
+    data: JointData
+    kern: Kernels
+    prog: Progress
+    tol: float
+    deadline: float
+    t0: float
+    chains: list = field(default_factory=list)
+    laws: list = field(default_factory=list)
+    best: _Best = field(default_factory=_Best)
+    evaluations: int = 0
+    chain_sweeps: int = 0
+    history: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
+
+    def clock(self, name: str, since: float) -> None:
+        self.seconds[name] = self.seconds.get(name, 0.0) + time.monotonic() - since
+
+    def out_of_time(self) -> bool:
+        return time.monotonic() >= self.deadline
+
+    @property
+    def chain_tol(self) -> float:
+        return max(1e-11, 0.02 * self.tol)
+
+
+def _evaluate(run: _Run, prices: np.ndarray, phase: str) -> float:
+    """Solve every priced chain (warm-started), certify their tables, keep the best: returns
+    L(prices) = sum_k lower_k (the Lagrangian's value, from the chains' brackets)."""
+    data = run.data
+    sols: list[ChainSolution] = []
+    t = time.monotonic()
+    for k in range(data.n_processes):
+        h0 = run.chains[k].h if run.chains else None
+        sols.append(solve_chain(data, k, prices[k], h0, run.kern, tol=run.chain_tol, stop=run.out_of_time))
+    run.clock("chains", t)
+    t = time.monotonic()
+    run.chains = sols
+    run.evaluations += 1
+    run.chain_sweeps += sum(s.sweeps for s in sols)
+    tables = [s.h for s in sols]
+    cert = certify_tables(data, tables)
+    if cert.lower_bound > run.best.lower_bound:
+        run.best = _Best(cert.lower_bound, cert, tables, prices.copy(), np.array([s.lower for s in sols]), phase)
+    run.history.append((round(time.monotonic() - run.t0, 3), phase, cert.lower_bound))
+    run.clock("certify", t)
+    return float(sum(s.lower for s in sols))
+
+
+def _prices_from_tables(data: JointData, tables) -> np.ndarray:
+    """Zero-sum prices from tables: mu_k = u_k(h) + an equal share of each pair's slack
+    -g(h) - sum_k u_k(p) >= 0, centred over k. Any prices are valid; these make h a sub-solution of
+    every priced chain, so the chains' solutions certify at least g(h)."""
+    cert = certify_tables(data, tables)
+    u = cert.u
+    mu = u + (-cert.raw - u.sum(axis=0)) / data.n_processes
+    return mu - mu.mean(axis=0)
+
+
+def _cuts(run: _Run, sols: list[ChainSolution]) -> list[tuple[int, float, np.ndarray]]:
+    """The cut of each process's greedy policy (its stationary law warm-started from the last one)."""
+    out = []
+    t = time.monotonic()
+    for k, s in enumerate(sols):
+        w = policy_weights(run.data, k, s.policy)
+        y0 = run.laws[k] if len(run.laws) > k else None
+        y, _, _ = stationary(run.data, k, w, run.kern, y0, tol=1e-9)  # cuts steer; they certify nothing
+        if len(run.laws) > k:
+            run.laws[k] = y
+        else:
+            run.laws.append(y)
+        a, x = column(run.data, k, y, w)
+        out.append((k, a, x))
+    run.clock("cuts", t)
+    return out
+
+
+def _randomised_cuts(run: _Run, lp: JointLP, z: np.ndarray) -> list[tuple[int, float, np.ndarray]]:
+    """Cuts of the randomised policies pi_k(p | tau, C) proportional to the PDHG's occupation
+    measures (the chains' greedy policy where they carry no mass)."""
+    out = []
+    for k, Y in enumerate(lp.occupations(z)):
+        Y = np.maximum(Y, 0.0)
+        mass = np.zeros((run.data.n_configs, Y.shape[1]))
+        np.add.at(mass, run.data.pair_c, Y)
+        w = np.where(mass[run.data.pair_c] > 1e-12, Y / np.maximum(mass[run.data.pair_c], 1e-300), 0.0)
+        empty = mass <= 1e-12
+        cs, ts = np.nonzero(empty)
+        w[run.chains[k].policy[cs, ts], ts] = 1.0
+        y, _, _ = stationary(run.data, k, w, run.kern, run.laws[k] if len(run.laws) > k else None)
+        a, x = column(run.data, k, y, w)
+        out.append((k, a, x))
+    return out
+
+
+# ---------------------------------------------------------------------------- phases
+def _start(run: _Run, warm: tuple | None) -> tuple[list, np.ndarray]:
+    """Zero prices (every process alone on the joint configuration), then relaxation 1's tables and
+    prices when given. Returns the PDHG's warm start: the last chains' stationary occupations
+    and their mean (C, a) marginal."""
+    data = run.data
+    _evaluate(run, np.zeros((data.n_processes, data.n_pairs)), "start")
+    if warm is not None:
+        _offer(run, warm[0], None, "relaxation 1's tables")
+        _evaluate(run, warm[1], "relaxation 1's prices")
+    occ, xs = [], []
+    for k, s in enumerate(run.chains):
+        w = policy_weights(data, k, s.policy)
+        y, _, _ = stationary(data, k, w, run.kern)
+        run.laws.append(y)
+        occ.append(y[data.pair_c] * w)
+        xs.append(occ[-1].sum(axis=1))
+    return occ, np.mean(xs, axis=0)
+
+
+def _offer(run: _Run, tables: list, prices: np.ndarray | None, phase: str) -> None:
+    """Certify ``tables`` and keep them when they beat the best so far (prices: the zero-sum prices
+    that make them sub-solutions of every chain, when none are given)."""
+    cert = certify_tables(run.data, tables)
+    run.history.append((round(time.monotonic() - run.t0, 3), phase, cert.lower_bound))
+    if cert.lower_bound > run.best.lower_bound:
+        mu = _prices_from_tables(run.data, tables) if prices is None else prices
+        run.best = _Best(cert.lower_bound, cert, [np.array(h, float) for h in tables], mu,
+                         -cert.u.max(axis=1), phase)
+
+
+def relaxation1_start(system: System, r1: BoundResult) -> tuple[list, np.ndarray] | None:
+    r"""Relaxation 1's tables and prices carried to relaxation 2 (None when the model has no claims).
+
+    Tables: h_k(tau, C) = h^1_k(tau, column_k(C)), the private bias read on k's projection.
+    Prices: mu_k(p) = \sum_m \lambda_m claim_{m,k}(p) - (1/N) \sum_j \sum_m \lambda_m claim_{m,j}(p),
+    zero-sum over k. Where the claims sum to 1 the priced joint chain of process k is at least
+    its priced private chain (every joint action projects to a private one with the same
+    transition of (tau_k, C_k)), so relaxation 2 at these prices is at least relaxation 1's bound.
+    """
+    try:
+        claims = _joint_claims(system)
+    except WncsError:
+        return None
+    lam = np.asarray(r1.multipliers, float).ravel()
+    mu = np.einsum("m,pmk->kp", lam, claims)
+    tables = [np.asarray(h)[np.asarray(col)] for h, col in zip(r1.tables.h, r1.tables.column)]
+    return tables, mu - mu.mean(axis=0)
+
+
+def _joint_claims(system: System) -> np.ndarray:
+    """(|C x A|, M, N) claims of every joint pair, pairs in the automaton's flat order."""
+    model = system.model
+    return np.concatenate([model.claims(cfg, system.labels[c, : system.n_actions[c]])
+                           for c, cfg in enumerate(system.automaton.configs)]).astype(float)
+
+
+def _dual_of(lp: JointLP, tables) -> np.ndarray:
+    """A feasible dual of the LP from tables: h_k (pinned), u_k(h) plus slack shares, g(h)."""
+    tables = pin_tables(tables)
+    cert = certify_tables(lp.data, tables)
+    u = cert.u + (-cert.raw - cert.u.sum(axis=0)) / lp.data.n_processes
+    return lp.dual_from(tables, u, cert.raw)
+
+
+def _pdhg_phase(run: _Run, start: tuple, max_iter: int, share: float, patience: int) -> tuple[JointLP, np.ndarray, dict]:
+    """PDHG with periodic repairs, until ``patience`` repairs in a row gained nothing, ``max_iter``
+    iterations or its time share."""
+    data = run.data
+    occ, x = start
+    run.prog.phase(f"relaxation 2: the start gives {run.best.lower_bound:.6g}; building the LP")
+    t = time.monotonic()
+    lp = JointLP.build(data, run.kern)
+    run.clock("lp_build", t)
+    pd = HalpernPDHG(lp, lp.primal_from(occ, x), _dual_of(lp, run.best.tables))
+    stop_at = min(run.deadline, time.monotonic() + share * max(run.deadline - time.monotonic(), 0.0))
+    chunk, recent = 200, []
+    while pd.iterations < max_iter and time.monotonic() < stop_at:
+        t_it = time.monotonic()
+        pd.run(min(chunk, max_iter - pd.iterations))
+        run.clock("pdhg", t_it)
+        per_it = (time.monotonic() - t_it) / chunk
+        t_rep = time.monotonic()
+        before = run.best.lower_bound
+        _evaluate(run, _prices_from_tables(data, lp.tables(pd.dual)), "pdhg")
+        recent.append(run.best.lower_bound - before)
+        # repairs take at most a quarter of the phase
+        chunk = int(min(2000, max(200, 3.0 * (time.monotonic() - t_rep) / max(per_it, 1e-9))))
+        run.prog.tick(f"PDHG {pd.iterations} its: certified {run.best.lower_bound:.8g} "
+                      f"(restarts {pd.restarts}, w {pd.w:.2g})")
+        if len(recent) >= patience and sum(recent[-patience:]) <= 0.0:
+            break
+    return lp, pd.primal, {"pdhg_iterations": pd.iterations, "pdhg_restarts": pd.restarts,
+                           "pdhg_primal_weight": pd.w, **{f"pdhg_{k}": v for k, v in pd.residuals().items()}}
+
+
+def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int, PriceBundle]:
+    """Proximal bundle from the best prices, until its stopping test (True), :data:`STALL` null
+    steps in a row, ``max_iter`` steps or the deadline (False)."""
+    data = run.data
+    centre = run.best.prices
+    value = _evaluate(run, centre, "bundle")
+    cuts = seed_cuts + _cuts(run, run.chains)
+    X = np.array([x for _, _, x in cuts[-data.n_processes:]])
+    spread = float(((X - X.mean(axis=0)) ** 2).sum())
+    # a first step the linear model prices at ~1% of L: t ||PZ||^2 ~ 0.01 |L|, PZ ~ the spread of the cuts
+    bundle = PriceBundle(centre, value, t=1e-2 * max(abs(value), 1.0) / max(spread, 1e-12))
+    for k, a, x in cuts:
+        bundle.add_cut(k, a, x)
+    it = nulls = 0
+    while it < max_iter and not run.out_of_time():
+        t = time.monotonic()
+        mu = bundle.candidate()
+        run.clock("master", t)
+        if bundle.converged(run.tol):
+            return True, it, bundle
+        value = _evaluate(run, mu, "bundle")
+        it += 1
+        for k, a, x in _cuts(run, run.chains):
+            bundle.add_cut(k, a, x)
+        nulls = 0 if bundle.report(mu, value) else nulls + 1
+        if nulls >= STALL:
+            break
+        run.prog.tick(f"bundle {it}: certified {run.best.lower_bound:.8g}, L(centre) {bundle.value:.8g}, "
+                      f"predicted +{bundle.predicted:.3g}, disagreement {bundle.disagreement:.2g}, t {bundle.t:.3g}")
+    return False, it, bundle
+
+
+# ---------------------------------------------------------------------------- entry point
+def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = 600.0, max_iter: int = 1000,
+                pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "bundle", warm_start: bool = True,
+                kernel: str = "auto", threads: int = 1,
+                progress: bool | Progress | None = None) -> BoundResult:
+    """A certified lower bound on g* from relaxation 2 (joint configuration, per-process AoI).
+
+    Parameters
+    ----------
+    system : System
+        The scenario's automaton and costs (:meth:`System.from_scenario`); the tau box is never
+        formed.
+    tol : float
+        Relative accuracy asked of the relaxation: the bundle stops when its model predicts less
+        than ``tol * |L|`` more; the PDHG hands over when two repairs gained less than that.
+    time_limit : float or None
+        Seconds (default 10 minutes, so that ``wncs-lp bound`` with ``auto`` ends; None: no
+        limit); the PDHG gets at most 60% of it. The bound returned is certified whatever stops
+        the run.
+    max_iter : int
+        Bundle steps (each one certified evaluation: N priced chains and the separable check).
+    pdhg_iter : int
+        PDHG iterations at most.
+    pdhg_patience : int
+        The PDHG hands over after this many repairs in a row that did not raise the bound.
+    method : {"bundle", "auto", "pdhg"}
+        ``"bundle"`` (default): the bundle from the start; ``"auto"``: PDHG then bundle;
+        ``"pdhg"``: PDHG with repairs only. From relaxation 1's prices the bundle alone did
+        better where measured (processes 1-4 cap 20: 1514.4 with PDHG first in 471 s, 1516.9 with
+        the bundle alone in 395 s; on small instances the PDHG's repairs stayed below the start).
+    warm_start : bool
+        Solve relaxation 1 first and start from its tables and prices (:func:`relaxation1_start`);
+        where its claims sum to 1 this makes relaxation 2's bound at least relaxation 1's.
+    kernel : {"auto", "numba", "numpy"}
+    threads : int
+        numba threads (default 1: numba's OpenMP layer does not survive a fork).
+    progress : bool or Progress, optional
+
+    Returns
+    -------
+    BoundResult
+        ``relaxation="joint-configuration"``; ``lower_bound`` <= g* (the separable check of
+        ``tables``); ``multipliers`` the zero-sum prices mu (N, |C x A|) whose chains gave the
+        tables; ``process_gains`` each chain's certified lower gain there (their sum is within
+        round-off of a bound the check never falls below); ``status`` ``"optimal"`` when the
+        bundle's stopping test was met (``method="auto"`` / ``"bundle"``), ``"max_iter"`` when an
+        iteration or time budget ran out first, ``"interrupted"`` on Ctrl-C.
+        ``relaxation_upper`` is +inf (no primal point of the relaxation is certified).
+    """
+    if method not in JOINT_METHODS:
+        raise SolverError(f"unknown method {method!r} for relaxation 2; expected one of {', '.join(JOINT_METHODS)}")
+    if not tol > 0:
+        raise SolverError(f"tol must be positive, got {tol!r}")
+    t0 = time.monotonic()
+    prog = as_progress(progress)
+    data = JointData.from_system(system)
+    run = _Run(data=data, kern=Kernels(kernel, threads), prog=prog, tol=float(tol),
+               deadline=t0 + (float(time_limit) if time_limit is not None else np.inf), t0=t0)
+    prog.phase(f"relaxation 2: {data.n_processes} processes, {data.n_configs:,} configurations, "
+               f"{data.n_pairs:,} pairs, caps {tuple(int(c) for c in data.caps)}")
+    stats: dict = {"method": method, "kernel": run.kern.name, "threads": run.kern.threads}
+    status, it = MAX_ITER, 0
+    try:
+        warm = _warm_start(system, run, stats) if warm_start else None
+        closed, it = _phases(run, _start(run, warm), method, stats, pdhg_iter, pdhg_patience, max_iter)
+        status = OPTIMAL if closed else MAX_ITER
+    except KeyboardInterrupt:
+        status = INTERRUPTED
+    if run.best.tables is None:
+        raise KeyboardInterrupt  # nothing certified yet: nothing to return
+    prog.done(f"relaxation 2: certified lower bound {run.best.lower_bound:.10g} ({status})")
+    return _result(run, status, it, stats, time.monotonic() - t0)
+
+
+def _warm_start(system: System, run: _Run, stats: dict) -> tuple | None:
+    """Relaxation 1 solved, its tables and prices carried over (:func:`relaxation1_start`)."""
+    t = time.monotonic()
+    try:
+        r1 = private_bound(system)
+    except WncsError as exc:
+        stats["warm_start"] = f"none: {exc}"
+        return None
+    run.clock("relaxation_1", t)
+    stats["relaxation_1_bound"] = r1.lower_bound
+    warm = relaxation1_start(system, r1)
+    stats["warm_start"] = "relaxation 1" if warm is not None else "none: the model defines no claims"
+    return warm
+
+
+def _phases(run: _Run, start: tuple, method: str, stats: dict, pdhg_iter: int, patience: int,
+            max_iter: int) -> tuple[bool, int]:
+    """The PDHG and / or bundle phases of ``method``: (the bundle's stopping test met, its steps)."""
+    seed = []
+    if method in ("auto", "pdhg"):
+        lp, z, pstats = _pdhg_phase(run, start, pdhg_iter, 0.6 if method == "auto" else 1.0, patience)
+        stats.update(pstats, lp_shape=lp.shape)
+        if method == "auto":
+            seed = _randomised_cuts(run, lp, z)
+    if method not in ("auto", "bundle"):
+        return False, 0
+    closed, it, bundle = _bundle_phase(run, max_iter, seed)
+    stats.update(bundle_serious=bundle.serious_steps, bundle_null=bundle.null_steps,
+                 bundle_predicted=bundle.predicted, bundle_t=bundle.t, bundle_disagreement=bundle.disagreement,
+                 bundle_linearisation_error=bundle.linearisation_error)
+    return closed, it
+
+
+def _result(run: _Run, status: str, bundle_steps: int, stats: dict, seconds: float) -> BoundResult:
+    """The best tables, checked once more from scratch: the bound returned is that check's."""
+    best, data = run.best, run.data
+    cert = certify_tables(data, best.tables)
+    n_c = data.n_configs
+    tables = ValueTables(h=tuple(np.ascontiguousarray(h) for h in best.tables),
+                         column=tuple(np.arange(n_c) for _ in range(data.n_processes)))
+    stats.update(evaluations=run.evaluations, chain_sweeps=run.chain_sweeps, bundle_steps=bundle_steps,
+                 roundoff=cert.roundoff, raw_bound=cert.raw, binding_pair=cert.binding_pair,
+                 found_in=best.found_at, history=run.history, certified=bool(np.isfinite(cert.lower_bound)),
+                 seconds_in={k: round(v, 3) for k, v in run.seconds.items()})
+    how = ("separable check of the tables h_k(tau, C) over all sum_k tau_hat_k |C x A| = "
+           f"{int(data.caps.sum()) * data.n_pairs:,} constraints: g(h) = -max_(C,a) sum_k max_tau "
+           f"[h_k - q_k - E h_k] = {cert.raw:.12g}, minus a round-off bound {cert.roundoff:.2g}; the tables "
+           f"came from {best.found_at} (each process's chain (tau_k, C) priced at the multipliers, solved "
+           "by relative value iteration); how they were found does not enter the bound")
+    return BoundResult(relaxation="joint-configuration", lower_bound=float(cert.lower_bound),
+                       relaxation_upper=float("inf"), status=status, certified_by=how,
+                       multipliers=best.prices, process_gains=best.gains, tables=tables, seconds=float(seconds),
+                       iterations=int(run.evaluations), stats=stats)
