@@ -20,7 +20,9 @@ from wncs_lp.reproduce.context import PROFILES, Context
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
 
 TINY = b3.BeyondExactSettings((b3.Instance(b3.FOUR, 6, True), b3.Instance("bounds_mix6.toml", 4, False)),
-                              slots=3_000, reps=4, burn_in=200)
+                              slots=3_000, reps=4, burn_in=200, steps=3)
+#: the bound the section computes, rebuilt through the library
+SEARCH = {"max_iter": TINY.steps, "time_limit": None}
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +57,7 @@ def test_four_processes_against_the_enumerated_mdp(tiny):
     assert lb <= ref.gain * (1 + 1e-12)
     # the bound's policy, rebuilt from the library and evaluated on the stored matrix
     system = System.from_scenario(sc)
-    pol = bound_policy(lower_bound(system, "auto"), system)
+    pol = bound_policy(lower_bound(system, "auto", **SEARCH), system)
     exact = evaluate(ctx.mdp(sc), pol).gain
     row = next(r for r in inst["policies"] if r["policy"].startswith("bound"))
     assert row["how"] == "exact"
@@ -75,7 +77,7 @@ def test_monte_carlo_rows_against_the_exact_evaluation(tiny):
     lb = inst["bounds"][0]["lower_bound"]
     assert inst["how"] == "monte-carlo" and "optimum" not in inst
     system = System.from_scenario(ctx.scenario("bounds_mix6.toml", ["tau_cap=4"]))
-    ev = matrix_free_evaluate(system, bound_policy(lower_bound(system, "auto"), system), tol=1e-10)
+    ev = matrix_free_evaluate(system, bound_policy(lower_bound(system, "auto", **SEARCH), system), tol=1e-10)
     assert lb <= ev.gain_upper
     exact = ev.gain
     row = next(r for r in inst["policies"] if r["policy"].startswith("bound"))

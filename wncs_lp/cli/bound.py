@@ -20,7 +20,8 @@ def cmd_bound(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     system = System.from_scenario(scenario)
     prog.phase(f"computing the {relaxation} lower bound")
-    res = lower_bound(system, relaxation, tol=args.tol, progress=prog)
+    limit = {k: v for k, v in (("time_limit", args.time_limit), ("max_iter", args.max_steps)) if v is not None}
+    res = lower_bound(system, relaxation, tol=args.tol, progress=prog, **limit)
     report = None
     if args.policy:
         report = policy_gaps(res, system, ["bound", *compare], exact=None if args.exact_max_states else False,
@@ -70,6 +71,11 @@ def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tol", type=float, default=1e-6,
                    help="relative tolerance of the multiplier search (default 1e-6); the bound is certified "
                         "whatever it is")
+    p.add_argument("--max-steps", type=int, default=None, metavar="N",
+                   help="bundle steps of relaxation 2's search (default: 30 under auto, 1000 for --relaxation 2); "
+                        "the bound is certified whatever stops it")
+    p.add_argument("--time-limit", type=float, default=None, metavar="SECONDS",
+                   help="seconds of relaxation 2's search at most (default: 300 under auto, 600 for --relaxation 2)")
     p.add_argument("--policy", action="store_true",
                    help="also evaluate the bound's greedy policy and the --compare policies, with the certified "
                         "optimality gap of each")
