@@ -1,0 +1,91 @@
+"""Shared by the whole suite: the quick reproduction, computed once per run; no files left in
+the repository.
+
+``wncs-lp reproduce --profile quick`` is the suite's most expensive step. One run serves both
+the interruption test (Ctrl-C after three cached steps, then a resumed run) and the report's
+tests (they read the resumed run's report, which must be the whole report). Under pytest-xdist
+every test that uses it is kept on one worker (``xdist_group``), so it is computed once.
+"""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from hypothesis import settings
+
+# Hypothesis would keep its example database in .hypothesis/ of the working folder (the
+# repository): the fuzz tests print any falsifying example instead
+settings.register_profile("wncs_lp", database=None)
+settings.load_profile("wncs_lp")
+
+QUICK_GROUP = "quick_reproduction"
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if "quick_reproduction" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.xdist_group(QUICK_GROUP))
+
+
+def ctrl_c_default() -> None:
+    """In the child before exec: Ctrl-C's default action. A test run started in the background by
+    a non-interactive shell (``cmd &``) inherits SIGINT ignored, and Python then installs no
+    KeyboardInterrupt handler: the child would never see the Ctrl-C these tests send."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@dataclass(frozen=True)
+class QuickReproduction:
+    """What the interrupted-then-resumed quick reproduction left: ``out`` its folder; the
+    interrupted run's exit code and the cache entries it kept (name -> text); the resumed run's
+    exit code, stderr, printed JSON and its ``report.json`` as written (later tests may rerun
+    into ``out``)."""
+
+    out: Path
+    interrupted_code: int | None
+    kept: dict
+    code: int
+    stderr: str
+    printed: dict | None
+    report: dict | None
+
+
+@pytest.fixture(scope="session")
+def quick_reproduction(tmp_path_factory) -> QuickReproduction:
+    out = tmp_path_factory.mktemp("quick") / "repro"
+    cmd = [sys.executable, "-m", "wncs_lp", "reproduce", "--out", str(out), "--profile", "quick"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=ctrl_c_default)
+    cache = out / "cache"
+    deadline = time.time() + 300
+    while (not cache.exists() or len(list(cache.glob("*.json"))) < 3) and time.time() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+    kept = {p.name: p.read_text() for p in cache.glob("*.json")}
+    done = subprocess.run(cmd + ["--json"], capture_output=True, text=True, timeout=600)
+    printed = report = None
+    if done.returncode == 0:
+        printed = json.loads(done.stdout)
+        report = json.loads((out / "report.json").read_text())
+    return QuickReproduction(out, proc.returncode, kept, done.returncode, done.stderr, printed, report)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """Under ``-n 2`` the tests of one ``xdist_group`` share a worker (``--dist loadgroup``), so
+    the session fixtures they share are computed once per run."""
+    from xdist.scheduler import LoadGroupScheduling
+
+    if config.getoption("dist") == "load":
+        return LoadGroupScheduling(config, log)
+    return None
