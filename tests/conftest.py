@@ -27,10 +27,25 @@ settings.load_profile("wncs_lp")
 QUICK_GROUP = "quick_reproduction"
 
 
+def _shares_a_module_fixture(item) -> bool:
+    """Whether ``item`` uses a module- or class-scoped fixture of the suite (computed once per
+    module on each worker that runs one of the module's tests)."""
+    defs = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
+    return any(d[-1].scope in ("module", "class", "package") and d[-1].baseid for d in defs.values() if d)
+
+
 def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist (``-n 2``, loadgroup scheduling, see below) the tests that share an
+    expensive fixture stay on one worker, so it is computed once: the quick reproduction's tests
+    in one group, run first (the longest unit of work, started while the other worker takes the
+    rest), and the tests of a module with a module-scoped fixture in one group per module."""
+    quick = [i for i in items if "quick_reproduction" in getattr(i, "fixturenames", ())]
+    for item in quick:
+        item.add_marker(pytest.mark.xdist_group(QUICK_GROUP))
     for item in items:
-        if "quick_reproduction" in getattr(item, "fixturenames", ()):
-            item.add_marker(pytest.mark.xdist_group(QUICK_GROUP))
+        if item not in quick and _shares_a_module_fixture(item):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+    items[:] = quick + [i for i in items if i not in quick]
 
 
 def ctrl_c_default() -> None:
@@ -80,12 +95,8 @@ def quick_reproduction(tmp_path_factory) -> QuickReproduction:
     return QuickReproduction(out, proc.returncode, kept, done.returncode, done.stderr, printed, report)
 
 
-@pytest.hookimpl(optionalhook=True)
-def pytest_xdist_make_scheduler(config, log):
-    """Under ``-n 2`` the tests of one ``xdist_group`` share a worker (``--dist loadgroup``), so
-    the session fixtures they share are computed once per run."""
-    from xdist.scheduler import LoadGroupScheduling
-
-    if config.getoption("dist") == "load":
-        return LoadGroupScheduling(config, log)
-    return None
+def pytest_configure(config):
+    """``-n 2`` schedules by ``xdist_group`` (``--dist loadgroup``): the groups made in
+    :func:`pytest_collection_modifyitems` are kept on one worker, the other tests go one by one."""
+    if getattr(config.option, "dist", "no") == "load" and getattr(config.option, "tx", None):
+        config.option.dist = "loadgroup"
