@@ -1,6 +1,7 @@
 """The scripts in examples/ run (with small arguments) and print what they promise."""
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -40,3 +41,14 @@ def test_custom_mdp(method):
     line = next(l for l in out.splitlines() if l.strip().startswith(f"{method}:"))
     # machine replacement: keep at wear 0 and 1, replace from wear 2; hand-computed gain 23/13
     assert "replace when wear >= 2" in line and "1.7692307692" in line
+
+
+def test_gym_baselines():
+    """No agent beats the certified optimum (beyond Monte Carlo error), and the bound is below it."""
+    pytest.importorskip("gymnasium")  # in the test extra
+    out = run("06_gym_baselines.py", "2000", "8")
+    g = float(re.search(r"g\* = ([\d.]+)", out).group(1))
+    assert float(re.search(r"certified lower bound ([\d.]+)", out).group(1)) <= g
+    rows = re.findall(r"^\s*(random \(masked\)|greedy|suboptimal)\s+([\d.]+) \+- ([\d.]+)", out, re.M)
+    assert [r[0] for r in rows] == ["random (masked)", "greedy", "suboptimal"]
+    assert all(float(mean) >= g - 4.5 * float(se) for _, mean, se in rows)

@@ -42,6 +42,7 @@ from .chain import PolicyChain, stationary_law
 from .errors import PolicyError
 from .mdp import MDP
 from .models.system import System
+from .policy_forms import policy_array
 
 __all__ = ["Evaluation", "evaluate", "MultichainEvaluationError"]
 
@@ -108,10 +109,11 @@ class Evaluation:
 
 def evaluate(
     mdp: MDP,
-    policy: Any,
+    policy: Any = None,
     system: System | None = None,
     name: str | None = None,
     *,
+    sigma: Any = None,
     multichain: str = "error",
 ) -> Evaluation:
     """Evaluate a stationary policy exactly on an enumerated MDP.
@@ -120,15 +122,18 @@ def evaluate(
     ----------
     mdp : MDP
         Built by :func:`wncs_lp.models.build` (its ``states`` decode tau and C).
-    policy : Policy or array
+    policy : Policy, Solution or array
         A :class:`~wncs_lp.policies.Policy` (anything with ``on_mdp``, ``system`` and ``name``:
-        mapped with ``policy.on_mdp(mdp)``), or directly
+        mapped with ``policy.on_mdp(mdp)``), a solution of ``mdp`` (its ``policy``), or directly
         an (n,) int array of pair indices or an (L,) float array of pair probabilities.
     system : System, optional
-        Needed when ``policy`` is an array (for the cost tables and the busy table);
-        default ``policy.system``.
+        The cost tables and the busy table; default ``policy.system``, else the system of the
+        scenario ``mdp`` was built from.
     name : str, optional
-        Name reported (default ``policy.name`` or ``"array"``).
+        Name reported (default ``policy.name``, ``"sigma"`` or ``"array"``).
+    sigma : (n,) int array, optional
+        The policy as an action per state instead (a row of ``mdp.action_table``, as
+        :attr:`Solution.sigma`; see :mod:`wncs_lp.policy_forms`).
     multichain : {"error", "initial"}
         What to do with a multichain induced chain: raise (default), or report the long-run
         averages from the initial state (see the module docstring).
@@ -144,7 +149,7 @@ def evaluate(
         multichain induced chain (the message names the policy and two recurrent classes).
     """
     t0 = time.perf_counter()
-    arr, system, name = _policy_array(mdp, policy, system, name)
+    arr, system, name = _policy_array(mdp, policy, system, name, sigma)
     if multichain not in ("error", "initial"):
         raise PolicyError(f"multichain must be 'error' or 'initial', got {multichain!r}")
     pi, residual, n_classes, c_pi = _long_run_law(mdp, arr, system, name, multichain)
@@ -166,14 +171,32 @@ def evaluate(
     )
 
 
-def _policy_array(mdp: MDP, policy: Any, system: System | None, name: str | None) -> tuple[np.ndarray, System, str]:
-    """``(pair indices or pair probabilities, system, name)`` of a Policy or an array."""
-    if hasattr(policy, "on_mdp"):
-        return policy.on_mdp(mdp), system or policy.system, name or policy.name
-    if system is None:
-        raise PolicyError("evaluating a policy given as an array needs the System (system=...)")
+def _policy_array(mdp: MDP, policy: Any, system: System | None, name: str | None,
+                  sigma: Any = None) -> tuple[np.ndarray, System, str]:
+    """``(pair indices or pair probabilities, system, name)`` of a Policy, a solution, an array or
+    an action per state (``sigma``)."""
+    if hasattr(policy, "on_mdp") and hasattr(policy, "system") and sigma is None:
+        arr = policy.on_mdp(mdp)
+        arr = arr if isinstance(arr, np.ndarray) else policy_array(mdp, arr)
+        return arr, system or policy.system, name or _name_of(policy) or "array"
+    system = system if system is not None else _system_of(mdp)
     system.check_mdp(mdp)
-    return np.asarray(policy), system, name or "array"
+    default = "sigma" if sigma is not None else _name_of(policy)
+    return policy_array(mdp, policy, sigma), system, name or default or "array"
+
+
+def _name_of(policy: Any) -> str | None:
+    """A policy's name, or the method of a solution (which has no name)."""
+    return getattr(policy, "name", None) or getattr(policy, "method", None)
+
+
+def _system_of(mdp: MDP) -> System:
+    """The system of the scenario an MDP was built from (its state space keeps the model)."""
+    model = getattr(getattr(mdp, "states", None), "model", None)
+    if model is None:
+        raise PolicyError("evaluating a policy given as an array needs the System (system=...): this MDP carries "
+                          "no model (read back from a file, or made by hand)")
+    return System.from_scenario(model.scenario, model)
 
 
 def _long_run_law(mdp: MDP, arr: np.ndarray, system: System, name: str, multichain: str):

@@ -1,4 +1,5 @@
-"""Export a built MDP to a self-describing ``.npz`` file, and read it back.
+"""Export a built MDP to a self-describing ``.npz`` file (and read it back), to Storm's DRN and to
+PRISM's explicit format.
 
 ``wncs-lp export SCENARIO [--set k=v ...] --out FILE.npz`` and :func:`save_npz` write, and
 :func:`load_npz` reads, this format (``numpy.load(FILE, allow_pickle=False)`` reads it too:
@@ -104,14 +105,15 @@ Storm's explicit format (``wncs-lp export --format drn``)
 :func:`save_drn` writes the MDP in Storm's DiRect eNcoding (DRN), which ``storm --explicit-drn
 FILE`` and ``stormpy.build_model_from_drn(FILE)`` load. The file holds
 
-* a header: ``@type: MDP``, an empty ``@parameters`` line, ``@reward_models`` with the one reward
-  model ``cost``, ``@nr_states`` n and ``@nr_choices`` L; before it, comment lines (``//``) naming
-  the scenario and saying what each action name means;
+* a header: ``@type: MDP``, an empty ``@parameters`` line, ``@reward_models`` with the names of
+  the reward models (:func:`reward_models`: ``cost``, then one per ``[[constraint]]`` table of
+  the scenario), ``@nr_states`` n and ``@nr_choices`` L; before it, comment lines (``//``)
+  naming the scenario, each reward model and what each action name means;
 * ``@model``: every state as ``state <s> <labels>`` in the toolkit's numbering (the same as the
   ``.npz`` export's, so ``tau[s]``, ``config[s]`` of that file decode it), then each of its pairs
-  as ``action a<k> [<cost>]`` (``k`` the row of the action table; the one-slot cost as the
-  choice reward) followed by one line ``<target> : <probability>`` per successor, in
-  increasing target order.
+  as ``action a<k> [<cost>, <reward 2>, ...]`` (``k`` the row of the action table; the one-slot
+  cost and the other reward models' values as the choice rewards, in the header's order)
+  followed by one line ``<target> : <probability>`` per successor, in increasing target order.
 
 Labels: ``init`` on the initial state (every AoI at its cap in the first initial configuration,
 where the paper's chain starts; state 0 for an MDP without decoded states) and ``at_cap`` on the
@@ -123,8 +125,47 @@ or in Python::
     prop = stormpy.parse_properties('R{"cost"}min=? [LRA]')[0]
     g = stormpy.model_checking(model, prop).get_value(model.initial_states[0])
 
-Storm's long-run-average solver stops at its own precision (1e-6 relative by default) and gives
-no certificate. Numbers are written as Python's shortest round-trip decimals (the exact doubles).
+A constrained scenario's optimum is Storm's multi-objective query
+(:func:`multi_objective_property`), e.g. ``multi(R{"cost"}min=? [LRA], R{"send_rate_remote"}<=0.2
+[LRA])``. Storm's long-run-average solvers stop at their own precision (1e-6 relative by
+default) and give no certificate. Numbers are written as Python's shortest round-trip decimals
+(the exact doubles).
+
+PRISM's explicit format (``wncs-lp export --format prism``)
+-----------------------------------------------------------
+:func:`save_prism` writes the files of PRISM's explicit model import (the PRISM manual, appendix
+"Explicit Model Files"), for ``prism -importmodel NAME.all -mdp`` (or ``-importtrans NAME.tra
+-importstates NAME.sta -importlabels NAME.lab -importstaterewards NAME.srew ...``):
+
+===============  ================================================================================
+file             content
+===============  ================================================================================
+``NAME.tra``     ``n L nnz``, then ``s k j p a<action>`` per transition: state s, its k-th choice
+                 (pair ``pair_ptr[s] + k``), target j, probability p, action name as in the DRN
+``NAME.sta``     ``(config,tau1,...,tauN)``, then ``s:(c,t1,...,tN)`` per state (the same
+                 numbering, which is lexicographic in these values); ``(s)`` for an MDP without
+                 decoded states
+``NAME.lab``     ``0="init" 1="deadlock" 2="at_cap"``, then ``s: i j`` per labelled state
+``NAME.srew``    one reward structure: ``# Reward structure "cost"``, ``# State rewards``, ``n m``,
+                 then ``s r`` per nonzero state reward
+``NAME.trew``    only when some reward depends on the action: ``# Reward structure "..."``,
+                 ``# Transition rewards``, ``n L m``, then ``s k j r`` on every transition of a
+                 choice with reward r (PRISM reads it as the reward of the choice)
+===============  ================================================================================
+
+With several reward models (a constrained scenario) they are ``NAME1.srew``, ``NAME2.srew``, ...
+(and ``NAME1.trew``, ...), numbered in the order of :func:`reward_models` as PRISM's own export
+does; a reward that is the same for all pairs of a state is a state reward, any other a choice
+reward, and when any reward needs a ``.trew`` every reward structure gets both files (one of
+them empty) so that PRISM pairs them by number with matching names.
+
+What reads it: PRISM (its parser; note that PRISM does not compute long-run average rewards
+of MDPs -- ``R{"cost"}min=? [ S ]`` is refused for MDPs -- so the average-cost optimum itself is
+Storm's job, through the DRN). Storm's own "explicit" input (``storm --explicit``,
+``stormpy.build_model_from_explicit``) is a different dialect (a model-type line in place of the
+size line, ``#DECLARATION`` label files, one unnamed reward model) and does not read PRISM's
+``.tra``; the tests read these files with a parser written from PRISM's manual and check them in
+Storm through stormpy's sparse-model builder.
 
 Every file is written atomically (:func:`wncs_lp.files.atomic_write_bytes`): a reader sees the old
 complete file or the new one, never a partial one.
@@ -135,6 +176,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -158,6 +200,10 @@ __all__ = [
     "load_policy_npz",
     "save_solution_npz",
     "save_drn",
+    "save_prism",
+    "reward_models",
+    "constraint_reward_names",
+    "multi_objective_property",
     "initial_state",
     "ExportError",
 ]
@@ -548,7 +594,130 @@ def _action_comments(mdp: MDP, scenario: Any) -> list[str]:
     return out
 
 
-def save_drn(mdp: MDP, path: str | Path, *, scenario: Any = None) -> Path:
+_NAME_CHARS = re.compile(r"[^A-Za-z0-9_]+")
+
+
+def _reward_name(text: str) -> str:
+    """An identifier both Storm's properties and PRISM's reward headers accept ([A-Za-z_][A-Za-z0-9_]*)."""
+    name = _NAME_CHARS.sub("_", text).strip("_") or "reward"
+    return name if not name[0].isdigit() else f"r_{name}"
+
+
+def constraint_reward_names(scenario: Any) -> tuple[str, ...]:
+    """The reward-model name of each ``[[constraint]]`` table of ``scenario``, in file order.
+
+    A constraint's name is its quantity followed by the server and / or process it is about
+    (``send_rate_remote``, ``aoi_process_1``), with every character outside ``[A-Za-z0-9_]``
+    replaced by ``_``; a name already taken (``cost``, or an earlier constraint's) gets the
+    suffix ``_c<j>`` (j the constraint's 1-based position).
+    """
+    taken, out = {"cost"}, []
+    for j, spec in enumerate(getattr(scenario, "constraints", ()) or (), start=1):
+        parts = [spec.quantity]
+        if spec.server is not None:
+            parts.append(scenario.servers[spec.server].name)
+        if spec.process is not None:
+            parts.append(scenario.processes[spec.process].name)
+        name = _reward_name("_".join(parts))
+        if name in taken:
+            name = f"{name}_c{j}"
+        taken.add(name)
+        out.append(name)
+    return tuple(out)
+
+
+def reward_models(mdp: MDP, scenario: Any = None, rewards: dict[str, Any] | None = None) -> dict[str, np.ndarray]:
+    """The reward models a DRN or PRISM export carries, each an (L,) per-pair vector.
+
+    ``cost`` (the MDP's one-slot cost) first; then, when ``scenario`` has ``[[constraint]]``
+    tables, each constraint's quantity d_l (:func:`wncs_lp.models.quantities.pair_values`, the
+    vector whose long-run average the constraint bounds) under the name of
+    :func:`constraint_reward_names`; then ``rewards`` (name -> (L,) values) as given.
+
+    Raises
+    ------
+    ExportError
+        A name that is not an identifier or is used twice, or values of the wrong shape, not
+        finite or negative (Storm's and PRISM's parsers take non-negative rewards).
+    """
+    out: dict[str, np.ndarray] = {"cost": np.asarray(mdp.cost, dtype=np.float64)}
+    specs = getattr(scenario, "constraints", ()) or ()
+    if specs:
+        from .models.quantities import pair_values
+
+        for name, spec in zip(constraint_reward_names(scenario), specs):
+            out[name] = np.asarray(pair_values(mdp, spec), dtype=np.float64)
+    for name, values in (rewards or {}).items():
+        if not isinstance(name, str) or _reward_name(name) != name:
+            raise ExportError(f"reward model name {name!r}: expected an identifier ([A-Za-z_][A-Za-z0-9_]*)")
+        if name in out:
+            raise ExportError(f"reward model {name!r} is given twice (names taken: {', '.join(out)})")
+        out[name] = np.asarray(values, dtype=np.float64)
+    for name, v in out.items():
+        if v.shape != (mdp.n_pairs,):
+            raise ExportError(f"reward model {name!r}: expected {mdp.n_pairs} values (one per pair), got shape {v.shape}")
+        if not np.all(np.isfinite(v)) or np.any(v < 0):
+            raise ExportError(f"reward model {name!r}: values must be finite and >= 0 (pair {int(np.flatnonzero(~(v >= 0) | ~np.isfinite(v))[0])})")
+    return out
+
+
+def multi_objective_property(scenario: Any, *, direction: str = "min") -> str:
+    """Storm's multi-objective query of a constrained scenario: the least long-run average cost
+    subject to each ``[[constraint]]`` bound on its reward model's long-run average, e.g.
+    ``multi(R{"cost"}min=? [LRA], R{"send_rate_remote"}<=0.2 [LRA])``.
+
+    Its value is the constrained optimum that :func:`wncs_lp.constrained.solve_constrained`
+    certifies (Storm's multi-objective engine lets the scheduler randomise, as the constrained
+    optimum does).
+
+    Raises
+    ------
+    ExportError
+        The scenario has no ``[[constraint]]`` table.
+    """
+    specs = getattr(scenario, "constraints", ()) or ()
+    if not specs:
+        raise ExportError("the scenario has no [[constraint]] table: its optimum is R{\"cost\"}min=? [LRA]")
+    terms = [f'R{{"cost"}}{direction}=? [LRA]']
+    for name, spec in zip(constraint_reward_names(scenario), specs):
+        if spec.max is not None:
+            terms.append(f'R{{"{name}"}}<={float(spec.max)!r} [LRA]')
+        if spec.min is not None:
+            terms.append(f'R{{"{name}"}}>={float(spec.min)!r} [LRA]')
+    return f"multi({', '.join(terms)})"
+
+
+def _export_header(mdp: MDP, scenario: Any, fmt: str, names: list[str]) -> list[str]:
+    """Comment lines (without the comment marker) shared by the DRN and PRISM exports."""
+    source = str(scenario.source) if scenario is not None else str(mdp.meta.get("source", ""))
+    fingerprint = scenario.fingerprint() if scenario is not None else str(mdp.meta.get("fingerprint", ""))
+    lines = [
+        f"Exported by wncs_lp (wncs-lp export --format {fmt}): an average-cost MDP; its optimal average",
+        'cost is the minimal long-run average of the reward model "cost": R{"cost"}min=? [LRA] in Storm',
+        f"scenario {source} (fingerprint {fingerprint}): {mdp.n_states} states, {mdp.n_pairs} choices, "
+        f"{int(mdp.P.nnz)} transitions",
+        "states are numbered as in the .npz export (wncs-lp export --format npz): tau[s], config[s]",
+        f"reward models: {', '.join(names)}",
+    ]
+    specs = getattr(scenario, "constraints", ()) or ()
+    for name, spec in zip(constraint_reward_names(scenario) if specs else (), specs):
+        lines.append(f'reward model "{name}": the quantity of the constraint {spec.label or spec.quantity}')
+    if specs:
+        lines.append(f"the constrained optimum (Storm): {multi_objective_property(scenario)}")
+    return lines
+
+
+def _state_labels(mdp: MDP) -> tuple[int, np.ndarray]:
+    """The initial state and the states where some AoI is at its cap (the exports' labels)."""
+    st = mdp.states
+    if st is not None and hasattr(st, "tau") and len(getattr(st, "caps", ())) > 0:
+        at_cap = np.any(np.asarray(st.tau) >= np.asarray(st.caps)[None, :], axis=1)
+    else:
+        at_cap = np.zeros(mdp.n_states, bool)
+    return initial_state(mdp), at_cap
+
+
+def save_drn(mdp: MDP, path: str | Path, *, scenario: Any = None, rewards: dict[str, Any] | None = None) -> Path:
     """Write ``mdp`` in Storm's explicit DRN format (module docstring), atomically.
 
     Parameters
@@ -557,49 +726,32 @@ def save_drn(mdp: MDP, path: str | Path, *, scenario: Any = None) -> Path:
     path : file name (written as given)
     scenario : Scenario, optional
         Named in the header comments (with its fingerprint); also used to describe the actions.
+        Its ``[[constraint]]`` tables become extra reward models (:func:`reward_models`).
+    rewards : dict, optional
+        More reward models, name -> (L,) non-negative per-pair values.
 
     Returns
     -------
     Path of the written file.
     """
     path = Path(path)
+    models = reward_models(mdp, scenario, rewards)
     P = mdp.P.tocsr()
     if not P.has_sorted_indices:
         P = P.copy()
         P.sort_indices()
-    n, L = mdp.n_states, mdp.n_pairs
-    st = mdp.states
-    if st is not None and hasattr(st, "tau") and len(getattr(st, "caps", ())) > 0:
-        at_cap = np.any(np.asarray(st.tau) >= np.asarray(st.caps)[None, :], axis=1)
-    else:
-        at_cap = np.zeros(n, bool)
+    n = mdp.n_states
+    init, at_cap = _state_labels(mdp)
     labels = np.where(at_cap, " at_cap", "").astype(object)
-    init = initial_state(mdp)
     labels[init] = " init" + labels[init]
-    source = str(scenario.source) if scenario is not None else str(mdp.meta.get("source", ""))
-    fingerprint = scenario.fingerprint() if scenario is not None else str(mdp.meta.get("fingerprint", ""))
-    head = [
-        "// Exported by wncs_lp (wncs-lp export --format drn): an average-cost MDP; its optimal average",
-        '// cost is the minimal long-run average of the reward model "cost": R{"cost"}min=? [LRA]',
-        f"// scenario {source} (fingerprint {fingerprint}): {n} states, {L} choices, {int(P.nnz)} transitions",
-        "// states are numbered as in the .npz export (wncs-lp export --format npz): tau[s], config[s]",
-        *_action_comments(mdp, scenario),
-        "@type: MDP",
-        "@parameters",
-        "",
-        "@reward_models",
-        "cost",
-        "@nr_states",
-        str(n),
-        "@nr_choices",
-        str(L),
-        "@model",
-        "",
-    ]
-    pair_ptr = mdp.pair_ptr.tolist()
-    action = [f"\taction a{a} [{c!r}]\n" for a, c in zip(mdp.a_indices.tolist(), mdp.cost.tolist())]
+    head = [f"// {line}" for line in _export_header(mdp, scenario, "drn", list(models))]
+    head += [*_action_comments(mdp, scenario), "@type: MDP", "@parameters", "", "@reward_models", " ".join(models),
+             "@nr_states", str(n), "@nr_choices", str(mdp.n_pairs), "@model", ""]
+    values = np.column_stack(list(models.values())).tolist()
+    action = [f"\taction a{a} [{', '.join(repr(x) for x in r)}]\n" for a, r in zip(mdp.a_indices.tolist(), values)]
     rows = [f"\t\t{j} : {x!r}\n" for j, x in zip(P.indices.tolist(), P.data.tolist())]
     indptr = P.indptr.tolist()
+    pair_ptr = mdp.pair_ptr.tolist()
     out = ["\n".join(head)]
     push = out.append
     for s in range(n):
@@ -607,8 +759,123 @@ def save_drn(mdp: MDP, path: str | Path, *, scenario: Any = None) -> Path:
         for l in range(pair_ptr[s], pair_ptr[s + 1]):
             push(action[l])
             push("".join(rows[indptr[l]:indptr[l + 1]]))
-    atomic_write_bytes(path, "".join(out).encode("ascii"))
+    atomic_write_bytes(path, "".join(out).encode("utf-8"))
     return path
+
+
+def _prism_prefix(path_prefix: str | Path) -> Path:
+    """``DIR/NAME`` from ``DIR/NAME``, ``DIR/NAME.tra`` or ``DIR/NAME.all``."""
+    prefix = Path(path_prefix)
+    return prefix.with_suffix("") if prefix.suffix in (".tra", ".all") else prefix
+
+
+def _prism_tra(mdp: MDP, P: sp.csr_matrix) -> str:
+    """PRISM's ``.tra`` of an MDP: ``n c m``, then ``s k j p a<action>`` per transition."""
+    local = (np.arange(mdp.n_pairs) - mdp.pair_ptr[mdp.s_indices]).tolist()
+    head = [f"{mdp.n_states} {mdp.n_pairs} {int(P.nnz)}\n"]
+    lead = [f"{s} {k} " for s, k in zip(mdp.s_indices.tolist(), local)]
+    act = [f" a{a}\n" for a in mdp.a_indices.tolist()]
+    indptr, cols, vals = P.indptr.tolist(), P.indices.tolist(), P.data.tolist()
+    body = [f"{lead[l]}{cols[i]} {vals[i]!r}{act[l]}" for l in range(mdp.n_pairs) for i in range(indptr[l], indptr[l + 1])]
+    return "".join(head + body)
+
+
+def _prism_sta(mdp: MDP) -> str:
+    """PRISM's ``.sta``: ``(config,tau1,...,tauN)`` and one ``s:(c,t1,...,tN)`` line per state
+    (``(s)`` and the state's own number for an MDP without decoded states)."""
+    st = mdp.states
+    if st is None or not hasattr(st, "tau") or np.asarray(st.tau).ndim != 2 or np.asarray(st.tau).shape[1] == 0:
+        return "(s)\n" + "".join(f"{s}:({s})\n" for s in range(mdp.n_states))
+    tau = np.asarray(st.tau, dtype=np.int64)
+    values = np.column_stack([np.asarray(st.config, dtype=np.int64), tau]).tolist()
+    names = ",".join(["config", *(f"tau{k + 1}" for k in range(tau.shape[1]))])
+    return f"({names})\n" + "".join(f"{s}:({','.join(map(str, v))})\n" for s, v in enumerate(values))
+
+
+def _prism_lab(mdp: MDP) -> str:
+    """PRISM's ``.lab``: ``0="init" 1="deadlock" 2="at_cap"``, then ``s: i j`` per labelled state."""
+    init, at_cap = _state_labels(mdp)
+    lines = ['0="init" 1="deadlock" 2="at_cap"\n']
+    for s in sorted(set(np.flatnonzero(at_cap).tolist()) | {init}):
+        labels = (["0"] if s == init else []) + (["2"] if at_cap[s] else [])
+        lines.append(f"{s}: {' '.join(labels)}\n")
+    return "".join(lines)
+
+
+def _prism_rewards(mdp: MDP, P: sp.csr_matrix, name: str, values: np.ndarray, choices: bool) -> tuple[str, str | None]:
+    """One reward structure: the ``.srew`` text and, when ``choices``, the ``.trew`` text.
+
+    A reward that is the same for every pair of a state goes into ``.srew`` (state rewards);
+    otherwise into ``.trew`` as a choice reward: the same value on every transition of the choice,
+    which PRISM reads as the reward of the choice. The other file of the pair is empty.
+    """
+    n = mdp.n_states
+    first = values[mdp.pair_ptr[:-1]]
+    state_only = bool(np.array_equal(first[mdp.s_indices], values))
+    head = f'# Reward structure "{name}"\n'
+    if state_only:
+        nz = np.flatnonzero(first)
+        srew = head + f"# State rewards\n{n} {nz.size}\n" + "".join(f"{s} {v!r}\n" for s, v in zip(nz.tolist(), first[nz].tolist()))
+    else:
+        srew = head + f"# State rewards\n{n} 0\n"
+    if not choices:
+        return srew, None
+    if state_only:
+        return srew, head + f"# Transition rewards\n{n} {mdp.n_pairs} 0\n"
+    local = np.arange(mdp.n_pairs) - mdp.pair_ptr[mdp.s_indices]
+    lines = []
+    for l in np.flatnonzero(values).tolist():
+        lead, v = f"{int(mdp.s_indices[l])} {int(local[l])} ", repr(float(values[l]))
+        lines += [f"{lead}{j} {v}\n" for j in P.indices[P.indptr[l]:P.indptr[l + 1]].tolist()]
+    return srew, head + f"# Transition rewards\n{n} {mdp.n_pairs} {len(lines)}\n" + "".join(lines)
+
+
+def save_prism(mdp: MDP, path_prefix: str | Path, *, scenario: Any = None,
+               rewards: dict[str, Any] | None = None) -> dict[str, Path]:
+    """Write ``mdp`` in PRISM's explicit format (``.tra``, ``.sta``, ``.lab``, ``.srew``, ``.trew``).
+
+    See the module docstring ("PRISM's explicit format") for the files and what reads them.
+
+    Parameters
+    ----------
+    mdp : MDP
+    path_prefix : ``DIR/NAME`` (a trailing ``.tra`` or ``.all`` is dropped)
+        The files are ``DIR/NAME.tra``, ``.sta``, ``.lab`` and the reward files: ``NAME.srew``
+        (and ``NAME.trew``) for the one reward model ``cost``; ``NAME1.srew``, ``NAME2.srew``, ...
+        (and ``NAME1.trew``, ...) for several, in the order of :func:`reward_models`.
+    scenario : Scenario, optional
+        Its ``[[constraint]]`` tables become extra reward models (:func:`reward_models`).
+    rewards : dict, optional
+        More reward models, name -> (L,) non-negative per-pair values.
+
+    Returns
+    -------
+    dict
+        Extension (``"tra"``, ``"sta"``, ``"lab"``, ``"srew"``, ``"srew2"``, ... ``"trew"``, ...)
+        -> path of the written file (each written atomically).
+    """
+    prefix = _prism_prefix(path_prefix)
+    models = reward_models(mdp, scenario, rewards)
+    P = mdp.P.tocsr().copy()
+    P.eliminate_zeros()
+    P.sort_indices()
+    texts = {"tra": _prism_tra(mdp, P), "sta": _prism_sta(mdp), "lab": _prism_lab(mdp)}
+    choices = any(not np.array_equal(v[mdp.pair_ptr[:-1]][mdp.s_indices], v) for v in models.values())
+    numbered = len(models) > 1
+    for r, (name, values) in enumerate(models.items(), start=1):
+        srew, trew = _prism_rewards(mdp, P, name, values, choices)
+        key = "" if r == 1 else str(r)
+        texts[f"srew{key}"] = srew
+        if trew is not None:
+            texts[f"trew{key}"] = trew
+    out = {}
+    for key, text in texts.items():
+        ext = key.rstrip("0123456789")
+        number = (key[len(ext):] or "1") if numbered and ext in ("srew", "trew") else ""
+        path = prefix.with_name(f"{prefix.name}{number}.{ext}")
+        atomic_write_bytes(path, text.encode("utf-8"))
+        out[key] = path
+    return out
 
 
 def load_policy_npz(path: str | Path, mdp: MDP | None = None) -> np.ndarray:

@@ -12,11 +12,12 @@ given (:func:`wanted`).
 """
 from __future__ import annotations
 
+import math
 import sys
 import time
-from typing import Any, TextIO
+from typing import Any, Sequence, TextIO
 
-__all__ = ["Progress", "as_progress", "wanted"]
+__all__ = ["Progress", "as_progress", "wanted", "eta", "duration", "convergence_eta"]
 
 
 def _isatty(stream: Any) -> bool:
@@ -32,6 +33,43 @@ def wanted(flag: bool | None, json: bool = False, stream: Any = None) -> bool:
     if flag is not None:
         return bool(flag)
     return not json and _isatty(sys.stderr if stream is None else stream)
+
+
+def duration(seconds: float) -> str:
+    """``"42 s"``, ``"3 min 20 s"``, ``"2 h 05 min"``: a duration as a person reads it."""
+    s = max(0, int(round(seconds)))
+    if s < 60:
+        return f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60:02d} s"
+    return f"{s // 3600} h {(s % 3600) // 60:02d} min"
+
+
+def eta(done: int, total: int, elapsed: float) -> str:
+    """``"3/40, 12 s elapsed, ETA 2 min 28 s"``: how far a job of ``total`` equal steps is, and
+    the time left if the remaining steps take as long as the average of the ``done`` ones."""
+    text = f"{done}/{total}, {duration(elapsed)} elapsed"
+    if 0 < done < total:
+        text += f", ETA {duration(elapsed * (total - done) / done)}"
+    return text
+
+
+def convergence_eta(points: Sequence[tuple[float, float]], target: float) -> str:
+    """``", ETA 40 s"`` for a width shrinking geometrically towards ``target`` (a certificate gap),
+    from ``(seconds, width)`` points: the rate is that of the recent half of the run, so a solver
+    that speeds up or slows down is followed. Empty while the width is not shrinking, already at
+    the target, or measured only once."""
+    if len(points) < 2:
+        return ""
+    t_now, w_now = points[-1]
+    half = next((p for p in points if p[0] >= 0.5 * t_now), points[0])
+    if half is points[-1]:
+        half = points[-2]
+    t_then, w_then = half
+    if not (target > 0 and w_now > target and w_then > w_now > 0 and t_now > t_then):
+        return ""
+    rate = (math.log(w_then) - math.log(w_now)) / (t_now - t_then)
+    return f", ETA {duration(math.log(w_now / target) / rate)}"
 
 
 class Progress:

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from .errors import PolicyError
-from .policies import Policy
+from .mdp import MDP
+from .policies import Policy, as_policy
 
 __all__ = ["SimulationResult", "simulate"]
 
@@ -77,8 +78,10 @@ def _want_progress(progress: bool | None) -> bool:
 
 
 def simulate(
-    policy: Policy,
+    policy: Any = None,
+    mdp: MDP | None = None,
     *,
+    sigma: Any = None,
     slots: int = 40_000,
     reps: int = 20,
     seed: int | None = 0,
@@ -90,8 +93,15 @@ def simulate(
 
     Parameters
     ----------
-    policy : Policy
-        Any policy of :mod:`wncs_lp.policies`; its ``system`` gives the automaton.
+    policy : Policy, Solution or array
+        Any policy of :mod:`wncs_lp.policies` (its ``system`` gives the automaton; a
+        ``MatrixFreeSolution`` too); or, with ``mdp``, a solution of it or its policy as (n,) int
+        pair indices or (L,) float pair probabilities (:func:`wncs_lp.policies.as_policy`).
+    mdp : MDP, optional
+        The enumerated MDP a solution or an array lives on (built from the scenario).
+    sigma : (n,) int array, optional
+        The policy as an action per state of ``mdp`` instead (a row of ``mdp.action_table``:
+        :attr:`Solution.sigma`; see ``docs/policies.md``).
     slots : int
         Slots averaged per replication (the paper uses 40,000).
     reps : int
@@ -113,8 +123,10 @@ def simulate(
     Raises
     ------
     PolicyError
-        Bad sizes, or an action index out of range returned by the policy.
+        Bad sizes, a policy in no documented form (an array without its MDP, a malformed array:
+        the message says what was expected), or an action index out of range returned by the policy.
     """
+    policy = as_policy(policy, mdp, sigma=sigma)
     if slots < 1 or reps < 1 or burn_in < 0:
         raise PolicyError(f"need slots >= 1, reps >= 1 and burn_in >= 0; got {slots}, {reps}, {burn_in}")
     t0 = time.perf_counter()

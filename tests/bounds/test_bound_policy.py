@@ -125,3 +125,21 @@ def test_policy_maps_like_any_policy():
     assert cells.size > 10
     j = pol.act(np.asarray(st.tau)[cells], np.asarray(st.config)[cells])
     np.testing.assert_array_equal(A[S >= 0], mdp.a_indices[mdp.pair_ptr[cells] + j])
+
+
+def test_make_policy_by_name_is_the_policy_of_the_auto_bound():
+    # the factory's "relaxation" is lower_bound(system, "auto") then bound_policy: the same actions
+    # on every state, and an exact gain between the optimum and its own certified bound's reach
+    from wncs_lp.bounds import lower_bound
+    from wncs_lp.policies import make_policy
+
+    sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=8"])
+    system = System.from_scenario(sc)
+    pol = make_policy("relaxation", system)
+    ref = bound_policy(lower_bound(system, "auto"), system)
+    mdp = build(sc)
+    st = mdp.states
+    tau, cfg = np.asarray(st.tau), np.asarray(st.config)
+    assert np.array_equal(pol.act(tau, cfg), ref.act(tau, cfg))
+    opt = solve(mdp)
+    assert evaluate(mdp, pol).gain >= opt.gain_lower * (1 - 1e-9)

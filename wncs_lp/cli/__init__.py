@@ -7,7 +7,9 @@ commands that solve share one ``--method`` vocabulary (:mod:`wncs_lp.methods`, d
 phases and the solver's iterations on stderr. Errors from bad
 input print one line ``error: ...`` on stderr and exit with status 2 (with ``--json`` also one
 object ``{"error", "type", "source", "field"}`` on stdout). Ctrl-C and SIGTERM stop a command
-with one line on stderr and status 130 / 143; what was written so far is complete (atomic writes).
+with one line on stderr and status 130 / 143 (with ``--json`` also one object ``{"interrupted": true,
+"signal", "exit_status", ...}`` on stdout); what was written so far is complete (atomic writes).
+Every JSON object starts with ``schema_version`` and the toolkit's ``version``.
 
 Each module of this package lists its subcommands in ``COMMANDS``; :func:`build_parser` adds
 the modules' commands in the order of :data:`MODULES` (the one place a new module is named).
@@ -19,13 +21,13 @@ import sys
 from typing import Sequence
 
 from ..errors import WncsError
-from . import bound, capstudy, export, maps, policy, reproduce, solve, tradeoff, verify
+from . import bound, capstudy, export, maps, policy, reproduce, solve, tradeoff, validate, verify
 from .common import Command
 
 __all__ = ["main", "build_parser", "COMMANDS"]
 
 #: Command modules, in the order their subcommands appear in ``wncs-lp --help``.
-MODULES = (solve, bound, policy, tradeoff, capstudy, reproduce, verify, maps, export)
+MODULES = (validate, solve, bound, policy, tradeoff, capstudy, reproduce, verify, maps, export)
 
 #: Every subcommand of ``wncs-lp``.
 COMMANDS: list[Command] = [cmd for module in MODULES for cmd in module.COMMANDS]
@@ -89,11 +91,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                        **{k: getattr(exc, k) for k in ("source", "field") if hasattr(exc, k)}})
         return 2
     except KeyboardInterrupt:
-        if terminated:
-            print("terminated (SIGTERM): results already written are kept", file=sys.stderr)
-            return 143
-        print("interrupted: results already written are kept", file=sys.stderr)
-        return 130
+        name, code = ("SIGTERM", 143) if terminated else ("SIGINT", 130)
+        text = f"{'terminated (SIGTERM)' if terminated else 'interrupted'}: results already written are kept"
+        print(text, file=sys.stderr)
+        if getattr(args, "json", False):  # --json still prints its one object, saying so
+            from .common import emit_json
+
+            emit_json({"interrupted": True, "signal": name, "exit_status": code, "error": text,
+                       "type": "KeyboardInterrupt", "command": args.command})
+        return code
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

@@ -10,7 +10,8 @@ from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD, METHOD_HELP, METHODS,
 
 __all__ = ["Command", "add_scenario_args", "add_method_arg", "add_progress_arg", "add_threads_arg",
            "add_parallel_args", "executor_of", "progress_for", "load", "emit_json", "head", "output_file",
-           "output_folder", "write_after_work", "warn", "SOLVE_METHODS", "MATRIX_FREE_METHODS"]
+           "output_folder", "write_after_work", "warn", "solution_json", "scenario_file", "JSON_SCHEMA_VERSION", "SOLVE_METHODS",
+           "MATRIX_FREE_METHODS"]
 
 #: The methods of a command that takes a scenario beyond :data:`METHODS` (the matrix-free solver),
 #: and those of ``solve``: every unconstrained method and every constrained one.
@@ -27,11 +28,34 @@ class Command(NamedTuple):
     run: Callable[[argparse.Namespace], int]
 
 
+#: The version of the ``--json`` layout: 2 since a solver's statistics sit under ``"stats"``.
+JSON_SCHEMA_VERSION = 2
+
+
 def emit_json(payload: dict) -> None:
-    """Print one JSON object on stdout (strict JSON: NaN/inf written as null, see :func:`wncs_lp.files.dumps`)."""
+    """Print one JSON object on stdout (strict JSON: NaN/inf written as null, see :func:`wncs_lp.files.dumps`),
+    starting with ``schema_version`` (:data:`JSON_SCHEMA_VERSION`) and the toolkit's ``version``."""
+    import wncs_lp
+
     from ..files import dumps
 
-    print(dumps(payload, indent=2))
+    print(dumps({"schema_version": JSON_SCHEMA_VERSION, "version": wncs_lp.__version__, **payload}, indent=2))
+
+
+def solution_json(sol) -> dict:
+    """A solution's ``summary()`` for ``--json``: the certificate, ``iterations`` and ``seconds`` at
+    the top, the method's own statistics (which differ from method to method) under ``"stats"``."""
+    from ..files import scalars
+
+    summary = sol.summary()
+    stats = scalars(getattr(sol, "stats", None) or {})
+    top = {k: v for k, v in summary.items() if k not in stats or k in _TOP_KEYS}
+    return {**top, "stats": {k: v for k, v in stats.items() if k not in _TOP_KEYS}}
+
+
+#: The keys of a solution that stay at the top of ``--json`` even when its statistics repeat them.
+_TOP_KEYS = ("method", "status", "status_code", "message", "gain", "gain_lower", "gain_upper", "certificate_gap",
+             "iterations", "seconds", "policy")
 
 
 def warn(text: str) -> None:
@@ -40,7 +64,8 @@ def warn(text: str) -> None:
 
 
 def add_scenario_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scenario", help="scenario TOML file (see formulations/ and docs/scenarios.md)")
+    p.add_argument("scenario", help="scenario TOML file, or the name of a shipped one (paper_p12, paper_p123, ...: "
+                                    "wncs-lp validate --list; docs/scenarios.md)")
     p.add_argument(
         "--set",
         dest="overrides",
@@ -116,12 +141,28 @@ def progress_for(args: argparse.Namespace):
     return Progress(wanted(getattr(args, "progress", None), getattr(args, "json", False)))
 
 
+def scenario_file(text: str) -> str | Path:
+    """A scenario argument as a file: the file when it exists, else the shipped scenario of that
+    name (``paper_p12`` or ``paper_p12.toml``, :func:`wncs_lp.scenario_path`), else as given (the
+    loader then says it cannot be read)."""
+    from .. import scenario_path
+
+    path = Path(text)
+    if path.exists() or len(path.parts) != 1:
+        return text
+    try:
+        return scenario_path(text)
+    except FileNotFoundError:
+        return text
+
+
 def load(args: argparse.Namespace):
-    """The scenario of ``args.scenario`` with the ``--set`` overrides applied (degenerate
+    """The scenario of ``args.scenario`` (a file or a shipped scenario's name, :func:`scenario_file`)
+    with the ``--set`` overrides applied (degenerate
     scenarios get ``warning:`` lines on stderr)."""
     from ..scenario import load_scenario
 
-    scenario = load_scenario(args.scenario, args.overrides)
+    scenario = load_scenario(scenario_file(args.scenario), args.overrides)
     for text in scenario.degenerate_warnings():
         warn(text)
     return scenario

@@ -12,8 +12,9 @@ def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
     p.add_argument(
         "--policy",
         required=required,
-        metavar="NAME",
-        help="optimal (solved exactly), suboptimal (the paper's separable policy), static (one fixed server per "
+        metavar="NAME|FILE.npz",
+        help="a policy saved by wncs-lp solve --out FILE.npz (on the same scenario and overrides), or by name: "
+        "optimal (solved exactly), suboptimal (the paper's separable policy), static (one fixed server per "
         "process), best_static (the best static assignment, by exact evaluation), greedy (the process of largest "
         "current cost first, to its shortest-loop server) or random (uniform over the feasible actions)",
     )
@@ -33,8 +34,24 @@ def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
 def _policy(args: argparse.Namespace, scenario, *, need_mdp: bool, prog=False):
     from ..policies import policy_for
 
+    if args.policy.lower().endswith(".npz"):
+        return _policy_file(args, scenario, prog)
     return policy_for(scenario, args.policy, method=args.method, assignment=args.assignment,
                       need_mdp=need_mdp, force=args.force, threads=args.threads, progress=prog)
+
+
+def _policy_file(args: argparse.Namespace, scenario, prog):
+    """A policy saved by ``wncs-lp solve --out FILE.npz``, on the scenario's MDP (built here)."""
+    import time
+
+    from ..policies import PolicySetup, policy_from_file
+    from ..solvers.route import build_scenario
+
+    t0 = time.perf_counter()
+    mdp, _ = build_scenario(scenario, force=args.force, progress=prog)
+    prog.phase(f"reading the policy of {args.policy}")
+    policy = policy_from_file(args.policy, mdp)
+    return PolicySetup(system=policy.system, mdp=mdp, policy=policy, seconds=time.perf_counter() - t0)
 
 
 # ----------------------------------------------------------------------------- evaluate
@@ -127,7 +144,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     output_folder(args.out)  # before any work
     scenario = load(args)
-    log = None if args.json else (lambda line: print(line, file=sys.stderr, flush=True))
+    show = args.progress if args.progress is not None else not args.json  # a line per row, [done/total, ETA]
+    log = (lambda line: print(line, file=sys.stderr, flush=True)) if show else None
     res = run_sweep(
         scenario,
         args.param,
@@ -147,7 +165,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         plot=not args.no_plot,
         log=log,
     )
-    if res.dropped and args.json:  # without --json the log said so
+    if res.dropped and log is None:  # else the log said so
         from .common import warn
 
         warn(f"{res.dropped} row(s) of {args.out}/sweep.csv were not this sweep's (fingerprint): not reused")
@@ -190,6 +208,9 @@ def _configure_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-exact", action="store_true", help="no exact evaluation (simulate only; needs --simulate-slots)")
     add_parallel_args(p, "grid values")
     add_threads_arg(p)
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="one line on stderr per finished row, with the rows done, the time elapsed and an ETA "
+                        "(default: on without --json)")
     p.add_argument("--no-plot", action="store_true", help="do not write sweep.png / sweep.svg")
 
 

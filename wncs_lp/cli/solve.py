@@ -6,7 +6,7 @@ import time
 
 from ..methods import DEFAULT_METHOD, METHOD_HELP
 from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_threads_arg, emit_json, head,
-                     load, output_file, progress_for, write_after_work)
+                     load, output_file, progress_for, solution_json, write_after_work)
 
 
 def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
@@ -16,7 +16,8 @@ def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
     if args.out is not None:  # one byte a state: wncs_lp.solvers.matrix_free.load_solution reads it back
         progress_for(args).phase(f"writing the policy to {args.out}")
         _, failed = write_after_work(lambda: sol.save(args.out), args.out)
-    payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)), **sol.summary(),
+    payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)),
+               **solution_json(sol),
                "matrix_free_reason": run.route, "seconds": time.perf_counter() - t0}
     if args.json:
         emit_json(payload)
@@ -41,6 +42,13 @@ def _write_failed(message: str | None) -> int:
 def cmd_solve(args: argparse.Namespace) -> int:
     from ..solvers.route import solve_scenario
 
+    if args.dry_run:  # what wncs-lp validate says: the checks and the size, nothing built
+        from .validate import cmd_validate
+
+        args.list = False
+        return cmd_validate(args)
+    if args.discount is not None:
+        return _discounted(args)
     if args.out is not None:
         output_file(args.out, "--out")  # before any work: its folder must exist
     scenario = load(args)
@@ -83,6 +91,45 @@ def _unconstrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> 
     return _write_failed(failed) or (0 if sol.ok else 1)
 
 
+#: The discounted method of each --method (the average-cost vocabulary, read for --discount).
+_DISCOUNTED = {"auto": "pi", "pi": "pi", "vi": "vi", "rvi": "vi", "lp": "lp", "lp-highs": "lp", "lp-cvxpy": "lp"}
+
+
+def _discounted(args: argparse.Namespace) -> int:
+    """``--discount BETA``: the discounted problem, certified (:mod:`wncs_lp.solvers.discounted`)."""
+    from ..errors import WncsError
+    from ..export import initial_state
+    from ..solvers.discounted import solve_discounted
+    from ..solvers.route import build_scenario
+
+    if args.method not in _DISCOUNTED:
+        raise WncsError(f"--discount solves with {', '.join(sorted(set(_DISCOUNTED.values())))} (--method "
+                        f"{', '.join(_DISCOUNTED)}); got --method {args.method}")
+    scenario = load(args)
+    if scenario.constraints and not args.ignore_constraints:
+        raise WncsError(f"{scenario.source}: --discount solves the unconstrained problem, and this scenario has "
+                        "[[constraint]] tables; add --ignore-constraints to solve it without them")
+    t0 = time.perf_counter()
+    mdp, t_build = build_scenario(scenario, force=args.force, progress=progress_for(args))
+    d = solve_discounted(mdp, args.discount, _DISCOUNTED[args.method])
+    s0 = initial_state(mdp)
+    payload = {**head(args, scenario, mdp), "criterion": "discounted", "beta": d.beta, "method": d.method,
+               "status": d.status, "gap": d.gap, "initial_state": mdp.state_label(s0),
+               "value_initial": float(d.value[s0]), "lower_initial": float(d.lower[s0]),
+               "value_min": float(d.value.min()), "value_max": float(d.value.max()), "iterations": d.iterations,
+               "build_seconds": t_build, "seconds": time.perf_counter() - t0}
+    if args.json:
+        emit_json(payload)
+    else:
+        _header(scenario, mdp, t_build)
+        print(f"discounted (beta = {d.beta:g}) by {d.method}: status {d.status}, {d.iterations} iterations")
+        print(f"value from the initial state {payload['initial_state']}: {d.value[s0]:.10g} "
+              f"(certified: {d.lower[s0]:.10g} <= v*, gap in any state {d.gap:.2e})")
+        print(f"(1 - beta) v over the states: {(1 - d.beta) * d.value.min():.8g} .. {(1 - d.beta) * d.value.max():.8g} "
+              "(-> the average cost g* as beta -> 1)")
+    return 0 if d.status == "optimal" else 1
+
+
 def _print_auto(st: dict) -> None:
     print(f"auto: chose {st['auto_choice']} ({st['auto_reason']})")
     if st.get("cross_check_method"):
@@ -100,7 +147,8 @@ def _save(args: argparse.Namespace, scenario, mdp, sol, prog):
 
 def _payload(args: argparse.Namespace, scenario, mdp, sol, cap, t0: float, t_build: float, **extra) -> dict:
     """The JSON of a solve: the head, the solution's summary, the mass at the cap, the timings."""
-    return {**head(args, scenario, mdp), "nnz": int(mdp.P.nnz), **sol.summary(), **extra, "cap_mass": cap.to_dict(),
+    return {**head(args, scenario, mdp), "nnz": int(mdp.P.nnz), **solution_json(sol), **extra,
+            "cap_mass": cap.to_dict(),
             "build_seconds": t_build, "solve_seconds": sol.seconds, "seconds": time.perf_counter() - t0}
 
 
@@ -153,6 +201,13 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
         "[[constraint]] tables: auto, lp, lp-cvxpy or lagrangian (one bound: multiplier search with certified "
         "value iteration)",
     )
+    p.add_argument("--dry-run", action="store_true",
+                   help="check the scenario and print the size of its MDP and the memory a solve needs, as wncs-lp "
+                        "validate does; build and solve nothing")
+    p.add_argument("--discount", type=float, default=None, metavar="BETA",
+                   help="solve the discounted problem with this discount factor in [0, 1) instead of the average "
+                        "cost (--method auto/pi: policy iteration, vi/rvi: value iteration, lp/lp-highs: the LP on "
+                        "HiGHS; certified by MacQueen's bounds)")
     p.add_argument("--ignore-constraints", action="store_true",
                    help="solve the unconstrained problem even if the scenario has [[constraint]] tables")
     p.add_argument("--out", default=None, metavar="FILE.npz",

@@ -24,14 +24,24 @@ Policies (``make_policy`` builds them by name):
 ``static``       :class:`StaticPolicy` with :func:`default_assignment`;
 ``best_static``  :func:`best_static`, the static assignment of least exact average cost;
 ``greedy``       :class:`GreedyPolicy`, the paper's greedy baseline;
-``random``       :class:`RandomPolicy`, uniform over the feasible actions (tau-independent).
+``random``       :class:`RandomPolicy`, uniform over the feasible actions (tau-independent);
+``relaxation``   the greedy policy of the certified lower bound (:mod:`wncs_lp.bounds`), a
+                 :class:`SeparableGreedyPolicy` on the relaxation's value tables.
+
+Policies of one's own: :meth:`Policy.from_function` (a function of (tau, configuration) returning
+an action label), :meth:`Policy.from_sigma` (an action per state of an enumerated MDP) and
+:meth:`Policy.from_pairs` (pair indices); :func:`as_policy` makes a policy of any of these forms.
+The two array forms and their converters (:func:`pairs_to_sigma`, :func:`sigma_to_pairs`) are
+described in :mod:`wncs_lp.policy_forms`.
 
 The exact rules are in ``docs/policies.md``.
 """
 from __future__ import annotations
 
 from ..models.system import OutcomeTables, System
-from .base import Policy, as_rng
+from ..policy_forms import pairs_to_sigma, policy_array, sigma_to_pairs
+from .base import Configuration, FunctionPolicy, Policy, TablePolicy, as_rng, system_of
+from .convert import as_policy, policy_from_file
 from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
@@ -46,7 +56,7 @@ from .rules import (
     static_assignments,
 )
 from .search import best_static
-from .suboptimal import ProcessPoisson, SuboptimalPolicy
+from .suboptimal import ProcessPoisson, SeparableGreedyPolicy, SuboptimalPolicy
 
 __all__ = [
     "POLICY_NAMES",
@@ -54,6 +64,15 @@ __all__ = [
     "OutcomeTables",
     "Policy",
     "as_rng",
+    "as_policy",
+    "policy_from_file",
+    "system_of",
+    "Configuration",
+    "FunctionPolicy",
+    "TablePolicy",
+    "pairs_to_sigma",
+    "sigma_to_pairs",
+    "policy_array",
     "OptimalPolicy",
     "CappedPolicy",
     "MixedPolicy",
@@ -64,6 +83,7 @@ __all__ = [
     "StaticPolicy",
     "GreedyPolicy",
     "SuboptimalPolicy",
+    "SeparableGreedyPolicy",
     "ProcessPoisson",
     "default_assignment",
     "static_assignments",

@@ -1,19 +1,26 @@
-"""The policy interface: one ``act`` over (tau, configuration) arrays, one ``on_mdp``.
+"""The policy interface: one ``act`` over (tau, configuration) arrays, one ``on_mdp``; and the
+policies of one's own: from a function of (tau, configuration) (:meth:`Policy.from_function`),
+from an action per state or pair indices on an enumerated MDP (:meth:`Policy.from_sigma`,
+:meth:`Policy.from_pairs`).
 
-See :mod:`wncs_lp.policies` for the two uses of a policy.
+See :mod:`wncs_lp.policies` for the two uses of a policy, and :mod:`wncs_lp.policy_forms` for the
+array forms (``policy`` = pair indices, ``sigma`` = action per state).
 """
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Callable, Hashable
 
 import numpy as np
 
 from ..errors import PolicyError
 from ..mdp import MDP
 from ..models.system import System
+from ..policy_forms import check_pairs, policy_array, sigma_to_pairs
 
-__all__ = ["Policy", "as_rng"]
+__all__ = ["Policy", "as_rng", "Configuration", "FunctionPolicy", "TablePolicy", "system_of"]
 
 
 def as_rng(rng: np.random.Generator | int | None) -> np.random.Generator:
@@ -77,6 +84,43 @@ class Policy(ABC):
             raise PolicyError(f"policy {self.name}: a local action index is out of range")
         return mdp.pair_ptr[:-1] + j
 
+    # policies of one's own -------------------------------------------------------
+    @classmethod
+    def from_function(cls, system: Any, f: Callable[[tuple, "Configuration"], Any],
+                      name: str = "custom") -> "FunctionPolicy":
+        """A deterministic policy from a function ``f(tau, configuration) -> action label``.
+
+        Parameters
+        ----------
+        system : System, Scenario or MDP
+            The scenario's system (an MDP built from a scenario, or the scenario, gives it).
+        f : callable
+            Called as ``f(tau, configuration)`` with ``tau`` a tuple of ints (the AoI of each
+            process, 1..tau_hat_k) and ``configuration`` a :class:`Configuration` (its model's
+            readable ``description``, ``idle``, per-server ``accepts``, the allowed ``actions``).
+            Returns an action label: a tuple of per-server process indices as in
+            ``system.automaton.actions[c]`` (for the wncs model ``(a_1, ..., a_M)``, ``a_m = k``
+            sends process k to server m, 0 sends nothing); one of ``configuration.actions``.
+        name : str
+
+        Returns
+        -------
+        FunctionPolicy
+            ``f`` is called once per distinct state the policy is asked about (cached).
+        """
+        return FunctionPolicy(system_of(system), f, name=name)
+
+    @classmethod
+    def from_sigma(cls, mdp: MDP, sigma: Any, name: str = "sigma") -> "TablePolicy":
+        """A deterministic policy from an action per state of an enumerated MDP (``sigma[s]``: a
+        row of ``mdp.action_table``, as :attr:`Solution.sigma`), e.g. to simulate it."""
+        return TablePolicy(system_of(mdp), mdp, sigma_to_pairs(mdp, sigma), name=name)
+
+    @classmethod
+    def from_pairs(cls, mdp: MDP, policy: Any, name: str = "pairs") -> "TablePolicy":
+        """A deterministic policy from pair indices of an enumerated MDP (:attr:`Solution.policy`)."""
+        return TablePolicy(system_of(mdp), mdp, check_pairs(mdp, policy), name=name)
+
     def describe(self) -> dict[str, Any]:
         """JSON-ready description."""
         return {"policy": self.name, "randomised": self.randomised}
@@ -92,3 +136,166 @@ class Policy(ABC):
         if tau.ndim != 2 or c.shape != (tau.shape[0],):
             raise PolicyError(f"act expects tau of shape (R, N) and config_ids of shape (R,), got {tau.shape}, {c.shape}")
         return tau, c
+
+
+def system_of(obj: Any) -> System:
+    """The :class:`System` of a system, a scenario or an MDP built from a scenario."""
+    if isinstance(obj, System):
+        return obj
+    from ..scenario import Scenario
+
+    if isinstance(obj, Scenario):
+        return System.from_scenario(obj)
+    if isinstance(obj, MDP):
+        model = getattr(obj.states, "model", None)
+        if model is None:
+            raise PolicyError(f"{obj!r} carries no model (read back from a file, or made by hand): give the "
+                              "scenario's System instead (System.from_scenario(scenario))")
+        return System.from_scenario(model.scenario, model)
+    raise PolicyError(f"expected a System, a Scenario or an MDP built from a scenario; got {type(obj).__name__}")
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """A configuration of the automaton as a policy of one's own sees it (:meth:`Policy.from_function`).
+
+    Everything is asked of the scenario's model, so a function written against these fields works
+    for every model kind.
+
+    Attributes
+    ----------
+    id : int
+        The automaton's configuration id (``system.automaton.configs[id]``).
+    description : str
+        The model's readable one-line form (``"remote: idle; edge: job 1 d=2"``); also ``str()``.
+    idle : bool
+        Every server idle and every pipeline empty.
+    accepts : tuple of bool
+        Per server (in the scenario's order): whether a new update may be sent to it now.
+    servers : tuple of str
+        The server names, in the order of ``accepts`` and of an action label's entries.
+    actions : tuple of tuple of int
+        The allowed action labels, in the MDP's action order.
+    raw : object
+        The model's own configuration object (its layout is the model's business).
+    """
+
+    id: int
+    description: str
+    idle: bool
+    accepts: tuple[bool, ...]
+    servers: tuple[str, ...]
+    actions: tuple[tuple[int, ...], ...]
+    raw: Hashable = field(repr=False, default=None)
+
+    def __str__(self) -> str:
+        return self.description
+
+    @classmethod
+    def of(cls, system: System, c: int) -> "Configuration":
+        model, raw = system.model, system.automaton.configs[c]
+        return cls(id=int(c), description=model.describe(raw), idle=bool(model.is_idle(raw)),
+                   accepts=tuple(bool(x) for x in model.accepts(raw)),
+                   servers=tuple(s.name for s in system.scenario.servers),
+                   actions=tuple(tuple(int(x) for x in a) for a in system.automaton.actions[c]), raw=raw)
+
+
+def _label(value: Any) -> tuple[int, ...] | None:
+    """An action label as a tuple of ints (a bare int for a one-entry label), or None."""
+    try:
+        if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+            return (int(value),)
+        items = tuple(value)
+        if all(isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_)) for x in items):
+            return tuple(int(x) for x in items)
+    except TypeError:
+        pass
+    return None
+
+
+class FunctionPolicy(Policy):
+    """A deterministic policy given by a function of (tau, configuration): :meth:`Policy.from_function`.
+
+    ``act`` calls the function once per distinct state it has not seen yet and remembers the
+    answer, so a simulation (R states a slot, mostly revisited) or ``on_mdp`` (every state once)
+    costs one call per distinct state.
+    """
+
+    def __init__(self, system: System, f: Callable[[tuple, Configuration], Any], name: str = "custom"):
+        super().__init__(system)
+        if not callable(f):
+            raise PolicyError(f"Policy.from_function needs a function of (tau, configuration); got {type(f).__name__}")
+        self.f = f
+        self.name = name
+        self._configs: dict[int, Configuration] = {}
+        self._cache: dict[int, int] = {}
+        caps = [int(c) for c in system.caps]
+        self._box = math.prod(caps)
+        self._strides = np.array([math.prod(caps[k + 1:]) for k in range(len(caps))], dtype=np.int64)
+        if self._box * max(system.n_configs, 1) >= 2 ** 62:  # pragma: no cover - boxes beyond int64
+            raise PolicyError(f"policy {name}: the AoI box of {self._box} vectors is too large to index")
+
+    def configuration(self, c: int) -> Configuration:
+        """The :class:`Configuration` the function is shown for configuration id ``c``."""
+        if c not in self._configs:
+            self._configs[c] = Configuration.of(self.system, c)
+        return self._configs[c]
+
+    def _decide(self, tau: np.ndarray, c: int) -> int:
+        conf = self.configuration(c)
+        t = tuple(int(x) for x in tau)
+        value = self.f(t, conf)
+        label = _label(value)
+        j = self.system.label_index[c].get(label) if label is not None else None
+        if j is None:
+            allowed = ", ".join(str(a) for a in conf.actions)
+            raise PolicyError(f"policy {self.name}: the function returned {value!r} in state tau={t}, configuration "
+                              f"{c} [{conf.description}]; the action labels allowed there are {allowed}")
+        return int(j)
+
+    def act(self, tau, config_ids, rng=None):
+        tau, c = self._check_inputs(tau, config_ids)
+        if tau.shape[1] != self._strides.size or np.any(tau < 1) or np.any(tau > self.system.caps):
+            raise PolicyError(f"policy {self.name}: tau must have {self._strides.size} columns in 1..tau_hat = "
+                              f"{self.system.caps.tolist()}")
+        keys = c * self._box + (tau - 1) @ self._strides
+        uniq, first, inv = np.unique(keys, return_index=True, return_inverse=True)
+        out = np.empty(uniq.size, dtype=np.int64)
+        for i, (key, r) in enumerate(zip(uniq.tolist(), first.tolist())):
+            j = self._cache.get(key)
+            if j is None:
+                j = self._cache[key] = self._decide(tau[r], int(c[r]))
+            out[i] = j
+        return out[inv.reshape(-1)]
+
+    def describe(self) -> dict[str, Any]:
+        return {"policy": self.name, "randomised": False, "kind": "function",
+                "function": getattr(self.f, "__qualname__", repr(self.f)), "states_decided": len(self._cache)}
+
+
+class TablePolicy(Policy):
+    """A deterministic policy stored as one pair per state of an enumerated MDP
+    (:meth:`Policy.from_sigma`, :meth:`Policy.from_pairs`); ``act`` looks states up in the MDP."""
+
+    def __init__(self, system: System, mdp: MDP, pairs: np.ndarray, name: str = "table"):
+        super().__init__(system)
+        system.check_mdp(mdp)
+        self.mdp = mdp
+        self.pairs = check_pairs(mdp, pairs)
+        self.name = name
+        self._local = self.pairs - mdp.pair_ptr[:-1]
+
+    def act(self, tau, config_ids, rng=None):
+        tau, c = self._check_inputs(tau, config_ids)
+        s = self.mdp.states.ids(tau, c)
+        if np.any(s < 0):
+            r = int(np.flatnonzero(s < 0)[0])
+            raise PolicyError(f"policy {self.name}: state tau={tau[r].tolist()}, configuration {int(c[r])} is not in "
+                              "the MDP")
+        return self._local[s]
+
+    def on_mdp(self, mdp: MDP) -> np.ndarray:
+        if mdp is self.mdp:
+            return self.pairs.copy()
+        return super().on_mdp(mdp)
+

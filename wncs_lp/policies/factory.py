@@ -20,7 +20,7 @@ from .suboptimal import SuboptimalPolicy
 __all__ = ["POLICY_NAMES", "PolicySetup", "make_policy", "parse_assignment", "parse_policy_names", "policy_for"]
 
 #: Policy names understood by :func:`make_policy` and the command line.
-POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random")
+POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation")
 #: The policy a solve makes, and those that need the enumerated MDP.
 OPTIMAL = "optimal"
 NEED_MDP = ("optimal", "best_static")
@@ -40,7 +40,10 @@ def make_policy(
 
     Parameters
     ----------
-    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random"}
+    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation"}
+        ``relaxation`` is the greedy policy of the certified lower bound
+        (:func:`wncs_lp.bounds.lower_bound` with ``relaxation="auto"``, then
+        :func:`wncs_lp.bounds.bound_policy`): it needs no MDP, so it reaches any number of processes.
     system : System
     mdp : MDP, optional
         Needed by ``optimal`` (solved with ``method`` unless ``solution`` is given) and
@@ -75,7 +78,17 @@ def make_policy(
         return best_static(system, mdp)
     if name == "greedy":
         return GreedyPolicy(system)
+    if name == "relaxation":
+        return _relaxation_policy(system)
     return RandomPolicy(system)
+
+
+def _relaxation_policy(system: System) -> Policy:
+    # the bounds room builds on policies (its policy is a SeparableGreedyPolicy), so it is
+    # imported when asked for, after both packages are complete
+    from ..bounds import bound_policy, lower_bound
+
+    return bound_policy(lower_bound(system, "auto"), system)
 
 
 def parse_policy_names(text: str | Sequence[str]) -> list[str]:

@@ -128,8 +128,8 @@ def run_reproduction(
     force : bool
         Recompute every step, ignoring the cache.
     claims : sequence of str, optional
-        Only these claims (default all, C1-C13, and the "beyond the paper" sections, B1 and B2;
-        name B1 or B2 here to compute it in a partial run).
+        Only these claims (default all, C1-C13, and the "beyond the paper" sections, B1, B2 and
+        B3; name one of them here to compute it in a partial run).
     progress : bool
         A progress bar over the claims on stderr.
 

@@ -1,6 +1,8 @@
 """Beyond the paper: results the paper does not state, computed with the same care (no verdict).
 
 B2 -- the paper's four processes solved exactly (:mod:`~wncs_lp.reproduce.fullscale`).
+B3 -- beyond exact: certified lower bounds and the bound's policy up to eight processes
+(:mod:`~wncs_lp.reproduce.beyondexact`).
 
 B1 -- what it costs to use the cloud less. Processes 1 and 2 (``paper_p12.toml``) with
 ``model.allow_idle = true`` (a server may be left unused), total average MSE against a bound b
@@ -28,13 +30,14 @@ from ..studies.tradeoff import TradeoffResult, tradeoff
 from ..scenario import ConstraintSpec
 from ..viz import plot_tradeoff, subplots
 from .context import Context, ExtraResult, Profile
+from .beyondexact import section_b3
 from .fullscale import section_b2
 
 __all__ = ["BEYOND", "BeyondSettings", "SETTINGS", "ExtraResult", "run_beyond", "section_b1", "settings_for",
            "tradeoff_findings"]
 
 #: The sections of "beyond the paper", in report order.
-BEYOND = ("B1", "B2")
+BEYOND = ("B1", "B2", "B3")
 
 SCENARIO = "paper_p12.toml"
 SERVER = "remote"
@@ -292,7 +295,7 @@ def section_b1(ctx: Context) -> ExtraResult:
                        numbers, figs, [tab], details)
 
 
-_SECTIONS: dict[str, Callable[[Context], ExtraResult]] = {"B1": section_b1, "B2": section_b2}
+_SECTIONS: dict[str, Callable[[Context], ExtraResult]] = {"B1": section_b1, "B2": section_b2, "B3": section_b3}
 
 
 def run_beyond(ctx: Context, ids: Sequence[str] = BEYOND, say: Callable[[str], None] | None = None) -> list[dict]:

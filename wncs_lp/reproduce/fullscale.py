@@ -36,7 +36,8 @@ from ..truncation import CAP_MASS_WARN
 from ..viz import subplots
 from .context import Context, ExtraResult, Profile, assignment_label
 
-__all__ = ["FullScaleSettings", "SETTINGS", "POLICIES", "settings_for", "section_b2", "fullscale_findings", "summary_text"]
+__all__ = ["FullScaleSettings", "SETTINGS", "POLICIES", "settings_for", "section_b2", "exact_optimum",
+           "fullscale_findings", "summary_text"]
 
 SCENARIO = "paper_p1234.toml"
 #: The baselines, in the order of the paper's Fig. 10.
@@ -78,12 +79,46 @@ def settings_for(profile: Profile) -> FullScaleSettings:
 
 
 # ----------------------------------------------------------------------------- one instance
+def exact_optimum(ctx: Context, cap: int, p: float, tol: float = 1e-7) -> dict[str, Any]:
+    """The certified optimum of processes 1-4 at (cap, p), one cached step shared by B2 and B3.
+
+    Returns ``gain``, ``gain_lower``, ``gain_upper``, ``status``, ``states``, ``sweeps``,
+    ``seconds`` and the optimal policy's time at the cap (``at_cap``, ``at_cap_per_process``).
+    """
+    from ..models.system import System
+    from ..policies import MatrixFreePolicy
+    from ..solvers.matrix_free import matrix_free_cap_masses, matrix_free_value_iteration
+
+    sc = ctx.scenario(SCENARIO, [f"tau_cap={cap}", f"p={p!r}"])
+    system = System.from_scenario(sc)
+
+    def optimal():
+        t0 = time.perf_counter()
+        sol = matrix_free_value_iteration(system, tol=tol, on_interrupt="raise")
+        n = int(sol.stats.get("n_states", sol.local_actions.size))
+        ctx.log(f"processes 1-4 cap {cap} p={p:g}: optimal g* = {sol.gain:.10g} ({n:,} states, "
+                f"{time.perf_counter() - t0:.1f} s)")
+        res = {"gain": float(sol.gain), "gain_lower": float(sol.gain_lower), "gain_upper": float(sol.gain_upper),
+               "status": sol.status, "states": n, "sweeps": int(sol.iterations),
+               "seconds": time.perf_counter() - t0}
+        per = matrix_free_cap_masses(system, MatrixFreePolicy.from_solution(sol), on_interrupt="raise")
+        res.update({"at_cap": float(sum(e.gain for e in per)), "at_cap_lower": float(sum(e.gain_lower for e in per)),
+                    "at_cap_upper": float(sum(e.gain_upper for e in per)),
+                    "at_cap_status": "optimal" if all(e.status == "optimal" for e in per) else per[0].status,
+                    "at_cap_per_process": [float(e.gain) for e in per]})
+        res["q_at_cap"] = [float(system.q[k][int(system.caps[k]) - 1]) for k in range(system.n_processes)]
+        res["seconds_total"] = time.perf_counter() - t0
+        return res, None
+
+    res, _ = ctx.cache.get_or_compute("b2_optimal", {"fingerprint": sc.fingerprint(), "tol": tol}, optimal)
+    return res
+
+
 def _instance(ctx: Context, cap: int, p: float, st: FullScaleSettings) -> dict[str, Any]:
     """Optimal gain and every baseline's exact gain at one (cap, p); each a cached step."""
     from ..models.system import System
-    from ..policies import GreedyPolicy, MatrixFreePolicy, StaticPolicy, SuboptimalPolicy, default_assignment
-    from ..solvers.matrix_free import (matrix_free_cap_mass, matrix_free_cap_masses, matrix_free_evaluate,
-                                       matrix_free_value_iteration)
+    from ..policies import GreedyPolicy, StaticPolicy, SuboptimalPolicy, default_assignment
+    from ..solvers.matrix_free import matrix_free_cap_mass, matrix_free_evaluate
 
     sc = ctx.scenario(SCENARIO, [f"tau_cap={cap}", f"p={p!r}"])
     fp = sc.fingerprint()
@@ -96,28 +131,8 @@ def _instance(ctx: Context, cap: int, p: float, st: FullScaleSettings) -> dict[s
         return {"at_cap": float(ev.gain), "at_cap_lower": float(ev.gain_lower),
                 "at_cap_upper": float(ev.gain_upper), "at_cap_status": ev.status}
 
-    def masses_of(policy) -> dict[str, Any]:
-        per = matrix_free_cap_masses(system, policy, on_interrupt="raise")
-        return {"at_cap": float(sum(e.gain for e in per)), "at_cap_lower": float(sum(e.gain_lower for e in per)),
-                "at_cap_upper": float(sum(e.gain_upper for e in per)),
-                "at_cap_status": "optimal" if all(e.status == "optimal" for e in per) else per[0].status,
-                "at_cap_per_process": [float(e.gain) for e in per]}
-
-    def optimal():
-        t0 = time.perf_counter()
-        sol = matrix_free_value_iteration(system, tol=st.tol, on_interrupt="raise")
-        n = int(sol.stats.get("n_states", sol.local_actions.size))
-        ctx.log(f"{where}: optimal g* = {sol.gain:.10g} ({n:,} states, {time.perf_counter() - t0:.1f} s)")
-        res = {"gain": float(sol.gain), "gain_lower": float(sol.gain_lower), "gain_upper": float(sol.gain_upper),
-               "status": sol.status, "states": n, "sweeps": int(sol.iterations),
-               "seconds": time.perf_counter() - t0}
-        res.update(masses_of(MatrixFreePolicy.from_solution(sol)))
-        res["q_at_cap"] = [float(system.q[k][int(system.caps[k]) - 1]) for k in range(system.n_processes)]
-        res["seconds_total"] = time.perf_counter() - t0
-        return res, None
-
     out = {"cap": cap, "p": p, "assignment": assignment, "assignment_label": assignment_label(sc, assignment)}
-    out["optimal"], _ = ctx.cache.get_or_compute("b2_optimal", {"fingerprint": fp, "tol": st.tol}, optimal)
+    out["optimal"] = exact_optimum(ctx, cap, p, st.tol)
     n = out["optimal"]["states"]
     with_mass = n <= st.mass_max_states
     for name in POLICIES:

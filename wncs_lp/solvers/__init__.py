@@ -21,6 +21,9 @@ From a scenario, :func:`solve_scenario` (:mod:`wncs_lp.solvers.route`) is the on
 guard, build, solve, and ``auto``'s switch to the matrix-free solver when the stored matrix
 would not fit.
 
+The discounted criterion (a discount factor beta, certified by MacQueen's bounds) is
+:func:`solve_discounted` (:mod:`wncs_lp.solvers.discounted`).
+
 Every solution carries the bracket ``gain_lower <= g* <= gain_upper`` from one Bellman
 step on its bias (:func:`bracket`).
 """
@@ -35,6 +38,7 @@ from ..methods import DEFAULT_METHOD, METHODS, SCENARIO_METHODS
 from ..methods import method as method_row
 from .certify import bellman_step, bracket, certificate_closed, greedy_first, q_values
 from .auto import solve_auto
+from .discounted import DiscountedSolution, discounted_value, laurent_terms, solve_discounted
 from .dp import (
     MultichainPolicyError,
     PolicyEvaluation,
@@ -71,6 +75,10 @@ __all__ = [
     "ScenarioSolve",
     "WarmStart",
     "build_scenario",
+    "DiscountedSolution",
+    "solve_discounted",
+    "discounted_value",
+    "laurent_terms",
 ]
 
 

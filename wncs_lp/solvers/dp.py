@@ -15,6 +15,7 @@ import scipy.sparse as sp
 from ..chain import class_stationary, policy_matrices, recurrent_classes
 from ..errors import PolicyError, SolverError
 from ..mdp import MDP
+from ..policy_forms import policy_array
 from ..progress import Progress, as_progress
 from .certify import bracket, certificate_closed, greedy_first, q_values
 from .iteration import (PRECISION_STALL_SWEEPS, VI_TOL, IterationOptions, IterationOutcome, IterationScheme,
@@ -84,8 +85,8 @@ class PolicyEvaluation:
     solver: str = "splu"
 
 
-def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: np.ndarray | None = None,
-                    maxiter: int | None = None) -> PolicyEvaluation:
+def evaluate_policy(mdp: MDP, policy: Any = None, *, sigma: Any = None, method: str = "auto",
+                    h0: np.ndarray | None = None, maxiter: int | None = None) -> PolicyEvaluation:
     """Exact gain, bias and stationary distribution of a unichain stationary policy.
 
     With ``r`` the smallest state of the (unique) recurrent class, solves
@@ -112,9 +113,12 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: n
     Parameters
     ----------
     mdp : MDP
-    policy : array
+    policy : array, Policy or Solution
         Deterministic (n,) pair indices or randomised (L,) pair probabilities, see
-        :func:`policy_matrices`.
+        :func:`policy_matrices`; or a :class:`~wncs_lp.policies.Policy` or a solution of ``mdp``.
+    sigma : (n,) int array, optional
+        The policy as an action per state instead (a row of ``mdp.action_table``, as
+        :attr:`Solution.sigma`; :mod:`wncs_lp.policy_forms`).
     method : {"auto", "direct", "iterative"}
         ``"auto"``: iterative from :data:`EVAL_ITERATIVE_MIN_STATES` states on, else direct.
     h0 : (n,) array, optional
@@ -139,6 +143,8 @@ def evaluate_policy(mdp: MDP, policy: np.ndarray, *, method: str = "auto", h0: n
     """
     if method not in EVAL_METHODS:
         raise SolverError(f"unknown evaluation method {method!r}; expected one of {', '.join(EVAL_METHODS)}")
+    if sigma is not None or not isinstance(policy, np.ndarray):  # the array of policy iteration goes straight on
+        policy = policy_array(mdp, policy, sigma)
     P_pi, c_pi = policy_matrices(mdp, policy)
     n = mdp.n_states
     classes = recurrent_classes(P_pi)

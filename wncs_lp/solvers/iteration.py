@@ -63,7 +63,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SolverError
-from ..progress import Progress
+from ..progress import Progress, convergence_eta
 from .certify import width_closed
 
 __all__ = ["IterationOptions", "IterationScheme", "IterationOutcome", "certified_iteration", "check_options",
@@ -301,6 +301,11 @@ def max_abs(h: np.ndarray) -> float:
     return max(float(np.max(h)), -float(np.min(h))) if h.size else 0.0
 
 
+def _widths(history: list[tuple]) -> list[tuple[float, float]]:
+    """``(seconds, relative certificate width)`` of each check of the history (for the ETA)."""
+    return [(t, (hi - lo) / max(abs(0.5 * (lo + hi)), 1e-300)) for _, _, t, lo, hi in history]
+
+
 def cert_line(name: str, sweeps: int, lo: float, hi: float, tol: float) -> str:
     """One progress line of an iteration: the sweeps and the certificate gap against its target."""
     rel = (hi - lo) / max(abs(0.5 * (lo + hi)), 1e-300)
@@ -458,7 +463,8 @@ def _loop(scheme: IterationScheme, opts: IterationOptions, judge: _Judge, out: I
         if not _finite(lo, hi, scheme.h):
             raise scheme.overflow(lo, hi, out.used)
         if progress.enabled and progress.due():
-            progress.tick(cert_line(f"{label}:{scheme.name}", out.used, lo, hi, opts.tol))
+            progress.tick(cert_line(f"{label}:{scheme.name}", out.used, lo, hi, opts.tol)
+                          + convergence_eta(_widths(out.history), opts.tol))
         status = judge(lo, hi, out.used)
         if status is not None:
             out.status = status

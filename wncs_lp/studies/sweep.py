@@ -51,6 +51,7 @@ from ..methods import DEFAULT_METHOD, check_method
 from ..models.system import System
 from ..policies import POLICY_NAMES, make_policy, parse_policy_names
 from ..policies.factory import NEED_MDP, OPTIMAL
+from ..progress import eta
 from ..scenario import Scenario
 from ..solvers.route import build_scenario, solve_scenario
 from .executors import check_executor
@@ -255,6 +256,8 @@ class _Table:
         self.reused = sum(1 for k in self.keys() if k in self.done)
         self.computed = 0
         self.files: dict[str, str] = {}
+        self.total = sum(len(ps) for _, ps in self.todo())  # rows this run computes (for the ETA)
+        self.started = time.monotonic()
 
     def keys(self) -> list[str]:
         return [f"{value_key(v)}|{p}" for v in self.grid for p in self.names]
@@ -270,7 +273,9 @@ class _Table:
         if self.log is not None:
             g = "-" if not math.isfinite(row.gain) else f"{row.gain:.6g}"
             s = "" if not math.isfinite(row.sim_mean) else f", sim {row.sim_mean:.6g} +- {row.sim_stderr:.2g}"
-            self.log(f"{row.param}={row.value:g} {row.policy}: gain {g}{s} ({row.seconds:.2f} s) {row.status}")
+            where = eta(self.computed, self.total, time.monotonic() - self.started)
+            self.log(f"[{where}] {row.param}={row.value:g} {row.policy}: gain {g}{s} ({row.seconds:.2f} s) "
+                     f"{row.status}")
 
     def save(self) -> None:
         if self.folder is None:

@@ -190,6 +190,8 @@ def plot_policy_map(
         For process/server names and p in labels (default: read from ``mdp.meta["source"]``).
     title : str, optional
     legend : bool
+        Draw the legend: right of the panel; below it when another panel of the figure is on its
+        right (a 1 x 2 layout); inside it when there are panels both on its right and below.
 
     Returns
     -------
@@ -241,9 +243,46 @@ def plot_policy_map(
     extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(fixed.items()))
     ax.set_title(title or _title(info, mdp, cid, (extra + ", ") if extra else ""), fontsize=10)
     if legend:
-        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8.5,
-                  title="action" if probs is None else "most likely action", title_fontsize=9, frameon=True)
+        _place_legend(ax, handles, fontsize=8.5, title="action" if probs is None else "most likely action",
+                      title_fontsize=9, frameon=True)
     return ax
+
+
+def _neighbours(ax) -> tuple[bool, bool]:
+    """Whether another Axes of the figure sits to the right of ``ax`` (overlapping it vertically)
+    and whether one sits below it (overlapping it horizontally), in figure coordinates."""
+    me = ax.get_position()
+    right = below = False
+    for other in ax.figure.get_axes():
+        if other is ax or not other.get_visible():
+            continue
+        o = other.get_position()
+        if o.x0 >= me.x1 - 1e-9 and o.y0 < me.y1 and o.y1 > me.y0:
+            right = True
+        if o.y1 <= me.y0 + 1e-9 and o.x0 < me.x1 and o.x1 > me.x0:
+            below = True
+    return right, below
+
+
+def _place_legend(ax, handles: list, **kw) -> None:
+    """The legend outside the panel on the right; in a row of panels (another Axes to the right,
+    where it would hide under the next panel) below the panel's x label; with a panel both to the
+    right and below, inside the panel where it covers least (``loc="best"``)."""
+    right, below = _neighbours(ax)
+    if not right:
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), **kw)
+        return
+    if below:
+        ax.legend(handles=handles, loc="best", framealpha=0.85, **kw)
+        return
+    y = -0.12
+    try:  # just under the tick labels and x label, wherever they end
+        renderer = ax.figure.canvas.get_renderer()
+        tight, box = ax.get_tightbbox(renderer), ax.get_window_extent(renderer)
+        y = (tight.y0 - box.y0) / max(box.height, 1.0) - 0.02
+    except (AttributeError, TypeError):  # a backend without a renderer: the usual depth of the labels
+        pass
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, y), ncol=2, **kw)
 
 
 def _bary(t_i: np.ndarray, t_j: np.ndarray, t_k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -333,8 +372,8 @@ def plot_policy_slice(
     head = f"plane {_tau(i, info)} + {_tau(j, info)} + {_tau(k, info)} = {total}, " + (extra + ", " if extra else "")
     ax.set_title(title or _title(info, mdp, cid, head), fontsize=10, pad=30)
     if legend:
-        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8.5,
-                  title="action" if probs is None else "most likely action", title_fontsize=9)
+        _place_legend(ax, handles, fontsize=8.5, title="action" if probs is None else "most likely action",
+                      title_fontsize=9)
     return ax
 
 
@@ -427,6 +466,8 @@ def plot_matrix_free_map(
     ax : matplotlib Axes, optional
     title : str, optional
     legend : bool
+        Draw the legend: right of the panel; below it when another panel of the figure is on its
+        right (a 1 x 2 layout); inside it when there are panels both on its right and below.
 
     Returns
     -------
@@ -476,6 +517,5 @@ def plot_matrix_free_map(
     ax.set_title(title or f"{info['name']}: policy in [{system.model.describe(conf)}] (matrix-free)\n"
                  f"{extra + ', ' if extra else ''}{', '.join(par)}", fontsize=10)
     if legend:
-        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8.5, title="action",
-                  title_fontsize=9, frameon=True)
+        _place_legend(ax, handles, fontsize=8.5, title="action", title_fontsize=9, frameon=True)
     return ax

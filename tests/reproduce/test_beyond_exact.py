@@ -1,0 +1,93 @@
+"""The report's "beyond the paper" section B3 (certified lower bounds and the bound's policy).
+
+Every number is checked against an independent route: g* against policy iteration on the
+enumerated MDP, the bound's policy against the exact sparse evaluation of the same policy on that
+MDP, each certified gap against the true gap it must bound from above; the Monte Carlo rows
+against the bound they are measured from.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from wncs_lp.bounds import bound_policy, lower_bound
+from wncs_lp.evaluate import evaluate
+from wncs_lp.models.system import System
+from wncs_lp.reproduce import beyond, beyondexact as b3
+from wncs_lp.reproduce.context import PROFILES, Context
+
+pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
+
+TINY = b3.BeyondExactSettings((b3.Instance(b3.FOUR, 6, True), b3.Instance("bounds_mix6.toml", 4, False)),
+                              slots=3_000, reps=4, burn_in=200)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    prof = dataclasses.replace(PROFILES["quick"], name="tiny-b3")
+    b3.SETTINGS["tiny-b3"] = TINY
+    out = tmp_path_factory.mktemp("b3")
+    ctx = Context(out, prof)
+    (sec,) = beyond.run_beyond(ctx, ["B3"])
+    yield out, sec, ctx
+    del b3.SETTINGS["tiny-b3"]
+
+
+def test_section_has_a_table_and_no_verdict(tiny):
+    out, sec, _ = tiny
+    assert sec["id"] == "B3" and "verdict" not in sec
+    assert "could not be computed" not in sec["summary"], sec["numbers"].get("error")
+    (tab,) = sec["tables"]
+    assert (out / tab).read_text().startswith("scenario,processes,servers,cap,states,g_star,row")
+    assert "| scenario | N | cap |" in sec["details"]
+    assert [i["processes"] for i in sec["numbers"]["instances"]] == [4, 6]
+
+
+def test_four_processes_against_the_enumerated_mdp(tiny):
+    _, sec, ctx = tiny
+    inst = sec["numbers"]["instances"][0]
+    sc = ctx.scenario(b3.FOUR, ["tau_cap=6", "p=0.9"])
+    ref = ctx.solve(sc)  # policy iteration on the stored matrix
+    opt = inst["optimum"]  # certified to B2's relative width 1e-7
+    assert opt["gain_lower"] - 1e-9 * ref.gain <= ref.gain <= opt["gain_upper"] + 1e-9 * ref.gain
+    lb = inst["bounds"][0]["lower_bound"]
+    assert lb <= ref.gain * (1 + 1e-12)
+    # the bound's policy, rebuilt from the library and evaluated on the stored matrix
+    system = System.from_scenario(sc)
+    pol = bound_policy(lower_bound(system, "auto"), system)
+    exact = evaluate(ctx.mdp(sc), pol).gain
+    row = next(r for r in inst["policies"] if r["policy"].startswith("bound"))
+    assert row["how"] == "exact"
+    assert row["gain"] == pytest.approx(exact, rel=1e-7)
+    for r in inst["policies"]:  # a certified gap bounds the true one from above
+        assert r["gap"] >= r["gain"] / ref.gain - 1 - 1e-9
+        assert r["gain"] >= ref.gain * (1 - 1e-9)
+
+
+def test_monte_carlo_rows_against_the_exact_evaluation(tiny):
+    # six processes at cap 4 are small enough for the certified matrix-free evaluation, which the
+    # section's Monte Carlo row of the bound's policy must agree with (4 standard errors)
+    from wncs_lp.solvers.matrix_free import matrix_free_evaluate
+
+    _, sec, ctx = tiny
+    inst = sec["numbers"]["instances"][1]
+    lb = inst["bounds"][0]["lower_bound"]
+    assert inst["how"] == "monte-carlo" and "optimum" not in inst
+    system = System.from_scenario(ctx.scenario("bounds_mix6.toml", ["tau_cap=4"]))
+    ev = matrix_free_evaluate(system, bound_policy(lower_bound(system, "auto"), system), tol=1e-10)
+    assert lb <= ev.gain_upper
+    exact = ev.gain
+    row = next(r for r in inst["policies"] if r["policy"].startswith("bound"))
+    assert abs(row["gain"] - exact) <= 4 * row["stderr"]
+    for r in inst["policies"]:
+        assert r["gain_upper"] >= r["gain"]
+        assert r["gap"] == pytest.approx((r["gain_upper"] - lb) / lb, rel=1e-12)
+
+
+def test_a_second_run_is_read_from_the_cache(tiny):
+    out, sec, _ = tiny
+    ctx = Context(out, dataclasses.replace(PROFILES["quick"], name="tiny-b3"))
+    (again,) = beyond.run_beyond(ctx, ["B3"])
+    assert ctx.cache.misses == 0 and ctx.cache.hits >= 3
+    assert again["numbers"]["instances"] == sec["numbers"]["instances"]

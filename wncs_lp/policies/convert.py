@@ -1,0 +1,98 @@
+"""Any documented form of a policy as a :class:`~wncs_lp.policies.Policy`: what the simulator
+takes (a policy, a solution, pair indices, pair probabilities or an action per state)."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import PolicyError
+from ..mdp import MDP
+from ..models.system import System
+from ..policy_forms import policy_array
+from .base import Policy, TablePolicy, system_of
+from .matrix_free import MatrixFreePolicy
+from .mixed import MixedPolicy
+
+__all__ = ["as_policy", "policy_from_file"]
+
+
+def as_policy(policy: Any = None, mdp: MDP | None = None, *, sigma: Any = None, system: System | None = None,
+              name: str | None = None) -> Policy:
+    """A :class:`Policy` from any documented form of one (what the simulator takes).
+
+    Parameters
+    ----------
+    policy : Policy, Solution, MatrixFreeSolution or array, optional
+        A policy (returned as it is); a solution (its policy: a ``Solution`` or
+        ``ConstrainedSolution`` needs ``mdp``, a ``MatrixFreeSolution`` does not); or, with
+        ``mdp``, (n,) int pair indices or (L,) float pair probabilities.
+    mdp : MDP, optional
+        The enumerated MDP an array or a solution lives on (built from the scenario).
+    sigma : (n,) int array, optional
+        An action per state of ``mdp`` instead (a row of ``mdp.action_table``, :attr:`Solution.sigma`).
+    system : System, optional
+        Default: the MDP's (:func:`system_of`).
+    name : str, optional
+
+    Raises
+    ------
+    PolicyError
+        Nothing given, both ``policy`` and ``sigma``, an array or solution without its MDP, or a
+        malformed array (the message says what was expected).
+    """
+    if isinstance(policy, Policy) and sigma is None:
+        return policy
+    if policy is None and sigma is None:
+        raise PolicyError("no policy given: pass a Policy, a solution, pair indices (policy=) or an action per "
+                          "state (sigma=) with the MDP (mdp=)")
+    if sigma is None and hasattr(policy, "local_actions") and hasattr(policy, "layout"):  # a MatrixFreeSolution
+        return MatrixFreePolicy.from_solution(policy, name=name or "optimal")
+    if mdp is None:
+        what = "an action per state (sigma)" if sigma is not None else (
+            f"a {type(policy).__name__}" if not isinstance(policy, (np.ndarray, list, tuple)) else "an array")
+        raise PolicyError(f"a policy given as {what} needs the MDP it lives on: pass mdp= (e.g. "
+                          "simulate(sol.policy, mdp) or simulate(mdp=mdp, sigma=sigma)), or wrap it first "
+                          "(Policy.from_sigma(mdp, sigma), Policy.from_function(system, f))")
+    system = system if system is not None else system_of(mdp)
+    arr = policy_array(mdp, policy, sigma)
+    if np.issubdtype(arr.dtype, np.floating):
+        return MixedPolicy(system, mdp, arr, name=name)
+    if name is None:
+        name = "sigma" if sigma is not None else ("optimal" if hasattr(policy, "gain_lower") else "pairs")
+    return TablePolicy(system, mdp, arr, name=name)
+
+
+def policy_from_file(path: Any, mdp: MDP, *, name: str | None = None) -> Policy:
+    """The policy saved in a ``.npz`` file (``wncs-lp solve --out``, :func:`wncs_lp.export.save_policy_npz`),
+    on the MDP it was saved for.
+
+    Parameters
+    ----------
+    path : file name
+    mdp : MDP
+        The MDP of the scenario the policy was solved on (its pairs and fingerprint must match).
+    name : str, optional
+        Default: the file's stem.
+
+    Returns
+    -------
+    Policy
+        A deterministic :class:`TablePolicy` when every state has one pair of probability 1,
+        else a :class:`MixedPolicy`.
+
+    Raises
+    ------
+    ExportError
+        Not such a file, or a policy of another MDP (the message says which).
+    """
+    from pathlib import Path
+
+    from ..export import load_policy_npz  # export reads policies.mixed: imported on use
+
+    probs = load_policy_npz(path, mdp)
+    name = name or Path(path).stem
+    pairs = np.flatnonzero(probs == 1.0)
+    if pairs.size == mdp.n_states and np.array_equal(np.asarray(mdp.s_indices)[pairs], np.arange(mdp.n_states)):
+        return TablePolicy(system_of(mdp), mdp, pairs, name=name)
+    return MixedPolicy(system_of(mdp), mdp, probs, name=name)
