@@ -34,6 +34,7 @@ def _shares_a_module_fixture(item) -> bool:
     return any(d[-1].scope in ("module", "class", "package") and d[-1].baseid for d in defs.values() if d)
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist's worker reads the groups
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``-n 2``, loadgroup scheduling, see below) the tests that share an
     expensive fixture stay on one worker, so it is computed once: the quick reproduction's tests
@@ -97,6 +98,16 @@ def quick_reproduction(tmp_path_factory) -> QuickReproduction:
 
 def pytest_configure(config):
     """``-n 2`` schedules by ``xdist_group`` (``--dist loadgroup``): the groups made in
-    :func:`pytest_collection_modifyitems` are kept on one worker, the other tests go one by one."""
+    :func:`pytest_collection_modifyitems` are kept on one worker, the other tests go one by one.
+    A worker parses the command line again, so it learns of the switch from its controller
+    (:func:`pytest_configure_node`)."""
     if getattr(config.option, "dist", "no") == "load" and getattr(config.option, "tx", None):
         config.option.dist = "loadgroup"
+        config.option.loadscopereorder = False  # the collection's order: the quick group first
+    if getattr(config, "workerinput", {}).get("wncs_loadgroup"):
+        config.option.loadgroup = True  # xdist's worker then names each grouped test's group
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    node.workerinput["wncs_loadgroup"] = node.config.option.dist == "loadgroup"
