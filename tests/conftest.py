@@ -49,6 +49,25 @@ def pytest_collection_modifyitems(config, items):
     items[:] = quick + [i for i in items if i not in quick]
 
 
+class _GroupNames:
+    """pytest-xdist's worker marks a grouped test by appending ``@group`` to its node id, but
+    pytest 9.2 keeps the id in ``_id`` where xdist (3.8) writes ``_nodeid``: here it is done for
+    any grouped test still unnamed, so the groups hold on either."""
+
+    @pytest.hookimpl(trylast=True)
+    def pytest_collection_modifyitems(self, config, items):
+        for item in items:
+            groups = sorted({str(m.args[0]) for m in item.iter_markers("xdist_group") if m.args})
+            if groups and "@" not in item.nodeid.rsplit("::", 1)[-1]:
+                new = f"{item.nodeid}@{'_'.join(groups)}"
+                if hasattr(item, "_id"):
+                    from _pytest.nodeid import coerce_node_id
+
+                    item._id = coerce_node_id(new)
+                else:
+                    item._nodeid = new
+
+
 def ctrl_c_default() -> None:
     """In the child before exec: Ctrl-C's default action. A test run started in the background by
     a non-interactive shell (``cmd &``) inherits SIGINT ignored, and Python then installs no
@@ -106,6 +125,7 @@ def pytest_configure(config):
         config.option.loadscopereorder = False  # the collection's order: the quick group first
     if getattr(config, "workerinput", {}).get("wncs_loadgroup"):
         config.option.loadgroup = True  # xdist's worker then names each grouped test's group
+        config.pluginmanager.register(_GroupNames(), "wncs_lp_group_names")
 
 
 @pytest.hookimpl(optionalhook=True)
