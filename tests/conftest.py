@@ -9,20 +9,31 @@ every test that uses it is kept on one worker (``xdist_group``), so it is comput
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 from hypothesis import settings
+from hypothesis.configuration import set_hypothesis_home_dir
 
-# Hypothesis would keep its example database in .hypothesis/ of the working folder (the
-# repository): the fuzz tests print any falsifying example instead
+# Hypothesis would keep its example database and its cache of constants in .hypothesis/ of the
+# working folder (the repository): no database (the fuzz tests print any falsifying example),
+# the rest in a temporary folder removed at the end of the run
 settings.register_profile("wncs_lp", database=None)
 settings.load_profile("wncs_lp")
+_HYPOTHESIS_HOME = tempfile.mkdtemp(prefix="wncs_lp-hypothesis-")
+set_hypothesis_home_dir(_HYPOTHESIS_HOME)
+
+
+def pytest_unconfigure(config):
+    shutil.rmtree(_HYPOTHESIS_HOME, ignore_errors=True)
+
 
 QUICK_GROUP = "quick_reproduction"
 
