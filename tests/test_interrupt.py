@@ -80,23 +80,14 @@ def test_two_sweeps_into_one_folder(tmp_path):
     json.loads((out / "sweep.json").read_text())  # parseable, not interleaved
 
 
-def test_interrupted_reproduction_resumes(tmp_path):
-    out = tmp_path / "repro"
-    cmd = [sys.executable, "-m", "wncs_lp", "reproduce", "--out", str(out), "--profile", "quick"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=_ctrl_c_default)
-    cache = out / "cache"
-    deadline = time.time() + 300
-    while (not cache.exists() or len(list(cache.glob("*.json"))) < 3) and time.time() < deadline:
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
-    proc.communicate(timeout=120)
-    assert proc.returncode == 130
-    kept = {p.name for p in cache.glob("*.json")}
-    assert len(kept) >= 3
-    for p in cache.glob("*.json"):
-        json.loads(p.read_text())  # every cache entry complete
-    done = subprocess.run(cmd + ["--json"], capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
-    report = json.loads((out / "report.json").read_text())
-    assert len(report["claims"]) == 13
-    assert report["provenance"]["cache"]["hits"] >= 1  # the steps finished before Ctrl-C were reused
+def test_interrupted_reproduction_resumes(quick_reproduction):
+    # the run itself (Ctrl-C after three cached steps, then the same command again) is the
+    # session's quick reproduction (tests/conftest.py), whose report the reproduction's tests read
+    run = quick_reproduction
+    assert run.interrupted_code == 130
+    assert len(run.kept) >= 3
+    for text in run.kept.values():
+        json.loads(text)  # every cache entry complete
+    assert run.code == 0, run.stderr[-2000:]
+    assert len(run.report["claims"]) == 13
+    assert run.report["provenance"]["cache"]["hits"] >= 1  # the steps finished before Ctrl-C were reused
