@@ -266,6 +266,7 @@ class Solved:
     stationary: np.ndarray
     method: str
     seconds: float
+    status: str = "optimal"  # the solver's status (a certified solve closed its bracket: "optimal")
 
     @cached_property
     def recurrent(self) -> np.ndarray:
@@ -376,6 +377,7 @@ class Context:
             arr["stationary"],
             res["method"],
             res["seconds"],
+            res.get("status", "optimal"),
         )
         self._solved[key] = solved
         return solved
@@ -407,6 +409,34 @@ class Context:
                                                         "assignment": a}, compute)
         label = policy if a is None else f"{policy} ({assignment_label(scenario, a)})"
         return {**res, "assignment": a, "label": label}
+
+    def simulate(self, scenario: Scenario, policy: str, slots: int, reps: int, seed: int, burn_in: int
+                 ) -> dict[str, Any]:
+        """Monte Carlo of a policy by name (:func:`wncs_lp.simulate.simulate`; cached on disk).
+
+        ``optimal`` simulates the policy of :meth:`solve` (the instance is solved once per run,
+        whichever claim asks first); the others are built as a sweep builds them
+        (:func:`wncs_lp.policies.make_policy`, the static one on the spec's default assignment).
+        Returns ``{"mean", "stderr"}``.
+        """
+        from ..models.system import System
+        from ..policies import make_policy
+        from ..simulate import simulate
+
+        def compute():
+            system = System.from_scenario(scenario)
+            if policy == "optimal":
+                solved = self.solve(scenario)
+                pol = make_policy(policy, system, solved.mdp, solution=solved.as_solution())
+            else:
+                pol = make_policy(policy, system)
+            res = simulate(pol, slots=slots, reps=reps, seed=seed, burn_in=burn_in, progress=False)
+            return {"mean": float(res.mean), "stderr": float(res.stderr)}, None
+
+        params = {"fingerprint": scenario.fingerprint(), "policy": policy, "slots": int(slots), "reps": int(reps),
+                  "seed": seed, "burn_in": int(burn_in)}
+        res, _ = self.cache.get_or_compute("simulate", params, compute)
+        return res
 
     def static_search(self, scenario: Scenario) -> dict[str, Any]:
         """The default static assignment and ``best_static``: every assignment that gives each
