@@ -25,8 +25,8 @@ from ..verify.verdict import subclaims_verdict  # the compound-claim rule lives 
 from ..viz import save_figure
 from .cache import StepCache
 
-__all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "Table", "PI_MAX_STATES", "assignment_label",
-           "short_name"]
+__all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "Step", "Table", "PI_MAX_STATES", "WORKERS",
+           "assignment_label", "short_name"]
 
 #: The reproduction solves by policy iteration up to this many states, by relative value
 #: iteration above (:func:`wncs_lp.methods.exact_method`; policy iteration's own multichain
@@ -304,6 +304,36 @@ class Solved:
         )
 
 
+#: Worker processes of :meth:`Context.prefetch` (independent instances computed side by side).
+WORKERS = 2
+
+
+@dataclass(frozen=True)
+class Step:
+    """The work on one instance that :meth:`Context.prefetch` hands to a worker process: its
+    optimal solve, the baselines' exact evaluations (``evaluate``, by name; ``static``: every
+    static assignment, :meth:`Context.static_search`) and Monte Carlo runs (``simulate``:
+    ``(policy, slots, reps, seed, burn_in)`` tuples)."""
+
+    scenario: Scenario
+    evaluate: tuple[str, ...] = ()
+    static: bool = False
+    simulate: tuple[tuple[str, int, int, int, int], ...] = ()
+
+
+def _run_step(out: Path, profile: "Profile", step: Step) -> None:
+    """One :class:`Step` in a worker process, through a Context on the same folder (its cache)."""
+    ctx = Context(out, profile)
+    ctx.workers = 1
+    ctx.solve(step.scenario)
+    if step.static:
+        ctx.static_search(step.scenario)
+    for pol in step.evaluate:
+        ctx.evaluate(step.scenario, pol)
+    for sim in step.simulate:
+        ctx.simulate(step.scenario, *sim)
+
+
 class Context:
     """State shared by the claim computations of one reproduction run."""
 
@@ -320,6 +350,58 @@ class Context:
         self._solved: dict[str, Solved] = {}
         self.timings: dict[str, float] = {}
         self.scenario_files: set[str] = set()
+        self.workers = WORKERS
+        self._pool: Any = None
+
+    # ------------------------------------------------------------------ steps in worker processes
+    def prefetch(self, tasks: Sequence[Step]) -> None:
+        """Compute independent steps in ``self.workers`` worker processes, into the disk cache.
+
+        Each :class:`Step` (an instance with the solve, evaluations and simulations asked of it)
+        runs in a fresh process (spawned: numba's OpenMP layer does not survive a fork) through a
+        :class:`Context` on the same folder, exactly as :meth:`solve`, :meth:`evaluate`,
+        :meth:`static_search` and :meth:`simulate` compute it here, so the numbers are the same;
+        the caller then reads them from the cache. A step that fails in a worker is left to the
+        caller, which computes it again and reports the error where it belongs. Nothing runs in
+        workers with ``force`` (a forced run ignores the cache) or with fewer than two workers.
+        """
+        todo = [t for t in tasks if not self._cached(t)]
+        if self.workers < 2 or self.cache.force or len(todo) < 2:
+            return
+        from concurrent.futures import wait
+
+        pool = self._worker_pool()
+        t0 = time.perf_counter()
+        futures = [pool.submit(_run_step, self.out, self.profile, t) for t in todo]
+        wait(futures)
+        failed = sum(1 for f in futures if f.exception() is not None)
+        self.log(f"{len(todo)} instance(s) in {self.workers} worker processes, {time.perf_counter() - t0:.1f} s"
+                 + (f" ({failed} failed there, computed here)" if failed else ""))
+
+    def _cached(self, task: Step) -> bool:
+        """Every result of the step is in the cache already (a second run starts no worker)."""
+        from ..policies import default_assignment
+        from ..policies.rules import static_assignments
+
+        sc, fp = task.scenario, task.scenario.fingerprint()
+        keys = [("solve", {"fingerprint": fp})]
+        keys += [("evaluate", {"fingerprint": fp, "policy": p, "assignment": None}) for p in task.evaluate]
+        if task.static:
+            keys += [("evaluate", {"fingerprint": fp, "policy": "static", "assignment": [int(x) for x in a]})
+                     for a in [default_assignment(sc), *static_assignments(sc)]]
+        keys += [("simulate", {"fingerprint": fp, "policy": p, "slots": int(n), "reps": int(r), "seed": seed,
+                               "burn_in": int(b)}) for p, n, r, seed, b in task.simulate]
+        return all(self.cache.load(step, params) is not None for step, params in keys)
+
+    def _worker_pool(self):
+        if self._pool is None:
+            import multiprocessing
+            import weakref
+            from concurrent.futures import ProcessPoolExecutor
+
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
+            weakref.finalize(self, self._pool.shutdown, wait=False, cancel_futures=True)
+        return self._pool
 
     # ------------------------------------------------------------------ scenarios and solves
     def scenario(self, name: str, overrides: Sequence[str] = ()) -> Scenario:

@@ -24,7 +24,7 @@ from ..policies import RandomPolicy, StaticPolicy, SuboptimalPolicy
 from ..viz import subplots
 from ..verify.verdict import (CLOSE, EQ_RTOL, MUCH, NOT_STATIC, SIGNIFICANT, STATIC_RULE, destinations,
                               destinations_fixed, nonincreasing, static_reading, subclaims_verdict)
-from .context import ClaimResult, Context, Table, assignment_label, cap_basis, evidence, short_name
+from .context import ClaimResult, Context, Step, Table, assignment_label, cap_basis, evidence, short_name
 from .structural import pct, span_words
 
 #: The bars of the paper's words ("equal", "much better", "not significant", "close") are those of
@@ -95,15 +95,31 @@ def _monte_carlo(ctx: Context, file: str, cap: int, policies: list[str], slots: 
     for p in prof.p_grid:
         sc = ctx.scenario(file, [f"tau_cap={cap}", f"p={p}"])
         for pol in policies:
-            mc = ctx.simulate(sc, pol, slots, reps, prof.seed, min(1000, slots // 10))
+            mc = ctx.simulate(sc, pol, *_mc_settings(ctx, slots, reps))
             rows[(pol, _key(p))] = McRow(pol, float(p), mc["mean"], mc["stderr"], _mc_status(ctx, sc, pol))
             ctx.log(f"Monte Carlo {file} cap {cap} p={p:g} {pol}: {mc['mean']:.6g} +- {mc['stderr']:.2g}")
     return rows
 
 
-def _exact_grid(ctx: Context, file: str, caps, policies: tuple[str, ...]) -> dict[int, dict[float, dict]]:
+def _mc_settings(ctx: Context, slots: int, reps: int) -> tuple[int, int, int, int]:
+    """(slots, reps, seed, burn-in) of the Monte Carlo runs."""
+    return slots, reps, ctx.profile.seed, min(1000, slots // 10)
+
+
+def _exact_grid(ctx: Context, file: str, caps, policies: tuple[str, ...],
+                mc: tuple[int, list[str], int, int] | None = None) -> dict[int, dict[float, dict]]:
     """Exact values per cap and p: the optimal gain and mass at the cap, the default and best static
-    (named), and the other baselines asked for."""
+    (named), and the other baselines asked for. Every instance is first computed in the worker
+    processes (:meth:`Context.prefetch`), the largest first, with the Monte Carlo runs ``mc``
+    (cap, policies, slots, reps) of :func:`_monte_carlo` at its cap."""
+    steps = []
+    for cap in sorted(caps, reverse=True):
+        for p in ctx.profile.p_grid:
+            sims = ()
+            if mc is not None and mc[0] == cap:
+                sims = tuple((pol, *_mc_settings(ctx, mc[2], mc[3])) for pol in mc[1])
+            steps.append(Step(ctx.scenario(file, [f"tau_cap={cap}", f"p={p}"]), tuple(policies), True, sims))
+    ctx.prefetch(steps)
     out: dict[int, dict[float, dict]] = {}
     for cap in caps:
         for p in ctx.profile.p_grid:
@@ -280,9 +296,10 @@ def claim_c3(ctx: Context) -> ClaimResult:
     prof = ctx.profile
     ps = list(prof.p_grid)
     caps = list(prof.caps_2p)
-    exact = _exact_grid(ctx, "paper_p12.toml", caps, ("greedy",))
-    mc = _monte_carlo(ctx, "paper_p12.toml", prof.sweep_cap_2p, ["optimal", "static", "greedy"],
-                      prof.mc_slots, prof.mc_reps)
+    mc_pols = ["optimal", "static", "greedy"]
+    exact = _exact_grid(ctx, "paper_p12.toml", caps, ("greedy",),
+                        (prof.sweep_cap_2p, mc_pols, prof.mc_slots, prof.mc_reps))
+    mc = _monte_carlo(ctx, "paper_p12.toml", prof.sweep_cap_2p, mc_pols, prof.mc_slots, prof.mc_reps)
     pl = np.array(ps) < 1
     vast = f"static >= {MUCH:.0%} above optimal at low p (the paper's \"vastly improved\")"
     sub: dict[str, dict[int, bool | None]] = {k: {} for k in (
@@ -371,9 +388,10 @@ def claim_c6(ctx: Context) -> ClaimResult:
     prof = ctx.profile
     ps = list(prof.p_grid)
     caps = list(prof.caps_3p)
-    exact = _exact_grid(ctx, "paper_p123.toml", caps, ("suboptimal", "greedy"))
-    mc = _monte_carlo(ctx, "paper_p123.toml", prof.sweep_cap_3p, ["optimal", "suboptimal", "static", "greedy"],
-                      prof.mc_slots_3p, prof.mc_reps_3p)
+    mc_pols = ["optimal", "suboptimal", "static", "greedy"]
+    exact = _exact_grid(ctx, "paper_p123.toml", caps, ("suboptimal", "greedy"),
+                        (prof.sweep_cap_3p, mc_pols, prof.mc_slots_3p, prof.mc_reps_3p))
+    mc = _monte_carlo(ctx, "paper_p123.toml", prof.sweep_cap_3p, mc_pols, prof.mc_slots_3p, prof.mc_reps_3p)
     tol = 1 + EQ_RTOL
     sub: dict[str, dict[int, bool | None]] = {k: {} for k in (
         "optimal <= suboptimal", "suboptimal <= static", "static <= greedy", f"suboptimal within {CLOSE:.0%} of optimal",
@@ -479,13 +497,17 @@ NOT_SIGNIFICANT = f"improvement below {SIGNIFICANT:.0%} at every p (not signific
 def _c11_rows(ctx: Context, caps: list[int], ps: list[float]) -> tuple[list[dict], dict[int, dict]]:
     """The optimal gains with and without preemption per cap and p, the relative improvement with
     its certified interval (from both gains' brackets), and the mass at the cap per p."""
+    def scenarios(cap: int, p: float):
+        over = [f"tau_cap={cap}", f"p={p}"]
+        return (ctx.scenario("paper_preemption_p12.toml", over),
+                ctx.scenario("paper_preemption_p12.toml", over + ["model.preemptive=false"]))
+
+    ctx.prefetch([Step(sc) for cap in sorted(caps, reverse=True) for p in ps for sc in scenarios(cap, p)])
     rows, grids = [], {}
     for cap in caps:
         grid = {}
         for p in ps:
-            pre = ctx.solve(ctx.scenario("paper_preemption_p12.toml", [f"tau_cap={cap}", f"p={p}"]))
-            non = ctx.solve(ctx.scenario("paper_preemption_p12.toml", [f"tau_cap={cap}", f"p={p}",
-                                                                       "model.preemptive=false"]))
+            pre, non = (ctx.solve(sc) for sc in scenarios(cap, p))
             r = {"cap": cap, "p": p, "preemptive": pre.gain, "non_preemptive": non.gain,
                  "improvement_rel": (non.gain - pre.gain) / non.gain,
                  "improvement_lower": 1.0 - pre.gain_upper / non.gain_lower,
