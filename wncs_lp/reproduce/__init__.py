@@ -189,6 +189,7 @@ def run_reproduction(
     if bar is not None:
         bar.close()
     extras = run_beyond(ctx, extra_ids, say if progress else None)  # extra results, no verdict
+    ctx.close()  # the worker processes of Context.prefetch
     from datetime import datetime, timezone
 
     provenance = {

@@ -372,9 +372,15 @@ class Context:
 
         pool = self._worker_pool()
         t0 = time.perf_counter()
-        futures = [pool.submit(_run_step, self.out, self.profile, t) for t in todo]
-        wait(futures)
-        failed = sum(1 for f in futures if f.exception() is not None)
+        try:
+            pending = [pool.submit(_run_step, self.out, self.profile, t) for t in todo]
+            wait(pending)
+        except BaseException:  # Ctrl-C: stop the workers now (the cache keeps what they finished)
+            self.close()
+            raise
+        failed = sum(1 for f in pending if f.exception() is not None)  # a dead worker too: computed here
+        if failed:
+            self.close()  # a broken pool is not reused
         self.log(f"{len(todo)} instance(s) in {self.workers} worker processes, {time.perf_counter() - t0:.1f} s"
                  + (f" ({failed} failed there, computed here)" if failed else ""))
 
@@ -396,12 +402,21 @@ class Context:
     def _worker_pool(self):
         if self._pool is None:
             import multiprocessing
-            import weakref
             from concurrent.futures import ProcessPoolExecutor
 
             self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
-            weakref.finalize(self, self._pool.shutdown, wait=False, cancel_futures=True)
         return self._pool
+
+    def close(self) -> None:
+        """Stop the worker processes of :meth:`prefetch` (at once: their finished steps are cached)."""
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:  # the running steps too, not only the queued ones
+            if proc.is_alive():
+                proc.terminate()
 
     # ------------------------------------------------------------------ scenarios and solves
     def scenario(self, name: str, overrides: Sequence[str] = ()) -> Scenario:

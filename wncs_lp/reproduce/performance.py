@@ -702,8 +702,11 @@ def _c12_instance(ctx: Context, file: str, label: str, cap: int) -> dict[str, An
 def claim_c12(ctx: Context) -> ClaimResult:
     rows, ev, skipped = [], [], []
     sub: dict[str, dict[int, bool | None]] = {}
-    for file, label in (("paper_p12.toml", "processes 1, 2"), ("paper_p14.toml", "processes 1, 4"),
-                        ("paper_p123.toml", "processes 1, 2, 3")):
+    scenarios = [("paper_p12.toml", "processes 1, 2"), ("paper_p14.toml", "processes 1, 4"),
+                 ("paper_p123.toml", "processes 1, 2, 3")]
+    at_p1 = [ctx.scenario(f, [f"tau_cap={c}", "p=1"]) for f, _ in reversed(scenarios) for c in ctx.profile.caps_2p]
+    ctx.prefetch([Step(sc, static=True) for sc in at_p1 if estimate_size(sc).states <= C12_MAX_STATES])
+    for file, label in scenarios:
         for cap in ctx.profile.caps_2p:  # the caps of claims.md (12, 20, 30): a perfect channel keeps the chain small
             r = _c12_instance(ctx, file, label, cap)
             if r is None:
