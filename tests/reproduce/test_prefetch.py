@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from wncs_lp.reproduce.context import PROFILES, Context, Step
+from wncs_lp.reproduce.cache import code_version
+from wncs_lp.reproduce.context import PROFILES, Context, Step, _run_step
 
 SIM = ("optimal", 400, 2, 7, 40)
 
@@ -50,3 +51,13 @@ def test_nothing_is_sent_to_workers_when_every_result_is_cached(tmp_path):
     ctx.workers = 2
     ctx.prefetch(steps)
     assert ctx._pool is None  # no worker started
+
+
+def test_a_worker_on_other_source_computes_nothing(tmp_path):
+    prof = PROFILES["quick"]
+    ctx = Context(tmp_path, prof)
+    step = Step(ctx.scenario("paper_p12.toml", ["tau_cap=7"]), ("greedy",))
+    assert _run_step(tmp_path, prof, step, "edited since the run started") is False
+    assert not list((tmp_path / "cache").glob("*.json"))  # nothing stored under keys the parent would not read
+    assert _run_step(tmp_path, prof, step, code_version()) is True
+    assert ctx._cached(step)

@@ -23,7 +23,7 @@ from ..solvers.route import solve_scenario
 from ..truncation import CAP_MASS_WARN, CapMass, cap_mass
 from ..verify.verdict import subclaims_verdict  # the compound-claim rule lives with the other verdict rules
 from ..viz import save_figure
-from .cache import StepCache
+from .cache import StepCache, code_version
 
 __all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "Step", "Table", "PI_MAX_STATES", "WORKERS",
            "assignment_label", "short_name"]
@@ -321,8 +321,12 @@ class Step:
     simulate: tuple[tuple[str, int, int, int, int], ...] = ()
 
 
-def _run_step(out: Path, profile: "Profile", step: Step) -> None:
-    """One :class:`Step` in a worker process, through a Context on the same folder (its cache)."""
+def _run_step(out: Path, profile: "Profile", step: Step, code: str) -> bool:
+    """One :class:`Step` in a worker process, through a Context on the same folder (its cache).
+    Returns False, computing nothing, when the package's source is not the parent's ``code``
+    (edited since the run started: the parent would not find the results under its keys)."""
+    if code_version() != code:
+        return False
     ctx = Context(out, profile)
     ctx.workers = 1
     ctx.solve(step.scenario)
@@ -332,6 +336,7 @@ def _run_step(out: Path, profile: "Profile", step: Step) -> None:
         ctx.evaluate(step.scenario, pol)
     for sim in step.simulate:
         ctx.simulate(step.scenario, *sim)
+    return True
 
 
 class Context:
@@ -373,7 +378,7 @@ class Context:
         pool = self._worker_pool()
         t0 = time.perf_counter()
         try:
-            pending = [pool.submit(_run_step, self.out, self.profile, t) for t in todo]
+            pending = [pool.submit(_run_step, self.out, self.profile, t, code_version()) for t in todo]
             wait(pending)
         except BaseException:  # Ctrl-C: stop the workers now (the cache keeps what they finished)
             self.close()
@@ -381,6 +386,10 @@ class Context:
         failed = sum(1 for f in pending if f.exception() is not None)  # a dead worker too: computed here
         if failed:
             self.close()  # a broken pool is not reused
+        elif not all(f.result() for f in pending):  # the source changed under the run: no workers from now on
+            self.close()
+            self.workers = 1
+            self.log("the package's source changed since this run started: no more worker processes")
         self.log(f"{len(todo)} instance(s) in {self.workers} worker processes, {time.perf_counter() - t0:.1f} s"
                  + (f" ({failed} failed there, computed here)" if failed else ""))
 
