@@ -399,7 +399,7 @@ class Context:
         from ..policies.rules import static_assignments
 
         sc, fp = task.scenario, task.scenario.fingerprint()
-        keys = [("solve", {"fingerprint": fp})]
+        keys = [] if fp in self._solved else [("solve", {"fingerprint": fp})]  # solved in this run: not read again
         keys += [("evaluate", {"fingerprint": fp, "policy": p, "assignment": None}) for p in task.evaluate]
         if task.static:
             keys += [("evaluate", {"fingerprint": fp, "policy": "static", "assignment": [int(x) for x in a]})
