@@ -123,12 +123,12 @@ class RankRulePolicy(Policy):
         tau, c = self._check_inputs(tau, config_ids)
         order = self.ranking(tau)
         keys = c.astype(object if self._pow.dtype == object else np.int64) * self._base + order @ self._pow
-        uniq, inv = np.unique(keys, return_inverse=True)
+        uniq, first, inv = np.unique(keys, return_index=True, return_inverse=True)  # first: a row of each key
         out = np.empty(uniq.size, dtype=np.int64)
         for i, key in enumerate(uniq.tolist()):
             j = self._cache.get(key)
             if j is None:
-                r = int(np.flatnonzero(inv == i)[0])
+                r = int(first[i])
                 j = self._cache[key] = self._local(int(c[r]), tuple(int(x) for x in order[r]))
             out[i] = j
         return out[inv.reshape(-1)]

@@ -172,9 +172,12 @@ def run_reproduction(
     if progress:
         say(plan.opening(_threads_used(threads), usable_cores(), 0 if force else _cached_steps(out)))
     t_all = time.perf_counter()
-    with thread_limit(threads):
-        results = [_run_claim(ctx, cid, plan, say if progress else None, t_all) for cid in todo]
-        extras = [_run_section(ctx, sid, plan, say if progress else None, t_all) for sid in extra_ids]
+    try:
+        with thread_limit(threads):
+            results = [_run_claim(ctx, cid, plan, say if progress else None, t_all) for cid in todo]
+            extras = [_run_section(ctx, sid, plan, say if progress else None, t_all) for sid in extra_ids]
+    finally:
+        ctx.close()  # the worker processes of Context.prefetch, also on Ctrl-C
     provenance = _provenance(ctx, prof, _threads_used(threads), time.perf_counter() - t_all)
     if claims is not None:  # a partial run keeps the other claims of an earlier report in this folder
         results = _merge_previous(out / "report.json", results)

@@ -84,6 +84,18 @@ def settings_for(profile: Profile) -> BeyondSettings:
 
 
 # ----------------------------------------------------------------------------- one curve
+def _lp_warm_route(mdp, spec: ConstraintSpec, method: str) -> bool:
+    """Whether ``method`` solves this curve's points by the LP that one warm HiGHS model re-solves
+    point after point (the registry row, or the row ``auto`` picks): then the points run in order."""
+    from ..constrained import constraints_for
+    from ..methods import BASIS, CONSTRAINED, method as method_row, resolve
+
+    row = method_row(method, constrained=True)
+    if row.chooser is not None:
+        row = CONSTRAINED[resolve(row.chooser)(mdp, constraints_for(mdp, [spec]))]
+    return row.warm_start == BASIS
+
+
 def _curve(ctx: Context, cap: int, st: BeyondSettings) -> tuple[TradeoffResult, dict[str, Any]]:
     sc = ctx.scenario(SCENARIO, ["model.allow_idle=true", f"tau_cap={cap}"])
     server = [s.name for s in sc.servers].index(SERVER)
@@ -100,7 +112,10 @@ def _curve(ctx: Context, cap: int, st: BeyondSettings) -> tuple[TradeoffResult, 
             shutil.rmtree(folder, ignore_errors=True)
         fallback = "lp" if st.method != "lp" and mdp.n_pairs <= st.fallback_max_pairs else None
         ctx.log(f"trade-off: cap {cap}, {mdp.n_states:,} states, {len(st.values)} bounds ({st.method})")
-        kw = dict(method=st.method, out=folder, plot=False, fallback=fallback,
+        # the bounds side by side in the run's worker processes: each point of the Lagrangian route is an
+        # independent certified solve (the LP route's warm basis is the only thing carried between points)
+        workers = 1 if _lp_warm_route(mdp, spec, st.method) else ctx.workers
+        kw = dict(method=st.method, out=folder, plot=False, fallback=fallback, max_workers=workers,
                   progress=lambda line: ctx.log(f"  cap {cap}: {line}"))
         res = tradeoff(mdp, [spec], 0, list(st.values), **kw)
         half = res.threshold / 2

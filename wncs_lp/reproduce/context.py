@@ -23,10 +23,10 @@ from ..solvers.route import solve_scenario
 from ..truncation import CAP_MASS_WARN, CapMass, cap_mass
 from ..verify.verdict import subclaims_verdict  # the compound-claim rule lives with the other verdict rules
 from ..viz import save_figure
-from .cache import StepCache
+from .cache import StepCache, code_version
 
-__all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "Table", "PI_MAX_STATES", "assignment_label",
-           "short_name"]
+__all__ = ["Profile", "PROFILES", "Context", "ClaimResult", "Solved", "Step", "Table", "PI_MAX_STATES", "WORKERS",
+           "assignment_label", "short_name"]
 
 #: The reproduction solves by policy iteration up to this many states, by relative value
 #: iteration above (:func:`wncs_lp.methods.exact_method`; policy iteration's own multichain
@@ -310,6 +310,41 @@ class Solved:
         )
 
 
+#: Worker processes of :meth:`Context.prefetch` (independent instances computed side by side).
+WORKERS = 2
+
+
+@dataclass(frozen=True)
+class Step:
+    """The work on one instance that :meth:`Context.prefetch` hands to a worker process: its
+    optimal solve, the baselines' exact evaluations (``evaluate``, by name; ``static``: every
+    static assignment, :meth:`Context.static_search`) and Monte Carlo runs (``simulate``:
+    ``(policy, slots, reps, seed, burn_in)`` tuples)."""
+
+    scenario: Scenario
+    evaluate: tuple[str, ...] = ()
+    static: bool = False
+    simulate: tuple[tuple[str, int, int, int, int], ...] = ()
+
+
+def _run_step(out: Path, profile: "Profile", step: Step, code: str) -> bool:
+    """One :class:`Step` in a worker process, through a Context on the same folder (its cache).
+    Returns False, computing nothing, when the package's source is not the parent's ``code``
+    (edited since the run started: the parent would not find the results under its keys)."""
+    if code_version() != code:
+        return False
+    ctx = Context(out, profile)
+    ctx.workers = 1
+    ctx.solve(step.scenario)
+    if step.static:
+        ctx.static_search(step.scenario)
+    for pol in step.evaluate:
+        ctx.evaluate(step.scenario, pol)
+    for sim in step.simulate:
+        ctx.simulate(step.scenario, *sim)
+    return True
+
+
 class Context:
     """State shared by the claim computations of one reproduction run."""
 
@@ -328,12 +363,83 @@ class Context:
         self.scenario_files: set[str] = set()
         #: Every solve of this run that did not close its certificate, in words (:meth:`note_status`).
         self.status_notes: list[str] = []
+        self.workers = WORKERS
+        self._pool: Any = None
 
     def note_status(self, what: str, status: str) -> None:
         """Record a solve whose status is not optimal: the section that used it says so."""
         line = f"{what}: {status}"
         if line not in self.status_notes:
             self.status_notes.append(line)
+
+    # ------------------------------------------------------------------ steps in worker processes
+    def prefetch(self, tasks: Sequence[Step]) -> None:
+        """Compute independent steps in ``self.workers`` worker processes, into the disk cache.
+
+        Each :class:`Step` (an instance with the solve, evaluations and simulations asked of it)
+        runs in a fresh process (spawned: numba's OpenMP layer does not survive a fork) through a
+        :class:`Context` on the same folder, exactly as :meth:`solve`, :meth:`evaluate`,
+        :meth:`static_search` and :meth:`simulate` compute it here, so the numbers are the same;
+        the caller then reads them from the cache. A step that fails in a worker is left to the
+        caller, which computes it again and reports the error where it belongs. Nothing runs in
+        workers with ``force`` (a forced run ignores the cache) or with fewer than two workers.
+        """
+        todo = [t for t in tasks if not self._cached(t)]
+        if self.workers < 2 or self.cache.force or len(todo) < 2:
+            return
+        from concurrent.futures import wait
+
+        pool = self._worker_pool()
+        t0 = time.perf_counter()
+        try:
+            pending = [pool.submit(_run_step, self.out, self.profile, t, code_version()) for t in todo]
+            wait(pending)
+        except BaseException:  # Ctrl-C: stop the workers now (the cache keeps what they finished)
+            self.close()
+            raise
+        failed = sum(1 for f in pending if f.exception() is not None)  # a dead worker too: computed here
+        if failed:
+            self.close()  # a broken pool is not reused
+        elif not all(f.result() for f in pending):  # the source changed under the run: no workers from now on
+            self.close()
+            self.workers = 1
+            self.log("the package's source changed since this run started: no more worker processes")
+        self.log(f"{len(todo)} instance(s) in {self.workers} worker processes, {time.perf_counter() - t0:.1f} s"
+                 + (f" ({failed} failed there, computed here)" if failed else ""))
+
+    def _cached(self, task: Step) -> bool:
+        """Every result of the step is in the cache already (a second run starts no worker)."""
+        from ..policies import default_assignment
+        from ..policies.rules import static_assignments
+
+        sc, fp = task.scenario, task.scenario.fingerprint()
+        keys = [] if fp in self._solved else [("solve", {"fingerprint": fp})]  # solved in this run: not read again
+        keys += [("evaluate", {"fingerprint": fp, "policy": p, "assignment": None}) for p in task.evaluate]
+        if task.static:
+            keys += [("evaluate", {"fingerprint": fp, "policy": "static", "assignment": [int(x) for x in a]})
+                     for a in [default_assignment(sc), *static_assignments(sc)]]
+        keys += [("simulate", {"fingerprint": fp, "policy": p, "slots": int(n), "reps": int(r), "seed": seed,
+                               "burn_in": int(b)}) for p, n, r, seed, b in task.simulate]
+        return all(self.cache.load(step, params) is not None for step, params in keys)
+
+    def _worker_pool(self):
+        if self._pool is None:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
+        return self._pool
+
+    def close(self) -> None:
+        """Stop the worker processes of :meth:`prefetch` (at once: their finished steps are cached)."""
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:  # the running steps too, not only the queued ones
+            if proc.is_alive():
+                proc.terminate()
 
     # ------------------------------------------------------------------ scenarios and solves
     def scenario(self, name: str, overrides: Sequence[str] = ()) -> Scenario:
@@ -430,6 +536,34 @@ class Context:
                                                         "assignment": a}, compute)
         label = policy if a is None else f"{policy} ({assignment_label(scenario, a)})"
         return {**res, "assignment": a, "label": label}
+
+    def simulate(self, scenario: Scenario, policy: str, slots: int, reps: int, seed: int, burn_in: int
+                 ) -> dict[str, Any]:
+        """Monte Carlo of a policy by name (:func:`wncs_lp.simulate.simulate`; cached on disk).
+
+        ``optimal`` simulates the policy of :meth:`solve` (the instance is solved once per run,
+        whichever claim asks first); the others are built as a sweep builds them
+        (:func:`wncs_lp.policies.make_policy`, the static one on the spec's default assignment).
+        Returns ``{"mean", "stderr"}``.
+        """
+        from ..models.system import System
+        from ..policies import make_policy
+        from ..simulate import simulate
+
+        def compute():
+            system = System.from_scenario(scenario)
+            if policy == "optimal":
+                solved = self.solve(scenario)
+                pol = make_policy(policy, system, solved.mdp, solution=solved.as_solution())
+            else:
+                pol = make_policy(policy, system)
+            res = simulate(pol, slots=slots, reps=reps, seed=seed, burn_in=burn_in, progress=False)
+            return {"mean": float(res.mean), "stderr": float(res.stderr)}, None
+
+        params = {"fingerprint": scenario.fingerprint(), "policy": policy, "slots": int(slots), "reps": int(reps),
+                  "seed": seed, "burn_in": int(burn_in)}
+        res, _ = self.cache.get_or_compute("simulate", params, compute)
+        return res
 
     def static_search(self, scenario: Scenario) -> dict[str, Any]:
         """The default static assignment and ``best_static``: every assignment that gives each

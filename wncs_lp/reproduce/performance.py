@@ -11,21 +11,20 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..chain import PolicyChain, class_stationary
 from ..evaluate import evaluate
-from ..methods import exact_method
 from ..models.guard import estimate_size
 from ..models.system import System
 from ..policies import RandomPolicy, StaticPolicy, SuboptimalPolicy
-from ..sweep import run_sweep
 from ..viz import subplots
 from ..verify.verdict import (CLOSE, EQ_RTOL, MUCH, NOT_STATIC, SIGNIFICANT, STATIC_RULE, destinations,
                               destinations_fixed, nonincreasing, static_reading, subclaims_verdict)
-from .context import ClaimResult, Context, Table, assignment_label, cap_basis, evidence, short_name
+from .context import ClaimResult, Context, Step, Table, assignment_label, cap_basis, evidence, short_name
 from .structural import pct, span_words
 from .report import fmt
 
@@ -60,26 +59,71 @@ def mc_agrees(exact: float, mean: float, stderr: float) -> bool | None:
     return abs(mean - exact) <= max(MC_K * sd, MC_FLOOR * abs(exact) if no_variance else 0.0)
 
 
-def _method(ctx: Context, sc) -> str:
-    return exact_method(ctx.mdp(sc).n_states)
+@dataclass(frozen=True)
+class McRow:
+    """One Monte Carlo row (policy, p) beside the exact values: the simulation's mean and
+    standard error, and the status of the exact computation it runs beside (as a sweep's row)."""
+
+    policy: str
+    value: float
+    sim_mean: float
+    sim_stderr: float
+    status: str = "ok"
 
 
-def _monte_carlo(ctx: Context, name: str, file: str, cap: int, policies: list[str], slots: int, reps: int):
-    """Monte Carlo (with the exact values beside it) over the p grid at one cap; rows by (policy, p)."""
+def _mc_status(ctx: Context, sc, pol: str) -> str:
+    """A sweep row's status: the solver's when not optimal, the number of recurrent classes of a
+    multichain chain (whose gain is then the average from the initial state)."""
+    if pol == "optimal":
+        solved = ctx.solve(sc)
+        if solved.status != "optimal":
+            return f"error: solver status {solved.status}"
+        classes = len(PolicyChain(solved.mdp, solved.policy).recurrent_classes)
+    elif pol == "static":
+        from ..policies import default_assignment
+
+        classes = ctx.evaluate(sc, "static", default_assignment(sc))["recurrent_classes"]
+    else:
+        classes = ctx.evaluate(sc, pol)["recurrent_classes"]
+    return "ok" if classes <= 1 else f"ok (multichain: {classes} recurrent classes; gain from the initial state)"
+
+
+def _monte_carlo(ctx: Context, file: str, cap: int, policies: list[str], slots: int, reps: int):
+    """Monte Carlo over the p grid at one cap, rows by (policy, p). The optimal policy is the one
+    of the exact values (:meth:`Context.solve`): nothing is built or solved again."""
     prof = ctx.profile
-    sc = ctx.scenario(file, [f"tau_cap={cap}"])
-    res = run_sweep(sc, "p", list(prof.p_grid), policies, ctx.out / "sweeps" / name, method=_method(ctx, sc),
-                    simulate_slots=slots, reps=reps, seed=prof.seed, burn_in=min(1000, slots // 10), plot=False,
-                    log=ctx.log)
-    for r in res.rows:  # a row's solve or evaluation that did not end "ok" is said in the section
-        if not r.status.startswith("ok"):
-            ctx.note_status(f"Monte Carlo sweep {name}, {file} cap {cap} p={r.value:g} {r.policy}", r.status)
-    return {(r.policy, _key(r.value)): r for r in res.rows}
+    rows = {}
+    for p in prof.p_grid:
+        sc = ctx.scenario(file, [f"tau_cap={cap}", f"p={p}"])
+        for pol in policies:
+            mc = ctx.simulate(sc, pol, *_mc_settings(ctx, slots, reps))
+            status = _mc_status(ctx, sc, pol)
+            rows[(pol, _key(p))] = McRow(pol, float(p), mc["mean"], mc["stderr"], status)
+            if not status.startswith("ok"):  # a solve or evaluation that did not end "ok" is said in the section
+                ctx.note_status(f"Monte Carlo {file} cap {cap} p={p:g} {pol}", status)
+            ctx.log(f"Monte Carlo {file} cap {cap} p={p:g} {pol}: {mc['mean']:.6g} +- {mc['stderr']:.2g}")
+    return rows
 
 
-def _exact_grid(ctx: Context, file: str, caps, policies: tuple[str, ...]) -> dict[int, dict[float, dict]]:
+def _mc_settings(ctx: Context, slots: int, reps: int) -> tuple[int, int, int, int]:
+    """(slots, reps, seed, burn-in) of the Monte Carlo runs."""
+    return slots, reps, ctx.profile.seed, min(1000, slots // 10)
+
+
+def _exact_grid(ctx: Context, file: str, caps, policies: tuple[str, ...],
+                mc: tuple[int, list[str], int, int] | None = None) -> dict[int, dict[float, dict]]:
     """Exact values per cap and p: the optimal gain and mass at the cap, the default and best static
-    (named), and the other baselines asked for."""
+    (named), and the other baselines asked for. Every instance is first computed in the worker
+    processes (:meth:`Context.prefetch`), the largest first, with the Monte Carlo runs ``mc``
+    (cap, policies, slots, reps) of :func:`_monte_carlo` at its cap."""
+    steps = []
+    for cap in sorted(caps, reverse=True):
+        for p in ctx.profile.p_grid:
+            sims = ()
+            if mc is not None and mc[0] == cap:
+                sims = tuple((pol, *_mc_settings(ctx, mc[2], mc[3])) for pol in mc[1])
+            steps.append(Step(ctx.scenario(file, [f"tau_cap={cap}", f"p={p}"]), tuple(policies), True, sims))
+    ctx.prefetch(steps)
     out: dict[int, dict[float, dict]] = {}
     for cap in caps:
         for p in ctx.profile.p_grid:
@@ -141,7 +185,7 @@ def _mc_table(rows_by: dict, ps: list[float], policies: list[str], exact: dict[f
             r = rows_by.get((pol, _key(p)))
             if r is None:
                 continue
-            ex = exact[_key(p)][pol] if pol in exact[_key(p)] else r.gain
+            ex = exact[_key(p)][pol]
             ok = mc_agrees(ex, r.sim_mean, r.sim_stderr)
             ok_all &= ok is not False
             recs.append({"policy": names.get(pol, pol), "p": p, "exact": ex, "mc_mean": r.sim_mean,
@@ -264,9 +308,10 @@ def claim_c3(ctx: Context) -> ClaimResult:
     prof = ctx.profile
     ps = list(prof.p_grid)
     caps = list(prof.caps_2p)
-    exact = _exact_grid(ctx, "paper_p12.toml", caps, ("greedy",))
-    mc = _monte_carlo(ctx, "fig5", "paper_p12.toml", prof.sweep_cap_2p, ["optimal", "static", "greedy"],
-                      prof.mc_slots, prof.mc_reps)
+    mc_pols = ["optimal", "static", "greedy"]
+    exact = _exact_grid(ctx, "paper_p12.toml", caps, ("greedy",),
+                        (prof.sweep_cap_2p, mc_pols, prof.mc_slots, prof.mc_reps))
+    mc = _monte_carlo(ctx, "paper_p12.toml", prof.sweep_cap_2p, mc_pols, prof.mc_slots, prof.mc_reps)
     pl = np.array(ps) < 1
     vast = f"static >= {MUCH:.0%} above optimal at low p (the paper's \"vastly improved\")"
     sub: dict[str, dict[int, bool | None]] = {k: {} for k in (
@@ -356,9 +401,10 @@ def claim_c6(ctx: Context) -> ClaimResult:
     prof = ctx.profile
     ps = list(prof.p_grid)
     caps = list(prof.caps_3p)
-    exact = _exact_grid(ctx, "paper_p123.toml", caps, ("suboptimal", "greedy"))
-    mc = _monte_carlo(ctx, "fig10", "paper_p123.toml", prof.sweep_cap_3p, ["optimal", "suboptimal", "static", "greedy"],
-                      prof.mc_slots_3p, prof.mc_reps_3p)
+    mc_pols = ["optimal", "suboptimal", "static", "greedy"]
+    exact = _exact_grid(ctx, "paper_p123.toml", caps, ("suboptimal", "greedy"),
+                        (prof.sweep_cap_3p, mc_pols, prof.mc_slots_3p, prof.mc_reps_3p))
+    mc = _monte_carlo(ctx, "paper_p123.toml", prof.sweep_cap_3p, mc_pols, prof.mc_slots_3p, prof.mc_reps_3p)
     tol = 1 + EQ_RTOL
     sub: dict[str, dict[int, bool | None]] = {k: {} for k in (
         "optimal <= suboptimal", "suboptimal <= static", "static <= greedy", f"suboptimal within {CLOSE:.0%} of optimal",
@@ -466,13 +512,17 @@ NOT_SIGNIFICANT = f"improvement below {SIGNIFICANT:.0%} at every p (not signific
 def _c11_rows(ctx: Context, caps: list[int], ps: list[float]) -> tuple[list[dict], dict[int, dict]]:
     """The optimal gains with and without preemption per cap and p, the relative improvement with
     its certified interval (from both gains' brackets), and the mass at the cap per p."""
+    def scenarios(cap: int, p: float):
+        over = [f"tau_cap={cap}", f"p={p}"]
+        return (ctx.scenario("paper_preemption_p12.toml", over),
+                ctx.scenario("paper_preemption_p12.toml", over + ["model.preemptive=false"]))
+
+    ctx.prefetch([Step(sc) for cap in sorted(caps, reverse=True) for p in ps for sc in scenarios(cap, p)])
     rows, grids = [], {}
     for cap in caps:
         grid = {}
         for p in ps:
-            pre = ctx.solve(ctx.scenario("paper_preemption_p12.toml", [f"tau_cap={cap}", f"p={p}"]))
-            non = ctx.solve(ctx.scenario("paper_preemption_p12.toml", [f"tau_cap={cap}", f"p={p}",
-                                                                       "model.preemptive=false"]))
+            pre, non = (ctx.solve(sc) for sc in scenarios(cap, p))
             r = {"cap": cap, "p": p, "preemptive": pre.gain, "non_preemptive": non.gain,
                  "improvement_rel": (non.gain - pre.gain) / non.gain,
                  "improvement_lower": 1.0 - pre.gain_upper / non.gain_lower,
@@ -667,8 +717,11 @@ def _c12_instance(ctx: Context, file: str, label: str, cap: int) -> dict[str, An
 def claim_c12(ctx: Context) -> ClaimResult:
     rows, ev, skipped = [], [], []
     sub: dict[str, dict[int, bool | None]] = {}
-    for file, label in (("paper_p12.toml", "processes 1, 2"), ("paper_p14.toml", "processes 1, 4"),
-                        ("paper_p123.toml", "processes 1, 2, 3")):
+    scenarios = [("paper_p12.toml", "processes 1, 2"), ("paper_p14.toml", "processes 1, 4"),
+                 ("paper_p123.toml", "processes 1, 2, 3")]
+    at_p1 = [ctx.scenario(f, [f"tau_cap={c}", "p=1"]) for f, _ in reversed(scenarios) for c in ctx.profile.caps_2p]
+    ctx.prefetch([Step(sc, static=True) for sc in at_p1 if estimate_size(sc).states <= C12_MAX_STATES])
+    for file, label in scenarios:
         for cap in ctx.profile.caps_2p:  # the caps of claims.md (12, 20, 30): a perfect channel keeps the chain small
             r = _c12_instance(ctx, file, label, cap)
             if r is None:

@@ -15,7 +15,7 @@ from ..maps import NEIGHBOURS, action_name, region_stats, slice_grid
 from ..verify import check_consistency, check_monotonicity, check_threshold, policy_context
 from ..verify.verdict import across, combine, structural_verdict, verdict_of
 from ..viz import plot_policy_map, plot_policy_slice, subplots
-from .context import ClaimResult, Context, Solved, Table, cap_basis
+from .context import ClaimResult, Context, Solved, Step, Table, cap_basis
 
 CONFIGURATION_NOTE = ("Recurrent: the state lies in a closed class of the optimal policy's chain (positive stationary "
                       "probability); at the cap: some AoI equals its cap.")
@@ -280,6 +280,7 @@ def _c4_slice(solved: Solved, total: int) -> dict[str, Any]:
 def claim_c4(ctx: Context) -> ClaimResult:
     prof = ctx.profile
     rows, ev, by_cap = [], [], {}
+    ctx.prefetch([Step(ctx.scenario("paper_p123.toml", [f"tau_cap={c}"])) for c in sorted(prof.caps_3p, reverse=True)])
     for cap in prof.caps_3p:
         solved = ctx.solve(ctx.scenario("paper_p123.toml", [f"tau_cap={cap}"]))
         by_cap[cap] = solved
@@ -488,6 +489,7 @@ def _check_instances(ctx: Context, cid: str, check, instances: list[tuple[str, l
     """Run one structural check on each instance (cached); return the reports, the table rows
     and the solves."""
     rows, reports, solves = [], [], []
+    ctx.prefetch([Step(ctx.scenario(file, overrides)) for file, overrides in instances])
     for file, overrides in instances:
         sc = ctx.scenario(file, overrides)
         solved = ctx.solve(sc)
