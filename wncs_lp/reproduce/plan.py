@@ -13,21 +13,19 @@ from typing import Sequence
 
 __all__ = ["ESTIMATE_SECONDS", "ESTIMATE_WHERE", "Plan", "duration"]
 
-#: Seconds of each section with a cold cache, per profile, measured before the speed-up of issue
-#: 28: default claims and B1 from one run on 2 cores under load (sections without their own figure
-#: share the rest of its total evenly), B2 from a quiet run; quick: its total without B2 (93 s)
-#: split in the proportions of one run under load, B2 from a quiet run. To be re-measured by the
-#: lead on a quiet 2-core machine after the speed-up (report.json's ``timings_seconds``).
+#: Seconds of each section with a cold cache, per profile: ``default`` from one run of
+#: ``wncs-lp reproduce`` (commit 939a9a7, 2 cores, 2 threads, load 1.5-1.9: 21 min 56 s in all);
+#: ``quick`` from one run of ``wncs-lp reproduce --profile quick`` on the same machine
+#: (report.json's ``timings_seconds``).
 ESTIMATE_SECONDS: dict[str, dict[str, float]] = {
     "quick": {"C1": 2.0, "C2": 2.0, "C3": 8.0, "C4": 3.0, "C5": 2.0, "C6": 15.0, "C7": 2.0, "C8": 1.0,
               "C9": 5.0, "C10": 1.0, "C11": 5.0, "C12": 4.0, "C13": 17.0, "B1": 28.0, "B2": 38.0,
               "B3": 30.0},
-    "default": {"C1": 19.0, "C2": 19.0, "C3": 161.0, "C4": 62.0, "C5": 19.0, "C6": 761.0, "C7": 19.0,
-                "C8": 19.0, "C9": 19.0, "C10": 19.0, "C11": 57.0, "C12": 18.0, "C13": 18.0, "B1": 361.0,
-                "B2": 574.0, "B3": 120.0},
+    "default": {"C1": 10.0, "C2": 18.0, "C3": 56.0, "C4": 32.0, "C5": 2.0, "C6": 130.0, "C7": 9.0,
+                "C8": 1.0, "C9": 4.0, "C10": 4.0, "C11": 24.0, "C12": 7.0, "C13": 8.0, "B1": 78.0,
+                "B2": 849.0, "B3": 85.0},
 }
-# B3 (beyond exact, merged after these figures) has no measurement yet: 30 s / 2 min are guesses
-ESTIMATE_SECONDS["full"] = {**ESTIMATE_SECONDS["default"], "B2": 574.0 + 45 * 60.0}
+ESTIMATE_SECONDS["full"] = {**ESTIMATE_SECONDS["default"], "B2": 849.0 + 45 * 60.0, "B3": 85.0 + 30 * 60.0}
 #: Where the estimates come from, in the line that prints them.
 ESTIMATE_WHERE = "measured on a 2-core machine with a cold cache"
 
