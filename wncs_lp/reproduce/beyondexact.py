@@ -61,7 +61,7 @@ class BeyondExactSettings:
 #: Processes 1-4 with an exact column where B2 computes g* cheaply (cap <= 12: 2.9M states, seconds
 #: per evaluation), Monte Carlo above; then six and eight processes, where no exact g* exists.
 SETTINGS: dict[str, BeyondExactSettings] = {
-    "quick": BeyondExactSettings((Instance(FOUR, 10, False), Instance("bounds_p1234_twice.toml", 8, False)),
+    "quick": BeyondExactSettings((Instance(FOUR, 8, False), Instance("bounds_p1234_twice.toml", 8, False)),
                                  slots=5_000, reps=6, steps=3),
     "default": BeyondExactSettings((Instance(FOUR, 12, True), Instance(FOUR, 20, False),
                                     Instance("bounds_mix6.toml", 20, False),

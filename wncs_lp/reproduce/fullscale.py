@@ -70,7 +70,7 @@ class FullScaleSettings:
 #: at cap 30 (247M) 3-6 min; the default profile stays near 10 minutes for this section, so caps
 #: 25 and 30 and the sweep at cap 20 are in ``full``.
 SETTINGS: dict[str, FullScaleSettings] = {
-    "quick": FullScaleSettings(caps=(10,), sweep_cap=10, p_grid=(0.8, 0.9)),
+    "quick": FullScaleSettings(caps=(8,), sweep_cap=8, p_grid=(0.8, 0.9)),
     "default": FullScaleSettings(caps=(12, 20), sweep_cap=12, p_grid=(0.8, 0.85, 0.9, 0.95)),
     "full": FullScaleSettings(caps=(12, 20, 25, 30), sweep_cap=20, p_grid=(0.8, 0.85, 0.9, 0.95)),
 }
