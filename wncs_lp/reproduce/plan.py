@@ -15,11 +15,11 @@ __all__ = ["ESTIMATE_SECONDS", "ESTIMATE_WHERE", "Plan", "duration"]
 
 #: Seconds of each section with a cold cache, per profile: ``default`` from one run of
 #: ``wncs-lp reproduce`` (commit 939a9a7, 2 cores, 2 threads, load 1.5-1.9: 21 min 56 s in all);
-#: ``quick`` from one run of ``wncs-lp reproduce --profile quick`` on the same machine (1 min 56 s)
+#: ``quick`` from one run of ``wncs-lp reproduce --profile quick`` on the same machine (1 min 19 s, B2 and B3 at cap 8)
 #: (report.json's ``timings_seconds``).
 ESTIMATE_SECONDS: dict[str, dict[str, float]] = {
     "quick": {"C1": 2.0, "C2": 2.0, "C3": 3.0, "C4": 1.0, "C5": 1.0, "C6": 3.0, "C7": 1.0, "C8": 0.5,
-              "C9": 1.0, "C10": 0.5, "C11": 1.5, "C12": 1.5, "C13": 6.0, "B1": 8.0, "B2": 64.0,
+              "C9": 1.0, "C10": 0.5, "C11": 1.5, "C12": 1.5, "C13": 6.0, "B1": 8.5, "B2": 26.0,
               "B3": 19.0},
     "default": {"C1": 10.0, "C2": 18.0, "C3": 56.0, "C4": 32.0, "C5": 2.0, "C6": 130.0, "C7": 9.0,
                 "C8": 1.0, "C9": 4.0, "C10": 4.0, "C11": 24.0, "C12": 7.0, "C13": 8.0, "B1": 78.0,
