@@ -87,9 +87,8 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         Relaxation 2's search then stops as :data:`AUTO_SEARCH` says unless ``max_iter`` /
         ``time_limit`` are given.
     **options
-        Keyword arguments of the relaxation's function (e.g. ``tol``, ``progress``;
-        ``max_iter`` and ``time_limit`` for relaxation 2, ignored by relaxation 1, which takes
-        seconds).
+        Keyword arguments of the relaxation's function (e.g. ``tol``, ``progress``). Under
+        ``"auto"`` relaxation 1 takes only ``tol`` and ``progress``; the others go to relaxation 2.
 
     Returns
     -------
@@ -105,7 +104,7 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     if not isinstance(scenario_or_system, (Scenario, System)):
         raise WncsError(f"expected a Scenario or a System, got {type(scenario_or_system).__name__}")
     if name == "private-servers":
-        return private_bound(scenario_or_system, **_private_options(options))
+        return private_bound(scenario_or_system, **options)
     joint, why_not = _joint_module()
     if name == "joint-configuration":
         if joint is None:
@@ -123,19 +122,20 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
             why_not = (f"relaxation 1's certified bound {res1.lower_bound:.10g} beats relaxation 2's "
                        f"{res.lower_bound:.10g} (its search stopped early)")
         scenario_or_system = system
-    res = res1 if res1 is not None else private_bound(
-        scenario_or_system, **_private_options(options))
+    res = res1 if res1 is not None else private_bound(scenario_or_system, **_private_options(options))
     return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": why_not})
 
 
 def _private_options(options: dict) -> dict:
-    return {k: v for k, v in options.items() if k not in AUTO_SEARCH}
+    """What relaxation 1 takes of auto's options: the tolerance and the progress (the search
+    options, ``max_iter`` and ``time_limit``, are relaxation 2's under auto)."""
+    return {k: v for k, v in options.items() if k in ("tol", "progress")}
 
 
 def _try_private(system: System, options: dict) -> BoundResult | None:
     """Relaxation 1 for comparison with relaxation 2 (None where the model has no relaxation 1)."""
     try:
-        return private_bound(system, **{k: v for k, v in options.items() if k in ("tol", "progress")})
+        return private_bound(system, **_private_options(options))
     except WncsError:
         return None
 

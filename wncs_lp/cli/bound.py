@@ -20,7 +20,9 @@ def cmd_bound(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     system = System.from_scenario(scenario)
     prog.phase(f"computing the {relaxation} lower bound")
-    limit = {k: v for k, v in (("time_limit", args.time_limit), ("max_iter", args.max_steps)) if v is not None}
+    # the search options are relaxation 2's; relaxation 1's own max_iter counts other steps
+    limit = {} if relaxation == "private-servers" else {
+        k: v for k, v in (("time_limit", args.time_limit), ("max_iter", args.max_steps)) if v is not None}
     res = lower_bound(system, relaxation, tol=args.tol, progress=prog, **limit)
     report = None
     if args.policy:

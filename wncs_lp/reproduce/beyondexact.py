@@ -87,13 +87,12 @@ def _bound_entry(res) -> dict[str, Any]:
             "certified_by": res.certified_by, "seconds": float(res.seconds), "iterations": int(res.iterations)}
 
 
-def _compute(ctx: Context, inst: Instance, st: BeyondExactSettings) -> dict[str, Any]:
+def _compute(ctx: Context, sc, inst: Instance, st: BeyondExactSettings) -> dict[str, Any]:
     """Bounds and gaps at one instance (no g*: that is B2's step)."""
     from ..bounds import lower_bound, policy_gaps
     from ..models.system import System
 
     t0 = time.perf_counter()
-    sc = _scenario(ctx, inst, st)
     system = System.from_scenario(sc)
     best = lower_bound(system, "auto", max_iter=st.steps, time_limit=None)
     bounds = [_bound_entry(best)]
@@ -112,7 +111,7 @@ def _instance(ctx: Context, inst: Instance, st: BeyondExactSettings) -> dict[str
     sc = _scenario(ctx, inst, st)
     params = {"fingerprint": sc.fingerprint(), "exact": inst.exact, "slots": st.slots, "reps": st.reps,
               "seed": st.seed, "burn_in": st.burn_in, "policies": list(POLICIES), "steps": st.steps}
-    out, _ = ctx.cache.get_or_compute("b3_instance", params, lambda: (_compute(ctx, inst, st), None))
+    out, _ = ctx.cache.get_or_compute("b3_instance", params, lambda: (_compute(ctx, sc, inst, st), None))
     out = dict(out)
     if inst.scenario == FOUR:  # g* is B2's cached step (solved there, or here first)
         out["optimum"] = exact_optimum(ctx, inst.cap, st.p)
