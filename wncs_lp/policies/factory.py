@@ -84,9 +84,11 @@ def make_policy(
 
 
 def _relaxation_policy(system: System) -> Policy:
-    # the bounds room builds on policies (its policy is a SeparableGreedyPolicy), so it is
-    # imported when asked for, after both packages are complete
-    from ..bounds import bound_policy, lower_bound
+    # imported when asked for: the bounds room builds on policies (its policy is a
+    # SeparableGreedyPolicy); its gaps module takes comparators from this factory, so only the
+    # bound and the policy modules are named here
+    from ..bounds.lower import lower_bound
+    from ..bounds.policy import bound_policy
 
     return bound_policy(lower_bound(system, "auto"), system)
 
