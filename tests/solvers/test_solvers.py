@@ -86,8 +86,11 @@ def test_all_methods_match_brute_force(seed):
         assert sol.gain_lower - 1e-9 <= g_star <= sol.gain_upper + 1e-9, method
         assert sol.gap < 1e-6
         # the returned policy achieves g* (evaluated independently)
-        g_pol, _ = dense_gain(P[sol.policy], mdp.cost[sol.policy])
+        g_pol, pi_pol = dense_gain(P[sol.policy], mdp.cost[sol.policy])
         assert g_pol == pytest.approx(g_star, abs=1e-9, rel=1e-9), method
+        if method == "pi":  # its occupation: the stationary law of the returned policy, on its pairs
+            np.testing.assert_allclose(sol.occupation[sol.policy], pi_pol, atol=1e-10)
+            assert sol.occupation.sum() == pytest.approx(1.0, abs=1e-12)
         assert sol.bias[0] == 0.0
     lp = solve(mdp, "lp")
     # raw LP objective (no polishing) is accurate to roughly the solver tolerance
@@ -112,6 +115,9 @@ def test_evaluate_policy_matches_dense(seed, method):
     assert ev.bias[0] == 0.0
     # Poisson equation g + h = c + P h
     np.testing.assert_allclose(ev.gain + ev.bias, mdp.cost[det] + P[det] @ ev.bias, atol=100 * tol)
+    bare = evaluate_policy(mdp, det, method=method, stationary=False)  # the Poisson solve alone
+    assert bare.stationary is None and bare.gain == pytest.approx(g_ref, abs=tol, rel=tol)
+    np.testing.assert_allclose(bare.gain + bare.bias, mdp.cost[det] + P[det] @ bare.bias, atol=100 * tol)
     if method == "iterative":  # a warm start from another policy's bias gives the same answer
         other = evaluate_policy(mdp, mdp.pair_ptr[:-1].astype(np.int64), method="direct")
         assert evaluate_policy(mdp, det, method=method, h0=other.bias).gain == pytest.approx(g_ref, rel=tol)

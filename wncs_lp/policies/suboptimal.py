@@ -174,7 +174,8 @@ def _solve_process(system: System, k: int, w: np.ndarray) -> ProcessPoisson:
     chain = MDP.from_arrays(np.arange(n), np.zeros(n, dtype=np.int64), cost, P, n, check=False,
                             name=f"process-{k + 1} chain")
     try:
-        ev = evaluate_policy(chain, np.arange(n, dtype=np.int64))
+        # g_k and h_k only: the stationary solve would cost as much again (LU fill-in at many configurations)
+        ev = evaluate_policy(chain, np.arange(n, dtype=np.int64), stationary=False)
     except PolicyError as exc:
         raise PolicyError(f"process {k + 1}: the chain (tau_{k + 1}, C) under the base policy: {exc}") from None
     return ProcessPoisson(gain=float(ev.gain), h=ev.bias.reshape(nC, K), residual=float(ev.residual), size=n)

@@ -327,6 +327,19 @@ class Step:
     simulate: tuple[tuple[str, int, int, int, int], ...] = ()
 
 
+def _solved_law(sol: Solution, P_pi, n_pairs: int) -> np.ndarray | None:
+    """The stationary law a unichain solution carries already (policy iteration's occupation of its
+    last policy), when it is one of ``P_pi`` to the stationary tolerance; else None."""
+    from ..chain import STATIONARY_TOL
+
+    occ = sol.occupation
+    if sol.method != "pi" or occ is None or np.shape(occ) != (n_pairs,):
+        return None
+    pi = np.asarray(occ)[sol.policy]
+    ok = abs(pi.sum() - 1.0) <= STATIONARY_TOL and float(np.max(np.abs(P_pi.T @ pi - pi))) <= STATIONARY_TOL
+    return pi if ok else None
+
+
 def _run_step(out: Path, profile: "Profile", step: Step, code: str) -> bool:
     """One :class:`Step` in a worker process, through a Context on the same folder (its cache).
     Returns False, computing nothing, when the package's source is not the parent's ``code``
@@ -473,8 +486,10 @@ class Context:
             sol = solve_scenario(scenario, exact_method(mdp.n_states), constrained=False, mdp=mdp).solution
             P_pi = mdp.P[sol.policy]
             classes = recurrent_classes(P_pi)
-            stationary, _ = stationary_law(P_pi, classes)  # equal weights on several classes
             unichain = len(classes) == 1
+            stationary = _solved_law(sol, P_pi, mdp.n_pairs) if unichain else None
+            if stationary is None:
+                stationary, _ = stationary_law(P_pi, classes)  # equal weights on several classes
             res = {
                 "gain": float(sol.gain),
                 "gain_lower": float(sol.gain_lower),

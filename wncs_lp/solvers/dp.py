@@ -28,6 +28,7 @@ __all__ = [
     "initial_bias",
     "PolicyEvaluation",
     "evaluate_policy",
+    "stationary_of",
     "relative_value_iteration",
     "value_iteration",
     "policy_iteration",
@@ -75,10 +76,12 @@ class PolicyEvaluation(Certified):
         g = pi . c_pi, the long-run average cost (the same from every start state).
     bias : (n,) array
         The solution h of g + h = c_pi + P_pi h, normalised so that h[0] = 0.
-    stationary : (n,) array
-        The stationary distribution pi = pi P_pi, sum(pi) = 1 (zero on transient states).
+    stationary : (n,) array or None
+        The stationary distribution pi = pi P_pi, sum(pi) = 1 (zero on transient states); None
+        when not asked for (``evaluate_policy(..., stationary=False)``).
     residual : float
-        max(||g + h - c_pi - P_pi h||_inf, ||pi P_pi - pi||_inf + |sum pi - 1|), absolute.
+        max(||g + h - c_pi - P_pi h||_inf, ||pi P_pi - pi||_inf + |sum pi - 1|), absolute (the
+        first term alone without the stationary distribution).
     solver : str
         ``"splu"`` (sparse LU + one refinement step), ``"bicgstab"``, or
         ``"bicgstab->splu"`` when the iterative solve missed its tolerance and LU took over.
@@ -86,7 +89,7 @@ class PolicyEvaluation(Certified):
 
     gain: float
     bias: np.ndarray
-    stationary: np.ndarray
+    stationary: np.ndarray | None
     residual: float
     solver: str = "splu"
 
@@ -127,7 +130,8 @@ class PolicyEvaluation(Certified):
 
 
 def evaluate_policy(mdp: MDP, policy: Any = None, *, sigma: Any = None, method: str = "auto",
-                    h0: np.ndarray | None = None, maxiter: int | None = None) -> PolicyEvaluation:
+                    h0: np.ndarray | None = None, maxiter: int | None = None,
+                    stationary: bool = True) -> PolicyEvaluation:
     """Exact gain, bias and stationary distribution of a unichain stationary policy.
 
     With ``r`` the smallest state of the (unique) recurrent class, solves
@@ -167,6 +171,10 @@ def evaluate_policy(mdp: MDP, policy: Any = None, *, sigma: Any = None, method: 
     maxiter : int, optional
         BiCGSTAB iteration cap per call (default ``max(1000, 2 sqrt(n))``); a solve whose true
         residual misses after a converged call is restarted from its answer, up to 4 calls.
+    stationary : bool
+        Compute the stationary distribution (default). Without it the evaluation is the Poisson
+        solve alone: policy iteration needs the stationary law of its last policy only, and the
+        stationary solve costs as much as the Poisson solve on chains whose LU fills in.
 
     Returns
     -------
@@ -198,10 +206,31 @@ def evaluate_policy(mdp: MDP, policy: Any = None, *, sigma: Any = None, method: 
     g = float(z[r])
     h = z.copy()
     h[r] = 0.0
-    pi = np.zeros(n)
-    pi[classes[0]] = class_stationary(P_pi, classes[0])[0]
+    pi = _class_law(P_pi, classes[0]) if stationary else None
     residual = _check_poisson(P_pi, c_pi, g, h, pi)
     return PolicyEvaluation(gain=g, bias=h - h[0], stationary=pi, residual=residual, solver=solver)
+
+
+def _class_law(P_pi: sp.csr_matrix, cl: np.ndarray) -> np.ndarray:
+    """The stationary distribution of a unichain P_pi whose recurrent class is ``cl`` (zero off it)."""
+    pi = np.zeros(P_pi.shape[0])
+    pi[cl] = class_stationary(P_pi, cl)[0]
+    return pi
+
+
+def stationary_of(mdp: MDP, policy: np.ndarray) -> np.ndarray:
+    """The stationary distribution of a unichain deterministic policy (``policy``: a pair per state).
+
+    Raises
+    ------
+    MultichainPolicyError
+        The policy's chain has several recurrent classes.
+    """
+    P_pi, _ = policy_matrices(mdp, policy)
+    classes = recurrent_classes(P_pi)
+    if len(classes) != 1:
+        raise _multichain_error(mdp, classes)
+    return _class_law(P_pi, classes[0])
 
 
 def _multichain_error(mdp: MDP, classes: list) -> MultichainPolicyError:
@@ -248,10 +277,11 @@ def _solve_poisson(M: sp.csc_matrix, P_pi: sp.csr_matrix, c_pi: np.ndarray, r: i
     return z + lu.solve(c_pi - M @ z), solver
 
 
-def _check_poisson(P_pi: sp.csr_matrix, c_pi: np.ndarray, g: float, h: np.ndarray, pi: np.ndarray) -> float:
-    """The residual of g + h = c_pi + P_pi h and of pi P_pi = pi, sum pi = 1; PolicyError if too large."""
+def _check_poisson(P_pi: sp.csr_matrix, c_pi: np.ndarray, g: float, h: np.ndarray, pi: np.ndarray | None) -> float:
+    """The residual of g + h = c_pi + P_pi h and of pi P_pi = pi, sum pi = 1 (when pi is given);
+    PolicyError if too large."""
     res_bias = float(np.max(np.abs(g + h - c_pi - P_pi @ h)))
-    res_pi = float(np.max(np.abs(P_pi.T @ pi - pi)) + abs(pi.sum() - 1.0))
+    res_pi = 0.0 if pi is None else float(np.max(np.abs(P_pi.T @ pi - pi)) + abs(pi.sum() - 1.0))
     scale = max(float(np.max(np.abs(c_pi))), float(np.max(np.abs(h))), 1e-300)
     if not (res_bias <= EVAL_RESIDUAL_TOL * scale and res_pi <= EVAL_RESIDUAL_TOL):  # NaN fails too
         raise PolicyError(
@@ -799,6 +829,7 @@ class _HowardRun:
     def __init__(self, mdp: MDP, d: np.ndarray, rtol: float, multichain: str, kernel: str, prog: Progress):
         self.mdp, self.d, self.rtol, self.multichain, self.kernel, self.prog = mdp, d, rtol, multichain, kernel, prog
         self.ev: PolicyEvaluation | None = None
+        self.ev_d: np.ndarray = d  # the policy self.ev evaluated
         self.vi: Solution | None = None
         self.vi_stands = False
         self.stable = False
@@ -809,14 +840,16 @@ class _HowardRun:
     def iterate(self, max_iter: int) -> None:
         for self.it in range(1, max_iter + 1):
             try:
-                ev = evaluate_policy(self.mdp, self.d, h0=None if self.ev is None else self.ev.bias)
+                # the stationary law of the last policy only (_pi_solution): the iterates need g and h
+                ev = evaluate_policy(self.mdp, self.d, h0=None if self.ev is None else self.ev.bias,
+                                     stationary=False)
             except MultichainPolicyError as exc:
                 if self.multichain == "raise":
                     raise
                 if not self._restart(exc):
                     return
                 continue
-            self.ev = ev
+            self.ev, self.ev_d = ev, self.d
             d_new = _improve(self.mdp, q_values(self.mdp, ev.bias), self.d, self.rtol)
             nchg = int(np.count_nonzero(d_new != self.d))
             self.changes.append(nchg)
@@ -857,7 +890,7 @@ def _pi_solution(mdp: MDP, run: _HowardRun, t0: float, cert_rtol: float, prog: P
     else:
         status = of(INACCURATE)
     occ = np.zeros(mdp.n_pairs)
-    occ[run.d] = ev.stationary
+    occ[run.ev_d] = stationary_of(mdp, run.ev_d)  # of the evaluated policy (run.d is one step on at max_iter)
     prog.done(f"[pi] {run.it} evaluation(s): {lo:.10g} <= g* <= {hi:.10g}, gap {rel:.2e} ({status})")
     return Solution(
         method="pi", status=status, gain=ev.gain, gain_lower=lo, gain_upper=hi, bias=ev.bias, policy=run.d.copy(),
