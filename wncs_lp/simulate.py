@@ -130,37 +130,50 @@ def simulate(
     if slots < 1 or reps < 1 or burn_in < 0:
         raise PolicyError(f"need slots >= 1, reps >= 1 and burn_in >= 0; got {slots}, {reps}, {burn_in}")
     t0 = time.perf_counter()
-    sysm = policy.system
-    ot = sysm.outcome_tables
-    N = sysm.n_processes
+    chan_ss, pol_ss = np.random.SeedSequence(seed).spawn(2)
+    tau = _initial_tau(policy.system, reps, initial_tau)
+    bar = _progress_bar(policy, burn_in + slots, progress)
+    try:
+        proc_sum, busy_sum = _run_slots(policy, tau, burn_in, slots, np.random.default_rng(chan_ss),
+                                        np.random.default_rng(pol_ss), bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    return _result(policy, proc_sum, busy_sum, slots, reps, burn_in, seed, time.perf_counter() - t0)
+
+
+def _initial_tau(sysm, reps: int, initial_tau: np.ndarray | None) -> np.ndarray:
+    """(R, N) starting AoI: every tau_k at its cap, or ``initial_tau`` in every replication."""
     caps = sysm.caps
-    ss = np.random.SeedSequence(seed)
-    chan_ss, pol_ss = ss.spawn(2)
-    chan = np.random.default_rng(chan_ss)
-    prng = np.random.default_rng(pol_ss)
-
     if initial_tau is None:
-        tau = np.tile(caps, (reps, 1)).astype(np.int64)
-    else:
-        t_init = np.asarray(initial_tau, dtype=np.int64)
-        if t_init.shape != (N,) or np.any(t_init < 1) or np.any(t_init > caps):
-            raise PolicyError(f"initial_tau must be {N} integers in 1..tau_hat = {caps.tolist()}")
-        tau = np.tile(t_init, (reps, 1))
-    c = np.full(reps, sysm.initial_config, dtype=np.int64)
-    n_act = sysm.n_actions
-    q = sysm.q
-    busy = sysm.busy
+        return np.tile(caps, (reps, 1)).astype(np.int64)
+    t_init = np.asarray(initial_tau, dtype=np.int64)
+    N = sysm.n_processes
+    if t_init.shape != (N,) or np.any(t_init < 1) or np.any(t_init > caps):
+        raise PolicyError(f"initial_tau must be {N} integers in 1..tau_hat = {caps.tolist()}")
+    return np.tile(t_init, (reps, 1))
 
+
+def _progress_bar(policy, total: int, progress: bool | None):
+    if not _want_progress(progress):
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=f"simulate {policy.name}", unit="slot", file=sys.stderr, mininterval=0.5)
+
+
+def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.random.Generator,
+               prng: np.random.Generator, bar) -> tuple[np.ndarray, np.ndarray]:
+    """The slot loop, all replications at once: per replication and process the summed q_k(tau_k)
+    after the burn-in, and per server the number of busy slots (summed over replications)."""
+    sysm = policy.system
+    ot, caps, q, busy, n_act = sysm.outcome_tables, sysm.caps, sysm.q, sysm.busy, sysm.n_actions
+    reps, N = tau.shape
+    c = np.full(reps, sysm.initial_config, dtype=np.int64)
     proc_sum = np.zeros((reps, N))
     busy_sum = np.zeros(sysm.n_servers)
-    total = burn_in + slots
-    bar = None
-    if _want_progress(progress):
-        from tqdm import tqdm
-
-        bar = tqdm(total=total, desc=f"simulate {policy.name}", unit="slot", file=sys.stderr, mininterval=0.5)
     chunk = 1000
-    for t in range(total):
+    for t in range(burn_in + slots):
         if t >= burn_in:
             for k in range(N):
                 proc_sum[:, k] += q[k][tau[:, k] - 1]
@@ -170,8 +183,7 @@ def simulate(
                 raise PolicyError(f"policy {policy.name} returned action indices out of range")
         if t >= burn_in:
             busy_sum += busy[c, j].sum(axis=0)
-        u = chan.random(reps)
-        o = (u[:, None] >= ot.cum[c, j]).sum(axis=1)
+        o = (chan.random(reps)[:, None] >= ot.cum[c, j]).sum(axis=1)
         d = ot.delta[c, j, o]
         c = ot.nxt[c, j, o]
         tnew = np.minimum(tau + 1, caps)
@@ -179,16 +191,18 @@ def simulate(
         if bar is not None and (t + 1) % chunk == 0:
             bar.update(chunk)
     if bar is not None:
-        bar.update(total - bar.n)
-        bar.close()
+        bar.update(burn_in + slots - bar.n)
+    return proc_sum, busy_sum
 
+
+def _result(policy, proc_sum: np.ndarray, busy_sum: np.ndarray, slots: int, reps: int, burn_in: int,
+            seed: int | None, seconds: float) -> SimulationResult:
     per_proc = proc_sum / slots  # (R, N)
     rep_means = per_proc.sum(axis=1)
-    mean = float(rep_means.mean())
     stderr = float(rep_means.std(ddof=1) / np.sqrt(reps)) if reps > 1 else float("nan")
     return SimulationResult(
         policy=policy.name,
-        mean=mean,
+        mean=float(rep_means.mean()),
         stderr=stderr,
         rep_means=tuple(float(x) for x in rep_means),
         process_means=tuple(float(x) for x in per_proc.mean(axis=0)),
@@ -197,5 +211,5 @@ def simulate(
         reps=int(reps),
         burn_in=int(burn_in),
         seed=None if seed is None else int(seed),
-        seconds=time.perf_counter() - t0,
+        seconds=seconds,
     )
