@@ -328,12 +328,12 @@ class Step:
 
 
 def _solved_law(sol: Solution, P_pi, n_pairs: int) -> np.ndarray | None:
-    """The stationary law a unichain solution carries already (policy iteration's occupation of its
-    last policy), when it is one of ``P_pi`` to the stationary tolerance; else None."""
+    """The stationary law a unichain solution carries already (e.g. policy iteration's occupation
+    of its last policy), when it is one of ``P_pi`` to the stationary tolerance; else None."""
     from ..chain import STATIONARY_TOL
 
     occ = sol.occupation
-    if sol.method != "pi" or occ is None or np.shape(occ) != (n_pairs,):
+    if occ is None or np.shape(occ) != (n_pairs,):
         return None
     pi = np.asarray(occ)[sol.policy]
     ok = abs(pi.sum() - 1.0) <= STATIONARY_TOL and float(np.max(np.abs(P_pi.T @ pi - pi))) <= STATIONARY_TOL
