@@ -255,6 +255,31 @@ class NumbaKernel:
                             float(tau), float(shift), pol)
 
 
+#: :func:`_later_pairs` gives up (``np.minimum.reduceat`` is used) beyond this many pairs in a state.
+LATER_PAIRS_MAX = 6
+
+
+def _later_pairs(pair_ptr: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """For j = 1, 2, ...: the states with more than j pairs and their j-th pair, or None when a
+    state has more than :data:`LATER_PAIRS_MAX` pairs.
+
+    ``min_l q_l`` over the pairs of each state is then ``q`` at the first pairs, lowered by
+    ``np.minimum`` at each j: the same doubles as ``np.minimum.reduceat(q, pair_ptr[:-1])`` (a
+    minimum is exact in any order), ~4x faster on these models, where most states have one pair
+    and reduceat pays per segment.
+    """
+    counts = np.diff(pair_ptr)
+    top = int(counts.max(initial=1))
+    if top > LATER_PAIRS_MAX:
+        return None
+    starts = pair_ptr[:-1]
+    more = []
+    for j in range(1, top):
+        states = np.flatnonzero(counts > j)
+        more.append((states, starts[states] + j))
+    return more
+
+
 class ScipyKernel:
     """The same sweeps with scipy's CSR mat-vec (always available; Jacobi only)."""
 
@@ -265,14 +290,21 @@ class ScipyKernel:
         self.mdp = mdp
         self.d = prepare(mdp)
         self.starts = mdp.pair_ptr[:-1]
+        self._more = _later_pairs(mdp.pair_ptr)
         self.threads = 1
         self._pol_key = None
         self._Pd = None
 
     def jacobi(self, h, h_out, tau, shift):
         mdp = self.mdp
-        q = mdp.cost + mdp.P @ h
-        Th = np.minimum.reduceat(q, self.starts)
+        q = mdp.P @ h
+        q += mdp.cost
+        if self._more is None:
+            Th = np.minimum.reduceat(q, self.starts)
+        else:  # the same minima: the first pair of every state, then the j-th pair of the states that have one
+            Th = q[self.starts]
+            for states, pairs in self._more:
+                Th[states] = np.minimum(Th[states], q[pairs])
         dd = Th - h
         np.multiply(dd - shift, tau, out=h_out)
         h_out += h
