@@ -324,13 +324,13 @@ class ScipyKernel:
         h += tau * (v - shift)
 
 
-#: ``kernel="auto"`` takes numba from this many states on, scipy below. numba's fixed cost in a
-#: fresh process (its import and the load of three compiled kernels from its cache) was measured
-#: at 1.9-2.1 s on a loaded 2-core machine, the scipy kernel's Jacobi value iteration at about
-#: 3.6-5.4e-5 s a state against numba's 1e-5 (processes 1, 2 at caps 4-30, 1-3 at caps 6-10, to
-#: 1e-9): they cross at 50k-80k states. (270 states: numba 2.3 s, scipy 0.04 s; 110k states:
-#: numba 2.9 s, scipy 4.0 s.)
-NUMBA_MIN_STATES = 50_000
+#: ``kernel="auto"`` takes numba from this many states on, scipy below: where numba's fixed cost in
+#: a fresh process (importing it, ~0.3-0.5 s, and loading its three compiled kernels from the cache)
+#: pays. The whole ``wncs-lp solve --json``, numba against the scipy kernel, best of 3 on a loaded
+#: 2-core machine (load 6): p123 cap 10 (83k states) 3.85 s vs 3.21 s, p12 cap 30 (110k) 3.59 vs
+#: 2.60, p12 cap 36 (168k) 4.26 vs 4.01, p123 cap 12 (187k) 7.12 vs 9.74, p12 cap 45 (276k) 5.82 vs
+#: 7.35: they cross at ~170k-180k states (``benchmarks/fixed_costs.py``).
+NUMBA_MIN_STATES = 150_000
 
 
 def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None, *, in_place: bool = False):
