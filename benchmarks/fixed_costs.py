@@ -2,6 +2,7 @@
 
     python benchmarks/fixed_costs.py --baseline-rev d3dec86          # a commit, unpacked by git archive
     python benchmarks/fixed_costs.py --baseline /tmp/wncs_base --caps 4,12,30 --repeat 5
+    python benchmarks/fixed_costs.py --baseline-rev main --repeat 5 --csv benchmarks/fixed_costs.csv
 
 For each cap (default 4 and 30 of ``formulations/paper_p12.toml``) the command
 ``wncs-lp solve formulations/paper_p12.toml --set tau_cap=CAP --json`` is timed as a whole process,
@@ -11,12 +12,16 @@ with the command's own account (build, solve), the kernel its value iteration us
 packages it imported. Beside them: ``python -c pass`` (the floor of any command),
 ``python -c "import numba"`` (what a solve pays the first time it touches numba, before loading
 any kernel), and Storm's solve of the same model when ``stormpy`` imports
-(``benchmarks/startup.py`` does the measuring). The ratios of one run are steadier than its
-seconds: the machine is shared (the load average is printed).
+(``benchmarks/startup.py`` does the measuring; Storm's solve with stormpy's default sound
+environment and with a plain one, both value iteration). The ratios of one run are steadier than
+its seconds: the machine is shared (the load average is printed, and written to ``--csv``: one
+row per cap and tree).
 """
 from __future__ import annotations
 
 import argparse
+import csv
+import datetime
 import json
 import os
 import subprocess
@@ -67,6 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenario", default="paper_p12")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
+    ap.add_argument("--csv", type=Path, default=None, help="and as CSV (one row per cap and tree)")
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         trees = {"this tree": ROOT}
@@ -79,26 +85,67 @@ def main(argv: list[str] | None = None) -> int:
                                     "numba": ([py, "-c", "import numba"], ROOT, None)}, a.repeat)
         print(f"load average {os.getloadavg()[0]:.2f} (2 cores); python -c pass {floors['pass'][0]:.3f} s, "
               f"import numba {floors['numba'][0]:.3f} s")
-        result = {"floor": floors["pass"][0], "import_numba": floors["numba"][0], "caps": {}}
+        result = {"floor": floors["pass"][0], "import_numba": floors["numba"][0], "caps": {},
+                  "date": datetime.date.today().isoformat(), "load1_start": os.getloadavg()[0]}
         for cap in (int(c) for c in a.caps.split(",")):
             rows = one_cap(trees, cap, a.repeat, a.scenario)
             result["caps"][cap] = rows
             storm = rows.pop("storm", None)
             rows.pop("floor", None)
+            if storm is not None:
+                rows["storm_row"] = storm
             print(f"\n{a.scenario} at cap {cap} ({rows['this tree']['states']:,} states)")
             print(f"{'tree':<10} {'whole':>7} {'build':>7} {'solve':>7} {'method':>6} {'kernel':>6}  heavy imports")
-            for name, r in rows.items():
+            for name, r in ((k, v) for k, v in rows.items() if k != "storm_row"):
                 print(f"{name:<10} {r['e2e']:>7.3f} {r['build_seconds']:>7.3f} {r['solve_seconds']:>7.3f} "
                       f"{str(r['choice']):>6} {str(r['kernel']):>6}  {', '.join(r['heavy_imports'])}")
             if "baseline" in rows:
                 b, t = rows["baseline"]["e2e"], rows["this tree"]["e2e"]
                 print(f"whole command: baseline / this tree = {b / t:.2f}x ({b - t:+.3f} s saved)")
             if storm is not None:
-                print(f"Storm's LRA solve alone {storm['check']:.3f} s (whole process {storm['wall']:.3f} s): "
-                      f"our whole command / Storm's solve = {rows['this tree']['e2e'] / storm['check']:.2f}x")
+                mine = rows["this tree"]["e2e"]
+                print(f"Storm's LRA solve alone {storm['check']:.3f} s with stormpy's default (sound) environment, "
+                      f"{storm['check_plain']:.3f} s with a plain one (whole process {storm['wall']:.3f} s); gain "
+                      f"{storm['gain']:.10g} (plain {storm['gain_plain']:.10g})")
+                print(f"our whole command / Storm's solve = {mine / storm['check']:.2f}x "
+                      f"(/ its plain solve {mine / storm['check_plain']:.2f}x; / its whole process {mine / storm['wall']:.2f}x)")
+        result["load1_end"] = os.getloadavg()[0]
         if a.json is not None:
             a.json.write_text(json.dumps(result, indent=2, default=str) + "\n")
+        if a.csv is not None:
+            write_csv(a.csv, result, a.scenario)
     return 0
+
+
+CSV_FIELDS = ["date", "load1_start", "load1_end", "scenario", "cap", "states", "tree", "whole_s", "build_s", "solve_s",
+              "kernel", "sweeps", "status", "gain", "heavy_imports", "python_pass_s", "import_numba_s", "storm_solve_s",
+              "storm_solve_plain_s", "storm_whole_s", "storm_gain", "whole_over_storm_solve"]
+
+
+def write_csv(path: Path, result: dict, scenario: str) -> None:
+    """One row per cap and tree: the whole command, its own account, and Storm's solve beside it."""
+    rows = []
+    for cap, trees in result["caps"].items():
+        storm = trees.get("storm_row")
+        for name, r in trees.items():
+            if name == "storm_row":
+                continue
+            rows.append({"date": result["date"], "load1_start": f"{result['load1_start']:.2f}",
+                         "load1_end": f"{result['load1_end']:.2f}", "scenario": scenario, "cap": cap,
+                         "states": r["states"], "tree": name, "whole_s": f"{r['e2e']:.3f}",
+                         "build_s": f"{r['build_seconds']:.3f}", "solve_s": f"{r['solve_seconds']:.3f}",
+                         "kernel": r["kernel"], "sweeps": r["sweeps"], "status": r["status"], "gain": repr(r["gain"]),
+                         "heavy_imports": " ".join(r["heavy_imports"]), "python_pass_s": f"{result['floor']:.3f}",
+                         "import_numba_s": f"{result['import_numba']:.3f}",
+                         "storm_solve_s": f"{storm['check']:.3f}" if storm else "",
+                         "storm_solve_plain_s": f"{storm['check_plain']:.3f}" if storm else "",
+                         "storm_whole_s": f"{storm['wall']:.3f}" if storm else "",
+                         "storm_gain": repr(storm["gain"]) if storm else "",
+                         "whole_over_storm_solve": f"{r['e2e'] / storm['check']:.2f}" if storm else ""})
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, CSV_FIELDS)
+        w.writeheader()
+        w.writerows(rows)
 
 
 if __name__ == "__main__":

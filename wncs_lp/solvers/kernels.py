@@ -291,6 +291,9 @@ class ScipyKernel:
         self.d = prepare(mdp)
         self.starts = mdp.pair_ptr[:-1]
         self._more = _later_pairs(mdp.pair_ptr)
+        if self._more is not None:  # the buffers of the state minimum, reused by every sweep
+            self._Th = np.empty(mdp.n_states)
+            self._bufs = [(np.empty(st.size), np.empty(st.size)) for st, _ in self._more]
         self.threads = 1
         self._pol_key = None
         self._Pd = None
@@ -302,11 +305,14 @@ class ScipyKernel:
         if self._more is None:
             Th = np.minimum.reduceat(q, self.starts)
         else:  # the same minima: the first pair of every state, then the j-th pair of the states that have one
-            Th = q[self.starts]
-            for states, pairs in self._more:
-                Th[states] = np.minimum(Th[states], q[pairs])
-        dd = Th - h
-        np.multiply(dd - shift, tau, out=h_out)
+            Th = np.take(q, self.starts, out=self._Th)
+            for (states, pairs), (mine, other) in zip(self._more, self._bufs):
+                np.take(Th, states, out=mine)
+                np.take(q, pairs, out=other)
+                Th[states] = np.minimum(mine, other, out=mine)
+        dd = np.subtract(Th, h, out=Th)  # in place: fresh large temporaries cost page faults every sweep
+        np.subtract(dd, shift, out=h_out)
+        h_out *= tau
         h_out += h
         return float(dd.min()), float(dd.max())
 
