@@ -45,6 +45,40 @@ print(json.dumps({"kernel": sol.stats.get("kernel"), "choice": sol.stats.get("au
                   "sweeps": sol.stats.get("sweeps"), "status": sol.status}))
 """
 
+#: Where the whole command's time goes, phase by phase in one fresh process (the order the command
+#: pays them in; scipy.sparse.csgraph brings scipy.sparse.linalg and scipy.linalg with it).
+_PHASES = """
+import json, sys, time, warnings
+warnings.simplefilter("ignore")
+marks = [("start", time.perf_counter())]
+def mark(name):
+    marks.append((name, time.perf_counter()))
+import numpy; mark("import numpy")
+import scipy.sparse; mark("import scipy.sparse")
+import scipy.sparse.csgraph; mark("import scipy.sparse.csgraph")
+import wncs_lp.cli; mark("import wncs_lp.cli")
+from wncs_lp.solvers.route import solve_scenario; mark("import wncs_lp.solvers")
+from wncs_lp.scenario import load_scenario
+sc = load_scenario(sys.argv[1], ["tau_cap=" + sys.argv[2]]); mark("load the scenario")
+run = solve_scenario(sc, "auto"); mark("guard, build, solve")
+from wncs_lp.truncation import policy_cap_mass
+policy_cap_mass(run.mdp, run.solution.policy); mark("mass at the cap")
+out = {b[0]: b[1] - a[1] for a, b in zip(marks, marks[1:])}
+out.update(build=run.build_seconds, solve=run.solution.seconds)
+print(json.dumps(out))
+"""
+
+
+def phases(tree: Path, scenario: str, cap: int, repeat: int) -> dict:
+    """Each phase of :data:`_PHASES`: its fastest of ``repeat`` fresh processes."""
+    best: dict = {}
+    for _ in range(repeat):
+        _, out = _run([sys.executable, "-c", _PHASES, str(tree / "formulations" / f"{scenario}.toml"), str(cap)],
+                      tree, _env(tree))
+        for k, v in json.loads(out.strip().splitlines()[-1]).items():
+            best[k] = min(best.get(k, v), v)
+    return best
+
 
 def unpack(rev: str, folder: Path) -> Path:
     """The tree of commit ``rev`` of this repository, unpacked into ``folder`` (git archive)."""
@@ -102,6 +136,11 @@ def main(argv: list[str] | None = None) -> int:
             if "baseline" in rows:
                 b, t = rows["baseline"]["e2e"], rows["this tree"]["e2e"]
                 print(f"whole command: baseline / this tree = {b / t:.2f}x ({b - t:+.3f} s saved)")
+            for name, tree in trees.items():
+                ph = phases(tree, a.scenario, cap, a.repeat)
+                rows[name]["phases"] = ph
+                print(f"{name}, phase by phase (best of {a.repeat}): "
+                      + ", ".join(f"{k} {v:.3f}" for k, v in ph.items()) + " s")
             if storm is not None:
                 mine = rows["this tree"]["e2e"]
                 print(f"Storm's LRA solve alone {storm['check']:.3f} s with stormpy's default (sound) environment, "
