@@ -3,6 +3,7 @@
     python benchmarks/fixed_costs.py --baseline-rev d3dec86          # a commit, unpacked by git archive
     python benchmarks/fixed_costs.py --baseline /tmp/wncs_base --caps 4,12,30 --repeat 5
     python benchmarks/fixed_costs.py --baseline-rev main --repeat 5 --csv benchmarks/fixed_costs.csv
+    python benchmarks/fixed_costs.py --crossover paper_p123:10,paper_p12:30,paper_p12:36,paper_p123:12,paper_p12:45
 
 For each cap (default 4 and 30 of ``formulations/paper_p12.toml``) the command
 ``wncs-lp solve formulations/paper_p12.toml --set tau_cap=CAP --json`` is timed as a whole process,
@@ -16,6 +17,11 @@ any kernel), and Storm's solve of the same model when ``stormpy`` imports
 environment and with a plain one, both value iteration). The ratios of one run are steadier than
 its seconds: the machine is shared (the load average is printed, and written to ``--csv``: one
 row per cap and tree).
+
+``--crossover SCENARIO:CAP,...`` times instead the whole command of this tree on each instance
+with value iteration on numba and on the scipy kernel (``kernels.NUMBA_MIN_STATES`` set to 0 or
+to infinity before the command runs), in turn: where numba's load pays, which is what sets
+``NUMBA_MIN_STATES``.
 """
 from __future__ import annotations
 
@@ -79,6 +85,37 @@ def phases(tree: Path, scenario: str, cap: int, repeat: int) -> dict:
             best[k] = min(best.get(k, v), v)
     return best
 
+#: The command as ``wncs-lp`` runs it, with ``auto``'s numba threshold set first (numba itself is
+#: imported only when a kernel needs it, so this changes nothing else).
+_WITH_THRESHOLD = """
+import sys
+from wncs_lp.solvers import kernels
+kernels.NUMBA_MIN_STATES = float(sys.argv[1])
+from wncs_lp.cli import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def crossover(instances: list[tuple[str, int]], repeat: int) -> list[dict]:
+    """The whole command on numba and on scipy at each (scenario, cap), best of ``repeat``, in turn."""
+    rows = []
+    for scenario, cap in instances:
+        cmd = ["solve", str(ROOT / "formulations" / f"{scenario}.toml"), "--set", f"tau_cap={cap}", "--json"]
+        jobs = {k: ([sys.executable, "-c", _WITH_THRESHOLD, t, *cmd], ROOT, _env(ROOT))
+                for k, t in (("numba", "0"), ("scipy", "inf"))}
+        best = _best_interleaved(jobs, repeat)
+        out = {k: json.loads(v[1]) for k, v in best.items()}
+        row = {"scenario": scenario, "cap": cap, "states": out["numba"]["states"], "load1": os.getloadavg()[0]}
+        for k in ("numba", "scipy"):
+            assert out[k]["stats"]["kernel"] == k, out[k]["stats"]
+            row.update({f"{k}_whole_s": best[k][0], f"{k}_solve_s": out[k]["solve_seconds"],
+                        f"{k}_sweeps": out[k]["stats"]["sweeps"], f"{k}_status": out[k]["status"]})
+        rows.append(row)
+        print(f"{scenario} cap {cap} ({row['states']:,} states, load {row['load1']:.1f}): whole command numba "
+              f"{row['numba_whole_s']:.3f} s ({row['numba_sweeps']} sweeps), scipy {row['scipy_whole_s']:.3f} s "
+              f"({row['scipy_sweeps']} sweeps): numba / scipy {row['numba_whole_s'] / row['scipy_whole_s']:.2f}x")
+    return rows
+
 
 def unpack(rev: str, folder: Path) -> Path:
     """The tree of commit ``rev`` of this repository, unpacked into ``folder`` (git archive)."""
@@ -107,7 +144,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     ap.add_argument("--csv", type=Path, default=None, help="and as CSV (one row per cap and tree)")
+    ap.add_argument("--crossover", default=None, metavar="SCENARIO:CAP,...",
+                    help="instead: the whole command on numba against scipy on these instances")
     a = ap.parse_args(argv)
+    if a.crossover is not None:
+        pairs = [(x.split(":")[0], int(x.split(":")[1])) for x in a.crossover.split(",")]
+        rows = crossover(pairs, a.repeat)
+        if a.json is not None:
+            a.json.write_text(json.dumps(rows, indent=2) + "\n")
+        return 0
     with tempfile.TemporaryDirectory() as tmp:
         trees = {"this tree": ROOT}
         if a.baseline is not None:
