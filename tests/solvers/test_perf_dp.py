@@ -67,6 +67,21 @@ def test_numba_and_scipy_jacobi_sweeps_agree(seed, per_pair):
     assert (lo_s, hi_s) == pytest.approx(bracket(mdp, h), abs=1e-12)
 
 
+@pytest.mark.parametrize("max_actions", [1, 3, kernels.LATER_PAIRS_MAX + 4])  # one pair; the later-pair minimum; reduceat
+def test_scipy_jacobi_sweep_matches_a_python_reference(max_actions):
+    mdp = random_mdp(5, n=60, max_actions=max_actions)
+    assert (np.diff(mdp.pair_ptr).max() > kernels.LATER_PAIRS_MAX) == (max_actions > kernels.LATER_PAIRS_MAX)
+    h = np.random.default_rng(5).normal(size=mdp.n_states) * 5
+    K = ScipyKernel(mdp)
+    d = np.array([min(mdp.cost[l] + float((mdp.P[l] @ h)[0]) for l in mdp.pairs_of(s)) - h[s]
+                  for s in range(mdp.n_states)])
+    for _ in range(2):  # the buffers reused by the next sweep
+        out = np.full_like(h, np.nan)
+        lo, hi = K.jacobi(h, out, 0.7, 0.3)
+        np.testing.assert_allclose(out, h + 0.7 * (d - 0.3), rtol=1e-13, atol=1e-12)
+        assert lo == pytest.approx(d.min(), abs=1e-12) and hi == pytest.approx(d.max(), abs=1e-12)
+
+
 @needs_numba
 def test_numba_in_place_sweeps_match_a_python_reference():
     mdp = random_mdp(4)

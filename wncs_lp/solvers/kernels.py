@@ -2,7 +2,7 @@
 
 One Bellman sweep reads P (data, indices, indptr), the costs and the pair pointer once and
 the bias vector h at random. The scipy path does that in several passes (a CSR mat-vec into
-a length-L temporary, ``np.minimum.reduceat``, the span, the update); the numba kernels do it
+a length-L temporary, the minimum over each state's pairs, the span, the update); the numba kernels do it
 in one pass per state:
 
     q_l = c_l + sum_k P_lk h(j_k)   for the pairs l of s,   (T h)(s) = min_l q_l,
@@ -255,6 +255,32 @@ class NumbaKernel:
                             float(tau), float(shift), pol)
 
 
+#: :func:`_later_pairs` gives up (``np.minimum.reduceat`` is used) beyond this many pairs in a state
+#: (p123 has up to 6; on p1234's 12 the two were measured alike).
+LATER_PAIRS_MAX = 6
+
+
+def _later_pairs(pair_ptr: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """For j = 1, 2, ...: the states with more than j pairs and their j-th pair, or None when a
+    state has more than :data:`LATER_PAIRS_MAX` pairs.
+
+    ``min_l q_l`` over the pairs of each state is then ``q`` at the first pairs, lowered by
+    ``np.minimum`` at each j: the same doubles as ``np.minimum.reduceat(q, pair_ptr[:-1])`` (a
+    minimum is exact in any order), with the in-place update 1.1-2.9x faster a sweep on p12, p123
+    and p14 at 10k-110k states, where most states have one pair and reduceat pays per segment.
+    """
+    counts = np.diff(pair_ptr)
+    top = int(counts.max(initial=1))
+    if top > LATER_PAIRS_MAX:
+        return None
+    starts = pair_ptr[:-1]
+    more = []
+    for j in range(1, top):
+        states = np.flatnonzero(counts > j)
+        more.append((states, starts[states] + j))
+    return more
+
+
 class ScipyKernel:
     """The same sweeps with scipy's CSR mat-vec (always available; Jacobi only)."""
 
@@ -265,16 +291,29 @@ class ScipyKernel:
         self.mdp = mdp
         self.d = prepare(mdp)
         self.starts = mdp.pair_ptr[:-1]
+        self._more = _later_pairs(mdp.pair_ptr)
+        if self._more is not None:  # the buffers of the state minimum, reused by every sweep
+            self._Th = np.empty(mdp.n_states)
+            self._bufs = [(np.empty(st.size), np.empty(st.size)) for st, _ in self._more]
         self.threads = 1
         self._pol_key = None
         self._Pd = None
 
     def jacobi(self, h, h_out, tau, shift):
         mdp = self.mdp
-        q = mdp.cost + mdp.P @ h
-        Th = np.minimum.reduceat(q, self.starts)
-        dd = Th - h
-        np.multiply(dd - shift, tau, out=h_out)
+        q = mdp.P @ h
+        q += mdp.cost
+        if self._more is None:
+            Th = np.minimum.reduceat(q, self.starts)
+        else:  # the same minima: the first pair of every state, then the j-th pair of the states that have one
+            Th = np.take(q, self.starts, out=self._Th)
+            for (states, pairs), (mine, other) in zip(self._more, self._bufs):
+                np.take(Th, states, out=mine)
+                np.take(q, pairs, out=other)
+                Th[states] = np.minimum(mine, other, out=mine)
+        dd = np.subtract(Th, h, out=Th)  # in place: fresh large temporaries cost page faults every sweep
+        np.subtract(dd, shift, out=h_out)
+        h_out *= tau
         h_out += h
         return float(dd.min()), float(dd.max())
 
@@ -292,13 +331,15 @@ class ScipyKernel:
         h += tau * (v - shift)
 
 
-#: ``kernel="auto"`` takes numba from this many states on, scipy below. numba's fixed cost in a
-#: fresh process (its import and the load of three compiled kernels from its cache) was measured
-#: at 1.9-2.1 s on a loaded 2-core machine, the scipy kernel's Jacobi value iteration at about
-#: 3.6-5.4e-5 s a state against numba's 1e-5 (processes 1, 2 at caps 4-30, 1-3 at caps 6-10, to
-#: 1e-9): they cross at 50k-80k states. (270 states: numba 2.3 s, scipy 0.04 s; 110k states:
-#: numba 2.9 s, scipy 4.0 s.)
-NUMBA_MIN_STATES = 50_000
+#: ``kernel="auto"`` takes numba from this many states on, scipy below: where numba's fixed cost in
+#: a fresh process (importing it, ~0.3-0.5 s, and loading its three compiled kernels from the cache)
+#: pays. The whole ``wncs-lp solve --json``, numba time / scipy time, best of 3-5 in turn on a
+#: loaded 2-core machine (load 5-7; ``benchmarks/fixed_costs.py --crossover``): p123 cap 8 (29k
+#: states) 1.57, p123 cap 10 (83k) 1.15 and 0.83 in two runs, p12 cap 30 (110k) 1.16-1.23, p12 cap 36
+#: (168k) 1.34, p123 cap 12 (186k) 0.61, p12 cap 45 (276k) 0.94. Where they cross depends on how
+#: many more sweeps scipy's Jacobi needs than numba's in-place sweeps (p12: 2.3x, ~200k states;
+#: p123: 2.8x, ~100k states); 120k keeps p12 at cap 30 off numba and p123 from cap 11 on it.
+NUMBA_MIN_STATES = 120_000
 
 
 def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None, *, in_place: bool = False):
