@@ -332,14 +332,13 @@ class ScipyKernel:
 
 
 #: ``kernel="auto"`` takes numba from this many states on, scipy below: where numba's fixed cost in
-#: a fresh process (importing it, ~0.3-0.5 s, and loading its three compiled kernels from the cache)
-#: pays. The whole ``wncs-lp solve --json``, numba time / scipy time, best of 3-5 in turn on a
-#: loaded 2-core machine (load 5-7; ``benchmarks/fixed_costs.py --crossover``): p123 cap 8 (29k
-#: states) 1.57, p123 cap 10 (83k) 1.15 and 0.83 in two runs, p12 cap 30 (110k) 1.16-1.23, p12 cap 36
-#: (168k) 1.34, p123 cap 12 (186k) 0.61, p12 cap 45 (276k) 0.94. Where they cross depends on how
-#: many more sweeps scipy's Jacobi needs than numba's in-place sweeps (p12: 2.3x, ~200k states;
-#: p123: 2.8x, ~100k states); 120k keeps p12 at cap 30 off numba and p123 from cap 11 on it.
-NUMBA_MIN_STATES = 120_000
+#: a fresh process (importing it, ~0.3-0.5 s, and loading its compiled kernels from the cache)
+#: pays. In a fresh process the whole ``wncs-lp solve --json`` would break even near 100k states on
+#: p123 and 200k on p12 (``benchmarks/fixed_costs.py --crossover``), but in a long run that has
+#: loaded numba already (a reproduction, a sweep, a notebook) the scipy Jacobi sweeps cost 2.6-3.2x
+#: numba's at 110k states (p12 cap 30, idling allowed: 1.9-2.4 s against 0.74 s, 393 against 157
+#: sweeps), so the threshold stays where numba's sweeps win as soon as they are loaded.
+NUMBA_MIN_STATES = 50_000
 
 
 def get_kernel(mdp: MDP, kernel: str = "auto", threads: int | None = None, *, in_place: bool = False):
