@@ -1,10 +1,11 @@
 """Shared by the whole suite: the quick reproduction, computed once per run; no files left in
 the repository.
 
-``wncs-lp reproduce --profile quick`` is the suite's most expensive step. One run serves both
-the interruption test (Ctrl-C after three cached steps, then a resumed run) and the report's
-tests (they read the resumed run's report, which must be the whole report). Under pytest-xdist
-every test that uses it is kept on one worker (``xdist_group``), so it is computed once.
+``wncs-lp reproduce --profile quick`` is the suite's most expensive step (here with its sections
+beyond the paper on small settings, :data:`SMALL_SECTIONS`). One run serves both the
+interruption test (Ctrl-C after three cached steps, then a resumed run) and the report's tests
+(they read the resumed run's report, which must be the whole report). Under pytest-xdist every
+test that uses it is kept on one worker (``xdist_group``), so it is computed once.
 """
 from __future__ import annotations
 
@@ -102,10 +103,28 @@ class QuickReproduction:
     report: dict | None
 
 
+#: ``wncs-lp reproduce`` (the CLI's own ``main``: its exit codes, Ctrl-C and ``--json``) with the
+#: quick profile's claims as they are and its sections beyond the paper (B1-B3, more than half of
+#: the quick run's time) on the small settings their own tests check against independent routes
+#: (tests/reproduce/test_beyond.py, test_fullscale.py, test_beyond_exact.py): here they need only
+#: be computed and rendered into the whole report.
+SMALL_SECTIONS = """
+import sys
+from wncs_lp.reproduce import beyond, beyondexact, fullscale
+beyond.SETTINGS["quick"] = beyond.BeyondSettings(caps=(5, 6), values=(0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3))
+fullscale.SETTINGS["quick"] = fullscale.FullScaleSettings(caps=(6,), sweep_cap=6, p_grid=(0.8, 0.9))
+beyondexact.SETTINGS["quick"] = beyondexact.BeyondExactSettings(
+    (beyondexact.Instance(beyondexact.FOUR, 6, True), beyondexact.Instance("bounds_mix6.toml", 4, False)),
+    slots=3_000, reps=4, burn_in=200, steps=3)
+from wncs_lp.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
 @pytest.fixture(scope="session")
 def quick_reproduction(tmp_path_factory) -> QuickReproduction:
     out = tmp_path_factory.mktemp("quick") / "repro"
-    cmd = [sys.executable, "-m", "wncs_lp", "reproduce", "--out", str(out), "--profile", "quick"]
+    cmd = [sys.executable, "-c", SMALL_SECTIONS, "reproduce", "--out", str(out), "--profile", "quick"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=ctrl_c_default)
     cache = out / "cache"
     deadline = time.time() + 600  # generous: guards a hang, not a speed (a loaded 2-core machine is slow)
