@@ -51,14 +51,19 @@ def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``-n 2``, loadgroup scheduling, see below) the tests that share an
     expensive fixture stay on one worker, so it is computed once: the quick reproduction's tests
     in one group, run first (the longest unit of work, started while the other worker takes the
-    rest), and the tests of a module with a module-scoped fixture in one group per module."""
+    rest), and the tests of a module with a module-scoped fixture in one group per module. The
+    tests marked ``slow`` (and their module's group) come next: the workers take units in this
+    order, so the longest ones start early and none is left running alone at the end."""
     quick = [i for i in items if "quick_reproduction" in getattr(i, "fixturenames", ())]
     for item in quick:
         item.add_marker(pytest.mark.xdist_group(QUICK_GROUP))
     for item in items:
         if item not in quick and _shares_a_module_fixture(item):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
-    items[:] = quick + [i for i in items if i not in quick]
+    first = {id(i) for i in quick}
+    slow = [i for i in items if id(i) not in first and i.get_closest_marker("slow") is not None]
+    first |= {id(i) for i in slow}
+    items[:] = quick + slow + [i for i in items if id(i) not in first]
 
 
 class _GroupNames:
