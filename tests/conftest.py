@@ -10,6 +10,7 @@ test that uses it is kept on one worker (``xdist_group``), so it is computed onc
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import subprocess
@@ -22,6 +23,13 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 from hypothesis.configuration import set_hypothesis_home_dir
+
+# numba's parallel kernels run on GNU OpenMP, whose idle threads spin (not sleep) while they wait
+# at a loop's end. Under ``-n 2`` the other worker holds a core, so a kernel's two threads take
+# turns on one: a spinning thread burns the slice its partner needs (the threads test took 30 s
+# beside two busy processes, 10 s with passive waiting). Inherited by every subprocess the tests
+# start; set before any parallel kernel loads the OpenMP runtime. Results do not depend on it.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 # Hypothesis would keep its example database and its cache of constants in .hypothesis/ of the
 # working folder (the repository): no database (the fuzz tests print any falsifying example),
