@@ -203,7 +203,9 @@ def test_solve_registers_the_method_on_a_built_mdp():
 
 @pytest.mark.slow
 def test_threads_give_the_same_certified_gain():
-    sc = paper("paper_p1234", "tau_cap=7")
+    # cap 6: the same 486 configurations as cap 7 on 48k states instead of 128k (beside another
+    # busy worker two threads share one core, at a pace set by the states they sweep)
+    sc = paper("paper_p1234", "tau_cap=6")
     one = matrix_free_value_iteration(sc, threads=1)
     two = matrix_free_value_iteration(sc, threads=2)
     assert one.status == two.status == "optimal" and two.stats["threads"] == 2
