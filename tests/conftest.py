@@ -1,14 +1,16 @@
 """Shared by the whole suite: the quick reproduction, computed once per run; no files left in
 the repository.
 
-``wncs-lp reproduce --profile quick`` is the suite's most expensive step. One run serves both
-the interruption test (Ctrl-C after three cached steps, then a resumed run) and the report's
-tests (they read the resumed run's report, which must be the whole report). Under pytest-xdist
-every test that uses it is kept on one worker (``xdist_group``), so it is computed once.
+``wncs-lp reproduce --profile quick`` is the suite's most expensive step (here with its sections
+beyond the paper on small settings, :data:`SMALL_SECTIONS`). One run serves both the
+interruption test (Ctrl-C after three cached steps, then a resumed run) and the report's tests
+(they read the resumed run's report, which must be the whole report). Under pytest-xdist every
+test that uses it is kept on one worker (``xdist_group``), so it is computed once.
 """
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import subprocess
@@ -21,6 +23,13 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 from hypothesis.configuration import set_hypothesis_home_dir
+
+# numba's parallel kernels run on GNU OpenMP, whose idle threads spin (not sleep) while they wait
+# at a loop's end. Under ``-n 2`` the other worker holds a core, so a kernel's two threads take
+# turns on one: a spinning thread burns the slice its partner needs (the threads test took 30 s
+# beside two busy processes, 10 s with passive waiting). Inherited by every subprocess the tests
+# start; set before any parallel kernel loads the OpenMP runtime. Results do not depend on it.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 # Hypothesis would keep its example database and its cache of constants in .hypothesis/ of the
 # working folder (the repository): no database (the fuzz tests print any falsifying example),
@@ -50,14 +59,19 @@ def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``-n 2``, loadgroup scheduling, see below) the tests that share an
     expensive fixture stay on one worker, so it is computed once: the quick reproduction's tests
     in one group, run first (the longest unit of work, started while the other worker takes the
-    rest), and the tests of a module with a module-scoped fixture in one group per module."""
+    rest), and the tests of a module with a module-scoped fixture in one group per module. The
+    tests marked ``slow`` (and their module's group) come next: the workers take units in this
+    order, so the longest ones start early and none is left running alone at the end."""
     quick = [i for i in items if "quick_reproduction" in getattr(i, "fixturenames", ())]
     for item in quick:
         item.add_marker(pytest.mark.xdist_group(QUICK_GROUP))
     for item in items:
         if item not in quick and _shares_a_module_fixture(item):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
-    items[:] = quick + [i for i in items if i not in quick]
+    first = {id(i) for i in quick}
+    slow = [i for i in items if id(i) not in first and i.get_closest_marker("slow") is not None]
+    first |= {id(i) for i in slow}
+    items[:] = quick + slow + [i for i in items if id(i) not in first]
 
 
 class _GroupNames:
@@ -102,10 +116,28 @@ class QuickReproduction:
     report: dict | None
 
 
+#: ``wncs-lp reproduce`` (the CLI's own ``main``: its exit codes, Ctrl-C and ``--json``) with the
+#: quick profile's claims as they are and its sections beyond the paper (B1-B3, more than half of
+#: the quick run's time) on the small settings their own tests check against independent routes
+#: (tests/reproduce/test_beyond.py, test_fullscale.py, test_beyond_exact.py): here they need only
+#: be computed and rendered into the whole report.
+SMALL_SECTIONS = """
+import sys
+from wncs_lp.reproduce import beyond, beyondexact, fullscale
+beyond.SETTINGS["quick"] = beyond.BeyondSettings(caps=(5, 6), values=(0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3))
+fullscale.SETTINGS["quick"] = fullscale.FullScaleSettings(caps=(6,), sweep_cap=6, p_grid=(0.8, 0.9))
+beyondexact.SETTINGS["quick"] = beyondexact.BeyondExactSettings(
+    (beyondexact.Instance(beyondexact.FOUR, 6, True), beyondexact.Instance("bounds_mix6.toml", 4, False)),
+    slots=3_000, reps=4, burn_in=200, steps=3)
+from wncs_lp.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
 @pytest.fixture(scope="session")
 def quick_reproduction(tmp_path_factory) -> QuickReproduction:
     out = tmp_path_factory.mktemp("quick") / "repro"
-    cmd = [sys.executable, "-m", "wncs_lp", "reproduce", "--out", str(out), "--profile", "quick"]
+    cmd = [sys.executable, "-c", SMALL_SECTIONS, "reproduce", "--out", str(out), "--profile", "quick"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=ctrl_c_default)
     cache = out / "cache"
     deadline = time.time() + 600  # generous: guards a hang, not a speed (a loaded 2-core machine is slow)

@@ -96,7 +96,7 @@ OWN = {
 }
 
 
-@pytest.mark.parametrize("name", list(OWN))
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "3proc-3srv" else n for n in OWN])
 def test_all_methods_agree(name):
     mdp = build(OWN[name])
     mdp.validate()

@@ -8,9 +8,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
+@pytest.mark.slow
 def test_the_walk_through_runs(tmp_path):
     png = tmp_path / "maps.png"
     proc = subprocess.run([sys.executable, str(ROOT / "examples" / "06_notebook.py"), "7", str(png)], cwd=ROOT,

@@ -21,11 +21,11 @@ CASES = [
     ("paper_p123.toml", ["tau_cap=6"]),
     ("paper_p14.toml", ["tau_cap=7", "p=0.85"]),
     ("paper_preemption_p12.toml", ["tau_cap=7", "p=0.8"]),
-    ("preemption_p123_u0d0.toml", ["tau_cap=5"]),
+    pytest.param("preemption_p123_u0d0.toml", ["tau_cap=5"], marks=pytest.mark.slow),
 ]
 
 
-@pytest.mark.parametrize("name, overrides", CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize("name, overrides", CASES, ids=[c.values[0] if hasattr(c, "values") else c[0] for c in CASES])
 def test_simulation_agrees_with_exact(name, overrides):
     """For every policy: |simulated mean - exact gain| <= 3 standard errors (and MSE per process)."""
     sc = load_scenario(FORMULATIONS / name, overrides)

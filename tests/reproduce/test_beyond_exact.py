@@ -36,6 +36,7 @@ def tiny(tmp_path_factory):
     del b3.SETTINGS["tiny-b3"]
 
 
+@pytest.mark.slow  # the module's fixture: its group starts early
 def test_section_has_a_table_and_no_verdict(tiny):
     out, sec, _ = tiny
     assert sec["id"] == "B3" and "verdict" not in sec

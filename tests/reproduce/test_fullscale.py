@@ -30,6 +30,7 @@ def tiny(tmp_path_factory):
     del fullscale.SETTINGS["tiny-b2"]
 
 
+@pytest.mark.slow  # the module's fixture: its group starts early
 def test_section_has_numbers_figure_table_and_no_verdict(tiny):
     out, _, b2, _ = tiny
     assert b2["id"] == "B2" and "verdict" not in b2

@@ -36,6 +36,7 @@ def test_the_default_is_the_usable_cores(monkeypatch):
     assert th.resolve_threads(None, 10 * th.PARALLEL_MIN_STATES) == 1
 
 
+@pytest.mark.slow
 def test_workers_forked_after_threaded_kernels_still_solve():
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.fail("this test needs numba to have 2 threads (NUMBA_NUM_THREADS >= 2)")
