@@ -65,14 +65,19 @@ from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
 from .joint_bundle import PriceBundle
 from .joint_chains import (Certificate, ChainSolution, JointData, Kernels, certify_tables, column,
                            kernels_available, policy_weights, solve_chain, stationary)
+from .joint_ipm import ipm_bytes, ipm_tables
 from .joint_lp import HalpernPDHG, JointLP, lp_shape, pin_tables
 from .private import private_bound
 from .result import BoundResult, ValueTables
 
-__all__ = ["joint_bound", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS", "REACH_MAX_NNZ", "REACH_MAX_BYTES"]
+__all__ = ["joint_bound", "ipm_fits", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS", "REACH_MAX_NNZ",
+           "REACH_MAX_BYTES", "IPM_MAX_NNZ"]
 
 #: ``method`` values of :func:`joint_bound`.
-JOINT_METHODS = ("auto", "pdhg", "bundle")
+JOINT_METHODS = ("auto", "ipm", "bundle", "pdhg", "pdhg+bundle")
+#: ``method="auto"`` solves the LP by the interior point when it has at most this many nonzeros
+#: (and its memory estimate fits :data:`REACH_MAX_BYTES`); beyond, the bundle alone.
+IPM_MAX_NNZ = 3_000_000
 #: The bundle stops after this many null steps in a row (its model no longer finds ascent).
 STALL = 50
 #: :func:`joint_size`'s reach rule: at most this many nonzeros in the LP ...
@@ -375,7 +380,8 @@ def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int,
 
 # ---------------------------------------------------------------------------- entry point
 def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = 600.0, max_iter: int = 1000,
-                pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "bundle", warm_start: bool = True,
+                pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "auto", ipm_tol: float | None = None,
+                warm_start: bool = True,
                 kernel: str = "auto", threads: int = 1,
                 progress: bool | Progress | None = None) -> BoundResult:
     """A certified lower bound on g* from relaxation 2 (joint configuration, per-process AoI).
@@ -437,7 +443,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     status, it = MAX_ITER, 0
     try:
         warm = _warm_start(system, run, stats) if warm_start else None
-        closed, it = _phases(run, _start(run, warm), method, stats, pdhg_iter, pdhg_patience, max_iter)
+        closed, it = _phases(run, _start(run, warm), method, stats, pdhg_iter, pdhg_patience, max_iter,
+                             1e-2 * tol if ipm_tol is None else ipm_tol)
         status = OPTIMAL if closed else MAX_ITER
     except KeyboardInterrupt:
         status = INTERRUPTED
@@ -462,16 +469,45 @@ def _warm_start(system: System, run: _Run, stats: dict) -> tuple | None:
     return warm
 
 
+def ipm_fits(data: JointData) -> bool:
+    """``method="auto"``'s rule: the interior point when the LP has at most :data:`IPM_MAX_NNZ`
+    nonzeros and its memory estimate is at most :data:`REACH_MAX_BYTES`."""
+    shape = lp_shape(data.caps, data.n_configs, data.n_pairs, data.n_outcomes)
+    return shape["nnz"] <= IPM_MAX_NNZ and ipm_bytes(shape["nnz"], shape["rows"], shape["cols"]) <= REACH_MAX_BYTES
+
+
+def _ipm_phase(run: _Run, stats: dict, tol: float) -> None:
+    """The LP solved whole by IPX; its duals' tables offered to the certificate."""
+    left = run.deadline - time.monotonic()
+    run.prog.phase(f"relaxation 2: the start gives {run.best.lower_bound:.8g}; the LP by the interior point "
+                   "(HiGHS IPX, no crossover)")
+    t = time.monotonic()
+    ipm = ipm_tables(run.data, tol=tol, time_limit=left if np.isfinite(left) else None)
+    run.clock("ipm", t)
+    stats.update(ipm_status=ipm.status, ipm_iterations=ipm.iterations, ipm_objective=ipm.objective,
+                 ipm_seconds=round(ipm.seconds, 3), lp_shape=ipm.shape[:2], lp_nnz=ipm.shape[2],
+                 ipm_tables=ipm.tables is not None)
+    if ipm.tables is not None:
+        _offer(run, ipm.tables, None, "the interior point's duals")
+        run.prog.tick(f"interior point ({ipm.status}, {ipm.iterations} iterations): certified "
+                      f"{run.best.lower_bound:.10g}")
+
+
 def _phases(run: _Run, start: tuple, method: str, stats: dict, pdhg_iter: int, patience: int,
-            max_iter: int) -> tuple[bool, int]:
-    """The PDHG and / or bundle phases of ``method``: (the bundle's stopping test met, its steps)."""
+            max_iter: int, ipm_tol: float) -> tuple[bool, int]:
+    """The phases of ``method``: (the bundle's stopping test met, its steps)."""
     seed = []
-    if method in ("auto", "pdhg"):
-        lp, z, pstats = _pdhg_phase(run, start, pdhg_iter, 0.6 if method == "auto" else 1.0, patience)
+    if method == "auto":
+        method = "ipm" if ipm_fits(run.data) else "bundle"
+        stats["auto_method"] = method
+    if method == "ipm":
+        _ipm_phase(run, stats, ipm_tol)
+    if method in ("pdhg+bundle", "pdhg"):
+        lp, z, pstats = _pdhg_phase(run, start, pdhg_iter, 0.6 if method == "pdhg+bundle" else 1.0, patience)
         stats.update(pstats, lp_shape=lp.shape)
-        if method == "auto":
+        if method == "pdhg+bundle":
             seed = _randomised_cuts(run, lp, z)
-    if method not in ("auto", "bundle"):
+    if method == "pdhg" or max_iter <= 0:
         return False, 0
     closed, it, bundle = _bundle_phase(run, max_iter, seed)
     stats.update(bundle_serious=bundle.serious_steps, bundle_null=bundle.null_steps,
