@@ -67,14 +67,29 @@ def _rel(value, ref):
     return "" if value in ("", None) or ref in ("", None) else (value - ref) / ref
 
 
-def _bounds(system, relaxations, time_limit=None):
+def _bounds(system, relaxations, time_limit=None, max_iter=None, method=None):
     out = {}
     for rel in relaxations:
         t0, l0 = time.perf_counter(), load1()
-        opts = {"time_limit": time_limit} if rel == "joint-configuration" and time_limit else {}
+        opts = {}
+        if rel == "joint-configuration":
+            given = {"time_limit": time_limit, "max_iter": max_iter, "method": method}
+            opts = {k: v for k, v in given.items() if v is not None}
         res = lower_bound(system, rel, **opts)
         out[rel] = (res, time.perf_counter() - t0, l0)
     return out
+
+
+def _bound_note(res):
+    st = res.stats
+    if res.relaxation != "joint-configuration":
+        return f"{res.iterations} iterations"
+    parts = [f"method {st.get('auto_method', st.get('method'))}"]
+    if "ipm_iterations" in st:
+        parts.append(f"IPX {st['ipm_iterations']} its {st['ipm_seconds']:.0f} s ({st['ipm_status']}), "
+                     f"LP nnz {st.get('lp_nnz', 0):,}")
+    parts.append(f"{st.get('bundle_steps', 0)} bundle steps; best from {st.get('found_in')}")
+    return "; ".join(parts)
 
 
 def _optimum(name, cap, system):
@@ -93,7 +108,7 @@ def run_instance(name, cap, args, joint):
     system = System.from_scenario(sc)
     base = {"instance": name, "cap": cap, "processes": sc.n_processes, "servers": sc.n_servers}
     rels = ["private-servers"] + (["joint-configuration"] if joint else [])
-    bounds = _bounds(system, rels, args.joint_time_limit)
+    bounds = _bounds(system, rels, args.joint_time_limit, args.joint_max_iter, args.joint_method)
     lb1 = bounds["private-servers"][0].lower_bound
     lb2 = bounds["joint-configuration"][0].lower_bound if joint else ""
     g_star, t_opt, how_opt = _optimum(name, cap, system)
@@ -101,7 +116,7 @@ def run_instance(name, cap, args, joint):
     for rel, (res, secs, l0) in bounds.items():
         rows.append({**base, "row": f"LB {rel}", "how": res.status, "value": res.lower_bound, "gap_optimum":
                      _rel(res.lower_bound, g_star), "seconds": round(secs, 2), "load1": l0,
-                     "note": f"{res.iterations} iterations"})
+                     "note": _bound_note(res)})
     if g_star is not None:
         rows.append({**base, "row": "optimum g*", "value": g_star, "seconds": round(t_opt, 2), "load1": load1(),
                      "note": how_opt})
@@ -157,6 +172,8 @@ def main(argv=None) -> int:
     ap.add_argument("--bounds-only", action="store_true", help="the bounds (and g* where known) only, no policies")
     ap.add_argument("--joint-time-limit", type=float, default=None,
                     help="seconds for relaxation 2's search (its bound is certified whenever it stops)")
+    ap.add_argument("--joint-max-iter", type=int, default=None, help="relaxation 2's bundle steps (after the IPM)")
+    ap.add_argument("--joint-method", default=None, help="relaxation 2's method (auto, ipm, bundle, ...)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     if args.instances:

@@ -29,8 +29,14 @@ Finding good tables
 The LP has N tau_hat |C| + N |C x A| + 1 variables and N tau_hat |C x A| constraints (processes 1-4
 at cap 20: 44k and 101k; the paper's four process types twice at cap 20: 567k and 1.96M), and
 its optimum mixes the per-process policies at about |C x A| states, so a simplex is slow even on
-four processes (HiGHS: minutes at cap 20) and a pure cutting-plane method needs about |C x A|
-cuts per process. The method here:
+four processes (HiGHS's dual simplex: minutes at cap 12) and a pure cutting-plane method needs
+about |C x A| cuts per process.
+
+**Up to** :data:`IPM_MAX_NNZ` **nonzeros** (``method="auto"``, ``"ipm"``) the LP is solved whole by
+HiGHS's interior point, IPX, without crossover (:mod:`~wncs_lp.bounds.joint_ipm`): its row duals
+are tables, certified like any others. That reaches the relaxation's optimum (processes 1-4:
+-1.58% of g* at cap 20, where the bundle below stalled at -3.7%). A few bundle steps from the
+prices those tables give (``max_iter``) may polish it. **Beyond**, or with ``method="bundle"``:
 
 1. **Lagrangian (price) form.** Dualising the shared marginal x(C, a) with prices mu_k(p) that
    sum to zero over k gives L(mu) = sum_k g_k(q_k + mu_k) <= optimum of the LP, g_k the optimal
@@ -45,7 +51,7 @@ cuts per process. The method here:
    one certified evaluation per step, until its stopping test, :data:`STALL` null steps in a
    row, ``max_iter`` steps or ``time_limit``.
 
-``method="auto"`` puts a first-order method first (:class:`~wncs_lp.bounds.joint_lp.HalpernPDHG`,
+``method="pdhg+bundle"`` puts a first-order method first (:class:`~wncs_lp.bounds.joint_lp.HalpernPDHG`,
 restarted Halpern PDHG on the equilibrated LP, whose duals are turned into prices -- mu_k =
 u_k(h) plus an equal share of each pair's slack -- and repaired by the chains); from relaxation
 1's prices it did not help where measured. Each evaluation warm-starts the chains from the last
@@ -396,19 +402,26 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         than ``tol * |L|`` more; the PDHG hands over when two repairs gained less than that.
     time_limit : float or None
         Seconds (default 10 minutes, so that ``wncs-lp bound`` with ``auto`` ends; None: no
-        limit); the PDHG gets at most 60% of it. The bound returned is certified whatever stops
-        the run.
+        limit); the interior point gets what is left after the start, the PDHG at most 60% of
+        it. The bound returned is certified whatever stops the run (an interior point stopped by
+        it may leave no tables: the bound is then the start's or the bundle's).
     max_iter : int
-        Bundle steps (each one certified evaluation: N priced chains and the separable check).
+        Bundle steps (each one certified evaluation: N priced chains and the separable check);
+        after the interior point, the polish (0: none).
     pdhg_iter : int
         PDHG iterations at most.
     pdhg_patience : int
         The PDHG hands over after this many repairs in a row that did not raise the bound.
-    method : {"bundle", "auto", "pdhg"}
-        ``"bundle"`` (default): the bundle from the start; ``"auto"``: PDHG then bundle;
-        ``"pdhg"``: PDHG with repairs only. From relaxation 1's prices the bundle alone did
-        better where measured (processes 1-4 cap 20: 1514.4 with PDHG first in 471 s, 1516.9 with
-        the bundle alone in 395 s; on small instances the PDHG's repairs stayed below the start).
+    method : {"auto", "ipm", "bundle", "pdhg", "pdhg+bundle"}
+        ``"auto"`` (default): ``"ipm"`` when :func:`ipm_fits` (at most :data:`IPM_MAX_NNZ` LP
+        nonzeros), else ``"bundle"`` (``stats["auto_method"]`` says which); ``"ipm"``: the LP by
+        IPX, then ``max_iter`` bundle steps; ``"bundle"``: the bundle from the start;
+        ``"pdhg"``: PDHG with repairs only; ``"pdhg+bundle"``: PDHG then bundle. From relaxation
+        1's prices the bundle alone beat the PDHG where measured (processes 1-4 cap 20: 1514.4
+        with PDHG first in 471 s, 1516.9 with the bundle alone in 395 s); the interior point beat
+        both (1547.6).
+    ipm_tol : float, optional
+        IPX's optimality tolerance (default ``tol / 100``).
     warm_start : bool
         Solve relaxation 1 first and start from its tables and prices (:func:`relaxation1_start`);
         where its claims sum to 1 this makes relaxation 2's bound at least relaxation 1's.

@@ -3,16 +3,16 @@ r"""Relaxation 2's LP solved whole by an interior point method: tables for the c
 The occupation-measure LP of :mod:`wncs_lp.bounds.joint_lp` (the dual of relaxation 2's
 approximate LP) is written out as a sparse matrix (:func:`~wncs_lp.bounds.joint_lp.sparse_lp`,
 the flat dual directions' rows dropped) and handed to HiGHS's interior point solver IPX with
-no crossover and no presolve (its search for dependent rows alone took 96 s at processes 1-4,
-cap 20). The row duals of its balance rows are tables h_k(tau, C).
+no crossover and without presolve's search for dependent rows (96 s at processes 1-4, cap 20,
+for nothing). The row duals of its balance rows are tables h_k(tau, C).
 
 Nothing HiGHS reports enters the bound: the tables go to
 :func:`~wncs_lp.bounds.joint_chains.certify_tables`, which turns *any* tables into a certified
 g(h) <= g*. An interior point's duals are (nearly) feasible at every iteration -- IPX keeps
 the dual residual at round-off here -- so even a loose tolerance gives tables whose
 certificate is within about the duality gap of the relaxation's optimum. A run stopped by its
-time limit may return no duals at all (HiGHS then holds no solution): the caller falls back to
-its other search.
+time limit returns no duals at all (HiGHS 1.16 then holds no solution; measured): the caller
+falls back to its other search.
 """
 from __future__ import annotations
 
@@ -26,6 +26,11 @@ from .joint_chains import JointData
 from .joint_lp import sparse_lp
 
 __all__ = ["IpmRun", "ipm_tables", "ipm_bytes"]
+
+#: HiGHS's ``presolve_rule_off`` bit of its dependent-equations rule (HiGHS 1.16's rule 10): its
+#: search took 96 s of a 275 s run at processes 1-4 cap 20 and removed nothing; without presolve
+#: at all IPX took 415 s there (42k rows instead of 19k).
+_NO_DEPENDENT_EQUATIONS = 1 << 10
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,7 +83,7 @@ def ipm_tables(data: JointData, *, tol: float = 1e-6, time_limit: float | None =
     """
     t0 = time.monotonic()
     A, b, c, keep, rows = sparse_lp(data)
-    settings = {"variant": "ipx", "run_crossover": "off", "presolve": "off", "threads": 1}
+    settings = {"variant": "ipx", "run_crossover": "off", "presolve_rule_off": _NO_DEPENDENT_EQUATIONS, "threads": 1}
     if time_limit is not None:
         settings["time_limit"] = max(float(time_limit) - (time.monotonic() - t0), 1.0)
     _, _, z, stats = solve_highs(A, b, c, tol=float(tol), max_iter=2**31 - 1, verbose=verbose, settings=settings)
