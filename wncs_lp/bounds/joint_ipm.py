@@ -85,7 +85,7 @@ def ipm_tables(data: JointData, *, tol: float = 1e-6, time_limit: float | None =
     A, b, c, keep, rows = sparse_lp(data)
     settings = {"variant": "ipx", "run_crossover": "off", "presolve_rule_off": _NO_DEPENDENT_EQUATIONS, "threads": 1}
     if time_limit is not None:
-        settings["time_limit"] = max(float(time_limit) - (time.monotonic() - t0), 1.0)
+        settings["time_limit"] = max(float(time_limit) - (time.monotonic() - t0), 1e-3)
     _, _, z, stats = solve_highs(A, b, c, tol=float(tol), max_iter=2**31 - 1, verbose=verbose, settings=settings)
     tables = None
     if np.isfinite(z).all():
