@@ -85,8 +85,12 @@ __all__ = ["joint_bound", "ipm_fits", "joint_size", "joint_reach", "relaxation1_
 #: ``method`` values of :func:`joint_bound`.
 JOINT_METHODS = ("auto", "ipm", "bundle", "pdhg", "pdhg+bundle")
 #: ``method="auto"`` solves the LP by the interior point when it has at most this many nonzeros
-#: (and its memory estimate fits :data:`REACH_MAX_BYTES`); beyond, the bundle alone.
-IPM_MAX_NNZ = 3_000_000
+#: (:func:`~wncs_lp.bounds.joint_lp.lp_shape`'s count, before duplicates merge; and its memory
+#: estimate fits :data:`REACH_MAX_BYTES`); beyond, the bundle alone. IPX's time grows faster than
+#: the LP (processes 1-4 on 2 loaded cores: 0.36M nonzeros at cap 12 in 27-55 s, 0.59M at cap
+#: 20 in 3-7 minutes), so the 6-process mix at cap 20 (3.4M) and 8 processes (12.5M) are left
+#: to the bundle.
+IPM_MAX_NNZ = 1_500_000
 #: The bundle stops after this many null steps in a row (its model no longer finds ascent).
 STALL = 50
 #: :func:`joint_size`'s reach rule: at most this many nonzeros in the LP ...
@@ -405,8 +409,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         than ``tol * |L|`` more; the PDHG hands over when two repairs gained less than that.
     time_limit : float or None
         Seconds (default 10 minutes, so that ``wncs-lp bound`` with ``auto`` ends; None: no
-        limit); the interior point gets what is left after the start, the PDHG at most 60% of
-        it. The bound returned is certified whatever stops the run (an interior point stopped by
+        limit); the interior point gets 80% of what is left after the start, the PDHG at most
+        60% of it. The bound returned is certified whatever stops the run (an interior point stopped by
         it may leave no tables: the bound is then the start's or the bundle's).
     max_iter : int
         Bundle steps (each one certified evaluation: N priced chains and the separable check);
@@ -504,7 +508,8 @@ def _ipm_phase(run: _Run, stats: dict, tol: float) -> bool:
     run.prog.phase(f"relaxation 2: the start gives {run.best.lower_bound:.8g}; the LP by the interior point "
                    "(HiGHS IPX, no crossover)")
     t = time.monotonic()
-    ipm = ipm_tables(run.data, tol=tol, time_limit=left if np.isfinite(left) else None)
+    # 80% of the time left: a run stopped by its limit leaves no tables, and the bundle the rest
+    ipm = ipm_tables(run.data, tol=tol, time_limit=0.8 * left if np.isfinite(left) else None)
     run.clock("ipm", t)
     stats.update(ipm_status=ipm.status, ipm_iterations=ipm.iterations, ipm_objective=ipm.objective,
                  ipm_seconds=round(ipm.seconds, 3), lp_shape=ipm.shape[:2], lp_nnz=ipm.shape[2],
