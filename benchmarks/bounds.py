@@ -88,8 +88,8 @@ def _bound_note(res):
         return f"{res.iterations} iterations"
     parts = [f"method {st.get('auto_method', st.get('method'))}"]
     if "ipm_iterations" in st:
-        parts.append(f"IPX {st['ipm_iterations']} its {st['ipm_seconds']:.0f} s ({st['ipm_status']}), "
-                     f"LP nnz {st.get('lp_nnz', 0):,}")
+        parts.append(f"IPX {st['ipm_iterations']} its {st['ipm_seconds']:.0f} s ({st['ipm_status']}, its objective "
+                     f"{st.get('ipm_objective', float('nan')):.10g}), LP nnz {st.get('lp_nnz', 0):,}")
     parts.append(f"{st.get('bundle_steps', 0)} bundle steps; best from {st.get('found_in')}")
     return "; ".join(parts)
 
