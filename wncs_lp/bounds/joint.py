@@ -87,9 +87,9 @@ JOINT_METHODS = ("auto", "ipm", "bundle", "pdhg", "pdhg+bundle")
 #: ``method="auto"`` solves the LP by the interior point when it has at most this many nonzeros
 #: (:func:`~wncs_lp.bounds.joint_lp.lp_shape`'s count, before duplicates merge; and its memory
 #: estimate fits :data:`REACH_MAX_BYTES`); beyond, the bundle alone. IPX's time grows faster than
-#: the LP (processes 1-4 on 2 loaded cores: 0.36M nonzeros at cap 12 in 27-55 s, 0.59M at cap
-#: 20 in 3-7 minutes), so the 6-process mix at cap 20 (3.4M) and 8 processes (12.5M) are left
-#: to the bundle.
+#: the LP (processes 1-4 on 2 shared cores at load 3-4: 0.36M nonzeros at cap 12 in 29 s, 0.59M
+#: at cap 20 in 104 s, 0.89M at cap 30 in 276 s; 2-4 times that at load 9), so the 6-process mix
+#: at cap 20 (3.4M) and 8 processes (12.5M) are left to the bundle.
 IPM_MAX_NNZ = 1_500_000
 #: The bundle stops after this many null steps in a row (its model no longer finds ascent).
 STALL = 50
@@ -410,8 +410,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     time_limit : float or None
         Seconds (default 10 minutes, so that ``wncs-lp bound`` with ``auto`` ends; None: no
         limit); the interior point gets 80% of what is left after the start, the PDHG at most
-        60% of it. The bound returned is certified whatever stops the run (an interior point stopped by
-        it may leave no tables: the bound is then the start's or the bundle's).
+        60% of it. The bound returned is certified whatever stops the run (an interior point
+        stopped by it leaves no tables: the bound is then the start's or the bundle's).
     max_iter : int
         Bundle steps (each one certified evaluation: N priced chains and the separable check);
         with ``"ipm"`` only when the interior point returned no tables (its time limit).
@@ -422,8 +422,9 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     method : {"auto", "ipm", "bundle", "pdhg", "pdhg+bundle"}
         ``"auto"`` (default): ``"ipm"`` when :func:`ipm_fits` (at most :data:`IPM_MAX_NNZ` LP
         nonzeros), else ``"bundle"`` (``stats["auto_method"]`` says which); ``"ipm"``: the LP by
-        IPX (the bundle only if IPX returned no tables, stopped by ``time_limit``); ``"bundle"``: the bundle from the start;
-        ``"pdhg"``: PDHG with repairs only; ``"pdhg+bundle"``: PDHG then bundle. From relaxation
+        IPX (the bundle only if IPX returned no tables, stopped by ``time_limit``); ``"bundle"``:
+        the bundle from the start; ``"pdhg"``: PDHG with repairs only; ``"pdhg+bundle"``: PDHG
+        then bundle. From relaxation
         1's prices the bundle alone beat the PDHG where measured (processes 1-4 cap 20: 1514.4
         with PDHG first in 471 s, 1516.9 with the bundle alone in 395 s); the interior point beat
         both (1547.6).
