@@ -429,7 +429,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         with PDHG first in 471 s, 1516.9 with the bundle alone in 395 s); the interior point beat
         both (1547.6).
     ipm_tol : float, optional
-        IPX's optimality tolerance (default ``tol / 100``).
+        IPX's optimality tolerance (default ``tol``: at processes 1-4 cap 20, 1e-4 took 36
+        iterations and certified 6e-6 (relative) less than 1e-6 in 47).
     warm_start : bool
         Solve relaxation 1 first and start from its tables and prices (:func:`relaxation1_start`);
         where its claims sum to 1 this makes relaxation 2's bound at least relaxation 1's.
@@ -466,7 +467,7 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     try:
         warm = _warm_start(system, run, stats) if warm_start else None
         closed, it = _phases(run, _start(run, warm), method, stats, pdhg_iter, pdhg_patience, max_iter,
-                             1e-2 * tol if ipm_tol is None else ipm_tol)
+                             tol if ipm_tol is None else ipm_tol)
         status = OPTIMAL if closed else MAX_ITER
     except KeyboardInterrupt:
         status = INTERRUPTED
