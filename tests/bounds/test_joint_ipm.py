@@ -33,7 +33,7 @@ def case(request):
 
 def test_ipm_bound_is_valid(case):
     system, res, g_star = case
-    assert res.stats["ipm_tables"] and res.stats["certified"]
+    assert res.stats["ipm_tables"] and res.stats["certified"], res.stats.get("ipm_status")
     assert res.lower_bound <= g_star
     assert res.lower_bound <= box_gain(system, res.tables.h)  # the independent box test of its tables
     assert res.lower_bound == certify_tables(JointData.from_system(system), res.tables.h).lower_bound

@@ -83,7 +83,9 @@ def ipm_tables(data: JointData, *, tol: float = 1e-6, time_limit: float | None =
     """
     t0 = time.monotonic()
     A, b, c, keep, rows = sparse_lp(data)
-    settings = {"variant": "ipx", "run_crossover": "off", "presolve_rule_off": _NO_DEPENDENT_EQUATIONS, "threads": 1}
+    # no "threads": HiGHS refuses to run when it differs from its scheduler's, set by the first run of
+    # the process (another solve's); IPX itself is serial
+    settings = {"variant": "ipx", "run_crossover": "off", "presolve_rule_off": _NO_DEPENDENT_EQUATIONS}
     if time_limit is not None:
         settings["time_limit"] = max(float(time_limit) - (time.monotonic() - t0), 1e-3)
     _, _, z, stats = solve_highs(A, b, c, tol=float(tol), max_iter=2**31 - 1, verbose=verbose, settings=settings)
