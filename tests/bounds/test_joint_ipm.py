@@ -18,11 +18,11 @@ from wncs_lp.solvers import solve
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
 
-def _cases():
-    return [("paper", None), ("u2", None), ("three processes", 5)]
+#: processes 1, 2 of the paper at cap 8, the same with a U = 2 remote server, three processes at cap 5
+CASES = (("paper", None), ("u2", None), ("three processes", 5))
 
 
-@pytest.fixture(scope="module", params=_cases(), ids=lambda c: c[0])
+@pytest.fixture(scope="module", params=CASES, ids=lambda c: c[0])
 def case(request):
     name, cap = request.param
     sc = three_processes(cap) if name == "three processes" else shape(name)
@@ -70,3 +70,18 @@ def test_auto_takes_the_interior_point_on_small_lps():
     res = lower_bound(system, 2, max_iter=3)
     assert res.stats["auto_method"] == "ipm" and np.isfinite(res.lower_bound)
     assert res.lower_bound >= box_alp(system) * (1 - 1e-4)
+
+
+def test_ipm_runs_after_another_highs_solve_with_other_threads():
+    """HiGHS keeps one scheduler per process; an IPX run asking for another thread count would not
+    run at all (status kNotset): the interior point must not ask."""
+    import highspy
+
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("threads", 2)
+    h.addVar(0.0, 1.0)
+    h.changeColCost(0, 1.0)
+    h.run()
+    data = JointData.from_system(System.from_scenario(three_processes(3)))
+    assert ipm_tables(data).tables is not None
