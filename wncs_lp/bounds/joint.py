@@ -29,8 +29,17 @@ Finding good tables
 The LP has N tau_hat |C| + N |C x A| + 1 variables and N tau_hat |C x A| constraints (processes 1-4
 at cap 20: 44k and 101k; the paper's four process types twice at cap 20: 567k and 1.96M), and
 its optimum mixes the per-process policies at about |C x A| states, so a simplex is slow even on
-four processes (HiGHS: minutes at cap 20) and a pure cutting-plane method needs about |C x A|
-cuts per process. The method here:
+four processes (HiGHS's dual simplex: minutes at cap 12) and a pure cutting-plane method needs
+about |C x A| cuts per process.
+
+**Up to** :data:`IPM_MAX_NNZ` **nonzeros** (``method="auto"``, ``"ipm"``) the LP is solved whole by
+HiGHS's interior point, IPX, without crossover (:mod:`~wncs_lp.bounds.joint_ipm`): its row duals
+are tables, certified like any others. That reaches the relaxation's optimum (processes 1-4:
+-1.58% of g* at cap 20, where the bundle below stalled at -3.7%). A few bundle steps from the
+prices those tables give are not taken (at processes 1-4 cap 20 the certified bound was within
+1e-6 of IPX's own objective: nothing left to gain); the bundle runs only when IPX returns no
+tables (its time limit: HiGHS then holds no solution).
+**Beyond**, or with ``method="bundle"``:
 
 1. **Lagrangian (price) form.** Dualising the shared marginal x(C, a) with prices mu_k(p) that
    sum to zero over k gives L(mu) = sum_k g_k(q_k + mu_k) <= optimum of the LP, g_k the optimal
@@ -45,7 +54,7 @@ cuts per process. The method here:
    one certified evaluation per step, until its stopping test, :data:`STALL` null steps in a
    row, ``max_iter`` steps or ``time_limit``.
 
-``method="auto"`` puts a first-order method first (:class:`~wncs_lp.bounds.joint_lp.HalpernPDHG`,
+``method="pdhg+bundle"`` puts a first-order method first (:class:`~wncs_lp.bounds.joint_lp.HalpernPDHG`,
 restarted Halpern PDHG on the equilibrated LP, whose duals are turned into prices -- mu_k =
 u_k(h) plus an equal share of each pair's slack -- and repaired by the chains); from relaxation
 1's prices it did not help where measured. Each evaluation warm-starts the chains from the last
@@ -65,14 +74,23 @@ from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
 from .joint_bundle import PriceBundle
 from .joint_chains import (Certificate, ChainSolution, JointData, Kernels, certify_tables, column,
                            kernels_available, policy_weights, solve_chain, stationary)
+from .joint_ipm import ipm_bytes, ipm_tables
 from .joint_lp import HalpernPDHG, JointLP, lp_shape, pin_tables
 from .private import private_bound
 from .result import BoundResult, ValueTables
 
-__all__ = ["joint_bound", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS", "REACH_MAX_NNZ", "REACH_MAX_BYTES"]
+__all__ = ["joint_bound", "ipm_fits", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS", "REACH_MAX_NNZ",
+           "REACH_MAX_BYTES", "IPM_MAX_NNZ"]
 
 #: ``method`` values of :func:`joint_bound`.
-JOINT_METHODS = ("auto", "pdhg", "bundle")
+JOINT_METHODS = ("auto", "ipm", "bundle", "pdhg", "pdhg+bundle")
+#: ``method="auto"`` solves the LP by the interior point when it has at most this many nonzeros
+#: (:func:`~wncs_lp.bounds.joint_lp.lp_shape`'s count, before duplicates merge; and its memory
+#: estimate fits :data:`REACH_MAX_BYTES`); beyond, the bundle alone. IPX's time grows faster than
+#: the LP (processes 1-4 on 2 shared cores at load 3-4: 0.36M nonzeros at cap 12 in 29 s, 0.59M
+#: at cap 20 in 104 s, 0.89M at cap 30 in 276 s; 2-4 times that at load 9), so the 6-process mix
+#: at cap 20 (3.4M) and 8 processes (12.5M) are left to the bundle.
+IPM_MAX_NNZ = 1_500_000
 #: The bundle stops after this many null steps in a row (its model no longer finds ascent).
 STALL = 50
 #: :func:`joint_size`'s reach rule: at most this many nonzeros in the LP ...
@@ -375,7 +393,8 @@ def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int,
 
 # ---------------------------------------------------------------------------- entry point
 def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = 600.0, max_iter: int = 1000,
-                pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "bundle", warm_start: bool = True,
+                pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "auto", ipm_tol: float | None = None,
+                warm_start: bool = True,
                 kernel: str = "auto", threads: int = 1,
                 progress: bool | Progress | None = None) -> BoundResult:
     """A certified lower bound on g* from relaxation 2 (joint configuration, per-process AoI).
@@ -390,19 +409,28 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         than ``tol * |L|`` more; the PDHG hands over when two repairs gained less than that.
     time_limit : float or None
         Seconds (default 10 minutes, so that ``wncs-lp bound`` with ``auto`` ends; None: no
-        limit); the PDHG gets at most 60% of it. The bound returned is certified whatever stops
-        the run.
+        limit); the interior point gets 80% of what is left after the start, the PDHG at most
+        60% of it. The bound returned is certified whatever stops the run (an interior point
+        stopped by it leaves no tables: the bound is then the start's or the bundle's).
     max_iter : int
-        Bundle steps (each one certified evaluation: N priced chains and the separable check).
+        Bundle steps (each one certified evaluation: N priced chains and the separable check);
+        with ``"ipm"`` only when the interior point returned no tables (its time limit).
     pdhg_iter : int
         PDHG iterations at most.
     pdhg_patience : int
         The PDHG hands over after this many repairs in a row that did not raise the bound.
-    method : {"bundle", "auto", "pdhg"}
-        ``"bundle"`` (default): the bundle from the start; ``"auto"``: PDHG then bundle;
-        ``"pdhg"``: PDHG with repairs only. From relaxation 1's prices the bundle alone did
-        better where measured (processes 1-4 cap 20: 1514.4 with PDHG first in 471 s, 1516.9 with
-        the bundle alone in 395 s; on small instances the PDHG's repairs stayed below the start).
+    method : {"auto", "ipm", "bundle", "pdhg", "pdhg+bundle"}
+        ``"auto"`` (default): ``"ipm"`` when :func:`ipm_fits` (at most :data:`IPM_MAX_NNZ` LP
+        nonzeros), else ``"bundle"`` (``stats["auto_method"]`` says which); ``"ipm"``: the LP by
+        IPX (the bundle only if IPX returned no tables, stopped by ``time_limit``); ``"bundle"``:
+        the bundle from the start; ``"pdhg"``: PDHG with repairs only; ``"pdhg+bundle"``: PDHG
+        then bundle. From relaxation
+        1's prices the bundle alone beat the PDHG where measured (processes 1-4 cap 20: 1514.4
+        with PDHG first in 471 s, 1516.9 with the bundle alone in 395 s); the interior point beat
+        both (1547.6).
+    ipm_tol : float, optional
+        IPX's optimality tolerance (default ``tol``: at processes 1-4 cap 20, 1e-4 took 36
+        iterations and certified 6e-6 (relative) less than 1e-6 in 47).
     warm_start : bool
         Solve relaxation 1 first and start from its tables and prices (:func:`relaxation1_start`);
         where its claims sum to 1 this makes relaxation 2's bound at least relaxation 1's.
@@ -418,7 +446,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         ``tables``); ``multipliers`` the zero-sum prices mu (N, |C x A|) whose chains gave the
         tables; ``process_gains`` each chain's certified lower gain there (their sum is within
         round-off of a bound the check never falls below); ``status`` ``"optimal"`` when the
-        bundle's stopping test was met (``method="auto"`` / ``"bundle"``), ``"max_iter"`` when an
+        bundle's stopping test was met, or IPX finished with its (uncertified) primal objective
+        within ``tol`` of the certified bound, ``"max_iter"`` when an
         iteration or time budget ran out first, ``"interrupted"`` on Ctrl-C.
         ``relaxation_upper`` is +inf (no primal point of the relaxation is certified).
     """
@@ -437,7 +466,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     status, it = MAX_ITER, 0
     try:
         warm = _warm_start(system, run, stats) if warm_start else None
-        closed, it = _phases(run, _start(run, warm), method, stats, pdhg_iter, pdhg_patience, max_iter)
+        closed, it = _phases(run, _start(run, warm), method, stats, pdhg_iter, pdhg_patience, max_iter,
+                             tol if ipm_tol is None else ipm_tol)
         status = OPTIMAL if closed else MAX_ITER
     except KeyboardInterrupt:
         status = INTERRUPTED
@@ -462,16 +492,57 @@ def _warm_start(system: System, run: _Run, stats: dict) -> tuple | None:
     return warm
 
 
+def ipm_fits(data: JointData) -> bool:
+    """``method="auto"``'s rule: the interior point when the LP has at most :data:`IPM_MAX_NNZ`
+    nonzeros and its memory estimate is at most :data:`REACH_MAX_BYTES`."""
+    shape = lp_shape(data.caps, data.n_configs, data.n_pairs, data.n_outcomes)
+    return shape["nnz"] <= IPM_MAX_NNZ and ipm_bytes(shape["nnz"], shape["rows"], shape["cols"]) <= REACH_MAX_BYTES
+
+
+def _ipm_phase(run: _Run, stats: dict, tol: float) -> bool:
+    """The LP solved whole by IPX; its duals' tables offered to the certificate. True when IPX
+    returned tables (then the bundle is not needed: they are at the relaxation's optimum up to
+    IPX's tolerance)."""
+    left = run.deadline - time.monotonic()
+    if left <= 0:
+        stats.update(ipm_status="not run: out of time", ipm_tables=False)
+        return False
+    run.prog.phase(f"relaxation 2: the start gives {run.best.lower_bound:.8g}; the LP by the interior point "
+                   "(HiGHS IPX, no crossover)")
+    t = time.monotonic()
+    # 80% of the time left: a run stopped by its limit leaves no tables, and the bundle the rest
+    ipm = ipm_tables(run.data, tol=tol, time_limit=0.8 * left if np.isfinite(left) else None)
+    run.clock("ipm", t)
+    stats.update(ipm_status=ipm.status, ipm_iterations=ipm.iterations, ipm_objective=ipm.objective,
+                 ipm_seconds=round(ipm.seconds, 3), lp_shape=ipm.shape[:2], lp_nnz=ipm.shape[2],
+                 ipm_tables=ipm.tables is not None)
+    if ipm.tables is not None:
+        _offer(run, ipm.tables, None, "the interior point's duals")
+        run.prog.tick(f"interior point ({ipm.status}, {ipm.iterations} iterations): certified "
+                      f"{run.best.lower_bound:.10g}")
+    return ipm.tables is not None
+
+
 def _phases(run: _Run, start: tuple, method: str, stats: dict, pdhg_iter: int, patience: int,
-            max_iter: int) -> tuple[bool, int]:
-    """The PDHG and / or bundle phases of ``method``: (the bundle's stopping test met, its steps)."""
+            max_iter: int, ipm_tol: float) -> tuple[bool, int]:
+    """The phases of ``method``: (the bundle's stopping test met, its steps)."""
     seed = []
-    if method in ("auto", "pdhg"):
-        lp, z, pstats = _pdhg_phase(run, start, pdhg_iter, 0.6 if method == "auto" else 1.0, patience)
+    if method == "auto":
+        method = "ipm" if ipm_fits(run.data) else "bundle"
+        stats["auto_method"] = method
+    if method == "ipm" and _ipm_phase(run, stats, ipm_tol):
+        # a stopping rule, not a certificate (like the bundle's): IPX finished (kOptimal, or
+        # kUnknown when HiGHS's stricter re-check at 1e-7 disagrees) with its primal objective
+        # within tol of the certified bound
+        gap = stats["ipm_objective"] - run.best.lower_bound
+        finished = stats["ipm_status"] in ("kOptimal", "kUnknown")
+        return finished and gap <= run.tol * max(abs(run.best.lower_bound), 1.0), 0
+    if method in ("pdhg+bundle", "pdhg"):
+        lp, z, pstats = _pdhg_phase(run, start, pdhg_iter, 0.6 if method == "pdhg+bundle" else 1.0, patience)
         stats.update(pstats, lp_shape=lp.shape)
-        if method == "auto":
+        if method == "pdhg+bundle":
             seed = _randomised_cuts(run, lp, z)
-    if method not in ("auto", "bundle"):
+    if method == "pdhg" or max_iter <= 0:
         return False, 0
     closed, it, bundle = _bundle_phase(run, max_iter, seed)
     stats.update(bundle_serious=bundle.serious_steps, bundle_null=bundle.null_steps,

@@ -36,7 +36,7 @@ import scipy.sparse as sp
 
 from .joint_chains import JointData, Kernels
 
-__all__ = ["JointLP", "HalpernPDHG", "lp_shape", "pin_tables"]
+__all__ = ["JointLP", "HalpernPDHG", "lp_shape", "pin_tables", "sparse_lp"]
 
 
 def lp_shape(caps: np.ndarray, n_configs: int, n_pairs: int, n_outcomes: int) -> dict:
@@ -174,6 +174,36 @@ class JointLP:
         """The (unscaled) dual vector of pinned tables (:func:`pin_tables`), u_k(p) and g."""
         lam = np.concatenate([np.asarray(h, float).ravel() for h in pinned_tables] + [-np.asarray(u).ravel(), [g]])
         return lam * self.free
+
+
+def sparse_lp(data: JointData) -> tuple[sp.csc_matrix, np.ndarray, np.ndarray, np.ndarray, list[slice]]:
+    """The LP as an explicit matrix for a general LP solver, its dropped rows removed.
+
+    Returns
+    -------
+    (A, b, c, keep, table_rows)
+        min c^T z s.t. A z = b, z >= 0 (CSC, unscaled, duplicates summed), ``keep`` the mask of
+        the full rows kept (:class:`JointLP`'s ``free``); ``table_rows[k]`` the
+        slice of the full row vector holding process k's balance rows: with ``lam`` the row duals
+        scattered back to the full rows (0 on the dropped ones), ``lam[table_rows[k]]`` reshaped
+        to (|C|, tau_hat_k) is h_k.
+    """
+    N, nC, P = data.n_processes, data.n_configs, data.n_pairs
+    caps = data.caps
+    y_off = np.r_[0, np.cumsum(caps * P)].astype(np.int64)
+    b_off = np.r_[0, np.cumsum(caps * nC)].astype(np.int64)
+    c_off = int(b_off[-1])
+    n_rows, n_cols = c_off + N * P + 1, int(y_off[-1]) + P
+    keep = np.ones(n_rows, dtype=bool)
+    keep[0] = False
+    for k in range(1, N):
+        keep[b_off[k]:b_off[k + 1]:caps[k]] = False
+    A = _assemble(data, y_off, b_off, c_off, n_rows, n_cols)
+    A.sum_duplicates()
+    c = np.concatenate([np.tile(data.q[k], P) for k in range(N)] + [np.zeros(P)])
+    b = np.zeros(n_rows)
+    b[-1] = 1.0
+    return A[keep].tocsc(), b[keep], c, keep, [slice(int(b_off[k]), int(b_off[k + 1])) for k in range(N)]
 
 
 def _assemble(data: JointData, y_off, b_off, c_off, n_rows, n_cols) -> sp.csr_matrix:

@@ -24,12 +24,14 @@ RELAXATIONS = ("auto", "private-servers", "joint-configuration")
 _SHORT = {"1": "private-servers", "2": "joint-configuration"}
 
 
-#: Relaxation 2's search under ``"auto"`` unless given: ``max_iter`` bundle steps (a count, so the
-#: bound and its policy are the same on every machine) and ``time_limit`` seconds as a guard.
+#: Relaxation 2's search under ``"auto"`` unless given: ``time_limit`` seconds as a guard and
+#: ``max_iter`` bundle steps (a count, so the bound and its policy are the same on every machine).
+#: Where its LP is small enough (``joint.IPM_MAX_NNZ``: processes 1-4 up to cap 30) relaxation 2
+#: solves it by the interior point and needs no bundle steps unless the guard stops the interior
+#: point (it gets 80% of the time; stopped, it leaves no tables and the bundle takes the rest).
 #: Its bound is certified whatever stops the search, and it starts at relaxation 1's, so a short
-#: search is still at least as tight (measured on 2 loaded cores: processes 1-4 at cap 12 reach
-#: -0.18% of g* in 257 s, at cap 20 -3.7% in 378 s; ``lower_bound(x, 2)`` keeps its own defaults,
-#: 1000 steps and 10 minutes).
+#: search is still at least as tight (``lower_bound(x, 2)`` keeps its own defaults, 1000 steps
+#: and 10 minutes).
 AUTO_SEARCH = {"max_iter": 30, "time_limit": 300.0}
 
 

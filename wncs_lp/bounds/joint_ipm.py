@@ -1,0 +1,99 @@
+r"""Relaxation 2's LP solved whole by an interior point method: tables for the certificate.
+
+The occupation-measure LP of :mod:`wncs_lp.bounds.joint_lp` (the dual of relaxation 2's
+approximate LP) is written out as a sparse matrix (:func:`~wncs_lp.bounds.joint_lp.sparse_lp`,
+the flat dual directions' rows dropped) and handed to HiGHS's interior point solver IPX with
+no crossover and without presolve's search for dependent rows (96 s at processes 1-4, cap 20,
+for nothing). The row duals of its balance rows are tables h_k(tau, C).
+
+Nothing HiGHS reports enters the bound: the tables go to
+:func:`~wncs_lp.bounds.joint_chains.certify_tables`, which turns *any* tables into a certified
+g(h) <= g*. An interior point's duals are (nearly) feasible at every iteration -- IPX keeps
+the dual residual at round-off here -- so even a loose tolerance gives tables whose
+certificate is within about the duality gap of the relaxation's optimum. A run stopped by its
+time limit returns no duals at all (HiGHS 1.16 then holds no solution; measured): the caller
+falls back to its other search.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..solvers.highs import solve_highs
+from .joint_chains import JointData
+from .joint_lp import sparse_lp
+
+__all__ = ["IpmRun", "ipm_tables", "ipm_bytes"]
+
+#: HiGHS's ``presolve_rule_off`` bit of its dependent-equations rule (HiGHS 1.16's rule 10): its
+#: search took 96 s of a 275 s run at processes 1-4 cap 20 and removed nothing; without presolve
+#: at all IPX took 415 s there (42k rows instead of 19k).
+_NO_DEPENDENT_EQUATIONS = 1 << 10
+
+
+@dataclass(frozen=True, eq=False)
+class IpmRun:
+    """What the interior point returned.
+
+    Attributes
+    ----------
+    tables : list of (|C|, tau_hat_k) arrays, or None
+        The balance rows' duals (None when HiGHS held no dual solution).
+    status : str
+        HiGHS's model status name (``kOptimal``, ``kTimeLimit``, ...): a report, not a certificate.
+    objective : float
+        HiGHS's primal objective (not a bound).
+    iterations : int
+    seconds : float
+        Building the matrix and solving.
+    shape : tuple
+        (rows, columns, nonzeros) of the LP handed over.
+    """
+
+    tables: list | None
+    status: str
+    objective: float
+    iterations: int
+    seconds: float
+    shape: tuple
+
+
+def ipm_bytes(lp_nnz: int, lp_rows: int, lp_cols: int) -> int:
+    """Rough peak bytes of :func:`ipm_tables`: scipy's assembly (COO -> CSR -> CSC, ~40 bytes a
+    nonzero), highspy's copy and IPX's own (~3 copies of the matrix, its basis factors and
+    ~20 vectors)."""
+    return int(100 * lp_nnz + 8 * 25 * (lp_rows + lp_cols))
+
+
+def ipm_tables(data: JointData, *, tol: float = 1e-6, time_limit: float | None = None,
+               verbose: bool = False) -> IpmRun:
+    """Solve relaxation 2's LP by IPX (no crossover) and read its tables.
+
+    Parameters
+    ----------
+    data : JointData
+    tol : float
+        IPX's optimality tolerance (relative duality gap; also the feasibility tolerances).
+    time_limit : float or None
+        Seconds for HiGHS (None: none).
+    verbose : bool
+        HiGHS's log on stdout.
+    """
+    t0 = time.monotonic()
+    A, b, c, keep, rows = sparse_lp(data)
+    # no "threads": HiGHS refuses to run when it differs from its scheduler's, set by the first run of
+    # the process (another solve's); IPX itself is serial
+    settings = {"variant": "ipx", "run_crossover": "off", "presolve_rule_off": _NO_DEPENDENT_EQUATIONS}
+    if time_limit is not None:
+        settings["time_limit"] = max(float(time_limit) - (time.monotonic() - t0), 1e-3)
+    _, _, z, stats = solve_highs(A, b, c, tol=float(tol), max_iter=2**31 - 1, verbose=verbose, settings=settings)
+    tables = None
+    if np.isfinite(z).all():
+        lam = np.zeros(keep.size)
+        lam[keep] = -z  # solve_highs returns Clarabel's sign, z = -row_dual
+        tables = [lam[r].reshape(data.n_configs, -1).copy() for r in rows]
+    return IpmRun(tables=tables, status=str(stats["solver_status"]), objective=float(stats["obj_scaled"]),
+                  iterations=int(stats["ipm_iterations"]), seconds=time.monotonic() - t0,
+                  shape=(int(A.shape[0]), int(A.shape[1]), int(A.nnz)))
