@@ -61,3 +61,24 @@ def test_a_worker_on_other_source_computes_nothing(tmp_path):
     assert not list((tmp_path / "cache").glob("*.json"))  # nothing stored under keys the parent would not read
     assert _run_step(tmp_path, prof, step, code_version()) is True
     assert ctx._cached(step)
+
+
+def _record_pid(ctx: Context, tag: str):
+    """A cached step that records which process computed it (for prefetch_calls)."""
+    import os
+
+    return ctx.cache.get_or_compute("pid", {"tag": tag}, lambda: ({"pid": os.getpid()}, None))[0]["pid"]
+
+
+def test_prefetch_calls_compute_the_steps_in_workers(tmp_path):
+    import os
+
+    ctx = Context(tmp_path, PROFILES["quick"])
+    try:
+        ctx.prefetch_calls(_record_pid, [("a",), ("b",)])
+    finally:
+        ctx.close()
+    pids = [_record_pid(ctx, t) for t in ("a", "b")]  # read from the cache
+    assert ctx.cache.misses == 0 and os.getpid() not in pids
+    ctx.prefetch_calls(_record_pid, [("c",)])  # a single call is not worth a worker: left to the caller
+    assert ctx._pool is None and _record_pid(ctx, "c") == os.getpid()

@@ -107,11 +107,15 @@ def _compute(ctx: Context, sc, inst: Instance, st: BeyondExactSettings) -> dict[
             "bounds": bounds, "policies": [r.summary() for r in report.rows], "seconds": time.perf_counter() - t0}
 
 
+def _params(sc, inst: Instance, st: BeyondExactSettings) -> dict[str, Any]:
+    return {"fingerprint": sc.fingerprint(), "exact": inst.exact, "slots": st.slots, "reps": st.reps,
+            "seed": st.seed, "burn_in": st.burn_in, "policies": list(POLICIES), "steps": st.steps}
+
+
 def _instance(ctx: Context, inst: Instance, st: BeyondExactSettings) -> dict[str, Any]:
     sc = _scenario(ctx, inst, st)
-    params = {"fingerprint": sc.fingerprint(), "exact": inst.exact, "slots": st.slots, "reps": st.reps,
-              "seed": st.seed, "burn_in": st.burn_in, "policies": list(POLICIES), "steps": st.steps}
-    out, _ = ctx.cache.get_or_compute("b3_instance", params, lambda: (_compute(ctx, sc, inst, st), None))
+    out, _ = ctx.cache.get_or_compute("b3_instance", _params(sc, inst, st),
+                                      lambda: (_compute(ctx, sc, inst, st), None))
     out = dict(out)
     if inst.scenario == FOUR:  # g* is B2's cached step (solved there, or here first)
         out["optimum"] = exact_optimum(ctx, inst.cap, st.p)
@@ -178,6 +182,11 @@ def _sentence(i: dict[str, Any]) -> str:
 def section_b3(ctx: Context) -> ExtraResult:
     """B3: beyond exact (see the module docstring)."""
     st = settings_for(ctx.profile)
+    # the instances are independent and mostly single-threaded (bundle steps, Monte Carlo): side by
+    # side in the run's worker processes first, then read here from the cache
+    todo = [(len(sc.processes) * inst.cap, inst) for inst in st.instances
+            if ctx.cache.load("b3_instance", _params(sc := _scenario(ctx, inst, st), inst, st)) is None]
+    ctx.prefetch_calls(_instance, [(inst, st) for _, inst in sorted(todo, key=lambda t: -t[0])])  # largest first
     instances = [_instance(ctx, inst, st) for inst in st.instances]
     rows = _rows(instances)
     tab = ctx.save_table(rows, "b3_beyond_exact")

@@ -358,6 +358,17 @@ def _run_step(out: Path, profile: "Profile", step: Step, code: str) -> bool:
     return True
 
 
+def _run_call(out: Path, profile: "Profile", fn: Callable[..., Any], args: tuple, code: str) -> bool:
+    """``fn(ctx, *args)`` in a worker process (:meth:`Context.prefetch_calls`); False, computing
+    nothing, when the package's source is not the parent's ``code``."""
+    if code_version() != code:
+        return False
+    ctx = Context(out, profile)
+    ctx.workers = 1
+    fn(ctx, *args)
+    return True
+
+
 class Context:
     """State shared by the claim computations of one reproduction run."""
 
@@ -398,14 +409,27 @@ class Context:
         workers with ``force`` (a forced run ignores the cache) or with fewer than two workers.
         """
         todo = [t for t in tasks if not self._cached(t)]
-        if self.workers < 2 or self.cache.force or len(todo) < 2:
+        self._in_workers(_run_step, [(t,) for t in todo], "instance(s)")
+
+    def prefetch_calls(self, fn: Callable[..., Any], calls: Sequence[tuple]) -> None:
+        """Run ``fn(ctx, *args)`` for each ``args`` of ``calls`` in ``self.workers`` worker processes,
+        each through a :class:`Context` on the same folder, for the cached steps ``fn`` computes (the
+        caller then computes the same calls here, reading the cache). ``fn`` must be a module-level
+        function and ``args`` picklable; the rules of :meth:`prefetch` apply (no workers with
+        ``force``, with fewer than two workers or for fewer than two calls; a failed call is left to
+        the caller)."""
+        self._in_workers(_run_call, [(fn, args) for args in calls], "step(s)")
+
+    def _in_workers(self, job: Callable[..., bool], items: list[tuple], what: str) -> None:
+        """``job(out, profile, *item, code)`` for each item in the worker pool; waits for all."""
+        if self.workers < 2 or self.cache.force or len(items) < 2:
             return
         from concurrent.futures import wait
 
         pool = self._worker_pool()
         t0 = time.perf_counter()
         try:
-            pending = [pool.submit(_run_step, self.out, self.profile, t, code_version()) for t in todo]
+            pending = [pool.submit(job, self.out, self.profile, *item, code_version()) for item in items]
             wait(pending)
         except BaseException:  # Ctrl-C: stop the workers now (the cache keeps what they finished)
             self.close()
@@ -417,7 +441,7 @@ class Context:
             self.close()
             self.workers = 1
             self.log("the package's source changed since this run started: no more worker processes")
-        self.log(f"{len(todo)} instance(s) in {self.workers} worker processes, {time.perf_counter() - t0:.1f} s"
+        self.log(f"{len(items)} {what} in {self.workers} worker processes, {time.perf_counter() - t0:.1f} s"
                  + (f" ({failed} failed there, computed here)" if failed else ""))
 
     def _cached(self, task: Step) -> bool:
