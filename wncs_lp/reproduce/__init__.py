@@ -21,6 +21,7 @@ from ..errors import WncsError
 from ..solvers.threads import usable_cores
 from .beyond import BEYOND
 from .context import PROFILES, ClaimResult, Context, Profile
+from .fullscale import warm_kernels
 from .plan import Plan
 from .report import write_report
 
@@ -173,6 +174,8 @@ def run_reproduction(
         say(plan.opening(_threads_used(threads), usable_cores(), 0 if force else _cached_steps(out)))
     t_all = time.perf_counter()
     try:
+        if {"B2", "B3"} & set(extra_ids) and todo:  # their kernels compile in a worker while the claims run
+            ctx.start_in_worker(warm_kernels)
         with thread_limit(threads):
             results = [_run_claim(ctx, cid, plan, say if progress else None, t_all) for cid in todo]
             extras = [_run_section(ctx, sid, plan, say if progress else None, t_all) for sid in extra_ids]

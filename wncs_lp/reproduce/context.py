@@ -420,6 +420,13 @@ class Context:
         the caller)."""
         self._in_workers(_run_call, [(fn, args) for args in calls], "step(s)")
 
+    def start_in_worker(self, fn: Callable[..., Any], *args: Any) -> None:
+        """Start ``fn(ctx, *args)`` in a worker process and return at once; its result and errors
+        are not read. For work whose effect is outside the run's cache, e.g. compiling kernels
+        into numba's on-disk cache while this process computes other sections."""
+        if self.workers >= 2:
+            self._worker_pool().submit(_run_call, self.out, self.profile, fn, args, code_version())
+
     def _in_workers(self, job: Callable[..., bool], items: list[tuple], what: str) -> None:
         """``job(out, profile, *item, code)`` for each item in the worker pool; waits for all."""
         if self.workers < 2 or self.cache.force or len(items) < 2:
