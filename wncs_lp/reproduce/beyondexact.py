@@ -120,7 +120,7 @@ def _instance(ctx: Context, inst: Instance, st: BeyondExactSettings) -> dict[str
                                       lambda: (_compute(ctx, sc, inst, st), None))
     out = dict(out)
     if inst.scenario == FOUR:  # g* is B2's cached step (solved there, or here first)
-        out["optimum"] = exact_optimum(ctx, inst.cap, st.p)
+        out["optimum"] = exact_optimum(ctx, inst.cap, st.p, per_process=False)
     return out
 
 
