@@ -130,3 +130,15 @@ def test_an_uncertified_number_is_said():
     assert not f["all_certified"]
     text = fullscale.summary_text([bad], [], f, TINY, None)
     assert "NOT every number closed its certificate" in text
+
+
+def test_cap_text_names_what_it_has():
+    per = _inst(12, 0.9, (100.0, 110.0, 120.0, 200.0))
+    per["optimal"].update(at_cap=1.5, at_cap_per_process=[0.1, 0.2, 0.2, 1.0], q_at_cap=[5.0, 5.0, 5.0, 15.0])
+    text = fullscale.cap_text([per])
+    assert text.startswith("Share of the time each process") and "10.0%, 20.0%, 20.0%, 100.0%" in text
+    assert "process 4" in text  # the process that sits at its cap is named
+    total = _inst(12, 0.9, (100.0, 110.0, 120.0, 200.0))
+    total["optimal"]["at_cap"] = 1.43
+    text = fullscale.cap_text([total])
+    assert text == "Time at the cap under the optimal policy: cap 12: 1.43 processes at their cap on average."

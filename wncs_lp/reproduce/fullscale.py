@@ -272,8 +272,9 @@ def cap_text(at_p: list[dict[str, Any]]) -> str:
             continue
         bits.append(f"cap {i['cap']}: " + ", ".join(f"{100 * m:.1f}%" for m in per))
         last = (i["cap"], per, o)
-    s = ("Share of the time each process spends at its cap under the optimal policy (processes 1-4): "
-         + "; ".join(bits) + ".")
+    head = ("Share of the time each process spends at its cap under the optimal policy (processes 1-4): "
+            if last is not None else "Time at the cap under the optimal policy: ")
+    s = head + "; ".join(bits) + "."
     if last is not None:
         cap, per, o = last
         q = o.get("q_at_cap", [math.nan] * len(per))
