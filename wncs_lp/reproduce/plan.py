@@ -15,14 +15,14 @@ __all__ = ["ESTIMATE_SECONDS", "ESTIMATE_WHERE", "Plan", "duration"]
 
 #: Seconds of each section with a cold cache, per profile: ``default`` from one run of
 #: ``wncs-lp reproduce`` on a fresh clone (commit 29e6d52, 2 cores, 2 threads, quiet: 7 min 06 s in
-#: all); ``quick`` from one run of ``wncs-lp reproduce --profile quick`` on the same machine
+#: all); ``quick`` from one run of ``wncs-lp reproduce --profile quick`` on the same machine (51 s)
 #: (report.json's ``timings_seconds``). ``full`` adds B2's caps 20, 25 and 30 and its sweep at cap
 #: 20, and B3's processes 1-4 at caps 20 and 30, estimated from the matrix-free and bounds
 #: benchmarks (not one measured run).
 ESTIMATE_SECONDS: dict[str, dict[str, float]] = {
-    "quick": {"C1": 2.0, "C2": 2.0, "C3": 3.0, "C4": 1.0, "C5": 1.0, "C6": 3.0, "C7": 1.0, "C8": 0.5,
-              "C9": 1.0, "C10": 0.5, "C11": 1.5, "C12": 1.5, "C13": 6.0, "B1": 8.5, "B2": 26.0,
-              "B3": 19.0},
+    "quick": {"C1": 1.8, "C2": 1.0, "C3": 3.3, "C4": 1.2, "C5": 0.8, "C6": 4.2, "C7": 0.6, "C8": 0.1,
+              "C9": 1.0, "C10": 0.1, "C11": 1.1, "C12": 1.3, "C13": 4.6, "B1": 9.1, "B2": 5.8,
+              "B3": 14.7},
     "default": {"C1": 7.6, "C2": 13.3, "C3": 52.4, "C4": 26.6, "C5": 1.1, "C6": 118.6, "C7": 7.4,
                 "C8": 0.8, "C9": 4.2, "C10": 2.5, "C11": 19.3, "C12": 7.3, "C13": 5.3, "B1": 43.6,
                 "B2": 60.3, "B3": 56.1},
