@@ -67,6 +67,27 @@ def pin_tables(tables) -> list[np.ndarray]:
     return out
 
 
+def _offsets(data: JointData) -> tuple[np.ndarray, np.ndarray, int, int, int]:
+    """(y_off, b_off, c_off, n_rows, n_cols): where process k's occupation columns and balance rows
+    start, where the coupling rows start, and the LP's size (the last row: the normalisation)."""
+    N, nC, P, caps = data.n_processes, data.n_configs, data.n_pairs, data.caps
+    y_off = np.r_[0, np.cumsum(caps * P)].astype(np.int64)
+    b_off = np.r_[0, np.cumsum(caps * nC)].astype(np.int64)
+    c_off = int(b_off[-1])
+    return y_off, b_off, c_off, c_off + N * P + 1, int(y_off[-1]) + P
+
+
+def _kept_rows(data: JointData) -> np.ndarray:
+    """The rows kept (bool): all but process 0's row (tau = 1, C_0) and the rows (tau = 1, C) of
+    every other process (see the module docstring: their duals can be taken 0)."""
+    _, b_off, _, n_rows, _ = _offsets(data)
+    keep = np.ones(n_rows, dtype=bool)
+    keep[0] = False
+    for k in range(1, data.n_processes):
+        keep[b_off[k]:b_off[k + 1]:data.caps[k]] = False
+    return keep
+
+
 @dataclass(frozen=True, eq=False)
 class JointLP:
     """The equilibrated LP: B = diag(row_scale) A diag(col_scale), applied by :meth:`matvec`.
@@ -98,14 +119,8 @@ class JointLP:
     def build(cls, data: JointData, kern: Kernels, scaling_rounds: int = 8) -> "JointLP":
         N, nC, P = data.n_processes, data.n_configs, data.n_pairs
         caps = data.caps
-        y_off = np.r_[0, np.cumsum(caps * P)].astype(np.int64)
-        b_off = np.r_[0, np.cumsum(caps * nC)].astype(np.int64)
-        c_off = int(b_off[-1])
-        n_rows, n_cols = c_off + N * P + 1, int(y_off[-1]) + P
-        free = np.ones(n_rows)
-        free[0] = 0.0
-        for k in range(1, N):
-            free[b_off[k]:b_off[k + 1]:caps[k]] = 0.0
+        y_off, b_off, c_off, n_rows, n_cols = _offsets(data)
+        free = _kept_rows(data).astype(float)
         c = np.zeros(n_cols)
         for k in range(N):
             c[y_off[k]:y_off[k + 1]] = np.tile(data.q[k], P)
@@ -190,14 +205,8 @@ def sparse_lp(data: JointData) -> tuple[sp.csc_matrix, np.ndarray, np.ndarray, n
     """
     N, nC, P = data.n_processes, data.n_configs, data.n_pairs
     caps = data.caps
-    y_off = np.r_[0, np.cumsum(caps * P)].astype(np.int64)
-    b_off = np.r_[0, np.cumsum(caps * nC)].astype(np.int64)
-    c_off = int(b_off[-1])
-    n_rows, n_cols = c_off + N * P + 1, int(y_off[-1]) + P
-    keep = np.ones(n_rows, dtype=bool)
-    keep[0] = False
-    for k in range(1, N):
-        keep[b_off[k]:b_off[k + 1]:caps[k]] = False
+    y_off, b_off, c_off, n_rows, n_cols = _offsets(data)
+    keep = _kept_rows(data)
     A = _assemble(data, y_off, b_off, c_off, n_rows, n_cols)
     A.sum_duplicates()
     c = np.concatenate([np.tile(data.q[k], P) for k in range(N)] + [np.zeros(P)])
