@@ -90,7 +90,7 @@ def main() -> None:
                 continue
             if getattr(obj, "__module__", "").split(".")[0] != "wncs_lp":
                 continue
-            if name not in ("wncs_lp", "wncs_lp.solvers", "wncs_lp.verify", "wncs_lp.viz", "wncs_lp.models") \
+            if name not in ("wncs_lp", "wncs_lp.solvers", "wncs_lp.verify", "wncs_lp.viz", "wncs_lp.models", "wncs_lp.bounds") \
                     and obj.__module__ != name:
                 continue
             try:
