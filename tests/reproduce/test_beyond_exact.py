@@ -66,6 +66,12 @@ def test_four_processes_against_the_enumerated_mdp(tiny):
     for r in inst["policies"]:  # a certified gap bounds the true one from above
         assert r["gap"] >= r["gain"] / ref.gain - 1 - 1e-9
         assert r["gain"] >= ref.gain * (1 - 1e-9)
+    if inst["bounds"][0]["relaxation"] != "private-servers":  # relaxation 1's policy is shown beside
+        first = evaluate(ctx.mdp(sc), bound_policy(lower_bound(system, 1), system)).gain
+        (row1,) = [r for r in inst["policies"] if r["policy"] == "bound[private-servers]"]
+        assert row1["gain"] == pytest.approx(first, rel=1e-7)
+        best = min((r for r in inst["policies"] if r["policy"].startswith("bound")), key=lambda r: r["gap"])
+        assert f"best bound's policy ({best['policy']}) is within" in sec["summary"]
 
 
 def test_monte_carlo_rows_against_the_exact_evaluation(tiny):
