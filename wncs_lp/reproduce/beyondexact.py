@@ -190,9 +190,10 @@ def section_b3(ctx: Context) -> ExtraResult:
     st = settings_for(ctx.profile)
     # the instances are independent and mostly single-threaded (bundle steps, Monte Carlo): side by
     # side in the run's worker processes first, then read here from the cache
-    todo = [(len(sc.processes) * inst.cap, inst) for inst in st.instances
+    # the longest first: exact rows (matrix-free evaluations of 2.9M states) before Monte Carlo ones
+    todo = [((inst.exact, len(sc.processes) * inst.cap), inst) for inst in st.instances
             if ctx.cache.load("b3_instance", _params(sc := _scenario(ctx, inst, st), inst, st)) is None]
-    ctx.prefetch_calls(_instance, [(inst, st) for _, inst in sorted(todo, key=lambda t: -t[0])])  # largest first
+    ctx.prefetch_calls(_instance, [(inst, st) for _, inst in sorted(todo, key=lambda t: t[0], reverse=True)])
     instances = [_instance(ctx, inst, st) for inst in st.instances]
     rows = _rows(instances)
     tab = ctx.save_table(rows, "b3_beyond_exact")
