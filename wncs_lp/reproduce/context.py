@@ -340,14 +340,8 @@ def _solved_law(sol: Solution, P_pi, n_pairs: int) -> np.ndarray | None:
     return pi if ok else None
 
 
-def _run_step(out: Path, profile: "Profile", step: Step, code: str) -> bool:
-    """One :class:`Step` in a worker process, through a Context on the same folder (its cache).
-    Returns False, computing nothing, when the package's source is not the parent's ``code``
-    (edited since the run started: the parent would not find the results under its keys)."""
-    if code_version() != code:
-        return False
-    ctx = Context(out, profile)
-    ctx.workers = 1
+def _compute_step(ctx: "Context", step: Step) -> None:
+    """The work of one :class:`Step`, into ``ctx``'s cache."""
     ctx.solve(step.scenario)
     if step.static:
         ctx.static_search(step.scenario)
@@ -355,18 +349,23 @@ def _run_step(out: Path, profile: "Profile", step: Step, code: str) -> bool:
         ctx.evaluate(step.scenario, pol)
     for sim in step.simulate:
         ctx.simulate(step.scenario, *sim)
-    return True
 
 
 def _run_call(out: Path, profile: "Profile", fn: Callable[..., Any], args: tuple, code: str) -> bool:
-    """``fn(ctx, *args)`` in a worker process (:meth:`Context.prefetch_calls`); False, computing
-    nothing, when the package's source is not the parent's ``code``."""
+    """``fn(ctx, *args)`` in a worker process, through a Context on the same folder (its cache).
+    Returns False, computing nothing, when the package's source is not the parent's ``code``
+    (edited since the run started: the parent would not find the results under its keys)."""
     if code_version() != code:
         return False
     ctx = Context(out, profile)
     ctx.workers = 1
     fn(ctx, *args)
     return True
+
+
+def _run_step(out: Path, profile: "Profile", step: Step, code: str) -> bool:
+    """One :class:`Step` in a worker process (:meth:`Context.prefetch`), as :func:`_run_call`."""
+    return _run_call(out, profile, _compute_step, (step,), code)
 
 
 class Context:
