@@ -99,7 +99,7 @@ def _compute(ctx: Context, sc, inst: Instance, st: BeyondExactSettings) -> dict[
     best = lower_bound(system, "auto", max_iter=st.steps, time_limit=None)
     bounds = [_bound_entry(best)]
     policies: list = list(POLICIES)
-    if best.relaxation != "private-servers":  # relaxation 1's policy too: an optimal dual need not act well
+    if best.relaxation != "private-servers":  # relaxation 1's policy too: neither relaxation's policy always acts better
         first = lower_bound(system, 1)
         bounds.append(_bound_entry(first))
         policies.insert(1, BoundPolicy(first, system))
