@@ -33,9 +33,10 @@ def _fake_joint(reach=None, bound=None):
 
 def test_names_and_short_names():
     assert parse_relaxation(1) == "private-servers" and parse_relaxation("2") == "joint-configuration"
+    assert parse_relaxation(3) == "grouped-private-servers"
     assert [parse_relaxation(r) for r in RELAXATIONS] == list(RELAXATIONS)
-    with pytest.raises(WncsError, match="expected one of 1, 2"):
-        parse_relaxation("3")
+    with pytest.raises(WncsError, match="expected one of 1, 2, 3"):
+        parse_relaxation("4")
 
 
 def test_auto_is_a_valid_bound_and_says_which_fired(p12):
@@ -87,4 +88,5 @@ def test_auto_takes_relaxation_1_when_relaxation_2_stopped_below_it(monkeypatch,
     monkeypatch.setitem(__import__("sys").modules, JOINT, _fake_joint(lambda s: None, lambda s, **kw: worse))
     res = lower_bound(p12, "auto")
     assert res.relaxation == "private-servers" and res.lower_bound == base.lower_bound
-    assert "beats relaxation 2's" in res.stats["auto_reason"]
+    assert res.stats["auto_bounds"] == {"joint-configuration": base.lower_bound - 1.0, "private-servers": base.lower_bound}
+    assert "largest certified bound" in res.stats["auto_reason"]

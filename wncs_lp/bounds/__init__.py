@@ -3,29 +3,36 @@ they give (relaxations of the joint MDP built on :class:`~wncs_lp.models.system.
 the enumerated MDP).
 
 * :func:`lower_bound` -- the entry point: a :class:`BoundResult` from the relaxation asked for
-  (``"private-servers"`` = 1, ``"joint-configuration"`` = 2, or ``"auto"``);
+  (``"private-servers"`` = 1, ``"joint-configuration"`` = 2, ``"grouped-private-servers"`` = 3,
+  or ``"auto"``);
 * :func:`~wncs_lp.bounds.private.private_bound` -- relaxation 1, private servers with averaged
   capacity (:mod:`wncs_lp.bounds.private`);
+* :func:`~wncs_lp.bounds.grouped.grouped_bound` -- relaxation 3, relaxation 1 with groups of
+  processes sharing their private servers (:mod:`wncs_lp.bounds.grouped`);
 * relaxation 2, the joint configuration with separable value functions, lives in
   :mod:`wncs_lp.bounds.joint` when installed: ``joint_bound(system, **options)`` (the command
   line passes ``tol`` and ``progress``; a :class:`~wncs_lp.errors.WncsError` it raises makes
   ``auto`` fall back to relaxation 1) and optionally ``joint_reach(system)``, ``None`` when the
   instance is within its reach, else the reason in words;
-* :func:`bound_policy` / :class:`BoundPolicy` -- the greedy policy on a bound's value tables;
+* :func:`bound_policy` / :class:`BoundPolicy` / :class:`GroupBoundPolicy` -- the greedy policy on a
+  bound's value tables;
 * :func:`~wncs_lp.bounds.gaps.policy_gaps` -- policies evaluated against a bound: the certified
   optimality gap of each.
 
 Every bound is certified by the Bellman brackets of the chains it solves, never by an LP
 solver's status; the result type of every relaxation is :class:`BoundResult`, whose value
-tables (:class:`ValueTables`) drive the greedy policy of the bound.
+tables (:class:`ValueTables`, or :class:`GroupTables` for relaxation 3) drive the greedy policy
+of the bound.
 """
 from __future__ import annotations
 
 from .gaps import GapReport, PolicyGap, policy_gaps
 from .lower import AUTO_SEARCH, RELAXATIONS, lower_bound, parse_relaxation
-from .policy import BoundPolicy, bound_policy
+from .grouped import grouped_bound
+from .policy import BoundPolicy, GroupBoundPolicy, bound_policy
 from .private import private_bound
-from .result import BoundResult, ValueTables
+from .result import BoundResult, GroupTables, ValueTables
 
-__all__ = ["BoundResult", "ValueTables", "BoundPolicy", "GapReport", "PolicyGap", "RELAXATIONS", "lower_bound",
-           "bound_policy", "policy_gaps", "private_bound", "parse_relaxation", "AUTO_SEARCH"]
+__all__ = ["BoundResult", "ValueTables", "GroupTables", "BoundPolicy", "GroupBoundPolicy", "GapReport", "PolicyGap",
+           "RELAXATIONS", "lower_bound", "bound_policy", "policy_gaps", "private_bound", "grouped_bound",
+           "parse_relaxation", "AUTO_SEARCH"]

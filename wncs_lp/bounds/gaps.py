@@ -28,7 +28,7 @@ from ..models.system import System
 from ..policies import Policy, make_policy
 from ..progress import as_progress
 from ..simulate import simulate
-from .policy import BoundPolicy
+from .policy import bound_policy
 from .result import BoundResult
 
 __all__ = ["PolicyGap", "GapReport", "policy_gaps", "DEFAULT_POLICIES", "EXACT_MAX_STATES"]
@@ -104,7 +104,7 @@ class GapReport:
 def _policy(name: str | Policy, bound: BoundResult, system: System) -> Policy:
     if isinstance(name, Policy):
         return name
-    return BoundPolicy(bound, system) if name == "bound" else make_policy(name, system)
+    return bound_policy(bound, system) if name == "bound" else make_policy(name, system)
 
 
 def _exact_route(system: System, exact: bool | None, exact_max_states: int) -> tuple[bool, int]:

@@ -14,14 +14,15 @@ from typing import Any
 from ..errors import WncsError
 from ..models.system import System
 from ..scenario import Scenario
+from .grouped import grouped_bound
 from .private import private_bound
 from .result import BoundResult
 
 __all__ = ["RELAXATIONS", "AUTO_SEARCH", "lower_bound", "parse_relaxation"]
 
 #: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
-RELAXATIONS = ("auto", "private-servers", "joint-configuration")
-_SHORT = {"1": "private-servers", "2": "joint-configuration"}
+RELAXATIONS = ("auto", "private-servers", "joint-configuration", "grouped-private-servers")
+_SHORT = {"1": "private-servers", "2": "joint-configuration", "3": "grouped-private-servers"}
 
 
 #: Relaxation 2's search under ``"auto"`` unless given: ``time_limit`` seconds as a guard and
@@ -36,7 +37,7 @@ AUTO_SEARCH = {"max_iter": 30, "time_limit": 300.0}
 
 
 def parse_relaxation(name: str | int) -> str:
-    """``1`` / ``"1"`` / ``"private-servers"`` -> ``"private-servers"`` (likewise 2 and auto).
+    """``1`` / ``"1"`` / ``"private-servers"`` -> ``"private-servers"`` (likewise 2, 3 and auto).
 
     Raises
     ------
@@ -45,7 +46,7 @@ def parse_relaxation(name: str | int) -> str:
     """
     text = _SHORT.get(str(name).strip(), str(name).strip())
     if text not in RELAXATIONS:
-        raise WncsError(f"unknown relaxation {name!r}; expected one of 1, 2, {', '.join(RELAXATIONS)}")
+        raise WncsError(f"unknown relaxation {name!r}; expected one of 1, 2, 3, {', '.join(RELAXATIONS)}")
     return text
 
 
@@ -65,15 +66,18 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     Parameters
     ----------
     scenario_or_system : Scenario or System
-    relaxation : {"auto", "private-servers", "joint-configuration"} or 1 / 2
-        ``"auto"``: the larger of the two certified bounds when relaxation 2 is installed and
-        the instance is within its reach (relaxation 2 on a tie), else relaxation 1;
-        ``stats["auto_choice"]`` and ``stats["auto_reason"]`` say which was taken and why.
-        Relaxation 2's search then stops as :data:`AUTO_SEARCH` says unless ``max_iter`` /
-        ``time_limit`` are given.
+    relaxation : {"auto", "private-servers", "joint-configuration", "grouped-private-servers"} or 1 / 2 / 3
+        ``"auto"``: the largest certified bound of relaxation 1, relaxation 2 when it is installed
+        and the instance is within its reach, and relaxation 3 (pairs, :mod:`~wncs_lp.bounds.grouped`)
+        when there are at least three processes and relaxation 2 was not solved by its interior
+        point (where it was, it was the tighter: processes 1-4, cap 20, 1547.6 against 1441.2);
+        on a tie the first of 2, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
+        ``stats["auto_bounds"]`` say which was taken, why, and what each gave. Relaxation 2's
+        search then stops as :data:`AUTO_SEARCH` says unless ``max_iter`` / ``time_limit`` are given.
     **options
         Keyword arguments of the relaxation's function (e.g. ``tol``, ``progress``). Under
-        ``"auto"`` relaxation 1 takes only ``tol`` and ``progress``; the others go to relaxation 2.
+        ``"auto"`` relaxations 1 and 3 take only ``tol`` and ``progress``; the others go to
+        relaxation 2.
 
     Returns
     -------
@@ -90,25 +94,44 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         raise WncsError(f"expected a Scenario or a System, got {type(scenario_or_system).__name__}")
     if name == "private-servers":
         return private_bound(scenario_or_system, **options)
+    if name == "grouped-private-servers":
+        return grouped_bound(scenario_or_system, **options)
     joint, why_not = _joint_module()
     if name == "joint-configuration":
         if joint is None:
             raise WncsError(f"relaxation joint-configuration asked for, but {why_not}")
         return joint.joint_bound(_as_system(scenario_or_system), **options)
-    res1 = None
-    options = {**AUTO_SEARCH, **options}
+    return _auto(_as_system(scenario_or_system), joint, why_not, {**AUTO_SEARCH, **options})
+
+
+def _auto(system: System, joint: Any, why_not: str, options: dict) -> BoundResult:
+    """``"auto"``: every relaxation that applies, the largest certified bound returned."""
+    found: list[BoundResult] = []
+    notes: list[str] = []
+    res2 = None
     if joint is not None:
-        system = _as_system(scenario_or_system)
-        res, why_not = _try_joint(joint, system, options)
-        if res is not None:
-            res1 = _try_private(system, options)
-            if res1 is None or res.lower_bound >= res1.lower_bound:
-                return res
-            why_not = (f"relaxation 1's certified bound {res1.lower_bound:.10g} beats relaxation 2's "
-                       f"{res.lower_bound:.10g} (its search stopped early)")
-        scenario_or_system = system
-    res = res1 if res1 is not None else private_bound(scenario_or_system, **_private_options(options))
-    return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": why_not})
+        res2, note = _try_joint(joint, system, options)
+        if res2 is not None:
+            found.append(res2)
+        else:
+            notes.append(note)
+    else:
+        notes.append(why_not)
+    if system.n_processes >= 3 and (res2 is None or res2.stats.get("ipm_tables") is not True):
+        res3 = _try(grouped_bound, system, options)
+        if res3 is not None:
+            found.append(res3)
+    res1 = _try(private_bound, system, options)
+    if res1 is not None:
+        found.append(res1)
+    if not found:
+        return private_bound(system, **_private_options(options))  # raises the model's reason
+    best = max(found, key=lambda r: r.lower_bound)  # max keeps the first of equals: 2, 3, 1
+    bounds = {r.relaxation: r.lower_bound for r in found}
+    reason = "; ".join([f"the largest certified bound of {', '.join(f'{k} {v:.10g}' for k, v in bounds.items())}"]
+                       + notes)
+    return replace(best, stats={**best.stats, "auto_choice": best.relaxation, "auto_reason": reason,
+                                "auto_bounds": bounds})
 
 
 def _private_options(options: dict) -> dict:
@@ -117,10 +140,10 @@ def _private_options(options: dict) -> dict:
     return {k: v for k, v in options.items() if k in ("tol", "progress")}
 
 
-def _try_private(system: System, options: dict) -> BoundResult | None:
-    """Relaxation 1 for comparison with relaxation 2 (None where the model has no relaxation 1)."""
+def _try(relaxation: Any, system: System, options: dict) -> BoundResult | None:
+    """Relaxation 1 or 3 for comparison (None where the model has no private servers)."""
     try:
-        return private_bound(system, **_private_options(options))
+        return relaxation(system, **_private_options(options))
     except WncsError:
         return None
 
@@ -135,8 +158,7 @@ def _try_joint(joint: Any, system: System, options: dict) -> tuple[BoundResult |
         res = joint.joint_bound(system, **options)
     except WncsError as exc:
         return None, f"relaxation 2 could not run: {exc}"
-    reason = "relaxation 2 is within reach and its certified bound is at least relaxation 1's"
-    return replace(res, stats={**res.stats, "auto_choice": res.relaxation, "auto_reason": reason}), ""
+    return res, ""
 
 
 def _as_system(obj: Scenario | System) -> System:

@@ -21,10 +21,14 @@ import numpy as np
 
 from ..errors import PolicyError
 from ..models.system import System
+from ..policies.base import Policy
 from ..policies.suboptimal import SeparableGreedyPolicy
-from .result import BoundResult
+from .result import BoundResult, GroupTables
 
-__all__ = ["BoundPolicy", "bound_policy"]
+__all__ = ["BoundPolicy", "GroupBoundPolicy", "bound_policy"]
+
+#: States per block of :meth:`GroupBoundPolicy.act` (its lookahead holds R x A_max x O_max floats).
+ACT_BLOCK = 20_000
 
 
 class BoundPolicy(SeparableGreedyPolicy):
@@ -63,6 +67,69 @@ class BoundPolicy(SeparableGreedyPolicy):
                 "lower_bound": self.result.lower_bound, "build_seconds": self.build_seconds}
 
 
-def bound_policy(result: BoundResult, system: System) -> BoundPolicy:
-    """The greedy policy of a bound on its system (:class:`BoundPolicy`)."""
+class GroupBoundPolicy(Policy):
+    r"""The greedy policy on the group tables of a grouped bound (:class:`GroupTables`):
+
+    .. math:: \pi(\tau, C) = \arg\min_a \sum_o P(o \mid C, a) \sum_G h_G(\tau'_G, \mathrm{column}_G(C'_o)),
+
+    ties to the first action. A group's table is not separable over its processes, so the
+    lookahead is computed per state (R x A_max x O_max lookups per group, in blocks of
+    :data:`ACT_BLOCK` states) instead of from precomputed per-process tables.
+
+    Parameters
+    ----------
+    result : BoundResult
+        With ``tables`` a :class:`GroupTables`.
+    system : System
+    """
+
+    name = "bound"
+
+    def __init__(self, result: BoundResult, system: System):
+        super().__init__(system)
+        t0 = time.perf_counter()
+        tables = result.tables
+        if not isinstance(tables, GroupTables):
+            raise PolicyError(f"the {result.relaxation} bound has no group tables; use bound_policy")
+        if tables.n_processes != system.n_processes or any(np.shape(c) != (system.n_configs,) for c in tables.column):
+            raise PolicyError(f"the {result.relaxation} bound's tables belong to another system ({tables.n_processes} "
+                              f"processes; this system has {system.n_processes} processes and "
+                              f"{system.n_configs} configurations)")
+        self.result = result
+        self.tables = tables
+        self.name = f"bound[{result.relaxation}]"
+        self.build_seconds = time.perf_counter() - t0
+
+    def values(self, tau: np.ndarray, config_ids: np.ndarray) -> np.ndarray:
+        """(R, A_max) lookahead values (+inf on infeasible actions)."""
+        tau, c = self._check_inputs(tau, config_ids)
+        s = self.system
+        ot = s.outcome_tables
+        nxt, prob = ot.nxt[c], ot.prob[c]
+        tn = np.minimum(tau[:, None, None, :] + 1, np.asarray(s.caps))
+        tn = np.where(ot.delta[c] > 0, np.minimum(tn, ot.delta[c]), tn)
+        v = np.zeros(prob.shape)
+        for g, h, col in zip(self.tables.groups, self.tables.h, self.tables.column):
+            v += h[(col[nxt],) + tuple(tn[..., k] - 1 for k in g)]
+        out = np.where(prob > 0, prob * v, 0.0).sum(axis=-1)
+        out[~s.action_valid[c]] = np.inf
+        return out
+
+    def act(self, tau, config_ids, rng=None):
+        tau, c = self._check_inputs(tau, config_ids)
+        out = np.empty(c.size, dtype=np.int64)
+        for i in range(0, c.size, ACT_BLOCK):
+            out[i:i + ACT_BLOCK] = np.argmin(self.values(tau[i:i + ACT_BLOCK], c[i:i + ACT_BLOCK]), axis=1)
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        return {**super().describe(), "relaxation": self.result.relaxation, "lower_bound": self.result.lower_bound,
+                "groups": [list(g) for g in self.tables.groups], "build_seconds": self.build_seconds}
+
+
+def bound_policy(result: BoundResult, system: System) -> Policy:
+    """The greedy policy of a bound on its system: :class:`BoundPolicy` on per-process tables,
+    :class:`GroupBoundPolicy` on a grouped bound's group tables."""
+    if isinstance(result.tables, GroupTables):
+        return GroupBoundPolicy(result, system)
     return BoundPolicy(result, system)

@@ -60,7 +60,8 @@ from ..solvers import policy_iteration
 from ..status import MAX_ITER, OPTIMAL
 from .result import BoundResult, ValueTables
 
-__all__ = ["PrivateChain", "private_chains", "private_bound", "private_lower_bound_at"]
+__all__ = ["PrivateChain", "private_chains", "private_bound", "private_lower_bound_at", "build_private_chain",
+           "chain_key", "capacity_sense", "search_multipliers"]
 
 #: Name of this relaxation in :class:`BoundResult`.
 RELAXATION = "private-servers"
@@ -127,14 +128,15 @@ class PrivateChain:
         return out
 
 
-def _private_key(sc: Scenario) -> str:
-    """What makes two private systems the same chain (the process name aside)."""
-    pr = sc.processes[0]
-    return repr((pr.A.tolist(), pr.R.tolist(), pr.weight, pr.tau_cap, sc.model,
+def chain_key(sc: Scenario) -> str:
+    """What makes two private systems the same chain (the process names aside)."""
+    return repr(([(pr.A.tolist(), pr.R.tolist(), pr.weight, pr.tau_cap) for pr in sc.processes], sc.model,
                  [(s.uplink_delay, s.downlink_delay, s.processing_time, s.p_up, s.p_down) for s in sc.servers]))
 
 
-def _make_chain(processes: tuple, sc: Scenario) -> PrivateChain:
+def build_private_chain(processes: tuple, sc: Scenario) -> PrivateChain:
+    """The enumerated private MDP of ``sc`` (one process, or a group of them: the claims of its
+    processes on each server are summed), with its AoI cost and claims per pair."""
     model = model_for(sc)
     mdp = model.build()
     auto = model.automaton
@@ -142,12 +144,12 @@ def _make_chain(processes: tuple, sc: Scenario) -> PrivateChain:
     amax = max(len(a) for a in auto.actions)
     table = np.zeros((len(auto.configs), amax, M))
     for c, (cfg, acts) in enumerate(zip(auto.configs, auto.actions)):
-        table[c, : len(acts)] = model.claims(cfg, np.array(acts, dtype=np.int64))[:, :, 0]
+        table[c, : len(acts)] = model.claims(cfg, np.array(acts, dtype=np.int64)).sum(axis=2)
     st = mdp.states
     s = mdp.s_indices
     j = np.arange(mdp.n_pairs) - mdp.pair_ptr[s]
     cfg_of = np.asarray(st.config)[s]
-    q = np.asarray(mdp.cost, float)  # the 1-process MDP's cost is q_k(tau_k)
+    q = np.asarray(mdp.cost, float)  # the private MDP's cost is sum_k q_k(tau_k) over its processes
     return PrivateChain(processes, sc, model, mdp, q, table[cfg_of, j], table,
                         {cfg: i for i, cfg in enumerate(auto.configs)})
 
@@ -163,8 +165,8 @@ def private_chains(model: Model) -> tuple[list[PrivateChain], np.ndarray]:
     scenarios = [model.private_scenario(k) for k in range(model.scenario.n_processes)]
     groups: dict[str, list[int]] = {}
     for k, sc in enumerate(scenarios):
-        groups.setdefault(_private_key(sc), []).append(k)
-    chains = [_make_chain(tuple(ks), scenarios[ks[0]]) for ks in groups.values()]
+        groups.setdefault(chain_key(sc), []).append(k)
+    chains = [build_private_chain(tuple(ks), scenarios[ks[0]]) for ks in groups.values()]
     which = np.empty(len(scenarios), dtype=np.int64)
     for i, ch in enumerate(chains):
         which[list(ch.processes)] = i
@@ -329,7 +331,7 @@ def private_bound(
         scenario_or_system, model)
     columns = _columns(system, chains, which)
     sense = capacity_sense(system, chains, which, columns)
-    search = _search(system, chains, which, sense, tol, max_iter, solve_tol, prog)
+    search = search_multipliers(system, chains, which, sense, tol, max_iter, solve_tol, prog)
     lam, solves = search["lambda"], search["solves"]
     tables = ValueTables(h=tuple(chains[which[k]].value_table(solves[which[k]].bias) for k in range(len(which))),
                          column=columns)
@@ -364,10 +366,10 @@ def private_bound(
     )
 
 
-def _search(system: System, chains: list, which: np.ndarray, sense: str, tol: float, max_iter: int,
-            solve_tol: float, prog) -> dict:
+def search_multipliers(system: System, chains: list, which: np.ndarray, sense: str, tol: float, max_iter: int,
+                       solve_tol: float, prog) -> dict:
     """Kelley's cutting planes on the multipliers, inside a box that doubles while the answer
-    touches it."""
+    touches it. ``which[i]`` is the chain of the i-th member (a process, or a group of them)."""
     mult = np.bincount(which, minlength=len(chains)).astype(float)
     M = system.n_servers
     half = float(sum(q[-1] for q in system.q))  # the cost scale: every AoI at its cap

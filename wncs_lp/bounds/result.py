@@ -9,7 +9,7 @@ import numpy as np
 from ..files import json_ready
 from ..status import OPTIMAL
 
-__all__ = ["ValueTables", "BoundResult"]
+__all__ = ["ValueTables", "GroupTables", "BoundResult"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,13 +46,48 @@ class ValueTables:
 
 
 @dataclass(frozen=True, eq=False)
+class GroupTables:
+    """Per-group value tables h_G(tau_G, c) of a value function separable across groups of
+    processes, h(tau, C) ~ sum_G h_G(tau_G, column_G(C)) (the grouped relaxation's).
+
+    Attributes
+    ----------
+    groups : tuple of tuples of int
+        The partition of the processes (0-based, increasing in each group).
+    h : tuple of arrays
+        ``h[i][col, tau_{G[0]} - 1, tau_{G[1]} - 1, ...]``, shape (n_cols_i, tau_hat of each member).
+    column : tuple of int arrays
+        ``column[i][c]``, shape (|C|,): the column of ``h[i]`` that joint configuration ``c`` reads
+        (group i's projection of ``c``).
+    """
+
+    groups: tuple
+    h: tuple
+    column: tuple
+
+    @property
+    def n_processes(self) -> int:
+        return sum(len(g) for g in self.groups)
+
+    def value(self, tau: np.ndarray, config_ids: np.ndarray) -> np.ndarray:
+        """sum_G h_G(tau_G, column_G(C)) for an (R, N) array of AoI vectors and (R,) configuration ids."""
+        tau = np.asarray(tau, dtype=np.int64)
+        c = np.asarray(config_ids, dtype=np.int64)
+        out = np.zeros(tau.shape[0])
+        for g, hg, col in zip(self.groups, self.h, self.column):
+            out += hg[(col[c],) + tuple(tau[:, k] - 1 for k in g)]
+        return out
+
+
+@dataclass(frozen=True, eq=False)
 class BoundResult:
     """A certified lower bound on the optimal gain g* of a scenario, from one relaxation.
 
     Attributes
     ----------
     relaxation : str
-        ``"private-servers"`` (relaxation 1) or ``"joint-configuration"`` (relaxation 2).
+        ``"private-servers"`` (relaxation 1), ``"joint-configuration"`` (relaxation 2) or
+        ``"grouped-private-servers"`` (relaxation 3).
     lower_bound : float
         The certified bound: ``lower_bound <= g*``. It holds whatever ``status`` says.
     relaxation_upper : float
@@ -67,9 +102,10 @@ class BoundResult:
         solver's status alone.
     multipliers : numpy array
         The prices / dual solution at which the bound was certified.
-    process_gains : (N,) array
-        Each process's part of the bound (its certified gain at the multipliers).
-    tables : ValueTables
+    process_gains : array
+        Each process's part of the bound (its certified gain at the multipliers); for the grouped
+        relaxation each group's, in the order of ``tables.groups``.
+    tables : ValueTables or GroupTables
         The value tables of the relaxation, for the greedy policy of the bound.
     seconds : float
     iterations : int

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
+from ..errors import WncsError
 from .common import Command, add_progress_arg, add_scenario_args, emit_json, head, load, progress_for
 
 
@@ -21,8 +22,12 @@ def cmd_bound(args: argparse.Namespace) -> int:
     system = System.from_scenario(scenario)
     prog.phase(f"computing the {relaxation} lower bound")
     # the search options are relaxation 2's; relaxation 1's own max_iter counts other steps
-    limit = {} if relaxation == "private-servers" else {
+    limit = {} if relaxation in ("private-servers", "grouped-private-servers") else {
         k: v for k, v in (("time_limit", args.time_limit), ("max_iter", args.max_steps)) if v is not None}
+    if args.groups is not None:
+        if relaxation != "grouped-private-servers":
+            raise WncsError("--groups is an option of --relaxation 3 (grouped private servers)")
+        limit["groups"] = _parse_groups(args.groups)
     res = lower_bound(system, relaxation, tol=args.tol, progress=prog, **limit)
     report = None
     if args.policy:
@@ -37,13 +42,23 @@ def cmd_bound(args: argparse.Namespace) -> int:
     return 0 if res.ok else 1
 
 
+def _parse_groups(text: str) -> list[tuple[int, ...]]:
+    """``"1,5;2,6;3;4"`` (1-based processes) -> [(0, 4), (1, 5), (2,), (3,)]."""
+    try:
+        return [tuple(int(k) - 1 for k in part.split(",")) for part in text.split(";") if part.strip()]
+    except ValueError:
+        raise WncsError(f"--groups {text!r}: expected groups of 1-based process numbers, e.g. '1,5;2,6;3,7;4,8'") from None
+
+
 def _print(scenario, res, report) -> None:
     print(scenario.describe())
     why = f" (auto: {res.stats['auto_reason']})" if res.stats.get("auto_reason") else ""
     print(f"relaxation {res.relaxation}{why}: status {res.status}, {res.iterations} iterations, {res.seconds:.2f} s")
     print(f"certified lower bound: g* >= {res.lower_bound:.10g}")
     print(f"  certified by: {res.certified_by}")
-    if res.relaxation == "private-servers":
+    if res.relaxation == "grouped-private-servers":
+        print("  groups: " + "; ".join(", ".join(scenario.processes[k].name for k in g) for g in res.tables.groups))
+    if res.relaxation in ("private-servers", "grouped-private-servers"):
         names = ", ".join(f"{s.name} {lam:.8g}" for s, lam in zip(scenario.servers, res.multipliers))
         print(f"  multipliers (price of a server slot): {names}; capacity as an {res.stats['capacity']}")
     if res.relaxation_upper < float("inf"):
@@ -66,10 +81,14 @@ def _print(scenario, res, report) -> None:
 
 def _configure(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
-    p.add_argument("--relaxation", default="auto", metavar="1|2|auto",
+    p.add_argument("--relaxation", default="auto", metavar="1|2|3|auto",
                    help="1 = private servers with averaged capacity (seconds at any number of processes), "
                         "2 = joint configuration with separable value functions (tighter, when installed), "
-                        "auto = 2 where it can run, else 1 (default)")
+                        "3 = private servers shared by pairs of processes (relaxation 1 on groups), "
+                        "auto = the largest certified bound of those that apply (default)")
+    p.add_argument("--groups", default=None, metavar="1,5;2,6;...",
+                   help="--relaxation 3: the groups of processes (1-based, ';' between groups; default: the "
+                        "pairs that interact most at relaxation 1's multipliers)")
     p.add_argument("--tol", type=float, default=1e-6,
                    help="relative tolerance of the multiplier search (default 1e-6); the bound is certified "
                         "whatever it is")

@@ -160,10 +160,28 @@ class Model(ABC):
         raise ModelError(f"{self.scenario.source}: no private-servers bound for a {self.kind!r} model: "
                          f"{self.private_servers_refusal}")
 
+    def group_scenario(self, group: Sequence[int]) -> Scenario:
+        """The processes of ``group`` (0-based, increasing) alone with their own copy of every
+        server, idling allowed: the private system of a group in the grouped private-servers
+        relaxation (:mod:`wncs_lp.bounds.grouped`); process ``group[i]`` is its process i + 1.
+
+        Raises
+        ------
+        ModelError
+            The kind has no such relaxation (:attr:`private_servers_refusal` says why).
+        """
+        raise ModelError(f"{self.scenario.source}: no private-servers bound for a {self.kind!r} model: "
+                         f"{self.private_servers_refusal}")
+
     def project(self, config: Hashable, k: int) -> Hashable:
         """Process ``k``'s own jobs of a joint configuration, as a configuration of
         :meth:`private_scenario` (``k``)."""
         raise ModelError(f"{self.scenario.source}: a {self.kind!r} configuration has no per-process projection")
+
+    def project_group(self, config: Hashable, group: Sequence[int]) -> Hashable:
+        """The jobs of the processes of ``group`` in a joint configuration, as a configuration of
+        :meth:`group_scenario` (``group``)."""
+        raise ModelError(f"{self.scenario.source}: a {self.kind!r} configuration has no per-group projection")
 
     def project_labels(self, labels: np.ndarray, k: int) -> np.ndarray:
         """The action labels (an (..., M) int array) as seen by process ``k`` alone: what it sends

@@ -195,6 +195,14 @@ def _is_idle_config(cfg: Any) -> bool:
         return False
 
 
+
+def _checked_group(group: Sequence[int], n: int) -> tuple:
+    """``group`` as a tuple of distinct increasing process indices in 0..n-1."""
+    out = tuple(int(k) for k in group)
+    if not out or list(out) != sorted(set(out)) or out[0] < 0 or out[-1] >= n:
+        raise ModelError(f"a group of processes must be distinct increasing indices in 0..{n - 1}, got {list(group)}")
+    return out
+
 class WncsModel(Model):
     """The Section II model: N processes, M servers with uplink/downlink pipelines.
 
@@ -269,27 +277,40 @@ class WncsModel(Model):
     def private_scenario(self, k: int) -> Scenario:
         """Process ``k`` alone with its own copy of every server (same delays, its processing
         times, same links), ``allow_idle = true``, ``distinct`` as in the scenario."""
+        return self._alone((k,), f"{self.scenario.processes[k].name} alone on private servers")
+
+    def group_scenario(self, group: Sequence[int]) -> Scenario:
+        """The processes of ``group`` alone with their own copy of every server (same delays,
+        their processing times, same links), ``allow_idle = true``, ``distinct`` as in the scenario."""
+        group = _checked_group(group, self.scenario.n_processes)
+        names = ", ".join(self.scenario.processes[k].name for k in group)
+        return self._alone(group, f"{names} on private servers")
+
+    def _alone(self, group: tuple, what: str) -> Scenario:
         sc = self.scenario
-        pr = sc.processes[k]
         raw = {
             "model": {"kind": self.kind, "allow_idle": True, "distinct": sc.model.distinct},
             "channel": {} if sc.p != sc.p else {"success_probability": sc.p},
-            "process": [{"name": pr.name, "A": pr.A.tolist(), "R": pr.R.tolist(), "weight": pr.weight,
-                         "tau_cap": pr.tau_cap}],
+            "process": [{"name": sc.processes[k].name, "A": sc.processes[k].A.tolist(), "R": sc.processes[k].R.tolist(),
+                         "weight": sc.processes[k].weight, "tau_cap": sc.processes[k].tau_cap} for k in group],
             "server": [{"name": s.name, "uplink_delay": s.uplink_delay, "downlink_delay": s.downlink_delay,
-                        "processing_time": [s.processing_time[k]], "p_up": s.p_up, "p_down": s.p_down}
+                        "processing_time": [s.processing_time[k] for k in group], "p_up": s.p_up, "p_down": s.p_down}
                        for s in sc.servers],
         }
-        return scenario_from_dict(raw, source=f"{sc.source} [{pr.name} alone on private servers]")
+        return scenario_from_dict(raw, source=f"{sc.source} [{what}]")
 
     def project(self, config: tuple, k: int) -> tuple:
         """Every entry of another process emptied, process ``k`` renamed 1 (its private index)."""
-        own = k + 1
+        return self.project_group(config, (k,))
+
+    def project_group(self, config: tuple, group: Sequence[int]) -> tuple:
+        """Every entry of a process outside ``group`` emptied, process ``group[i]`` renamed i + 1."""
+        rename = {k + 1: i + 1 for i, k in enumerate(group)}
 
         def mine(x: int) -> int:
-            return 1 if x == own else 0
+            return rename.get(x, 0)
 
-        return tuple((tuple(mine(x) for x in up), mine(job), d if job == own else 0, tuple(mine(x) for x in down))
+        return tuple((tuple(mine(x) for x in up), mine(job), d if mine(job) else 0, tuple(mine(x) for x in down))
                      for (up, job, d, down) in config)
 
     def project_labels(self, labels: np.ndarray, k: int) -> np.ndarray:

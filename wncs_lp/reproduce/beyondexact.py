@@ -115,7 +115,7 @@ def _compute(ctx: Context, sc, inst: Instance, st: BeyondExactSettings) -> dict[
 def _params(sc, inst: Instance, st: BeyondExactSettings) -> dict[str, Any]:
     return {"fingerprint": sc.fingerprint(), "exact": inst.exact, "slots": st.slots, "reps": st.reps,
             "seed": st.seed, "burn_in": st.burn_in, "policies": list(POLICIES), "steps": st.steps,
-            "relaxation_1_policy": True}
+            "relaxation_1_policy": True, "auto": "relaxations 1, 2, 3; relaxation 2's tables from its priced chains"}
 
 
 def _instance(ctx: Context, inst: Instance, st: BeyondExactSettings) -> dict[str, Any]:
@@ -210,7 +210,9 @@ def section_b3(ctx: Context) -> ExtraResult:
         "Every lower bound is certified without the enumerated MDP (relaxation 1: each process alone with "
         "private servers whose capacity is shared on average, certified by the priced chains' policy-iteration "
         "bounds; relaxation 2, when installed: separable value tables over (AoI, configuration), certified by one "
-        "pass over every (configuration, action) pair). A certified gap (upper - LB) / LB bounds the policy's "
+        "pass over every (configuration, action) pair; relaxation 3 where relaxation 2 is not solved by its interior "
+        "point: relaxation 1 with pairs of processes sharing their private servers, the pairs that interact most at "
+        "relaxation 1's multipliers). A certified gap (upper - LB) / LB bounds the policy's "
         "distance to the unknown g* from above; 'upper' is the certified end of the matrix-free evaluation on "
         f"exact rows, the one-sided 95% upper confidence limit of {st.reps} x {st.slots:,} slots (seed {st.seed}, "
         f"burn-in {st.burn_in:,}) on Monte Carlo rows. 'vs g*' uses B2's certified optimum of processes 1-4 "

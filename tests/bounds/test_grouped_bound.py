@@ -1,0 +1,161 @@
+"""Relaxation 3, private servers shared by groups: below the exact g* (the solver) on several
+shapes, never below relaxation 1, at least the optimum of the whole system with idling when all
+processes form one group; the pairing against a brute force over every pairing; its policy
+against a brute-force argmin and against the optimum."""
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+from bounds_reference import shape
+from joint_reference import three_processes
+
+from wncs_lp import scenario_path
+from wncs_lp.bounds import bound_policy, lower_bound, private_bound
+from wncs_lp.bounds.grouped import _best_matching, grouped_bound
+from wncs_lp.bounds.policy import GroupBoundPolicy
+from wncs_lp.cli import main
+from wncs_lp.errors import WncsError
+from wncs_lp.evaluate import evaluate
+from wncs_lp.models import build
+from wncs_lp.models.system import System
+from wncs_lp.scenario import load_scenario, scenario_from_dict
+from wncs_lp.solvers import solve
+
+pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
+
+#: (scenario, groups): three processes of the paper at cap 10 and 12, the 3 x 3 shape (U = 0, 1, 2
+#: servers), three processes on an edge and a remote server, with given groups and with the pairs
+#: chosen by their interaction
+CASES = {
+    "p123-10 (2,3)": (lambda: load_scenario(scenario_path("paper_p123"), ["tau_cap=10"]), [(1, 2), (0,)]),
+    "p123-12 (1,2)": (lambda: load_scenario(scenario_path("paper_p123"), ["tau_cap=12"]), [(0, 1), (2,)]),
+    "3x3 (1,3)": (lambda: shape("3x3"), [(0, 2), (1,)]),
+    "three (1,2)": (lambda: three_processes(6), [(0, 1), (2,)]),
+    "three pairs": (lambda: three_processes(7), "pairs"),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(CASES), ids=str)
+def case(request):
+    make, groups = CASES[request.param]
+    sc = make()
+    system = System.from_scenario(sc)
+    mdp = build(sc)
+    return system, mdp, grouped_bound(system, groups), solve(mdp, method="pi")
+
+
+def test_valid_below_the_exact_optimum(case):
+    system, _, res, opt = case
+    assert res.ok and res.relaxation == "grouped-private-servers"
+    assert res.lower_bound <= opt.gain_upper * (1 + 1e-12)
+
+
+def test_never_looser_than_relaxation_1(case):
+    system, _, res, _ = case
+    r1 = private_bound(system)
+    assert res.lower_bound >= r1.lower_bound - 1e-7 * abs(r1.lower_bound)
+    assert res.stats["relaxation_1_bound"] == pytest.approx(r1.lower_bound, rel=1e-12)
+
+
+def test_policy_is_at_least_the_optimum_and_its_action_the_argmin(case):
+    system, mdp, res, opt = case
+    pol = bound_policy(res, system)
+    assert isinstance(pol, GroupBoundPolicy)
+    assert evaluate(mdp, pol).gain >= opt.gain_lower * (1 - 1e-9)
+    st = mdp.states
+    rng = np.random.default_rng(2)
+    rows = rng.choice(mdp.n_states, size=min(300, mdp.n_states), replace=False)
+    tau, cfg = np.asarray(st.tau)[rows], np.asarray(st.config)[rows]
+    acts = pol.act(tau, cfg)
+    for r, t, c, j in zip(rows, tau, cfg, acts):
+        v = _brute_values(system, res.tables, t, int(c))
+        assert v[j] <= v.min() + 1e-9 * max(1.0, abs(v.min())), f"state {mdp.state_label(int(r))}"
+
+
+def _brute_values(system, tables, tau, c):
+    """sum_o P(o | C, a) sum_G h_G(tau'_G, column_G(C'_o)) per feasible action, by loops over the
+    automaton's outcome lists."""
+    out = []
+    for outs in system.automaton.outcomes[c]:
+        v = 0.0
+        for nxt, delta, p in outs:
+            nt = [min(tau[k] + 1, int(system.caps[k])) for k in range(system.n_processes)]
+            nt = [min(t, delta[k]) if delta[k] > 0 else t for k, t in enumerate(nt)]
+            for g, h, col in zip(tables.groups, tables.h, tables.column):
+                v += p * h[(col[nxt],) + tuple(nt[k] - 1 for k in g)]
+        out.append(v)
+    return np.array(out)
+
+
+def test_a_pair_that_shares_its_servers_is_tighter():
+    """Processes 2 and 3 of the paper at cap 12 compete for the servers: sharing one copy raises
+    relaxation 1's bound by more than 3%, still below g*."""
+    sc = load_scenario(scenario_path("paper_p123"), ["tau_cap=12"])
+    system = System.from_scenario(sc)
+    r1, r3 = private_bound(system), grouped_bound(system, [(1, 2), (0,)])
+    assert r3.lower_bound > 1.03 * r1.lower_bound
+    assert r3.lower_bound <= solve(build(sc), method="pi").gain_upper
+
+
+def test_one_group_of_everything_is_at_least_the_idling_optimum():
+    """All processes in one group: the whole system with idling allowed and priced claims; at
+    lambda = 0 that is the optimum with idling allowed (solved here by the solver on the
+    scenario with allow_idle = true), so the bound is between it and g*."""
+    raw = {"model": {"kind": "wncs", "tau_cap": 6}, "channel": {"success_probability": 0.9},
+           "process": [{"A": [[1.1]]}, {"A": [[1.05]]}, {"A": [[1.2]], "weight": 2.0}],
+           "server": [{"name": "edge", "uplink_delay": 0, "downlink_delay": 0, "processing_time": [1, 2, 1]},
+                      {"name": "remote", "uplink_delay": 1, "downlink_delay": 1, "processing_time": [1, 1, 2]}]}
+    sc = scenario_from_dict(raw, source="<three>")
+    idle = scenario_from_dict({**raw, "model": {**raw["model"], "allow_idle": True}}, source="<three, idling>")
+    res = grouped_bound(sc, [(0, 1, 2)])
+    assert solve(build(idle), method="pi").gain_lower * (1 - 1e-7) <= res.lower_bound <= solve(build(sc), method="pi").gain_upper
+
+
+def test_pairing_is_the_best_over_every_pairing():
+    rng = np.random.default_rng(5)
+    for n in (2, 3, 5, 6, 7):
+        w = {(k, l): float(rng.choice([0.0, rng.uniform(0, 10)])) for k, l in itertools.combinations(range(n), 2)}
+        got = _best_matching(n, w)
+        assert len({k for p in got for k in p}) == 2 * len(got)
+        best = max(_all_pairings(list(range(n))), key=lambda ps: sum(w[p] for p in ps))
+        assert sum(w[p] for p in got) == pytest.approx(sum(w[p] for p in best), abs=1e-12)
+
+
+def _all_pairings(items):
+    """Every set of disjoint pairs (unmatched items allowed)."""
+    if len(items) < 2:
+        yield []
+        return
+    first, rest = items[0], items[1:]
+    yield from _all_pairings(rest)  # first alone
+    for i, other in enumerate(rest):
+        for tail in _all_pairings(rest[:i] + rest[i + 1:]):
+            yield [(first, other)] + tail
+
+
+def test_bad_groups_and_the_preemption_model_are_refused():
+    system = System.from_scenario(load_scenario(scenario_path("paper_p123"), ["tau_cap=6"]))
+    for bad in ([(0, 1)], [(0, 1), (1, 2)], [(0, 1, 2, 3)], "triples"):
+        with pytest.raises(WncsError, match="partition|groups"):
+            grouped_bound(system, bad)
+    with pytest.raises(WncsError, match="preemption"):
+        grouped_bound(load_scenario(scenario_path("paper_preemption_p12"), ["tau_cap=7"]))
+
+
+def test_auto_counts_relaxation_3_from_three_processes():
+    system = System.from_scenario(load_scenario(scenario_path("paper_p123"), ["tau_cap=6"]))
+    res = lower_bound(system, "auto", method="bundle", max_iter=1)
+    assert "grouped-private-servers" in res.stats["auto_bounds"]
+    assert res.lower_bound == max(res.stats["auto_bounds"].values())
+
+
+def test_command_line_groups(capsys):
+    rc = main(["bound", "paper_p123", "--set", "tau_cap=8", "--relaxation", "3", "--groups", "2,3;1", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["bound"]["relaxation"] == "grouped-private-servers"
+    assert out["bound"]["stats"]["groups"] == [[1, 2], [0]]
+    rc = main(["bound", "paper_p123", "--set", "tau_cap=8", "--groups", "2,3;1", "--json"])
+    assert rc == 2 and "--relaxation 3" in json.loads(capsys.readouterr().out)["error"]
