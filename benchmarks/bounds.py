@@ -8,8 +8,9 @@
 For every instance (default: processes 1-4 at caps 12, 20, 30; the 6-process mix and the paper's
 four types twice, 8 processes, at cap 20):
 
-* the bound of relaxation 1 (private servers) and, when ``wncs_lp.bounds.joint`` is installed,
-  of relaxation 2 (joint configuration), with their times;
+* the bound of relaxation 1 (private servers), when ``wncs_lp.bounds.joint`` is installed of
+  relaxation 2 (joint configuration), and from three processes on of relaxation 3 (pairs sharing
+  their private servers), with their times;
 * the optimum g* where known: processes 1-4 at caps 20 and 30 from the matrix-free solve of issue
   17 (1572.4473862 and 1628.3374066), at smaller caps solved here (certified matrix-free value
   iteration);
@@ -37,13 +38,13 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import wncs_lp  # noqa: E402
-from wncs_lp.bounds import BoundPolicy, lower_bound, policy_gaps  # noqa: E402
+from wncs_lp.bounds import bound_policy, lower_bound, policy_gaps  # noqa: E402
 from wncs_lp.files import atomic_write_text  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
 from wncs_lp.solvers.matrix_free import matrix_free_value_iteration  # noqa: E402
 
 COLUMNS = ["instance", "cap", "processes", "servers", "row", "how", "value", "value_upper", "gap_lb1", "gap_lb2",
-           "gap_optimum", "seconds", "load1", "note"]
+           "gap_lb3", "gap_optimum", "seconds", "load1", "note"]
 #: g* of processes 1-4 from the matrix-free solves of issue 17 (certified to 1e-9).
 KNOWN = {("paper_p1234", 20): 1572.4473862, ("paper_p1234", 30): 1628.3374066,
          # solved by this benchmark on 2026-12-01 (certified matrix-free value iteration, bracket 1e-9)
@@ -84,6 +85,8 @@ def _bounds(system, relaxations, time_limit=None, max_iter=None, method=None):
 
 def _bound_note(res):
     st = res.stats
+    if res.relaxation == "grouped-private-servers":
+        return f"{res.iterations} iterations; groups {[tuple(k + 1 for k in g) for g in st['groups']]}"
     if res.relaxation != "joint-configuration":
         return f"{res.iterations} iterations"
     parts = [f"method {st.get('auto_method', st.get('method'))}"]
@@ -109,10 +112,12 @@ def run_instance(name, cap, args, joint):
     sc = wncs_lp.load_scenario(wncs_lp.scenario_path(name), [f"tau_cap={cap}"])
     system = System.from_scenario(sc)
     base = {"instance": name, "cap": cap, "processes": sc.n_processes, "servers": sc.n_servers}
-    rels = ["private-servers"] + (["joint-configuration"] if joint else [])
+    grouped = sc.n_processes >= 3 and not args.no_grouped
+    rels = ["private-servers"] + (["joint-configuration"] if joint else []) + (["grouped-private-servers"] if grouped else [])
     bounds = _bounds(system, rels, args.joint_time_limit, args.joint_max_iter, args.joint_method)
     lb1 = bounds["private-servers"][0].lower_bound
     lb2 = bounds["joint-configuration"][0].lower_bound if joint else ""
+    lb3 = bounds["grouped-private-servers"][0].lower_bound if grouped else ""
     g_star, t_opt, how_opt = _optimum(name, cap, system)
     rows = []
     for rel, (res, secs, l0) in bounds.items():
@@ -124,13 +129,14 @@ def run_instance(name, cap, args, joint):
                      "note": how_opt})
     if args.bounds_only:
         return rows
-    policies = [BoundPolicy(res, system) for res, _, _ in bounds.values()] + ["suboptimal", "static"]
+    policies = [bound_policy(res, system) for res, _, _ in bounds.values()] + ["suboptimal", "static"]
     l0 = load1()
     report = policy_gaps(bounds["private-servers"][0], system, policies, exact_max_states=args.exact_max_states,
                          slots=args.slots, reps=args.reps, seed=args.seed)
     for r in report.rows:
         rows.append({**base, "row": r.policy, "how": r.how, "value": r.gain, "value_upper": r.gain_upper,
                      "gap_lb1": _rel(r.gain_upper, lb1), "gap_lb2": _rel(r.gain_upper, lb2),
+                     "gap_lb3": _rel(r.gain_upper, lb3),
                      "gap_optimum": _rel(r.gain, g_star), "seconds": round(r.seconds, 2), "load1": l0,
                      "note": f"{report.states:,} states"})
     return rows
@@ -144,10 +150,11 @@ def table(rows) -> str:
 
     rows = [{c: r.get(c, "") for c in COLUMNS} for r in rows]
     out = [f"{'instance':<20} {'cap':>3} {'row':<36} {'how':<11} {'value':>14} {'upper':>14} {'gap LB1':>8} "
-           f"{'gap LB2':>8} {'vs g*':>8} {'s':>8} {'load':>5}"]
+           f"{'gap LB2':>8} {'gap LB3':>8} {'vs g*':>8} {'s':>8} {'load':>5}"]
     for r in rows:
         out.append(f"{r['instance']:<20} {r['cap']:>3} {r['row']:<36} {str(r['how']):<11} {fmt(r['value']):>14} "
                    f"{fmt(r['value_upper']):>14} {fmt(r['gap_lb1'], True):>8} {fmt(r['gap_lb2'], True):>8} "
+                   f"{fmt(r['gap_lb3'], True):>8} "
                    f"{fmt(r['gap_optimum'], True):>8} {fmt(r['seconds']):>8} {fmt(r['load1']):>5}")
     return "\n".join(out)
 
@@ -172,6 +179,7 @@ def main(argv=None) -> int:
     ap.add_argument("--reps", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--bounds-only", action="store_true", help="the bounds (and g* where known) only, no policies")
+    ap.add_argument("--no-grouped", action="store_true", help="leave relaxation 3 (pairs sharing private servers) out")
     ap.add_argument("--joint-time-limit", type=float, default=None,
                     help="seconds for relaxation 2's search (its bound is certified whenever it stops)")
     ap.add_argument("--joint-max-iter", type=int, default=None, help="relaxation 2's bundle steps (after the IPM)")

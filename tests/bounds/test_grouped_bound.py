@@ -14,7 +14,7 @@ from joint_reference import three_processes
 
 from wncs_lp import scenario_path
 from wncs_lp.bounds import bound_policy, lower_bound, private_bound
-from wncs_lp.bounds.grouped import _best_matching, grouped_bound
+from wncs_lp.bounds.grouped import _best_matching, _greedy_matching, grouped_bound
 from wncs_lp.bounds.policy import GroupBoundPolicy
 from wncs_lp.cli import main
 from wncs_lp.errors import WncsError
@@ -124,6 +124,21 @@ def test_pairing_is_the_best_over_every_pairing():
         assert sum(w[p] for p in got) == pytest.approx(sum(w[p] for p in best), abs=1e-12)
 
 
+def test_greedy_pairing_leaves_processes_without_interaction_alone():
+    w = {(0, 1): 0.0, (0, 2): 3.0, (1, 2): 1.0, (0, 3): 0.0, (1, 3): 0.0, (2, 3): 2.0}
+    assert _greedy_matching(4, w) == [(0, 2)]
+
+
+def test_a_stopped_search_is_still_at_least_relaxation_1():
+    """One multiplier point, or no time at all: the search starts at relaxation 1's multipliers,
+    where a pair's gain is at least its members', so the bound is never below relaxation 1's."""
+    system = System.from_scenario(load_scenario(scenario_path("paper_p123"), ["tau_cap=12"]))
+    r1 = private_bound(system)
+    for kw in ({"max_iter": 1}, {"time_limit": 0.0}):
+        res = grouped_bound(system, [(1, 2), (0,)], **kw)
+        assert res.status == "max_iter" and res.lower_bound >= r1.lower_bound * (1 - 1e-9)
+
+
 def _all_pairings(items):
     """Every set of disjoint pairs (unmatched items allowed)."""
     if len(items) < 2:
@@ -159,3 +174,5 @@ def test_command_line_groups(capsys):
     assert out["bound"]["stats"]["groups"] == [[1, 2], [0]]
     rc = main(["bound", "paper_p123", "--set", "tau_cap=8", "--groups", "2,3;1", "--json"])
     assert rc == 2 and "--relaxation 3" in json.loads(capsys.readouterr().out)["error"]
+    rc = main(["bound", "paper_p123", "--set", "tau_cap=8", "--relaxation", "3", "--groups", "0,1;2", "--json"])
+    assert rc == 2 and "1-based" in json.loads(capsys.readouterr().out)["error"]

@@ -49,7 +49,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..errors import WncsError
+from ..errors import SolverError, WncsError
 from ..models import Model, model_for
 from ..models.system import System
 from ..progress import as_progress
@@ -73,6 +73,7 @@ class _Chains:
     def __init__(self, model: Model):
         self.model = model
         self.by_key: dict[str, PrivateChain] = {}
+        self.policies: dict[int, np.ndarray] = {}  # id(chain) -> its last computed policy
 
     def of(self, group: tuple) -> PrivateChain:
         sc = self.model.group_scenario(group)
@@ -82,14 +83,17 @@ class _Chains:
         return self.by_key[key]
 
 
-def _priced_gain(chain: PrivateChain, lam: np.ndarray, tol: float) -> float:
-    """The certified lower end of the chain's optimal gain at the multipliers lam."""
-    lb, _ = private_lower_bound_at([chain], np.ones(1), lam, tol)
+def _priced_gain(chains: _Chains, chain: PrivateChain, lam: np.ndarray, tol: float) -> float:
+    """The certified lower end of the chain's optimal gain at the multipliers lam (its policy kept
+    to start the multiplier search)."""
+    lb, solves = private_lower_bound_at([chain], np.ones(1), lam, tol)
+    chains.policies[id(chain)] = solves[0].policy
     return lb + float(np.sum(lam))
 
 
 def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float], *, solve_tol: float = 1e-10,
-                 chains: _Chains | None = None, progress: Any = False) -> tuple[tuple[tuple[int, ...], ...], dict]:
+                 chains: _Chains | None = None, progress: Any = False,
+                 deadline: float = np.inf) -> tuple[tuple[tuple[int, ...], ...], dict]:
     """Pairs of processes of largest total interaction at the multipliers ``lam``.
 
     Parameters
@@ -100,22 +104,32 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
     single_gains : (N,) array
         Each process's certified gain at ``lam`` (relaxation 1's ``process_gains``).
 
+    deadline : float
+        ``time.perf_counter()`` after which no more pair chains are solved (the pairs not
+        measured by then count as not interacting).
+
     Returns
     -------
     (groups, weights)
-        The partition (pairs, and one singleton when N is odd), and ``{(k, l): w_kl}``.
+        The partition (pairs, and processes alone), and ``{(k, l): w_kl}`` of the pairs measured.
     """
     n = system.n_processes
     chains = chains if chains is not None else _Chains(system.model)
     prog = as_progress(progress)
+    # a pair's gain does not depend on the order of its processes: one solve per multiset of processes
+    kind = [chain_key(chains.model.private_scenario(k)) for k in range(n)]
     weights, seen = {}, {}
     for k, l in itertools.combinations(range(n), 2):
-        ch = chains.of((k, l))
-        if id(ch) not in seen:
-            seen[id(ch)] = _priced_gain(ch, lam, solve_tol)
-            prog.tick(f"[grouped] pair ({k + 1}, {l + 1}): {ch.mdp.n_states:,} states, gain {seen[id(ch)]:.8g}")
-        weights[(k, l)] = max(seen[id(ch)] - single_gains[k] - single_gains[l], 0.0)
-    pairs = _best_matching(n, weights) if n <= EXACT_MATCHING_MAX else _greedy_matching(n, weights)
+        if time.perf_counter() >= deadline:
+            break
+        key = tuple(sorted((kind[k], kind[l])))
+        if key not in seen:
+            ch = chains.of((k, l))
+            seen[key] = _priced_gain(chains, ch, lam, solve_tol)
+            prog.tick(f"[grouped] pair ({k + 1}, {l + 1}): {ch.mdp.n_states:,} states, gain {seen[key]:.8g}")
+        weights[(k, l)] = max(seen[key] - single_gains[k] - single_gains[l], 0.0)
+    full = {p: weights.get(p, 0.0) for p in itertools.combinations(range(n), 2)}
+    pairs = _best_matching(n, full) if n <= EXACT_MATCHING_MAX else _greedy_matching(n, full)
     singles = sorted(set(range(n)) - {k for p in pairs for k in p})
     return tuple(sorted([tuple(p) for p in pairs] + [(k,) for k in singles])), weights
 
@@ -149,7 +163,9 @@ def _best_matching(n: int, w: dict) -> list[tuple[int, int]]:
 
 def _greedy_matching(n: int, w: dict) -> list[tuple[int, int]]:
     used, pairs = set(), []
-    for (k, l), _ in sorted(w.items(), key=lambda kv: -kv[1]):
+    for (k, l), wkl in sorted(w.items(), key=lambda kv: -kv[1]):
+        if wkl <= 0:
+            break  # no interaction: alone costs nothing and keeps the chains small
         if k not in used and l not in used:
             pairs.append((k, l))
             used |= {k, l}
@@ -182,7 +198,8 @@ def group_table(chain: PrivateChain, bias: np.ndarray) -> np.ndarray:
 
 
 def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[Sequence[int]] = "pairs", *,
-                  tol: float = 1e-6, max_iter: int = 80, solve_tol: float = 1e-10, progress: Any = False) -> BoundResult:
+                  tol: float = 1e-6, max_iter: int = 80, solve_tol: float = 1e-10, time_limit: float | None = None,
+                  relaxation_1: BoundResult | None = None, progress: Any = False) -> BoundResult:
     """The grouped private-servers lower bound on g* (relaxation 3), certified.
 
     Parameters
@@ -194,6 +211,11 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
         (:func:`choose_pairs`); or an explicit partition of the processes (0-based), e.g.
         ``[(0, 4), (1, 5), (2, 6), (3, 7)]``.
     tol, max_iter, solve_tol : as :func:`~wncs_lp.bounds.private.private_bound`.
+    time_limit : float, optional
+        Seconds at most (after relaxation 1): choosing the pairs stops measuring pairs, and the
+        multiplier search stops, when it is reached; the bound is certified whatever stops it.
+    relaxation_1 : BoundResult, optional
+        Relaxation 1's result on this system, to start from (computed when not given).
     progress : bool or Progress
 
     Returns
@@ -203,6 +225,9 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
         bias h_G(tau_G, C_G) at the multipliers); ``process_gains`` one entry per group (its
         certified gain, in the order of ``tables.groups``); ``stats["groups"]`` the partition
         (0-based) and, with ``"pairs"``, ``stats["pair_interaction"]``; ``stats["relaxation_1_bound"]``.
+        The multiplier search starts at relaxation 1's multipliers, and the returned bound is never
+        below relaxation 1's (the search keeps its best point; at relaxation 1's multipliers the
+        groups' gains are at least their members').
 
     Raises
     ------
@@ -213,47 +238,62 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     """
     t0 = time.perf_counter()
     prog = as_progress(progress)
-    system = scenario_or_system if isinstance(scenario_or_system, System) else System.from_scenario(scenario_or_system)
-    model = system.model if isinstance(scenario_or_system, System) else model_for(system.scenario)
+    model = scenario_or_system.model if isinstance(scenario_or_system, System) else model_for(scenario_or_system)
     model.group_scenario((0,))  # refuses a kind without the relaxation before any work
+    system = scenario_or_system if isinstance(scenario_or_system, System) else System.from_scenario(
+        scenario_or_system, model)
     n = system.n_processes
     if not isinstance(groups, str):
         groups = _checked_partition(groups, n)
     elif groups != "pairs":
         raise WncsError(f"unknown groups {groups!r}; expected 'pairs' or a partition of the processes")
-    r1 = private_bound(system, tol=tol, solve_tol=solve_tol)
-    sense = r1.stats["capacity"]
+    r1 = relaxation_1 if relaxation_1 is not None else private_bound(system, tol=tol, solve_tol=solve_tol)
+    deadline = time.perf_counter() + (float(time_limit) if time_limit is not None else np.inf)
+    lam1 = np.asarray(r1.multipliers, float)
     chains = _Chains(model)
-    stats: dict[str, Any] = {"relaxation_1_bound": r1.lower_bound, "capacity": sense}
+    stats: dict[str, Any] = {"relaxation_1_bound": r1.lower_bound, "capacity": r1.stats["capacity"]}
     if groups == "pairs":
         prog.phase(f"grouped bound: the interaction of every pair of {n} processes at relaxation 1's multipliers")
-        groups, weights = choose_pairs(system, np.asarray(r1.multipliers, float), r1.process_gains,
-                                       solve_tol=solve_tol, chains=chains, progress=prog)
-        stats["pair_interaction"] = {f"{k + 1},{l + 1}": round(v, 9) for (k, l), v in weights.items()}
+        groups, weights = choose_pairs(system, lam1, r1.process_gains, solve_tol=solve_tol, chains=chains,
+                                       progress=prog, deadline=deadline)
+        stats["pair_interaction"] = {f"{k + 1},{l + 1}": round(float(v), 9) for (k, l), v in weights.items()}
     group_chains = [chains.of(g) for g in groups]
     distinct = list({id(c): c for c in group_chains}.values())
     which = np.array([next(i for i, c in enumerate(distinct) if c is gc) for gc in group_chains])
     prog.phase(f"grouped bound: groups {[tuple(k + 1 for k in g) for g in groups]}, "
                f"{len(distinct)} distinct private chains of {[c.mdp.n_states for c in distinct]} states")
-    search = search_multipliers(system, distinct, which, sense, tol, max_iter, solve_tol, prog)
+    search = search_multipliers(system, distinct, which, r1.stats["capacity"], tol, max_iter, solve_tol, prog,
+                                lam0=lam1, deadline=deadline, policies0=[chains.policies.get(id(c)) for c in distinct])
     solves = search["solves"]
-    tables = GroupTables(
-        groups=groups,
-        h=tuple(group_table(distinct[which[i]], solves[which[i]].bias) for i in range(len(groups))),
-        column=tuple(np.array([distinct[which[i]].config_index[model.project_group(cfg, g)]
-                               for cfg in system.automaton.configs], np.int64) for i, g in enumerate(groups)))
+    tables = GroupTables(groups=groups,
+                         h=tuple(group_table(distinct[which[i]], solves[which[i]].bias) for i in range(len(groups))),
+                         column=tuple(_columns(system, model, distinct[which[i]], g) for i, g in enumerate(groups)))
     stats.update(groups=[list(g) for g in groups], private_chains=len(distinct),
                  chain_states=[int(c.mdp.n_states) for c in distinct], cuts=search["cuts"],
                  priced_solves=search["solves_done"] + (len(chains.by_key) if "pair_interaction" in stats else 0),
-                 priced_status=sorted({s.status for s in solves}), box=search["box"])
+                 priced_status=sorted({s.status for s in solves}), box=search["box"],
+                 stopped_by_time=bool(time.perf_counter() >= deadline))
     return BoundResult(
         relaxation=RELAXATION, lower_bound=search["lb"], relaxation_upper=search["upper"],
-        status=OPTIMAL if search["converged"] else MAX_ITER,
-        certified_by=("sum over the groups " + ", ".join("(" + ", ".join(str(k + 1) for k in g) + ")" for g in groups)
-                      + " of the lower end gain_lower of the Bellman bracket of each group's priced private chain "
-                      "(its processes sharing one copy of the servers, idling allowed; q + lambda . claim, solved by "
-                      "policy iteration), minus sum_m lambda_m; valid for every "
-                      + ("lambda (the claims sum to 1 in every state-action pair)" if sense == "equality"
-                         else "lambda >= 0 (the claims sum to at most 1)")),
+        status=OPTIMAL if search["converged"] else MAX_ITER, certified_by=_certified_by(groups, r1.stats["capacity"]),
         multipliers=search["lambda"], process_gains=np.array([solves[which[i]].lower for i in range(len(groups))]),
         tables=tables, seconds=time.perf_counter() - t0, iterations=search["iterations"], stats=stats)
+
+
+def _columns(system: System, model: Model, chain: PrivateChain, group: tuple) -> np.ndarray:
+    """Group ``group``'s private configuration id of every joint configuration."""
+    try:
+        return np.array([chain.config_index[model.project_group(cfg, group)] for cfg in system.automaton.configs],
+                        np.int64)
+    except KeyError as exc:  # the projection argument says this cannot happen
+        raise SolverError(f"internal error: the projection {exc} of a joint configuration on the group "
+                          f"{tuple(k + 1 for k in group)} is not a configuration of its private system") from None
+
+
+def _certified_by(groups: tuple, sense: str) -> str:
+    names = ", ".join("(" + ", ".join(str(k + 1) for k in g) + ")" for g in groups)
+    return (f"sum over the groups {names} of the lower end gain_lower of the Bellman bracket of each group's priced "
+            "private chain (its processes sharing one copy of the servers, idling allowed; q + lambda . claim, solved "
+            "by policy iteration), minus sum_m lambda_m; valid for every "
+            + ("lambda (the claims sum to 1 in every state-action pair)" if sense == "equality"
+               else "lambda >= 0 (the claims sum to at most 1)"))

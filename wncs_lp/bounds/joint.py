@@ -563,7 +563,8 @@ def _phases(run: _Run, start: tuple, method: str, stats: dict, pdhg_iter: int, p
         # a stopping rule, not a certificate (like the bundle's): IPX finished (kOptimal, or
         # kUnknown when HiGHS's stricter re-check at 1e-7 disagrees) with its primal objective
         # within tol of the certified bound
-        gap = stats["ipm_objective"] - run.best.lower_bound
+        # against the duals' own certificate: the chains' tables kept for their policy may certify up to tol less
+        gap = stats["ipm_objective"] - max(run.best.lower_bound, stats.get("ipm_tables_bound", -np.inf))
         finished = stats["ipm_status"] in ("kOptimal", "kUnknown")
         return finished and gap <= run.tol * max(abs(run.best.lower_bound), 1.0), 0
     if method in ("pdhg+bundle", "pdhg"):

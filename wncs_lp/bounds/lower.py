@@ -76,7 +76,8 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         search then stops as :data:`AUTO_SEARCH` says unless ``max_iter`` / ``time_limit`` are given.
     **options
         Keyword arguments of the relaxation's function (e.g. ``tol``, ``progress``). Under
-        ``"auto"`` relaxations 1 and 3 take only ``tol`` and ``progress``; the others go to
+        ``"auto"`` relaxations 1 and 3 take only ``tol`` and ``progress`` (and relaxation 3 the
+        same ``time_limit`` as relaxation 2's search, :data:`AUTO_SEARCH`); the others go to
         relaxation 2.
 
     Returns
@@ -117,11 +118,12 @@ def _auto(system: System, joint: Any, why_not: str, options: dict) -> BoundResul
             notes.append(note)
     else:
         notes.append(why_not)
-    if system.n_processes >= 3 and (res2 is None or res2.stats.get("ipm_tables") is not True):
-        res3 = _try(grouped_bound, system, options)
+    res1 = _try(private_bound, system, _private_options(options))
+    if res1 is not None and system.n_processes >= 3 and (res2 is None or res2.stats.get("ipm_tables") is not True):
+        res3 = _try(grouped_bound, system, {**_private_options(options), "relaxation_1": res1,
+                                            "time_limit": options.get("time_limit")})
         if res3 is not None:
             found.append(res3)
-    res1 = _try(private_bound, system, options)
     if res1 is not None:
         found.append(res1)
     if not found:
@@ -143,7 +145,7 @@ def _private_options(options: dict) -> dict:
 def _try(relaxation: Any, system: System, options: dict) -> BoundResult | None:
     """Relaxation 1 or 3 for comparison (None where the model has no private servers)."""
     try:
-        return relaxation(system, **_private_options(options))
+        return relaxation(system, **options)
     except WncsError:
         return None
 

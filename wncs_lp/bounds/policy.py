@@ -27,8 +27,9 @@ from .result import BoundResult, GroupTables
 
 __all__ = ["BoundPolicy", "GroupBoundPolicy", "bound_policy"]
 
-#: States per block of :meth:`GroupBoundPolicy.act` (its lookahead holds R x A_max x O_max floats).
-ACT_BLOCK = 20_000
+#: Lookahead entries (states x A_max x O_max) per block of :meth:`GroupBoundPolicy.act`: a few
+#: arrays of this many numbers at a time.
+ACT_BLOCK_ENTRIES = 2_000_000
 
 
 class BoundPolicy(SeparableGreedyPolicy):
@@ -74,7 +75,7 @@ class GroupBoundPolicy(Policy):
 
     ties to the first action. A group's table is not separable over its processes, so the
     lookahead is computed per state (R x A_max x O_max lookups per group, in blocks of
-    :data:`ACT_BLOCK` states) instead of from precomputed per-process tables.
+    :data:`ACT_BLOCK_ENTRIES` entries) instead of from precomputed per-process tables.
 
     Parameters
     ----------
@@ -106,20 +107,25 @@ class GroupBoundPolicy(Policy):
         s = self.system
         ot = s.outcome_tables
         nxt, prob = ot.nxt[c], ot.prob[c]
-        tn = np.minimum(tau[:, None, None, :] + 1, np.asarray(s.caps))
-        tn = np.where(ot.delta[c] > 0, np.minimum(tn, ot.delta[c]), tn)
         v = np.zeros(prob.shape)
         for g, h, col in zip(self.tables.groups, self.tables.h, self.tables.column):
-            v += h[(col[nxt],) + tuple(tn[..., k] - 1 for k in g)]
+            v += h[(col[nxt],) + tuple(self._next_tau(tau, c, k) - 1 for k in g)]
         out = np.where(prob > 0, prob * v, 0.0).sum(axis=-1)
         out[~s.action_valid[c]] = np.inf
         return out
 
+    def _next_tau(self, tau: np.ndarray, c: np.ndarray, k: int) -> np.ndarray:
+        """(R, A_max, O_max) AoI of process k after each outcome: min(tau_k + 1, delta_k if > 0, tau_hat_k)."""
+        dk = self.system.outcome_tables.delta[c, :, :, k]
+        t = np.minimum(tau[:, k] + 1, int(self.system.caps[k]))[:, None, None]
+        return np.where(dk > 0, np.minimum(t, dk), t)
+
     def act(self, tau, config_ids, rng=None):
         tau, c = self._check_inputs(tau, config_ids)
         out = np.empty(c.size, dtype=np.int64)
-        for i in range(0, c.size, ACT_BLOCK):
-            out[i:i + ACT_BLOCK] = np.argmin(self.values(tau[i:i + ACT_BLOCK], c[i:i + ACT_BLOCK]), axis=1)
+        block = max(1, ACT_BLOCK_ENTRIES // int(np.prod(self.system.outcome_tables.nxt.shape[1:])))
+        for i in range(0, c.size, block):
+            out[i:i + block] = np.argmin(self.values(tau[i:i + block], c[i:i + block]), axis=1)
         return out
 
     def describe(self) -> dict[str, Any]:

@@ -367,18 +367,26 @@ def private_bound(
 
 
 def search_multipliers(system: System, chains: list, which: np.ndarray, sense: str, tol: float, max_iter: int,
-                       solve_tol: float, prog) -> dict:
+                       solve_tol: float, prog, lam0: np.ndarray | None = None, deadline: float = np.inf,
+                       policies0: list | None = None) -> dict:
     """Kelley's cutting planes on the multipliers, inside a box that doubles while the answer
-    touches it. ``which[i]`` is the chain of the i-th member (a process, or a group of them)."""
+    touches it. ``which[i]`` is the chain of the i-th member (a process, or a group of them);
+    the first point is ``lam0`` (default 0; the box grows to hold it); the search also stops at
+    ``deadline`` (``time.perf_counter()``; after at least one point); ``policies0[j]`` (or None)
+    starts chain j's first policy iteration."""
     mult = np.bincount(which, minlength=len(chains)).astype(float)
     M = system.n_servers
     half = float(sum(q[-1] for q in system.q))  # the cost scale: every AoI at its cap
     free = sense == "equality"
     lo, hi = np.full(M, -half if free else 0.0), np.full(M, half)
-    lam = np.zeros(M)
+    if lam0 is not None:  # the box holds the first point
+        lam0 = np.asarray(lam0, float)
+        hi = np.maximum(hi, 2 * np.abs(lam0))
+        lo = np.minimum(lo, -2 * np.abs(lam0)) if free else lo
+    lam = np.zeros(M) if lam0 is None else np.clip(lam0, lo, hi)
     best = {"lb": -np.inf, "lambda": lam, "solves": None}
     cuts: list = []
-    policies = None
+    policies = policies0
     upper, converged, it = np.inf, False, 0
     for it in range(1, max_iter + 1):
         lb, solves = private_lower_bound_at(chains, mult, lam, solve_tol, policies)
@@ -394,6 +402,8 @@ def search_multipliers(system: System, chains: list, which: np.ndarray, sense: s
                 break
             lo, hi = (2 * lo if free else lo), 2 * hi
             upper, lam = _master(cuts, mult, lo, hi)
+        if time.perf_counter() >= deadline:
+            break
     interior = converged or not _on_boundary(lam, lo, hi, free)
     return {"lb": best["lb"], "lambda": best["lambda"], "solves": best["solves"], "converged": converged,
             "upper": float(upper) if interior else float("inf"), "iterations": it, "cuts": len(cuts),

@@ -45,9 +45,12 @@ def cmd_bound(args: argparse.Namespace) -> int:
 def _parse_groups(text: str) -> list[tuple[int, ...]]:
     """``"1,5;2,6;3;4"`` (1-based processes) -> [(0, 4), (1, 5), (2,), (3,)]."""
     try:
-        return [tuple(int(k) - 1 for k in part.split(",")) for part in text.split(";") if part.strip()]
+        groups = [tuple(int(k) - 1 for k in part.split(",")) for part in text.split(";") if part.strip()]
     except ValueError:
-        raise WncsError(f"--groups {text!r}: expected groups of 1-based process numbers, e.g. '1,5;2,6;3,7;4,8'") from None
+        groups = None
+    if not groups or any(k < 0 for g in groups for k in g):
+        raise WncsError(f"--groups {text!r}: expected groups of 1-based process numbers, e.g. '1,5;2,6;3,7;4,8'")
+    return groups
 
 
 def _print(scenario, res, report) -> None:

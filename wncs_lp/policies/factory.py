@@ -84,8 +84,8 @@ def make_policy(
 
 
 def _relaxation_policy(system: System) -> Policy:
-    # imported when asked for: the bounds room builds on policies (its policy is a
-    # SeparableGreedyPolicy); its gaps module takes comparators from this factory, so only the
+    # imported when asked for: the bounds room builds on policies (its policies are a
+    # SeparableGreedyPolicy or, for relaxation 3, a Policy on group tables); its gaps module takes comparators from this factory, so only the
     # bound and the policy modules are named here
     from ..bounds.lower import lower_bound
     from ..bounds.policy import bound_policy
