@@ -123,3 +123,18 @@ def shape(name: str):
 
 
 SHAPES = ("paper", "asymmetric", "three-servers", "idle", "u2", "u3", "3x3")
+
+
+def brute_lookahead(system, groups, h, column, tau, c: int) -> np.ndarray:
+    """sum_o P(o | C, a) sum_G h_G(tau'_G, column_G(C'_o)) per feasible action of configuration c,
+    by loops over the automaton's outcome lists (per-process tables: groups of one process)."""
+    out = []
+    for outs in system.automaton.outcomes[c]:
+        v = 0.0
+        for nxt, delta, p in outs:
+            nt = [min(tau[k] + 1, int(system.caps[k])) for k in range(system.n_processes)]
+            nt = [min(t, delta[k]) if delta[k] > 0 else t for k, t in enumerate(nt)]
+            for g, hg, col in zip(groups, h, column):
+                v += p * hg[(col[nxt],) + tuple(nt[k] - 1 for k in g)]
+        out.append(v)
+    return np.array(out)

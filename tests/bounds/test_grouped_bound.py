@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 import pytest
-from bounds_reference import shape
+from bounds_reference import brute_lookahead, shape
 from joint_reference import three_processes
 
 from wncs_lp import scenario_path
@@ -70,23 +70,8 @@ def test_policy_is_at_least_the_optimum_and_its_action_the_argmin(case):
     tau, cfg = np.asarray(st.tau)[rows], np.asarray(st.config)[rows]
     acts = pol.act(tau, cfg)
     for r, t, c, j in zip(rows, tau, cfg, acts):
-        v = _brute_values(system, res.tables, t, int(c))
+        v = brute_lookahead(system, res.tables.groups, res.tables.h, res.tables.column, t, int(c))
         assert v[j] <= v.min() + 1e-9 * max(1.0, abs(v.min())), f"state {mdp.state_label(int(r))}"
-
-
-def _brute_values(system, tables, tau, c):
-    """sum_o P(o | C, a) sum_G h_G(tau'_G, column_G(C'_o)) per feasible action, by loops over the
-    automaton's outcome lists."""
-    out = []
-    for outs in system.automaton.outcomes[c]:
-        v = 0.0
-        for nxt, delta, p in outs:
-            nt = [min(tau[k] + 1, int(system.caps[k])) for k in range(system.n_processes)]
-            nt = [min(t, delta[k]) if delta[k] > 0 else t for k, t in enumerate(nt)]
-            for g, h, col in zip(tables.groups, tables.h, tables.column):
-                v += p * h[(col[nxt],) + tuple(nt[k] - 1 for k in g)]
-        out.append(v)
-    return np.array(out)
 
 
 def test_a_pair_that_shares_its_servers_is_tighter():

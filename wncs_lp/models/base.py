@@ -150,15 +150,9 @@ class Model(ABC):
 
     def private_scenario(self, k: int) -> Scenario:
         """Process ``k`` (0-based) alone with its own copy of every server, idling allowed: the
-        private system of the private-servers relaxation.
-
-        Raises
-        ------
-        ModelError
-            The kind has no such relaxation (:attr:`private_servers_refusal` says why).
-        """
-        raise ModelError(f"{self.scenario.source}: no private-servers bound for a {self.kind!r} model: "
-                         f"{self.private_servers_refusal}")
+        private system of the private-servers relaxation (the group of ``k`` alone, see
+        :meth:`group_scenario`, which raises for a kind without the relaxation)."""
+        return self.group_scenario((k,))
 
     def group_scenario(self, group: Sequence[int]) -> Scenario:
         """The processes of ``group`` (0-based, increasing) alone with their own copy of every
