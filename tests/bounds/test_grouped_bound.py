@@ -74,6 +74,22 @@ def test_policy_is_at_least_the_optimum_and_its_action_the_argmin(case):
         assert v[j] <= v.min() + 1e-9 * max(1.0, abs(v.min())), f"state {mdp.state_label(int(r))}"
 
 
+def test_precomputed_lookahead_equals_the_per_state_one(case, monkeypatch):
+    """The group tables W_G[(C, a), tau_G] give the values the per-state lookahead over the outcome
+    tables gives (a policy built with no room for the tables computes per state)."""
+    from wncs_lp.bounds import policy as bound_policy_module
+
+    system, mdp, res, _ = case
+    fast = bound_policy(res, system)
+    monkeypatch.setattr(bound_policy_module, "TABLE_MAX_BYTES", 0)
+    slow = bound_policy(res, system)
+    assert all(w is not None for w in fast.lookahead) and all(w is None for w in slow.lookahead)
+    tau, cfg = np.asarray(mdp.states.tau), np.asarray(mdp.states.config)
+    a, b = fast.values(tau, cfg), slow.values(tau, cfg)
+    np.testing.assert_array_equal(np.isfinite(a), np.isfinite(b))
+    np.testing.assert_allclose(a[np.isfinite(a)], b[np.isfinite(b)], rtol=1e-12, atol=1e-9)
+
+
 def test_a_pair_that_shares_its_servers_is_tighter():
     """Processes 2 and 3 of the paper at cap 12 compete for the servers: sharing one copy raises
     relaxation 1's bound by more than 3% (below g*: the case "p123-12 (2,3)" above)."""

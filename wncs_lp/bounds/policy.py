@@ -25,11 +25,15 @@ from ..policies.base import Policy
 from ..policies.suboptimal import SeparableGreedyPolicy
 from .result import BoundResult, GroupTables
 
-__all__ = ["BoundPolicy", "GroupBoundPolicy", "bound_policy"]
+__all__ = ["BoundPolicy", "GroupBoundPolicy", "bound_policy", "group_lookahead"]
 
-#: Lookahead entries (states x A_max x O_max) per block of :meth:`GroupBoundPolicy.act`: a few
-#: arrays of this many numbers at a time.
+#: Lookahead entries (states x A_max x O_max) per block of :meth:`GroupBoundPolicy.act` for groups
+#: without a precomputed table: a few arrays of this many numbers at a time.
 ACT_BLOCK_ENTRIES = 2_000_000
+#: Largest precomputed lookahead table of one group (valid pairs x the group's AoI vectors, 8 bytes
+#: each: 39 MB for a pair of processes at cap 20 among 8 processes); a larger group computes its
+#: lookahead per state.
+TABLE_MAX_BYTES = 256 * 2**20
 
 
 class BoundPolicy(SeparableGreedyPolicy):
@@ -73,9 +77,11 @@ class GroupBoundPolicy(Policy):
 
     .. math:: \pi(\tau, C) = \arg\min_a \sum_o P(o \mid C, a) \sum_G h_G(\tau'_G, \mathrm{column}_G(C'_o)),
 
-    ties to the first action. A group's table is not separable over its processes, so the
-    lookahead is computed per state (R x A_max x O_max lookups per group, in blocks of
-    :data:`ACT_BLOCK_ENTRIES` entries) instead of from precomputed per-process tables.
+    ties to the first action. A group's table is not separable over its processes, so its
+    expectation is precomputed per group over the valid pairs and the group's AoI vectors,
+    W_G[(C, a), tau_G] (:func:`group_lookahead`, up to :data:`TABLE_MAX_BYTES`; the value of an
+    action is then sum_G W_G[(C, a), tau_G]); a larger group computes its lookahead per state
+    (R x A_max x O_max lookups, in blocks of :data:`ACT_BLOCK_ENTRIES` entries).
 
     Parameters
     ----------
@@ -99,18 +105,34 @@ class GroupBoundPolicy(Policy):
         self.result = result
         self.tables = tables
         self.name = f"bound[{result.relaxation}]"
+        valid = system.action_valid
+        self._pair = np.full(valid.shape, -1, dtype=np.int64)  # (C, a) -> its row in the W tables
+        self._pair[valid] = np.arange(int(valid.sum()))
+        self.lookahead = tuple(group_lookahead(system, g, h, col)
+                               for g, h, col in zip(tables.groups, tables.h, tables.column))
         self.build_seconds = time.perf_counter() - t0
 
     def values(self, tau: np.ndarray, config_ids: np.ndarray) -> np.ndarray:
         """(R, A_max) lookahead values (+inf on infeasible actions)."""
         tau, c = self._check_inputs(tau, config_ids)
         s = self.system
-        ot = s.outcome_tables
-        nxt, prob = ot.nxt[c], ot.prob[c]
-        v = np.zeros(prob.shape)
-        for g, h, col in zip(self.tables.groups, self.tables.h, self.tables.column):
-            v += h[(col[nxt],) + tuple(self._next_tau(tau, c, k) - 1 for k in g)]
-        out = np.where(prob > 0, prob * v, 0.0).sum(axis=-1)
+        rows = np.maximum(self._pair[c], 0)
+        out = np.zeros(rows.shape)
+        lazy = []
+        for g, W, i in zip(self.tables.groups, self.lookahead, range(len(self.lookahead))):
+            if W is None:
+                lazy.append(i)
+                continue
+            t = np.ravel_multi_index(tuple(tau[:, k] - 1 for k in g), tuple(int(s.caps[k]) for k in g))
+            out += W[rows, t[:, None]]
+        if lazy:
+            ot = s.outcome_tables
+            nxt, prob = ot.nxt[c], ot.prob[c]
+            v = np.zeros(prob.shape)
+            for i in lazy:
+                g, h, col = self.tables.groups[i], self.tables.h[i], self.tables.column[i]
+                v += h[(col[nxt],) + tuple(self._next_tau(tau, c, k) - 1 for k in g)]
+            out += np.where(prob > 0, prob * v, 0.0).sum(axis=-1)
         out[~s.action_valid[c]] = np.inf
         return out
 
@@ -131,6 +153,33 @@ class GroupBoundPolicy(Policy):
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "relaxation": self.result.relaxation, "lower_bound": self.result.lower_bound,
                 "groups": [list(g) for g in self.tables.groups], "build_seconds": self.build_seconds}
+
+
+def group_lookahead(system: System, group: tuple, h: np.ndarray, column: np.ndarray) -> np.ndarray | None:
+    """W[p, t] = sum_o P(o | pair p) h(column(C'_o), tau'_G) for every valid pair p (the
+    automaton's (C, a) in row-major order of ``action_valid``) and every AoI vector of the group
+    (t the flat index of tau_G - 1), tau'_k = min(tau_k + 1, delta_k if > 0, tau_hat_k); None when it
+    would exceed :data:`TABLE_MAX_BYTES`."""
+    ot = system.outcome_tables
+    caps = tuple(int(system.caps[k]) for k in group)
+    cs, js = np.nonzero(system.action_valid)
+    n_t = int(np.prod(caps))
+    if cs.size * n_t * 8 > TABLE_MAX_BYTES:
+        return None
+    grid = np.stack(np.unravel_index(np.arange(n_t), caps), axis=1) + 1  # (T, |G|) AoI vectors
+    step = np.minimum(grid + 1, np.asarray(caps))
+    W = np.zeros((cs.size, n_t))
+    block = max(1, ACT_BLOCK_ENTRIES // (n_t * len(group)))
+    for o in range(ot.nxt.shape[2]):
+        prob = ot.prob[cs, js, o]
+        real = np.flatnonzero(prob > 0)
+        for b in range(0, real.size, block):
+            idx = real[b:b + block]
+            d = ot.delta[cs[idx], js[idx], o][:, list(group)][:, None, :]  # (E, 1, |G|)
+            tn = np.where(d > 0, np.minimum(step[None], d), step[None])  # (E, T, |G|)
+            nxt = column[ot.nxt[cs[idx], js[idx], o]][:, None]
+            W[idx] += prob[idx, None] * h[(nxt,) + tuple(tn[..., i] - 1 for i in range(len(group)))]
+    return W
 
 
 def bound_policy(result: BoundResult, system: System) -> Policy:
