@@ -127,7 +127,7 @@ from wncs_lp.reproduce import beyond, beyondexact, fullscale
 beyond.SETTINGS["quick"] = beyond.BeyondSettings(caps=(5, 6), values=(0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3))
 fullscale.SETTINGS["quick"] = fullscale.FullScaleSettings(caps=(6,), sweep_cap=6, p_grid=(0.8, 0.9))
 beyondexact.SETTINGS["quick"] = beyondexact.BeyondExactSettings(
-    (beyondexact.Instance(beyondexact.FOUR, 6, True), beyondexact.Instance("bounds_mix6.toml", 4, False)),
+    (beyondexact.Instance(beyondexact.FOUR, 6, True), beyondexact.Instance("bounds_mix6.toml", 3, False)),
     slots=3_000, reps=4, burn_in=200, steps=3)
 from wncs_lp.cli import main
 sys.exit(main(sys.argv[1:]))

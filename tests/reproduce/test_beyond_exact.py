@@ -19,7 +19,7 @@ from wncs_lp.reproduce.context import PROFILES, Context
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
 
-TINY = b3.BeyondExactSettings((b3.Instance(b3.FOUR, 6, True), b3.Instance("bounds_mix6.toml", 4, False)),
+TINY = b3.BeyondExactSettings((b3.Instance(b3.FOUR, 6, True), b3.Instance("bounds_mix6.toml", 3, False)),
                               slots=3_000, reps=4, burn_in=200, steps=3)
 #: the bound the section computes, rebuilt through the library
 SEARCH = {"max_iter": TINY.steps, "time_limit": None}
@@ -75,7 +75,7 @@ def test_four_processes_against_the_enumerated_mdp(tiny):
 
 
 def test_monte_carlo_rows_against_the_exact_evaluation(tiny):
-    # six processes at cap 4 are small enough for the certified matrix-free evaluation, which the
+    # six processes at cap 3 are small enough for the certified matrix-free evaluation, which the
     # section's Monte Carlo row of the bound's policy must agree with (4 standard errors)
     from wncs_lp.solvers.matrix_free import matrix_free_evaluate
 
@@ -83,7 +83,7 @@ def test_monte_carlo_rows_against_the_exact_evaluation(tiny):
     inst = sec["numbers"]["instances"][1]
     lb = inst["bounds"][0]["lower_bound"]
     assert inst["how"] == "monte-carlo" and "optimum" not in inst
-    system = System.from_scenario(ctx.scenario("bounds_mix6.toml", ["tau_cap=4"]))
+    system = System.from_scenario(ctx.scenario("bounds_mix6.toml", ["tau_cap=3"]))
     ev = matrix_free_evaluate(system, bound_policy(lower_bound(system, "auto", **SEARCH), system), tol=1e-10)
     assert lb <= ev.gain_upper
     exact = ev.gain
