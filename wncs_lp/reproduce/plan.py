@@ -14,20 +14,21 @@ from typing import Sequence
 __all__ = ["ESTIMATE_SECONDS", "ESTIMATE_WHERE", "Plan", "duration"]
 
 #: Seconds of each section with a cold cache, per profile: ``default`` from one run of
-#: ``wncs-lp reproduce`` on a fresh clone (commit c9ca94f, 2 cores, 2 threads, quiet: 7 min 15 s in
-#: all; three such runs gave 7 min 06 s to 8 min 04 s); ``quick`` from one run of ``wncs-lp
-#: reproduce --profile quick`` on the same machine (51 s) (report.json's ``timings_seconds``). ``full`` adds B2's caps 20, 25 and 30 and its sweep at cap
-#: 20, and B3's processes 1-4 at caps 20 and 30, estimated from the matrix-free and bounds
-#: benchmarks (not one measured run).
+#: ``wncs-lp reproduce`` on a fresh clone (commit f27f716, 2 cores, 2 threads, quiet: 8 min 36 s in
+#: all; the code before relaxation 3 took 7 min 06 s to 8 min 04 s over three runs); ``quick`` from
+#: one run of ``wncs-lp reproduce --profile quick`` on the same machine (55 s) (report.json's
+#: ``timings_seconds``). ``full`` adds B2's caps 20, 25 and 30 and its sweep at cap 20, and B3's
+#: processes 1-4 at caps 20 and 30, estimated from the matrix-free and bounds benchmarks (not one
+#: measured run).
 ESTIMATE_SECONDS: dict[str, dict[str, float]] = {
-    "quick": {"C1": 1.8, "C2": 1.0, "C3": 3.3, "C4": 1.2, "C5": 0.8, "C6": 4.2, "C7": 0.6, "C8": 0.1,
-              "C9": 1.0, "C10": 0.1, "C11": 1.1, "C12": 1.3, "C13": 4.6, "B1": 9.1, "B2": 5.8,
-              "B3": 14.7},
-    "default": {"C1": 8.5, "C2": 12.2, "C3": 45.8, "C4": 22.6, "C5": 1.5, "C6": 109.2, "C7": 6.8,
-                "C8": 0.6, "C9": 3.2, "C10": 2.2, "C11": 16.9, "C12": 6.8, "C13": 4.9, "B1": 45.8,
-                "B2": 71.0, "B3": 76.7},
+    "quick": {"C1": 2.3, "C2": 1.6, "C3": 2.8, "C4": 1.4, "C5": 1.0, "C6": 3.7, "C7": 0.8, "C8": 0.1,
+              "C9": 1.6, "C10": 0.1, "C11": 1.4, "C12": 1.1, "C13": 5.7, "B1": 7.6, "B2": 4.5,
+              "B3": 19.5},
+    "default": {"C1": 7.5, "C2": 11.4, "C3": 50.8, "C4": 31.4, "C5": 1.9, "C6": 138.4, "C7": 7.6,
+                "C8": 0.7, "C9": 3.7, "C10": 2.7, "C11": 15.6, "C12": 7.3, "C13": 6.4, "B1": 46.2,
+                "B2": 59.5, "B3": 122.8},
 }
-ESTIMATE_SECONDS["full"] = {**ESTIMATE_SECONDS["default"], "B1": 80.0, "B2": 71.0 + 75 * 60.0, "B3": 76.7 + 15 * 60.0}
+ESTIMATE_SECONDS["full"] = {**ESTIMATE_SECONDS["default"], "B1": 80.0, "B2": 71.0 + 75 * 60.0, "B3": 122.8 + 15 * 60.0}
 #: Where the estimates come from, in the line that prints them.
 ESTIMATE_WHERE = "measured on a 2-core machine with a cold cache"
 
