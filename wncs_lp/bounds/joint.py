@@ -198,8 +198,9 @@ class _Run:
         return max(1e-11, 0.02 * self.tol)
 
 
-def _evaluate(run: _Run, prices: np.ndarray, phase: str) -> float:
-    """Solve every priced chain (warm-started), certify their tables, keep the best: returns
+def _evaluate(run: _Run, prices: np.ndarray, phase: str, slack: float = 0.0) -> float:
+    """Solve every priced chain (warm-started), certify their tables, keep the best (or these
+    tables when they certify at most ``slack`` less than the best): returns
     L(prices) = sum_k lower_k (the Lagrangian's value, from the chains' brackets)."""
     data = run.data
     sols: list[ChainSolution] = []
@@ -214,7 +215,7 @@ def _evaluate(run: _Run, prices: np.ndarray, phase: str) -> float:
     run.chain_sweeps += sum(s.sweeps for s in sols)
     tables = [s.h for s in sols]
     cert = certify_tables(data, tables)
-    if cert.lower_bound > run.best.lower_bound:
+    if cert.lower_bound > run.best.lower_bound - slack:
         run.best = _Best(cert.lower_bound, cert, tables, prices.copy(), np.array([s.lower for s in sols]), phase)
     run.history.append((round(time.monotonic() - run.t0, 3), phase, cert.lower_bound))
     run.clock("certify", t)
@@ -539,17 +540,10 @@ def _chains_at_ipm_prices(run: _Run, tables: list, stats: dict) -> None:
     and they certified 1547.629 against the duals' 1547.601 (0.1 s of chain sweeps).
     """
     ipm_bound = run.best.lower_bound
-    prices = _prices_from_tables(run.data, tables)
-    before = run.best
-    _evaluate(run, prices, "the priced chains at the interior point's prices")
-    chain_bound = run.history[-1][2]
-    stats.update(ipm_tables_bound=ipm_bound, ipm_chains_bound=chain_bound)
-    if run.best is before and chain_bound >= ipm_bound - run.tol * max(abs(ipm_bound), 1.0):
-        # the duals certified a hair more; the chains' tables are kept for their policy
-        tables = [s.h.copy() for s in run.chains]
-        cert = certify_tables(run.data, tables)
-        run.best = _Best(cert.lower_bound, cert, tables, prices.copy(),
-                         np.array([s.lower for s in run.chains]), "the priced chains at the interior point's prices")
+    # kept even when the duals certified a hair more (within tol): the chains' tables are kept for their policy
+    _evaluate(run, _prices_from_tables(run.data, tables), "the priced chains at the interior point's prices",
+              slack=run.tol * max(abs(ipm_bound), 1.0))
+    stats.update(ipm_tables_bound=ipm_bound, ipm_chains_bound=run.history[-1][2])
 
 
 def _phases(run: _Run, start: tuple, method: str, stats: dict, pdhg_iter: int, patience: int,
@@ -562,8 +556,7 @@ def _phases(run: _Run, start: tuple, method: str, stats: dict, pdhg_iter: int, p
     if method == "ipm" and _ipm_phase(run, stats, ipm_tol):
         # a stopping rule, not a certificate (like the bundle's): IPX finished (kOptimal, or
         # kUnknown when HiGHS's stricter re-check at 1e-7 disagrees) with its primal objective
-        # within tol of the certified bound
-        # against the duals' own certificate: the chains' tables kept for their policy may certify up to tol less
+        # within tol of the duals' own certificate (the chains' tables kept may certify up to tol less)
         gap = stats["ipm_objective"] - max(run.best.lower_bound, stats.get("ipm_tables_bound", -np.inf))
         finished = stats["ipm_status"] in ("kOptimal", "kUnknown")
         return finished and gap <= run.tol * max(abs(run.best.lower_bound), 1.0), 0
