@@ -103,7 +103,11 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
         Relaxation 1's multipliers.
     single_gains : (N,) array
         Each process's certified gain at ``lam`` (relaxation 1's ``process_gains``).
-
+    solve_tol : float
+        Relative certificate width of each priced pair solve.
+    chains : optional
+        The cache of group chains to build into (the caller's, so the chosen pairs are not built twice).
+    progress : bool or Progress
     deadline : float
         ``time.perf_counter()`` after which no more pair chains are solved (the pairs not
         measured by then count as not interacting).

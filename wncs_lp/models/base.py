@@ -169,13 +169,13 @@ class Model(ABC):
 
     def project(self, config: Hashable, k: int) -> Hashable:
         """Process ``k``'s own jobs of a joint configuration, as a configuration of
-        :meth:`private_scenario` (``k``)."""
-        raise ModelError(f"{self.scenario.source}: a {self.kind!r} configuration has no per-process projection")
+        :meth:`private_scenario` (``k``): the projection on the group of ``k`` alone."""
+        return self.project_group(config, (k,))
 
     def project_group(self, config: Hashable, group: Sequence[int]) -> Hashable:
         """The jobs of the processes of ``group`` in a joint configuration, as a configuration of
         :meth:`group_scenario` (``group``)."""
-        raise ModelError(f"{self.scenario.source}: a {self.kind!r} configuration has no per-group projection")
+        raise ModelError(f"{self.scenario.source}: a {self.kind!r} configuration has no per-process projection")
 
     def project_labels(self, labels: np.ndarray, k: int) -> np.ndarray:
         """The action labels (an (..., M) int array) as seen by process ``k`` alone: what it sends

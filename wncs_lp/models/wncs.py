@@ -195,13 +195,13 @@ def _is_idle_config(cfg: Any) -> bool:
         return False
 
 
-
 def _checked_group(group: Sequence[int], n: int) -> tuple:
     """``group`` as a tuple of distinct increasing process indices in 0..n-1."""
     out = tuple(int(k) for k in group)
     if not out or list(out) != sorted(set(out)) or out[0] < 0 or out[-1] >= n:
         raise ModelError(f"a group of processes must be distinct increasing indices in 0..{n - 1}, got {list(group)}")
     return out
+
 
 class WncsModel(Model):
     """The Section II model: N processes, M servers with uplink/downlink pipelines.
@@ -291,17 +291,13 @@ class WncsModel(Model):
         raw = {
             "model": {"kind": self.kind, "allow_idle": True, "distinct": sc.model.distinct},
             "channel": {} if sc.p != sc.p else {"success_probability": sc.p},
-            "process": [{"name": sc.processes[k].name, "A": sc.processes[k].A.tolist(), "R": sc.processes[k].R.tolist(),
-                         "weight": sc.processes[k].weight, "tau_cap": sc.processes[k].tau_cap} for k in group],
+            "process": [{"name": pr.name, "A": pr.A.tolist(), "R": pr.R.tolist(), "weight": pr.weight,
+                         "tau_cap": pr.tau_cap} for pr in (sc.processes[k] for k in group)],
             "server": [{"name": s.name, "uplink_delay": s.uplink_delay, "downlink_delay": s.downlink_delay,
                         "processing_time": [s.processing_time[k] for k in group], "p_up": s.p_up, "p_down": s.p_down}
                        for s in sc.servers],
         }
         return scenario_from_dict(raw, source=f"{sc.source} [{what}]")
-
-    def project(self, config: tuple, k: int) -> tuple:
-        """Every entry of another process emptied, process ``k`` renamed 1 (its private index)."""
-        return self.project_group(config, (k,))
 
     def project_group(self, config: tuple, group: Sequence[int]) -> tuple:
         """Every entry of a process outside ``group`` emptied, process ``group[i]`` renamed i + 1."""
