@@ -146,7 +146,7 @@ def test_overrides_in_every_shape():
     with pytest.raises(ScenarioError, match="expected a mapping, a list"):
         load_scenario(P12, 5)
     # one string is one override, not a list of characters
-    assert load_scenario(P12, "p=0.5").servers[0].p_up == 0.5
+    assert load_scenario(P12, "p=0.5").servers[0].p_up == (0.5, 0.5)
     assert load_scenario(P12, ["p=0.5"]) == load_scenario(P12, "p=0.5") == load_scenario(P12, {"p": 0.5})
 
 
@@ -171,7 +171,7 @@ def test_dataclasses_replace_cannot_leave_derived_fields_stale(tmp_path):
     with pytest.raises(ScenarioError, match="field 'p'.*scenario.replace"):
         dataclasses.replace(sc, p=0.5)
     fixed = sc.replace(p=0.5)
-    assert [s.p_up for s in fixed.servers] == [0.5, 0.5] and [s.p_down for s in fixed.servers] == [0.5, 0.5]
+    assert [s.p_up for s in fixed.servers] == [(0.5, 0.5)] * 2 and [s.p_down for s in fixed.servers] == [(0.5, 0.5)] * 2
     # the same scenario written as a file with p = 0.5: an independent path to the expected one
     f = tmp_path / "half.toml"
     f.write_text(Path(P12).read_text().replace("success_probability = 0.9", "success_probability = 0.5"))

@@ -63,7 +63,7 @@ def test_good_file_loads_into_typed_frozen_objects(tmp_path):
     assert sc.servers[0].processing_time == (2, 1)
     assert sc.servers[1].processing_time == (4, 2)
     # per-link override vs channel default
-    assert sc.servers[1].p_up == 0.7 and sc.servers[1].p_down == 0.9
+    assert sc.servers[1].p_up == (0.7, 0.7) and sc.servers[1].p_down == (0.9, 0.9)  # one per process
     assert sc.servers[0].loop == (1 + 2 + 1, 1 + 1 + 1)
     with pytest.raises(Exception):
         sc.p = 0.5  # frozen
@@ -94,9 +94,9 @@ def test_overrides(tmp_path):
     assert sc.p == 0.8
     assert sc.tau_caps == (15, 15)
     assert sc.processes[1].weight == 2.0
-    assert sc.servers[0].p_up == 0.8  # follows the channel
-    assert sc.servers[1].p_up == 0.7  # own value kept
-    assert sc.servers[1].p_down == 0.5
+    assert sc.servers[0].p_up == (0.8, 0.8)  # follows the channel
+    assert sc.servers[1].p_up == (0.7, 0.7)  # own value kept
+    assert sc.servers[1].p_down == (0.5, 0.5)
     # with_overrides on a loaded scenario, and processing time forms replace each other
     sc2 = sc.with_overrides({"server.remote.processing_time": [3, 3], "process.a.A": [[1.5]]})
     assert sc2.servers[0].processing_time == (3, 3)
@@ -207,7 +207,7 @@ def test_missing_channel_ok_when_every_link_has_its_own_p():
         "server": [{"uplink_delay": 0, "downlink_delay": 0, "processing_time": [1], "p_up": 0.5, "p_down": 1.0}],
     }
     sc = scenario_from_dict(raw)
-    assert sc.servers[0].p_up == 0.5 and math.isnan(sc.p)
+    assert sc.servers[0].p_up == (0.5,) and math.isnan(sc.p)
     raw["server"][0].pop("p_down")
     with pytest.raises(ScenarioError, match="channel.success_probability"):
         scenario_from_dict(raw)

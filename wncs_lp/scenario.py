@@ -4,9 +4,9 @@ The format (the model it describes: ``docs/model.md``)::
 
     [model]     kind, allow_idle, distinct, preemptive, tau_cap
     [channel]   success_probability
-    [[process]] name, A, R, weight, tau_cap
+    [[process]] name, A, R, weight, tau_cap, cost, arrival_probability
     [[server]]  name, uplink_delay, downlink_delay,
-                slots_per_dimension | processing_time, p_up, p_down
+                slots_per_dimension | processing_time, p_up, p_down (a number, or one per process)
     [[constraint]] quantity, server, process, max, min   (constrained scheduling;
                 docs/constraints.md)
 
@@ -37,6 +37,7 @@ else:  # pragma: no cover
 
 __all__ = [
     "ModelOptions",
+    "CostSpec",
     "ProcessSpec",
     "ServerSpec",
     "ConstraintSpec",
@@ -51,7 +52,7 @@ __all__ = [
 KINDS = ("wncs", "preemption")
 _MODEL_FIELDS = {"kind", "allow_idle", "distinct", "preemptive", "tau_cap"}
 _CHANNEL_FIELDS = {"success_probability"}
-_PROCESS_FIELDS = {"name", "A", "R", "weight", "tau_cap"}
+_PROCESS_FIELDS = {"name", "A", "R", "weight", "tau_cap", "cost", "arrival_probability"}
 _SERVER_FIELDS = {
     "name",
     "uplink_delay",
@@ -68,6 +69,9 @@ _TOP_FIELDS = {"model", "channel", "process", "server", "constraint"}
 #: (need ``process``); ``send_rate`` the fraction of slots in which a server is sent an update
 #: (needs ``server``; ``process`` optionally restricts it to that process's updates).
 QUANTITIES = ("cost", "process_cost", "aoi", "send_rate")
+#: The cost families of a process (``cost = ...``): the MSE of ``docs/model.md`` section 1 (the
+#: default), the AoI itself, a power of the AoI (``{ power = x }``), or an explicit table.
+COST_FAMILIES = ("mse", "aoi", "power", "table")
 #: Largest AoI cap accepted on load; far beyond anything enumerable, it only stops absurd input.
 MAX_TAU_CAP = 100_000
 #: Deepest nesting of lists and tables accepted (a scenario needs 5: top table, [[process]] list,
@@ -96,20 +100,78 @@ class ModelOptions:
     preemptive: bool = True
 
 
+@dataclass(frozen=True)
+class CostSpec:
+    """The cost family of one process: q(tau) = weight * f(tau), tau = 1..tau_hat.
+
+    Attributes
+    ----------
+    family : {"mse", "aoi", "power", "table"}
+        ``"mse"``: f(tau) = trace(sum_{i<tau} A^i R A^iT) (the default, ``docs/model.md``
+        section 1); ``"aoi"``: f(tau) = tau; ``"power"``: f(tau) = tau ** power; ``"table"``:
+        f(tau) = table[tau - 1].
+    power : float
+        The exponent of ``"power"`` (> 0; 1.0 otherwise).
+    table : tuple of float
+        The values of ``"table"``, at least tau_hat of them, finite, >= 0 and nondecreasing
+        (empty otherwise).
+    """
+
+    family: str = "mse"
+    power: float = 1.0
+    table: tuple[float, ...] = ()
+
+    def __str__(self) -> str:
+        if self.family == "power":
+            return f"aoi^{self.power:g}"
+        if self.family == "table":
+            return f"table[{len(self.table)}]"
+        return self.family
+
+    def to_raw(self) -> Any:
+        """The scenario-file value of this cost (``"aoi"``, ``{"power": 2.0}``, a list)."""
+        if self.family == "power":
+            return {"power": self.power}
+        if self.family == "table":
+            return list(self.table)
+        return self.family
+
+
+#: The default cost: the MSE of the paper.
+MSE_COST = CostSpec()
+
+
 @dataclass(frozen=True, eq=False)
 class ProcessSpec:
-    """One LTI process x(t+1) = A x + B u + z, z ~ N(0, R), with weight and AoI cap."""
+    """One LTI process x(t+1) = A x + B u + z, z ~ N(0, R), with weight, AoI cap, cost family and
+    arrivals.
+
+    Attributes
+    ----------
+    cost : CostSpec
+        The cost family (default: the MSE).
+    arrival_probability : float
+        lambda_k in (0, 1]: the probability that the sensor generates an update in a slot; 1.0
+        (the default) is the paper's sampling at will (``docs/model.md``, "Random arrivals").
+    """
 
     name: str
     A: np.ndarray
     R: np.ndarray
     weight: float
     tau_cap: int
+    cost: CostSpec = MSE_COST
+    arrival_probability: float = 1.0
 
     @property
     def dim(self) -> int:
         """n_k, the dimension of the process state."""
         return int(self.A.shape[0])
+
+    @property
+    def has_arrivals(self) -> bool:
+        """Whether updates arrive at random (lambda_k < 1) rather than at will."""
+        return self.arrival_probability < 1.0
 
     def __eq__(self, other: object) -> bool:
         return (
@@ -117,24 +179,37 @@ class ProcessSpec:
             and self.name == other.name
             and self.weight == other.weight
             and self.tau_cap == other.tau_cap
+            and self.cost == other.cost
+            and self.arrival_probability == other.arrival_probability
             and np.array_equal(self.A, other.A)
             and np.array_equal(self.R, other.R)
         )
 
     def __hash__(self) -> int:
-        return hash((self.name, self.weight, self.tau_cap, self.A.tobytes(), self.R.tobytes()))
+        return hash((self.name, self.weight, self.tau_cap, self.cost, self.arrival_probability,
+                     self.A.tobytes(), self.R.tobytes()))
 
 
 @dataclass(frozen=True)
 class ServerSpec:
-    """One server m: delays U, D, processing times T_{m,k}, link success probabilities."""
+    """One server m: delays U, D, processing times T_{m,k}, link success probabilities.
+
+    Attributes
+    ----------
+    processing_time : tuple of int
+        T_{m,k}, one per process.
+    p_up, p_down : tuple of float
+        pu_{m,k} and pd_{m,k}: the success probability of process k's uplink to this server and
+        of its downlink from it, one per process (``docs/model.md``, "Per-link success
+        probabilities"); all equal unless the scenario gives a list.
+    """
 
     name: str
     uplink_delay: int
     downlink_delay: int
     processing_time: tuple[int, ...]
-    p_up: float
-    p_down: float
+    p_up: tuple[float, ...]
+    p_down: tuple[float, ...]
 
     @property
     def loop(self) -> tuple[int, ...]:
@@ -262,24 +337,47 @@ class Scenario:
         return self.with_overrides(fields)
 
     def fingerprint(self) -> str:
-        """A stable hash of the validated content (for caches keyed by scenario)."""
+        """A stable hash of the validated content (for caches keyed by scenario).
+
+        A field at its default (the MSE cost, sampling at will, one link probability for every
+        process of a server) hashes as it did before the field existed, so the caches of the
+        scenarios that do not use it stay valid.
+        """
+        def process(pr: ProcessSpec) -> list:
+            row = [pr.name, pr.A.tolist(), pr.R.tolist(), pr.weight, pr.tau_cap]
+            if pr.cost != MSE_COST:
+                row.append({"cost": pr.cost.to_raw()})
+            if pr.has_arrivals:
+                row.append({"arrival_probability": pr.arrival_probability})
+            return row
+
+        def server(sv: ServerSpec) -> dict:
+            out = dict(vars(sv))
+            for key in ("p_up", "p_down"):
+                out[key] = _uniform(out[key])
+            return out
+
         content = {
             "model": vars(self.model),
             "p": None if math.isnan(self.p) else self.p,
-            "processes": [
-                [pr.name, pr.A.tolist(), pr.R.tolist(), pr.weight, pr.tau_cap] for pr in self.processes
-            ],
-            "servers": [vars(s) for s in self.servers],
+            "processes": [process(pr) for pr in self.processes],
+            "servers": [server(s) for s in self.servers],
         }
         payload = json.dumps(_canonical(content), sort_keys=True)
         return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
+    @property
+    def has_arrivals(self) -> bool:
+        """Whether some process has random arrivals (``arrival_probability < 1``)."""
+        return any(pr.has_arrivals for pr in self.processes)
+
     def degenerate_warnings(self) -> list[str]:
         """Warnings, in words, about a valid scenario that describes a degenerate problem.
 
-        * a server whose uplink or downlink never succeeds (``p_up = 0`` or ``p_down = 0``, e.g.
+        * a server whose every link fails (``p_up = 0`` or ``p_down = 0`` for every process, e.g.
           from ``channel.success_probability = 0``) never delivers: it is useless, and when every
           server is so, every AoI climbs to its cap and stays there (every policy costs the same);
+        * a process none of whose links to a working server succeeds is never delivered;
         * a process whose ``tau_cap`` is at most the shortest loop ``U + T + D`` of every server:
           a delivered update is never fresher than the cap, so its AoI stays at the cap and
           scheduling it changes nothing.
@@ -289,16 +387,28 @@ class Scenario:
         solve, with a result that says little.
         """
         out = []
-        dead = [sv for sv in self.servers if sv.p_up == 0 or sv.p_down == 0]
+
+        def works(sv: ServerSpec, k: int) -> bool:
+            return sv.p_up[k] > 0 and sv.p_down[k] > 0
+
+        N = self.n_processes
+        dead = [sv for sv in self.servers if not any(works(sv, k) for k in range(N))]
         why = " (the channel's success_probability is 0)" if self.p == 0 else ""
         if dead and len(dead) == len(self.servers):
             out.append(f"{self.source}: no update is ever delivered: every server has p_up = 0 or p_down = 0{why}; "
                        "every AoI climbs to its cap and stays there, so every policy costs the same")
         else:
             for sv in dead:
-                link = "uplink (p_up = 0)" if sv.p_up == 0 else "downlink (p_down = 0)"
+                if _uniform(sv.p_up) == 0 or _uniform(sv.p_down) == 0:
+                    link = "uplink (p_up = 0)" if _uniform(sv.p_up) == 0 else "downlink (p_down = 0)"
+                else:
+                    link = "link of every process (p_up = 0 or p_down = 0)"
                 out.append(f"{self.source}: server '{sv.name}' never delivers: its {link} always fails, "
                            "so sending it updates is never useful")
+            for k, pr in enumerate(self.processes):
+                if not any(works(sv, k) for sv in self.servers if sv not in dead):
+                    out.append(f"{self.source}: process '{pr.name}' is never delivered: its link to every server has "
+                               "p_up = 0 or p_down = 0, so its AoI climbs to its cap and stays there")
         for k, pr in enumerate(self.processes):
             loops = [(sv.loop[k], sv.name) for sv in self.servers]
             shortest, name = min(loops)
@@ -311,16 +421,33 @@ class Scenario:
 
     def describe(self) -> str:
         """A one-paragraph human summary."""
-        procs = ", ".join(f"{pr.name} (n={pr.dim}, cap={pr.tau_cap}, w={pr.weight:g})" for pr in self.processes)
+        def extra(pr: ProcessSpec) -> str:
+            text = f", cost={pr.cost}" if pr.cost != MSE_COST else ""
+            return text + (f", lambda={pr.arrival_probability:g}" if pr.has_arrivals else "")
+
+        procs = ", ".join(f"{pr.name} (n={pr.dim}, cap={pr.tau_cap}, w={pr.weight:g}{extra(pr)})"
+                          for pr in self.processes)
         servs = ", ".join(
             f"{s.name} (U={s.uplink_delay}, D={s.downlink_delay}, T={list(s.processing_time)}, "
-            f"pu={s.p_up:g}, pd={s.p_down:g})"
+            f"pu={_show_links(s.p_up)}, pd={_show_links(s.p_down)})"
             for s in self.servers
         )
         text = f"kind={self.model.kind}; processes: {procs}; servers: {servs}"
         if self.constraints:
             text += "; constraints: " + ", ".join(c.label for c in self.constraints)
         return text
+
+
+def _uniform(values: tuple[float, ...]) -> float | list[float]:
+    """One number when every process's link has it (the form of a scenario without per-link
+    values), else the list."""
+    values = tuple(values)
+    return float(values[0]) if values and all(v == values[0] for v in values) else [float(v) for v in values]
+
+
+def _show_links(values: tuple[float, ...]) -> str:
+    one = _uniform(values)
+    return f"{one:g}" if isinstance(one, float) else "[" + ", ".join(f"{v:g}" for v in one) + "]"
 
 
 def _canonical(obj: Any) -> Any:
@@ -739,7 +866,44 @@ def _process_table(entry: Any, i: int, v: _V, default_cap: int | None) -> Proces
         cap = default_cap
     else:
         raise v.err(f"{f}.tau_cap", "missing: set it here or as [model].tau_cap")
-    return ProcessSpec(name, _frozen_array(A), _frozen_array(R), weight, cap)
+    cost = _cost_spec(entry.get("cost", "mse"), cap, f"{f}.cost", v)
+    lam = 1.0
+    if "arrival_probability" in entry:
+        lam = v.real(entry["arrival_probability"], f"{f}.arrival_probability")
+        if not 0.0 < lam <= 1.0:
+            raise v.err(f"{f}.arrival_probability", f"expected a probability in (0, 1] (1: an update every slot, the "
+                                                   f"paper's sampling at will), found {lam:g}")
+    return ProcessSpec(name, _frozen_array(A), _frozen_array(R), weight, cap, cost, lam)
+
+
+def _cost_spec(obj: Any, cap: int, fld: str, v: _V) -> CostSpec:
+    """``cost``: ``"mse"``, ``"aoi"``, ``{ power = x }`` (x > 0) or a table of at least ``cap``
+    finite, nonnegative, nondecreasing numbers (q(1), q(2), ...)."""
+    expected = 'expected "mse", "aoi", { power = x } (x > 0) or a list q(1), q(2), ... of at least tau_cap numbers'
+    if isinstance(obj, str):
+        if obj not in ("mse", "aoi"):
+            raise v.err(fld, f"{expected}, found {_show(obj)}")
+        return CostSpec(obj)
+    if isinstance(obj, dict):
+        v.table(obj, fld, {"power"})
+        if "power" not in obj:
+            raise v.err(f"{fld}.power", "missing: expected a number > 0 (q(tau) = weight * tau ** power)")
+        x = v.real(obj["power"], f"{fld}.power")
+        if not x > 0:
+            raise v.err(f"{fld}.power", f"expected a number > 0 (a nondecreasing cost), found {x:g}")
+        return CostSpec("power", power=x)
+    if isinstance(obj, list):
+        values = [v.real(x, f"{fld}[{i + 1}]") for i, x in enumerate(obj)]
+        if len(values) < cap:
+            raise v.err(fld, f"expected at least tau_cap = {cap} values q(1..{cap}), found {len(values)}")
+        for i, x in enumerate(values):
+            if x < 0:
+                raise v.err(f"{fld}[{i + 1}]", f"expected a cost >= 0, found {x:g}")
+            if i and x < values[i - 1]:
+                raise v.err(f"{fld}[{i + 1}]", f"expected a nondecreasing table (q(tau) >= q(tau - 1)), found "
+                                               f"{x:g} after {values[i - 1]:g}")
+        return CostSpec("table", table=tuple(values))
+    raise v.err(fld, f"{expected}, found {_show(obj)}")
 
 
 def _noise_covariance(r_raw: Any, n: int, fld: str, v: _V) -> np.ndarray:
@@ -782,14 +946,29 @@ def _server_table(entry: Any, m: int, v: _V, processes: list[ProcessSpec], p: fl
     U = v.integer(entry["uplink_delay"], f"{f}.uplink_delay", 0, 10_000)
     D = v.integer(entry["downlink_delay"], f"{f}.downlink_delay", 0, 10_000)
     T = _processing_times(entry, f, v, processes)
-    pu = v.probability(entry["p_up"], f"{f}.p_up") if "p_up" in entry else p
-    pd = v.probability(entry["p_down"], f"{f}.p_down") if "p_down" in entry else p
-    if pu is None or pd is None:
-        raise v.err(
-            "channel.success_probability",
-            f"missing: needed by {f} (which sets no own p_up/p_down); expected a probability in [0, 1]",
-        )
-    return ServerSpec(name, U, D, T, pu, pd)
+    links = []
+    for key in ("p_up", "p_down"):
+        if key in entry:
+            links.append(_link_probabilities(entry[key], f"{f}.{key}", len(processes), v))
+        elif p is None:
+            raise v.err(
+                "channel.success_probability",
+                f"missing: needed by {f} (which sets no own p_up/p_down); expected a probability in [0, 1]",
+            )
+        else:
+            links.append((p,) * len(processes))
+    return ServerSpec(name, U, D, T, links[0], links[1])
+
+
+def _link_probabilities(obj: Any, fld: str, n: int, v: _V) -> tuple[float, ...]:
+    """``p_up`` / ``p_down`` of a server: one probability for every process's link, or a list of
+    one per process (in process order)."""
+    if isinstance(obj, list):
+        if len(obj) != n:
+            raise v.err(fld, f"expected a probability in [0, 1] or a list of {n} (one per process), found a list "
+                             f"of {len(obj)}")
+        return tuple(v.probability(x, f"{fld}[{k + 1}]") for k, x in enumerate(obj))
+    return (v.probability(obj, fld),) * n
 
 
 def _processing_times(entry: dict, f: str, v: _V, processes: list[ProcessSpec]) -> tuple[int, ...]:

@@ -47,7 +47,7 @@ def private_scenario(scenario, k: int):
         "model": {"kind": "wncs", "allow_idle": True, "distinct": scenario.model.distinct},
         "process": [{"A": pr.A.tolist(), "R": pr.R.tolist(), "weight": pr.weight, "tau_cap": pr.tau_cap}],
         "server": [{"name": s.name, "uplink_delay": s.uplink_delay, "downlink_delay": s.downlink_delay,
-                    "processing_time": [s.processing_time[k]], "p_up": s.p_up, "p_down": s.p_down}
+                    "processing_time": [s.processing_time[k]], "p_up": s.p_up[k], "p_down": s.p_down[k]}
                    for s in scenario.servers],
     }, source=f"<private {k}>")
 

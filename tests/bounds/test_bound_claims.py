@@ -82,7 +82,7 @@ def test_private_scenario_is_the_process_alone_with_idling():
     assert priv.n_processes == 1 and priv.model.allow_idle
     assert [s.processing_time for s in priv.servers] == [(1,), (2,)]
     assert [(s.uplink_delay, s.downlink_delay, s.p_up, s.p_down) for s in priv.servers] == \
-        [(3, 0, 0.9, 0.9), (0, 1, 0.9, 0.9)]
+        [(3, 0, (0.9,), (0.9,)), (0, 1, (0.9,), (0.9,))]
     np.testing.assert_array_equal(priv.processes[0].A, sc.processes[1].A)
 
 

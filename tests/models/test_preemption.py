@@ -124,7 +124,7 @@ def test_paper_file_loads():
     assert sc.n_servers == 1 and sc.n_processes == 2
     s = sc.servers[0]
     assert (s.uplink_delay, s.downlink_delay, s.processing_time) == (1, 1, (4, 3))
-    assert (s.p_up, s.p_down) == (0.9, 0.9)
+    assert (s.p_up, s.p_down) == ((0.9, 0.9), (0.9, 0.9))
     assert sc.tau_caps == (12, 12)
 
 
@@ -385,7 +385,7 @@ def test_preemption_never_hurts(make):
 def test_three_processes_without_delays_builds_and_validates():
     sc = load_scenario(THREE, {"tau_cap": 5})
     s = sc.servers[0]
-    assert (s.uplink_delay, s.downlink_delay, s.processing_time, s.p_up, s.p_down) == (0, 0, (4, 2, 3), 0.8, 0.95)
+    assert (s.uplink_delay, s.downlink_delay, s.processing_time, s.p_up, s.p_down) == (0, 0, (4, 2, 3), (0.8,) * 3, (0.95,) * 3)
     mdp = build(sc)
     mdp.validate()
     st = mdp.states

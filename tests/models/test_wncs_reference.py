@@ -13,7 +13,8 @@ reading the package's builder.  For every scenario below we compare
 
 The scenarios cover U = 0..3, D = 0..2, 1-3 servers, allow_idle and distinct both ways,
 per-server p_up / p_down different from p, p = 1 (zero-probability outcomes dropped) and
-processing times 1..4 given as lists (and once via slots_per_dimension).
+processing times 1..4 given as lists (and once via slots_per_dimension), and per-link
+probabilities (a list of one per process).
 """
 from __future__ import annotations
 
@@ -99,6 +100,12 @@ SCENARIOS = {
     "2srv-3proc-U2": scen(
         [{"A": [[1.1]], "tau_cap": 3}, {"A": [[1.05]], "tau_cap": 4}, {"A": [[0.9]], "tau_cap": 3}],
         [srv(2, 1, [1, 1, 2]), srv(0, 0, [3, 1, 2], p_up=0.8)],
+        p=0.9,
+    ),
+    # per-link probabilities: every (process, server) its own uplink and downlink (docs/model.md)
+    "2srv-2proc-per-link": scen(
+        [{"A": [[1.1]], "tau_cap": 5}, {"A": A2, "tau_cap": 4}],
+        [srv(1, 1, [1, 2], p_up=[0.95, 0.6], p_down=[0.9, 0.7]), srv(0, 0, [2, 1], p_up=[0.5, 0.99])],
         p=0.9,
     ),
     # distinct = false, no idling, more servers than processes: 0 is allowed only when both

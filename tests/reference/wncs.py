@@ -152,13 +152,15 @@ def step(scenario, state, action):
     per_server = []
     for srv, ss, a in zip(scenario.servers, servers, action):
         outs = []
-        up_opts = [(True, srv.p_up), (False, 1.0 - srv.p_up)] if a else [(True, 1.0)]
+        pu_a = srv.p_up[a - 1] if a else 1.0  # the link of the process sent
+        up_opts = [(True, pu_a), (False, 1.0 - pu_a)] if a else [(True, 1.0)]
         for up_ok, pu in up_opts:
             if pu <= 0.0:
                 continue
             new_ss, delivered = _server_slot(srv, ss, a, up_ok)
             if delivered:
-                dn_opts = [(True, srv.p_down), (False, 1.0 - srv.p_down)]
+                pd_k = srv.p_down[delivered - 1]  # the link of the process delivered
+                dn_opts = [(True, pd_k), (False, 1.0 - pd_k)]
             else:
                 dn_opts = [(False, 1.0)]
             for dn_ok, pd in dn_opts:

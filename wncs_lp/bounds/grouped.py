@@ -55,6 +55,7 @@ from ..models.system import System
 from ..progress import as_progress
 from ..scenario import Scenario
 from ..status import MAX_ITER, OPTIMAL
+from .inputs import bound_system, check_private_chains
 from .private import PrivateChain, build_private_chain, chain_key, private_bound, private_lower_bound_at, search_multipliers
 from .result import BoundResult, GroupTables
 
@@ -242,6 +243,8 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     """
     t0 = time.perf_counter()
     prog = as_progress(progress)
+    if isinstance(scenario_or_system, System):  # checked; cost tables of its own honoured
+        scenario_or_system = bound_system(scenario_or_system)
     model = scenario_or_system.model if isinstance(scenario_or_system, System) else model_for(scenario_or_system)
     model.group_scenario((0,))  # refuses a kind without the relaxation before any work
     system = scenario_or_system if isinstance(scenario_or_system, System) else System.from_scenario(
@@ -262,6 +265,8 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
                                        progress=prog, deadline=deadline)
         stats["pair_interaction"] = {f"{k + 1},{l + 1}": round(float(v), 9) for (k, l), v in weights.items()}
     group_chains = [chains.of(g) for g in groups]
+    columns = tuple(_columns(system, model, c, g) for c, g in zip(group_chains, groups))
+    check_private_chains(system, groups, group_chains, columns, "relaxation 3")
     distinct = list({id(c): c for c in group_chains}.values())
     which = np.array([next(i for i, c in enumerate(distinct) if c is gc) for gc in group_chains])
     prog.phase(f"grouped bound: groups {[tuple(k + 1 for k in g) for g in groups]}, "
@@ -271,7 +276,7 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     solves = search["solves"]
     tables = GroupTables(groups=groups,
                          h=tuple(group_table(distinct[which[i]], solves[which[i]].bias) for i in range(len(groups))),
-                         column=tuple(_columns(system, model, distinct[which[i]], g) for i, g in enumerate(groups)))
+                         column=columns)
     stats.update(groups=[list(g) for g in groups], private_chains=len(distinct),
                  chain_states=[int(c.mdp.n_states) for c in distinct], cuts=search["cuts"],
                  priced_solves=search["solves_done"] + (len(chains.by_key) if "pair_interaction" in stats else 0),

@@ -80,6 +80,7 @@ from .joint_chains import (Certificate, ChainSolution, JointData, Kernels, certi
                            kernels_available, policy_weights, solve_chain, stationary)
 from .joint_ipm import ipm_bytes, ipm_tables
 from .joint_lp import HalpernPDHG, JointLP, lp_shape, pin_tables
+from .inputs import bound_system
 from .private import private_bound
 from .result import BoundResult, ValueTables
 
@@ -462,6 +463,7 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         raise SolverError(f"tol must be positive, got {tol!r}")
     t0 = time.monotonic()
     prog = as_progress(progress)
+    system = bound_system(system)  # a System checked, its own cost tables honoured
     data = JointData.from_system(system)
     run = _Run(data=data, kern=Kernels(kernel, threads), prog=prog, tol=float(tol),
                deadline=t0 + (float(time_limit) if time_limit is not None else np.inf), t0=t0)

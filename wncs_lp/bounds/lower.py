@@ -15,6 +15,7 @@ from ..errors import WncsError
 from ..models.system import System
 from ..scenario import Scenario
 from .grouped import grouped_bound
+from .inputs import bound_system
 from .private import private_bound
 from .result import BoundResult
 
@@ -164,4 +165,4 @@ def _try_joint(joint: Any, system: System, options: dict) -> tuple[BoundResult |
 
 
 def _as_system(obj: Scenario | System) -> System:
-    return obj if isinstance(obj, System) else System.from_scenario(obj)
+    return bound_system(obj)  # a System checked, its own cost tables honoured

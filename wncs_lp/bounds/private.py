@@ -58,6 +58,7 @@ from ..progress import as_progress
 from ..scenario import Scenario
 from ..solvers import policy_iteration
 from ..status import MAX_ITER, OPTIMAL
+from .inputs import bound_system, check_private_chains
 from .result import BoundResult, ValueTables
 
 __all__ = ["PrivateChain", "private_chains", "private_bound", "private_lower_bound_at", "build_private_chain",
@@ -130,7 +131,8 @@ class PrivateChain:
 
 def chain_key(sc: Scenario) -> str:
     """What makes two private systems the same chain (the process names aside)."""
-    return repr(([(pr.A.tolist(), pr.R.tolist(), pr.weight, pr.tau_cap) for pr in sc.processes], sc.model,
+    return repr(([(pr.A.tolist(), pr.R.tolist(), pr.weight, pr.tau_cap, pr.cost, pr.arrival_probability)
+                  for pr in sc.processes], sc.model,
                  [(s.uplink_delay, s.downlink_delay, s.processing_time, s.p_up, s.p_down) for s in sc.servers]))
 
 
@@ -323,6 +325,8 @@ def private_bound(
     """
     t0 = time.perf_counter()
     prog = as_progress(progress)
+    if isinstance(scenario_or_system, System):  # checked; cost tables of its own honoured
+        scenario_or_system = bound_system(scenario_or_system)
     model = scenario_or_system.model if isinstance(scenario_or_system, System) else model_for(scenario_or_system)
     model.private_scenario(0)  # refuses a kind without the relaxation before any exploration
     prog.phase("building every process's private chain (its own copy of the servers, idling allowed)")
@@ -330,6 +334,7 @@ def private_bound(
     system = scenario_or_system if isinstance(scenario_or_system, System) else System.from_scenario(
         scenario_or_system, model)
     columns = _columns(system, chains, which)
+    check_private_chains(system, [(k,) for k in range(len(which))], [chains[i] for i in which], columns, "relaxation 1")
     sense = capacity_sense(system, chains, which, columns)
     search = search_multipliers(system, chains, which, sense, tol, max_iter, solve_tol, prog)
     lam, solves = search["lambda"], search["solves"]

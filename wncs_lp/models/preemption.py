@@ -1,8 +1,11 @@
 """The Section IV model (``docs/model.md``, "Section IV"): one server with processing preemption.
 
 Every slot every sensor transmits on its own orthogonal channel; the update of process k reaches
-the server with probability ``pu`` (independently per process). The scheduler then chooses which
-arrived update, if any, to start -- preempting the job in service if needed.
+the server with probability ``pu_k`` (the one server's ``p_up[k - 1]``, independently per
+process). The scheduler then chooses which arrived update, if any, to start -- preempting the job
+in service if needed. A process with random arrivals (``arrival_probability`` lambda_k < 1) pushes
+each update in the slot it is generated, so its update arrives with probability lambda_k pu_k
+(``docs/model.md``, "Arrivals in the Section IV model").
 
 Configuration
 -------------
@@ -58,9 +61,10 @@ One slot (the order of ``docs/model.md``, resolved as follows)
    it gets its first resumed service slot in the next slot. It keeps its remaining work d and
    its age (which grew while it waited).
 6. Delivery: the leaving command of process k with age g reaches the actuator with
-   probability pd and then sets tau_k(t+1) = min(tau_k(t) + 1, g) (the engine's delta_k = g);
+   probability pd_k and then sets tau_k(t+1) = min(tau_k(t) + 1, g) (the engine's delta_k = g);
    every other tau grows by one; then the cap applies.
-7. Arrivals: the next ``b`` is drawn, ``b'_k = 1`` with probability pu independently.
+7. Arrivals: the next ``b`` is drawn, ``b'_k = 1`` with probability lambda_k pu_k independently
+   (lambda_k = 1 when the process samples at will).
 
 Consequently an uninterrupted job of process k is delivered with age U + T_k + D, exactly the
 Section II loop length (``ServerSpec.loop``), also for U = 0 and/or D = 0 (U = D = 0, T = 1:
@@ -139,11 +143,18 @@ def feasible_preemption_actions(scenario: Scenario, config: tuple) -> list[tuple
     return [(0,)] + [(k,) for k in range(1, len(b) + 1) if b[k - 1]]
 
 
-def _arrival_distribution(N: int, pu: float) -> list[tuple[tuple[int, ...], float]]:
+def arrival_probabilities(scenario: Scenario) -> tuple[float, ...]:
+    """Per process, the probability that its update reaches the server in a slot: lambda_k pu_k."""
+    server = scenario.servers[0]
+    return tuple(pr.arrival_probability * server.p_up[k] if pr.has_arrivals else server.p_up[k]
+                 for k, pr in enumerate(scenario.processes))
+
+
+def _arrival_distribution(probs: Sequence[float]) -> list[tuple[tuple[int, ...], float]]:
     out = []
-    for b in itertools.product((0, 1), repeat=N):
+    for b in itertools.product((0, 1), repeat=len(probs)):
         prob = 1.0
-        for x in b:
+        for x, pu in zip(b, probs):
             prob *= pu if x else 1.0 - pu
         if prob > 0.0:
             out.append((tuple(b), prob))
@@ -194,14 +205,14 @@ def preemption_step(scenario: Scenario, config: tuple, a: int) -> list[tuple[Pre
     if job is None and stack:
         job, stack = stack[-1], stack[:-1]
     # 6. delivery, 7. arrivals
-    pd = server.p_down
     if leaving is not None:
+        pd = server.p_down[leaving[0] - 1]
         delta_ok = tuple(leaving[1] if k == leaving[0] else 0 for k in range(1, N + 1))
         links = [(delta_ok, pd), ((0,) * N, 1.0 - pd)]
     else:
         links = [((0,) * N, 1.0)]
     out = []
-    for nb, pb in _arrival_distribution(N, server.p_up):
+    for nb, pb in _arrival_distribution(arrival_probabilities(scenario)):
         nxt = PreemptionConfig(nb, job, stack, new_down)
         for delta, pl in links:
             if pl > 0.0:
@@ -287,12 +298,13 @@ class PreemptionModel(Model):
         """b is one of 2^N arrival vectors; the job in service is none or (k, d <= T_k, g <= tau_hat_k)
         (J = sum_k T_k tau_hat_k choices), the stack at most N - 1 such jobs, each of the D downlink
         places none or (k, g <= tau_hat_k): at most 2^N (1 + J)^N (1 + sum_k tau_hat_k)^D
-        configurations. The 2^N initial ones each draw every arrival vector next when 0 < pu < 1."""
+        configurations. The 2^N initial ones each draw every arrival vector next when every arrival
+        probability lambda_k pu_k is in (0, 1)."""
         sc = self.scenario
         N, srv = sc.n_processes, sc.servers[0]
         jobs = sum(t * cap for t, cap in zip(srv.processing_time, sc.tau_caps))
         configs = 2 ** N * (1 + jobs) ** N * (1 + sum(sc.tau_caps)) ** srv.downlink_delay
-        edges = 2 ** N if 0.0 < srv.p_up < 1.0 else 1
+        edges = 2 ** sum(0.0 < p < 1.0 for p in arrival_probabilities(sc))
         return AutomatonBounds(configs=configs, initial=2 ** N, edges_initial=edges)
 
     def initial_config(self) -> PreemptionConfig:

@@ -11,14 +11,25 @@ A server's configuration is the tuple ``(up, job, d, down)``:
 A joint configuration is the tuple of the servers' configurations. One slot of one server, for
 an action (the process sent to it, or 0), follows the order of ``docs/model.md`` exactly:
 uplink loss -> start at once if U = 0 -> service -> downlink -> start from the uplink if U >= 1
--> downlink loss. A delivered command of process k sets delta_k = U + T_k + D (its age).
+-> downlink loss. A delivered command of process k sets delta_k = U + T_k + D (its age). The
+uplink of process k to server m succeeds with pu_{m,k} (``ServerSpec.p_up[k - 1]``), its
+downlink with pd_{m,k}.
+
+**Random arrivals** (``docs/model.md``, "Random arrivals"). When some process has
+``arrival_probability < 1`` a configuration is an :class:`ArrivalConfig` ``(servers, ages,
+alpha)``: ``servers`` the tuple above, ``ages`` the same shape per server ``(up_ages, job_age,
+down_ages)`` holding the age at send of each job (0 where empty), lumped at
+a_{m,k} = max(0, tau_hat_k - (U_m + T_{m,k} + D_m)), and ``alpha`` the age of the update at each
+sensor, lumped at a_k = max_m a_{m,k} (0 for a process sampling at will). A delivered command of
+process k sent with age a through server m sets delta_k = a + U_m + T_{m,k} + D_m. Everything
+that reads only the servers (acceptance, actions, claims, the busy table) reads ``servers``.
 """
 from __future__ import annotations
 
 import itertools
 import math
 from functools import lru_cache
-from typing import Any, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 
@@ -30,6 +41,7 @@ from .base import Model
 
 __all__ = [
     "WncsModel",
+    "ArrivalConfig",
     "build_wncs",
     "wncs_automaton",
     "server_accepts",
@@ -40,6 +52,43 @@ __all__ = [
 ]
 
 ServerState = tuple  # (up: tuple[int,...], job: int, d: int, down: tuple[int,...])
+
+
+class ArrivalConfig(NamedTuple):
+    """A configuration of a scenario with random arrivals (module docstring).
+
+    Attributes
+    ----------
+    servers : tuple
+        Per server ``(up, job, d, down)``, as without arrivals.
+    ages : tuple
+        Per server ``(up_ages, job_age, down_ages)``: the age at send of the job in each place
+        (lumped at a_{m,k}; 0 where the place is empty).
+    alpha : tuple of int
+        Per process, the age of the update at its sensor (lumped at a_k; 0 at will).
+    """
+
+    servers: tuple
+    ages: tuple
+    alpha: tuple
+
+
+def _servers(config: Any) -> tuple:
+    """The servers' part of a configuration (the whole of it without arrivals)."""
+    return config.servers if isinstance(config, ArrivalConfig) else config
+
+
+def useful_ages(scenario: Scenario) -> tuple[tuple[int, ...], tuple[tuple[int, ...], ...]]:
+    """``(a_k per process, a_{m,k} per server and process)``: the lumping ages of ``docs/model.md``.
+
+    a_{m,k} = max(0, tau_hat_k - (U_m + T_{m,k} + D_m)): an update sent to server m with at least
+    this age cannot bring tau_k below its cap; a_k = max_m a_{m,k}, the sensor's. A process
+    sampling at will has a_k = 0 and a_{m,k} = 0 (its updates are always fresh).
+    """
+    per_server = tuple(tuple(max(0, pr.tau_cap - s.loop[k]) if pr.has_arrivals else 0
+                             for k, pr in enumerate(scenario.processes)) for s in scenario.servers)
+    sensor = tuple(max(col) for col in zip(*per_server))
+    return sensor, per_server
 
 
 def idle_server(server: ServerSpec) -> ServerState:
@@ -68,42 +117,60 @@ def server_accepts(server: ServerSpec, state: ServerState) -> bool:
 
 def server_step(server: ServerSpec, state: ServerState, a: int) -> list[tuple[ServerState, int, float]]:
     """One slot of one server: ``[(next_state, delivered_process (0 = none), prob), ...]``."""
+    return [(nxt, k, p) for nxt, _, k, _, p in aged_server_step(server, state, None, a, 0)]
+
+
+def aged_server_step(server: ServerSpec, state: ServerState, ages: tuple | None, a: int,
+                     sent_age: int) -> list[tuple[ServerState, tuple | None, int, int, float]]:
+    """One slot of one server, the jobs carrying their age at send.
+
+    ``ages`` is ``(up_ages, job_age, down_ages)`` (None: not tracked, all 0) and ``sent_age`` the
+    (lumped) age of the update sent now. Returns ``[(next_state, next_ages, delivered_process
+    (0 = none), its age at send, prob), ...]``, in the order of the uplink outcome (success first)
+    then the downlink's.
+    """
     up, job, d, down = state
+    ua, ja, da = ages if ages is not None else ((0,) * len(up), 0, (0,) * len(down))
     U, D, T = server.uplink_delay, server.downlink_delay, server.processing_time
-    pu, pd = server.p_up, server.p_down
+    pu = server.p_up[a - 1] if a else 1.0
     sends = [(a, pu), (0, 1.0 - pu)] if a else [(0, 1.0)]
-    out: list[tuple[ServerState, int, float]] = []
+    out: list[tuple[ServerState, tuple | None, int, int, float]] = []
     for arrived, p1 in sends:
-        j, dd = job, d
+        new_age = sent_age if arrived else 0
+        j, dd, jage = job, d, ja
         if U == 0 and arrived:  # 2. start at once
             if dd != 0:
                 raise ModelError(f"internal error: server {server.name} busy (d={dd}) when a job starts")
-            j, dd = arrived, T[arrived - 1]
-        completed = 0
+            j, dd, jage = arrived, T[arrived - 1], new_age
+        completed, cage = 0, 0
         if dd > 0:  # 3. service
             dd -= 1
             if dd == 0:
-                completed, j = j, 0
+                completed, cage, j, jage = j, jage, 0, 0
         if D == 0:  # 4. downlink
-            delivered, new_down = completed, ()
+            delivered, dage, new_down, new_da = completed, cage, (), ()
         else:
-            delivered, new_down = down[-1], (completed,) + down[:-1]
-        new_up = up
+            delivered, dage = down[-1], da[-1]
+            new_down, new_da = (completed,) + down[:-1], (cage,) + da[:-1]
+        new_up, new_ua = up, ua
         if U >= 1:  # 5. the update leaving the uplink starts service next slot
             if U == 1:
-                leaving = arrived
+                leaving, lage = arrived, new_age
             else:
-                leaving, new_up = up[-1], (arrived,) + up[:-1]
+                leaving, lage = up[-1], ua[-1]
+                new_up, new_ua = (arrived,) + up[:-1], (new_age,) + ua[:-1]
             if leaving:
                 if dd != 0:
                     raise ModelError(f"internal error: server {server.name} busy (d={dd}) when a job starts")
-                j, dd = leaving, T[leaving - 1]
+                j, dd, jage = leaving, T[leaving - 1], lage
         nxt = (new_up, j, dd, new_down)
+        nxt_ages = (new_ua, jage, new_da) if ages is not None else None
         if delivered:  # 6. downlink loss
-            out.append((nxt, delivered, p1 * pd))
-            out.append((nxt, 0, p1 * (1.0 - pd)))
+            pd = server.p_down[delivered - 1]
+            out.append((nxt, nxt_ages, delivered, dage, p1 * pd))
+            out.append((nxt, nxt_ages, 0, 0, p1 * (1.0 - pd)))
         else:
-            out.append((nxt, 0, p1))
+            out.append((nxt, nxt_ages, 0, 0, p1))
     return out
 
 
@@ -116,7 +183,7 @@ def feasible_actions(scenario: Scenario, config: tuple) -> list[tuple[int, ...]]
     so ties between equally good actions break towards sending rather than idling.
     """
     N = scenario.n_processes
-    accepts = [server_accepts(s, st) for s, st in zip(scenario.servers, config)]
+    accepts = [server_accepts(s, st) for s, st in zip(scenario.servers, _servers(config))]
     n_acc = sum(accepts)
     idle_ok = scenario.model.allow_idle or n_acc > N
     choices = []
@@ -136,9 +203,12 @@ def feasible_actions(scenario: Scenario, config: tuple) -> list[tuple[int, ...]]
 
 
 def wncs_automaton(scenario: Scenario) -> ConfigAutomaton:
-    """Explore the joint server configurations reachable from the all-idle one."""
+    """Explore the joint server configurations reachable from the all-idle one (with random
+    arrivals: the :class:`ArrivalConfig` reachable from all-idle servers and fresh updates)."""
     if scenario.model.kind != "wncs":
         raise ModelError(f"{scenario.source}: build_wncs needs kind = \"wncs\", found {scenario.model.kind!r}")
+    if scenario.has_arrivals:
+        return _arrival_automaton(scenario)
     servers = scenario.servers
     N = scenario.n_processes
     steps = [lru_cache(maxsize=None)(lambda st, a, s=s: server_step(s, st, a)) for s in servers]
@@ -162,19 +232,91 @@ def wncs_automaton(scenario: Scenario) -> ConfigAutomaton:
     return explore_configs([idle_config(scenario)], step)
 
 
+def _generations(scenario: Scenario, sensor_cap: tuple[int, ...]):
+    """alpha -> [(alpha', prob), ...]: each process with arrivals draws its next update (alpha' = 0
+    with lambda_k, else min(alpha + 1, a_k)); a process sampling at will keeps alpha = 0."""
+    lam = [pr.arrival_probability for pr in scenario.processes]
+
+    @lru_cache(maxsize=None)
+    def draws(alpha: tuple) -> list:
+        per = [[(0, lam[k]), (min(x + 1, sensor_cap[k]), 1.0 - lam[k])] if lam[k] < 1.0 else [(0, 1.0)]
+               for k, x in enumerate(alpha)]
+        out = []
+        for combo in itertools.product(*per):
+            prob = 1.0
+            for _, pr in combo:
+                prob *= pr
+            out.append((tuple(x for x, _ in combo), prob))
+        return out
+
+    return draws
+
+
+def _arrival_automaton(scenario: Scenario) -> ConfigAutomaton:
+    """The automaton over :class:`ArrivalConfig`: the servers' slot with the jobs' ages, then the
+    sensors' generations (independent of the action and the channels)."""
+    servers = scenario.servers
+    N = scenario.n_processes
+    sensor_cap, job_cap = useful_ages(scenario)
+    steps = [lru_cache(maxsize=None)(lambda st, ag, a, age, s=s: aged_server_step(s, st, ag, a, age)) for s in servers]
+    draws = _generations(scenario, sensor_cap)
+
+    def step(config: ArrivalConfig):
+        srv, ages, alpha = config
+        nexts = draws(alpha)
+        for action in feasible_actions(scenario, srv):
+            per_server = [steps[m](srv[m], ages[m], a, min(alpha[a - 1], job_cap[m][a - 1]) if a else 0)
+                          for m, a in enumerate(action)]
+            outs = []
+            for combo in itertools.product(*per_server):
+                prob = 1.0
+                delta = [0] * N
+                for m, (_, _, delivered, sent, pr) in enumerate(combo):
+                    prob *= pr
+                    if delivered:
+                        k = delivered - 1
+                        age = sent + servers[m].loop[k]
+                        delta[k] = age if delta[k] == 0 else min(delta[k], age)
+                nsrv, nages, delta = tuple(c[0] for c in combo), tuple(c[1] for c in combo), tuple(delta)
+                outs.extend((ArrivalConfig(nsrv, nages, nalpha), delta, prob * pa) for nalpha, pa in nexts)
+            yield action, outs
+
+    return explore_configs([initial_arrival_config(scenario)], step)
+
+
+def initial_arrival_config(scenario: Scenario) -> ArrivalConfig:
+    """Every server idle with empty pipelines, every sensor holding a fresh update (alpha = 0)."""
+    idle = idle_config(scenario)
+    ages = tuple((tuple(0 for _ in up), 0, tuple(0 for _ in down)) for up, _, _, down in idle)
+    return ArrivalConfig(idle, ages, (0,) * scenario.n_processes)
+
+
 def describe_wncs_config(servers: tuple[ServerSpec, ...], config: tuple) -> str:
+    """One line per configuration: ``"remote: job 1 d=2 down[2]; edge: idle"``; with random
+    arrivals a job shows its age at send (``job 1@3 d=2``: process 1's update, sent 3 slots
+    old) and the sensors' ages close the line (``; sensor ages: 0, 4``)."""
+    aged = isinstance(config, ArrivalConfig)
+    srv_cfg = _servers(config)
+    all_ages = config.ages if aged else [None] * len(srv_cfg)
+
+    def one(k: int, age: int) -> str:
+        return f"{k}@{age}" if aged and k else str(k)
+
     parts = []
-    for s, (up, job, d, down) in zip(servers, config):
+    for s, (up, job, d, down), ages in zip(servers, srv_cfg, all_ages):
+        ua, ja, da = ages if ages is not None else ((0,) * len(up), 0, (0,) * len(down))
         if not job and not any(up) and not any(down):
             parts.append(f"{s.name}: idle")
             continue
         bits = []
         if any(up):
-            bits.append("up[" + ",".join(str(k) for k in up) + "]")
-        bits.append(f"job {job} d={d}" if job else "no job")
+            bits.append("up[" + ",".join(one(k, a) for k, a in zip(up, ua)) + "]")
+        bits.append(f"job {one(job, ja)} d={d}" if job else "no job")
         if any(down):
-            bits.append("down[" + ",".join(str(k) for k in down) + "]")
+            bits.append("down[" + ",".join(one(k, a) for k, a in zip(down, da)) + "]")
         parts.append(f"{s.name}: " + " ".join(bits))
+    if aged:
+        parts.append("sensor ages: " + ", ".join(str(x) for x in config.alpha))
     return "; ".join(parts)
 
 
@@ -189,6 +331,10 @@ def build_wncs(scenario: Scenario) -> MDP:
 
 
 def _is_idle_config(cfg: Any) -> bool:
+    """Every server idle with empty pipelines (with random arrivals: and every sensor holding a
+    fresh update, the initial configuration)."""
+    if isinstance(cfg, ArrivalConfig):
+        return _is_idle_config(cfg.servers) and not any(cfg.alpha)
     try:
         return all(job == 0 and d == 0 and not any(up) and not any(down) for (up, job, d, down) in cfg)
     except (TypeError, ValueError):
@@ -230,6 +376,11 @@ class WncsModel(Model):
         configs = 1
         for s in sc.servers:
             configs *= (N + 1) ** (max(s.uplink_delay - 1, 0) + s.downlink_delay) * (1 + sum(s.processing_time))
+        if sc.has_arrivals:  # the sensors' ages, and an age at send in every place of every server
+            sensor_cap, job_cap = useful_ages(sc)
+            configs *= math.prod(a + 1 for a in sensor_cap)
+            for s, caps in zip(sc.servers, job_cap):
+                configs *= (1 + max(caps)) ** (max(s.uplink_delay - 1, 0) + 1 + s.downlink_delay)
         if sc.model.distinct:
             actions = math.perm(N, min(N, M))
         else:
@@ -237,21 +388,26 @@ class WncsModel(Model):
         return AutomatonBounds(configs=configs, initial=1, edges_initial=max(actions, 1))
 
     def initial_config(self) -> tuple:
+        """Every server idle with empty pipelines (with random arrivals: and every sensor holding
+        a fresh update)."""
+        if self.scenario.has_arrivals:
+            return initial_arrival_config(self.scenario)
         return idle_config(self.scenario)
 
     def accepts(self, config: tuple) -> tuple[bool, ...]:
-        return tuple(server_accepts(s, st) for s, st in zip(self.scenario.servers, config))
+        return tuple(server_accepts(s, st) for s, st in zip(self.scenario.servers, _servers(config)))
 
     def busy(self, config: tuple, labels: np.ndarray) -> np.ndarray:
         """A server is busy when a job is in service at the start of the slot (d > 0), or when
         U_m = 0 and an update is sent to it and survives the uplink (it is served in this same
-        slot), which has probability ``pu_m``."""
+        slot), which has probability ``pu_{m,k}`` of the process k sent."""
         out = np.zeros(labels.shape, dtype=float)
-        for m, (srv, st) in enumerate(zip(self.scenario.servers, config)):
+        for m, (srv, st) in enumerate(zip(self.scenario.servers, _servers(config))):
             base = 1.0 if st[2] > 0 else 0.0
             out[:, m] = base
             if srv.uplink_delay == 0 and base == 0.0:
-                out[:, m] = np.where(labels[:, m] > 0, srv.p_up, 0.0)
+                pu = np.asarray(srv.p_up, dtype=float)
+                out[:, m] = np.where(labels[:, m] > 0, pu[np.clip(labels[:, m] - 1, 0, pu.size - 1)], 0.0)
         return out
 
     def greedy_label(self, config: tuple, order: Sequence[int]) -> tuple[int, ...]:
@@ -287,27 +443,45 @@ class WncsModel(Model):
         return self._alone(group, f"{names} on private servers")
 
     def _alone(self, group: tuple, what: str) -> Scenario:
+        """The processes of ``group`` with everything that is theirs: A, R, weight, cap, cost family,
+        arrivals, processing times and their own link probabilities to every server."""
         sc = self.scenario
+
+        def process(pr) -> dict:
+            out = {"name": pr.name, "A": pr.A.tolist(), "R": pr.R.tolist(), "weight": pr.weight,
+                   "tau_cap": pr.tau_cap, "cost": pr.cost.to_raw()}
+            if pr.has_arrivals:
+                out["arrival_probability"] = pr.arrival_probability
+            return out
+
         raw = {
             "model": {"kind": self.kind, "allow_idle": True, "distinct": sc.model.distinct},
             "channel": {} if sc.p != sc.p else {"success_probability": sc.p},
-            "process": [{"name": pr.name, "A": pr.A.tolist(), "R": pr.R.tolist(), "weight": pr.weight,
-                         "tau_cap": pr.tau_cap} for pr in (sc.processes[k] for k in group)],
+            "process": [process(sc.processes[k]) for k in group],
             "server": [{"name": s.name, "uplink_delay": s.uplink_delay, "downlink_delay": s.downlink_delay,
-                        "processing_time": [s.processing_time[k] for k in group], "p_up": s.p_up, "p_down": s.p_down}
+                        "processing_time": [s.processing_time[k] for k in group],
+                        "p_up": [s.p_up[k] for k in group], "p_down": [s.p_down[k] for k in group]}
                        for s in sc.servers],
         }
         return scenario_from_dict(raw, source=f"{sc.source} [{what}]")
 
     def project_group(self, config: tuple, group: Sequence[int]) -> tuple:
-        """Every entry of a process outside ``group`` emptied, process ``group[i]`` renamed i + 1."""
+        """Every entry of a process outside ``group`` emptied, process ``group[i]`` renamed i + 1;
+        with random arrivals, the group's jobs keep their ages at send and its sensors their
+        ages (a plain server tuple when no process of the group has random arrivals)."""
         rename = {k + 1: i + 1 for i, k in enumerate(group)}
 
         def mine(x: int) -> int:
             return rename.get(x, 0)
 
-        return tuple((tuple(mine(x) for x in up), mine(job), d if mine(job) else 0, tuple(mine(x) for x in down))
-                     for (up, job, d, down) in config)
+        srv = tuple((tuple(mine(x) for x in up), mine(job), d if mine(job) else 0, tuple(mine(x) for x in down))
+                    for (up, job, d, down) in _servers(config))
+        if not any(self.scenario.processes[k].has_arrivals for k in group):
+            return srv
+        ages = tuple((tuple(a if mine(x) else 0 for x, a in zip(up, ua)), ja if mine(job) else 0,
+                      tuple(a if mine(x) else 0 for x, a in zip(down, da)))
+                     for (up, job, _, down), (ua, ja, da) in zip(config.servers, config.ages))
+        return ArrivalConfig(srv, ages, tuple(config.alpha[k] for k in group))
 
     def project_labels(self, labels: np.ndarray, k: int) -> np.ndarray:
         """a^k_m = 1 where a_m = k + 1 (process k sent to server m), else 0."""
@@ -329,7 +503,7 @@ class WncsModel(Model):
         labels = np.asarray(labels)
         N = self.scenario.n_processes
         out = np.zeros(labels.shape + (N,), dtype=np.int64)
-        for m, (srv, (up, job, d, _)) in enumerate(zip(self.scenario.servers, config)):
+        for m, (srv, (up, job, d, _)) in enumerate(zip(self.scenario.servers, _servers(config))):
             U = srv.uplink_delay
             if job and d >= U + 1:
                 out[:, m, job - 1] += 1
@@ -349,17 +523,21 @@ class WncsModel(Model):
 
     @classmethod
     def complete_partial(cls, text: str, descriptions: Sequence[str], idle_description: str | None) -> str | None:
-        """Servers not named in ``"edge: job 3 d=3"`` are idle."""
+        """Servers not named in ``"edge: job 3 d=3"`` are idle (and, with random arrivals, the
+        sensors' ages not given are those of the idle configuration: fresh updates)."""
         if idle_description is None:
             return None
-        server_names = [p.split(":")[0].strip().lower() for p in idle_description.split(";")]
+        defaults = {}
+        for part in idle_description.split(";"):
+            nm, _, rest = part.partition(":")
+            defaults[nm.strip().lower()] = rest.strip()
         given = {}
         for part in text.split(";"):
             if ":" in part:
                 nm, rest = part.split(":", 1)
-                given[nm.strip().lower()] = rest
-        if given and set(given) <= set(server_names):
-            return "; ".join(f"{nm}: {given.get(nm, 'idle')}" for nm in server_names)
+                given[nm.strip().lower()] = rest.strip()
+        if given and set(given) <= set(defaults):
+            return "; ".join(f"{nm}: {given.get(nm, default)}" for nm, default in defaults.items())
         return None
 
     @classmethod

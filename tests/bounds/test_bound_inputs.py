@@ -1,0 +1,105 @@
+"""What enters the bounds (``wncs_lp.bounds.inputs``): every per-process quantity read from the
+system given -- per-link probabilities, cost families, random arrivals -- or the system refused
+by name; Systems edited by hand checked where they enter.
+
+Each bound must stay below the exact optimum of its own system (solved by the LP) and move when
+the field moves (a field silently ignored would give the bound of the system without it).
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+import pytest
+
+import wncs_lp
+from wncs_lp.bounds import lower_bound
+from wncs_lp.errors import WncsError
+from wncs_lp.models.system import System
+from wncs_lp.scenario import scenario_from_dict
+
+BASE = {"model": {"kind": "wncs"}, "channel": {"success_probability": 0.9},
+        "process": [{"name": "a", "A": [[1.2]], "tau_cap": 5}, {"name": "b", "A": [[1.1]], "tau_cap": 5}],
+        "server": [{"name": "cloud", "uplink_delay": 1, "downlink_delay": 1, "processing_time": [1, 1]},
+                   {"name": "edge", "uplink_delay": 0, "downlink_delay": 0, "processing_time": [1, 2]}]}
+
+FIELDS = {
+    "none": {},
+    "links": {"server": {0: {"p_up": [0.95, 0.6]}, 1: {"p_down": [0.6, 0.99]}}},
+    "costs": {"process": {0: {"cost": {"power": 2.0}}, 1: {"cost": [1, 2, 4, 8, 16]}}},
+    "arrivals": {"process": {0: {"arrival_probability": 0.5}}},
+}
+
+
+def scenario(field: str):
+    raw = copy.deepcopy(BASE)
+    for table, entries in FIELDS[field].items():
+        for i, values in entries.items():
+            raw[table][i].update(values)
+    return scenario_from_dict(raw, source=f"<{field}>")
+
+
+@pytest.fixture(scope="module")
+def cases():
+    out = {}
+    for field in FIELDS:
+        sc = scenario(field)
+        sol = wncs_lp.solve(sc, "lp")
+        assert sol.status == "optimal"
+        out[field] = (sc, sol, {rel: lower_bound(sc, rel).lower_bound for rel in (1, 2, 3)})
+    return out
+
+
+@pytest.mark.parametrize("field", ["links", "costs", "arrivals"])
+@pytest.mark.parametrize("relaxation", [1, 2, 3])
+def test_every_bound_below_the_optimum_and_moved_by_the_field(cases, field, relaxation):
+    sc, sol, bounds = cases[field]
+    assert bounds[relaxation] <= sol.gain_upper * (1 + 1e-12)
+    assert bounds[relaxation] > 0.9 * sol.gain  # a bound of this system, not a trivial one
+    assert abs(bounds[relaxation] - cases["none"][2][relaxation]) > 1e-3 * sol.gain
+
+
+def test_replaced_cost_tables_are_honoured(cases):
+    """The issue's report: lower_bound(dataclasses.replace(system, q=...)) gave the bound of the
+    original costs. Now every relaxation reads them: the bounds are those of the scenario that
+    writes the same tables as its cost field."""
+    plain = System.from_scenario(scenario("none"))
+    costs_sc = cases["costs"][0]
+    edited = dataclasses.replace(plain, q=tuple(System.from_scenario(costs_sc).q))
+    for rel in (1, 2, 3):
+        assert lower_bound(edited, rel).lower_bound == pytest.approx(cases["costs"][2][rel], rel=1e-9, abs=1e-9)
+
+
+def test_replaced_cost_tables_checked():
+    plain = System.from_scenario(scenario("none"))
+    with pytest.raises(WncsError, match=r"process\[1\]\.cost\[3\].*nondecreasing"):
+        lower_bound(dataclasses.replace(plain, q=(np.array([1.0, 2, 1, 4, 5]), plain.q[1])), 1)
+    with pytest.raises(WncsError, match=r"System\.q\[1\]: expected q_2\(1\.\.5\)"):
+        lower_bound(dataclasses.replace(plain, q=(plain.q[0], plain.q[1][:3])), 1)
+    with pytest.raises(WncsError, match=r"System\.q\[0\]: expected finite"):
+        lower_bound(dataclasses.replace(plain, q=(plain.q[0] * np.inf, plain.q[1])), 2)
+
+
+def test_edited_system_fields_refused_by_name():
+    plain = System.from_scenario(scenario("none"))
+    with pytest.raises(WncsError, match=r"System\.caps"):
+        lower_bound(dataclasses.replace(plain, caps=plain.caps + 1), 1)
+    other = System.from_scenario(scenario("links"))
+    with pytest.raises(WncsError, match=r"System\.model"):
+        lower_bound(dataclasses.replace(plain, model=other.model), 2)
+    with pytest.raises(WncsError, match=r"System\.n_actions"):
+        lower_bound(dataclasses.replace(plain, n_actions=plain.n_actions + 1), 3)
+
+
+def test_automaton_edited_by_hand(cases):
+    """A per-link system made by swapping in another automaton (as a patched server step does):
+    relaxations 1 and 3, which rebuild the private chains from the scenario's fields, refuse it by
+    name; relaxation 2 reads the automaton, so it bounds the system the automaton describes."""
+    plain = System.from_scenario(scenario("none"))
+    links_sc, links_sol, _ = cases["links"]
+    edited = dataclasses.replace(plain, automaton=System.from_scenario(links_sc).automaton)
+    for rel in (1, 3):
+        with pytest.raises(WncsError, match=r"System\.automaton: relaxation .* cannot honour this system: process"):
+            lower_bound(edited, rel)
+    assert lower_bound(edited, 2).lower_bound <= links_sol.gain_upper * (1 + 1e-12)
