@@ -71,6 +71,11 @@ def valid_raw(draw) -> dict[str, Any]:
         elif draw(st.booleans()):
             d = [draw(st.floats(0, 3)) for _ in range(n)]
             p["R"] = [[d[i] if i == j else 0.0 for j in range(n)] for i in range(n)]
+        if draw(st.booleans()):  # cost families (docs/scenarios.md); a table covers every cap drawn (<= 20)
+            p["cost"] = draw(st.one_of(st.sampled_from(["mse", "aoi", {"power": 2.0}, {"power": 0.5}]),
+                                       st.lists(st.floats(0, 10), min_size=20, max_size=25).map(sorted)))
+        if draw(st.booleans()):
+            p["arrival_probability"] = draw(st.sampled_from([1.0, 0.5, 0.05]))
         procs.append(p)
     n_srv = 1 if kind == "preemption" else draw(st.integers(1, 3))
     servers = []
@@ -87,6 +92,8 @@ def valid_raw(draw) -> dict[str, Any]:
         for key in ("p_up", "p_down"):
             if draw(st.booleans()):
                 s[key] = draw(st.sampled_from([0.0, 1.0, 0.5, 0.9]))
+            elif draw(st.booleans()):  # per-link: one per process
+                s[key] = [draw(st.sampled_from([0.0, 1.0, 0.5, 0.9])) for _ in range(n_proc)]
         servers.append(s)
     model = {"kind": kind, "tau_cap": draw(st.integers(1, 20))}
     for key in ("allow_idle", "distinct", "preemptive"):
@@ -175,12 +182,14 @@ def to_toml(raw: dict[str, Any]) -> str:
 override_key = st.one_of(
     st.sampled_from(["p", "tau_cap", "model.kind", "model.tau_cap", "channel.success_probability",
                      "process.1.weight", "process.1.A", "process.2.R", "server.1.p_up", "server.s0.uplink_delay",
-                     "server.1.processing_time", "process.x.weight", "server.9.p_up", "foo", "model.bar"]),
+                     "server.1.processing_time", "process.x.weight", "server.9.p_up", "foo", "model.bar",
+                     "process.1.cost", "process.2.arrival_probability", "server.1.p_down"]),
     st.text(alphabet="abcdefghijklmnopqrstuvwxyz.0123456789_", max_size=20),
 )
 override_value = st.one_of(
     st.sampled_from(["0.8", "1.2", "-1", "nan", "inf", "true", "[[1.1]]", "[[1,2],[3,4]]", "preemption", "\"x\"",
-                     "[1, 2]", "0", "1", "1e400", "[", "{}"]),
+                     "[1, 2]", "0", "1", "1e400", "[", "{}", "aoi", "{power=2}", "{power=-1}", "[2, 1]",
+                     "[0.9, 0.5, 0.1]"]),
     st.text(max_size=10),
 )
 

@@ -219,3 +219,26 @@ def test_preemption_arrivals_are_thinned_arrivals():
     assert a.n_states == b.n_states and abs(a.P - b.P).max() < 1e-15
     assert math.isclose(wncs_lp.solve(with_lam, "lp").gain, wncs_lp.solve(thinned, "lp").gain, rel_tol=1e-12)
 
+
+
+# ----------------------------------------------------------------------------- defaults and overrides
+def test_defaults_written_out_change_nothing():
+    """Writing every new field at its default gives the same scenario, fingerprint and MDP: the
+    caches of scenarios without the fields stay valid."""
+    plain = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p12"), ["tau_cap=7"])
+    spelled = plain.replace(**{"process.1.cost": "mse", "process.2.arrival_probability": 1.0,
+                               "server.remote.p_up": [0.9, 0.9], "server.edge.p_down": [0.9, 0.9]})
+    assert spelled == plain and spelled.fingerprint() == plain.fingerprint()
+    a, b = build(plain), build(spelled)
+    assert a.n_states == b.n_states and (a.P != b.P).nnz == 0 and np.array_equal(a.cost, b.cost)
+
+
+def test_new_fields_as_overrides():
+    sc = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p12"), [
+        "tau_cap=7", "process.1.cost={power=2}", "process.2.cost=[1,2,3,4,5,6,7]", "process.2.arrival_probability=0.5",
+        "server.edge.p_up=[0.9,0.7]"])
+    assert str(sc.processes[0].cost) == "aoi^2" and sc.processes[1].cost.table == (1, 2, 3, 4, 5, 6, 7)
+    assert sc.processes[1].arrival_probability == 0.5 and sc.servers[1].p_up == (0.9, 0.7)
+    assert "cost=aoi^2" in sc.describe() and "pu=[0.9, 0.7]" in sc.describe() and "lambda=0.5" in sc.describe()
+    with pytest.raises(ScenarioError, match=r"process\[2\]\.cost.*at least tau_cap = 8"):
+        sc.replace(tau_cap=8)  # the table is shorter than the new cap
