@@ -1,7 +1,7 @@
 """Every room honours each of a researcher's own fields -- per-link probabilities, cost families,
 random arrivals -- or refuses it by name (issue 35's table of rooms x fields).
 
-For each field one small system uses it; each room runs on that system and its result is
+For each field one small system uses it (``tests/reference/own_systems.py``'s ``small_scenario``); each room runs on that system and its result is
 checked against an independent quantity of the *same* system (the exact optimum and exact
 evaluations of the MDP, itself checked against a reference builder in
 ``tests/models/test_own_systems.py``), and, where the room computes a number, against the same
@@ -10,7 +10,6 @@ number of the system without it.
 """
 from __future__ import annotations
 
-import copy
 import tempfile
 from pathlib import Path
 
@@ -26,19 +25,8 @@ from wncs_lp.evaluate import evaluate
 from wncs_lp.mdp import MDP
 from wncs_lp.models.system import System
 from wncs_lp.policies import GreedyPolicy, RandomPolicy, StaticPolicy, SuboptimalPolicy
-from wncs_lp.scenario import scenario_from_dict
 from wncs_lp.simulate import simulate
 
-BASE = {"model": {"kind": "wncs"}, "channel": {"success_probability": 0.9},
-        "process": [{"name": "a", "A": [[1.2]], "tau_cap": 5}, {"name": "b", "A": [[1.1]], "tau_cap": 5}],
-        "server": [{"name": "cloud", "uplink_delay": 1, "downlink_delay": 1, "processing_time": [1, 1]},
-                   {"name": "edge", "uplink_delay": 0, "downlink_delay": 0, "processing_time": [1, 2]}]}
-FIELDS = {
-    "none": {},
-    "links": {"server": {0: {"p_up": [0.95, 0.6]}, 1: {"p_down": [0.6, 0.99]}}},
-    "costs": {"process": {0: {"cost": {"power": 2.0}}, 1: {"cost": [1, 2, 4, 8, 16]}}},
-    "arrivals": {"process": {0: {"arrival_probability": 0.5}}},
-}
 ROOMS = ["exact", "matrix-free", "relaxation 1", "relaxation 2", "relaxation 3", "suboptimal", "static", "greedy",
          "bound policy", "simulator", "maps", "environment", "exports"]
 #: (room, field) -> why the room refuses the field (None: honoured). Every room honours every field.
@@ -49,11 +37,7 @@ class Case:
     """One system: scenario, MDP, System, exact optimum."""
 
     def __init__(self, field: str):
-        raw = copy.deepcopy(BASE)
-        for table, entries in FIELDS[field].items():
-            for i, values in entries.items():
-                raw[table][i].update(values)
-        self.scenario = scenario_from_dict(raw, source=f"<{field}>")
+        self.scenario = ref.small_scenario(field)
         self.mdp = wncs_lp.build(self.scenario)
         self.system = System.from_scenario(self.scenario)
         self.optimum = wncs_lp.solve(self.mdp, "lp")
@@ -70,7 +54,7 @@ class Case:
 
 @pytest.fixture(scope="module")
 def cases():
-    return {field: Case(field) for field in FIELDS}
+    return {field: Case(field) for field in ref.FIELDS}
 
 
 def _bound(case: Case, rel: int) -> float:

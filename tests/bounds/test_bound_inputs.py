@@ -7,45 +7,23 @@ Every relaxation below the exact optimum of a system with each field, and moved 
 """
 from __future__ import annotations
 
-import copy
 import dataclasses
 
 import numpy as np
 import pytest
 
 import wncs_lp
+from reference.own_systems import small_scenario
 from wncs_lp.bounds import lower_bound
 from wncs_lp.errors import WncsError
 from wncs_lp.models.system import System
-from wncs_lp.scenario import scenario_from_dict
-
-BASE = {"model": {"kind": "wncs"}, "channel": {"success_probability": 0.9},
-        "process": [{"name": "a", "A": [[1.2]], "tau_cap": 5}, {"name": "b", "A": [[1.1]], "tau_cap": 5}],
-        "server": [{"name": "cloud", "uplink_delay": 1, "downlink_delay": 1, "processing_time": [1, 1]},
-                   {"name": "edge", "uplink_delay": 0, "downlink_delay": 0, "processing_time": [1, 2]}]}
-
-FIELDS = {
-    "none": {},
-    "links": {"server": {0: {"p_up": [0.95, 0.6]}, 1: {"p_down": [0.6, 0.99]}}},
-    "costs": {"process": {0: {"cost": {"power": 2.0}}, 1: {"cost": [1, 2, 4, 8, 16]}}},
-    "arrivals": {"process": {0: {"arrival_probability": 0.5}}},
-}
-
-
-def scenario(field: str):
-    raw = copy.deepcopy(BASE)
-    for table, entries in FIELDS[field].items():
-        for i, values in entries.items():
-            raw[table][i].update(values)
-    return scenario_from_dict(raw, source=f"<{field}>")
-
 
 def test_replaced_cost_tables_are_honoured():
     """The issue's report: lower_bound(dataclasses.replace(system, q=...)) gave the bound of the
     original costs. Now every relaxation reads them: the bounds are those of the scenario that
     writes the same tables as its cost field."""
-    plain = System.from_scenario(scenario("none"))
-    costs_sc = scenario("costs")
+    plain = System.from_scenario(small_scenario("none"))
+    costs_sc = small_scenario("costs")
     edited = dataclasses.replace(plain, q=tuple(System.from_scenario(costs_sc).q))
     for rel in (1, 2, 3):
         assert lower_bound(edited, rel).lower_bound == pytest.approx(lower_bound(costs_sc, rel).lower_bound,
@@ -54,7 +32,7 @@ def test_replaced_cost_tables_are_honoured():
 
 
 def test_replaced_cost_tables_checked():
-    plain = System.from_scenario(scenario("none"))
+    plain = System.from_scenario(small_scenario("none"))
     with pytest.raises(WncsError, match=r"process\[1\]\.cost\[3\].*nondecreasing"):
         lower_bound(dataclasses.replace(plain, q=(np.array([1.0, 2, 1, 4, 5]), plain.q[1])), 1)
     with pytest.raises(WncsError, match=r"System\.q\[1\]: expected q_2\(1\.\.5\)"):
@@ -64,10 +42,10 @@ def test_replaced_cost_tables_checked():
 
 
 def test_edited_system_fields_refused_by_name():
-    plain = System.from_scenario(scenario("none"))
+    plain = System.from_scenario(small_scenario("none"))
     with pytest.raises(WncsError, match=r"System\.caps"):
         lower_bound(dataclasses.replace(plain, caps=plain.caps + 1), 1)
-    other = System.from_scenario(scenario("links"))
+    other = System.from_scenario(small_scenario("links"))
     with pytest.raises(WncsError, match=r"System\.model"):
         lower_bound(dataclasses.replace(plain, model=other.model), 2)
     with pytest.raises(WncsError, match=r"System\.n_actions"):
@@ -78,8 +56,8 @@ def test_automaton_edited_by_hand():
     """A per-link system made by swapping in another automaton (as a patched server step does):
     relaxations 1 and 3, which rebuild the private chains from the scenario's fields, refuse it by
     name; relaxation 2 reads the automaton, so it bounds the system the automaton describes."""
-    plain = System.from_scenario(scenario("none"))
-    links_sc = scenario("links")
+    plain = System.from_scenario(small_scenario("none"))
+    links_sc = small_scenario("links")
     links_sol = wncs_lp.solve(links_sc, "lp")
     edited = dataclasses.replace(plain, automaton=System.from_scenario(links_sc).automaton)
     for rel in (1, 3):

@@ -15,13 +15,14 @@ Everything is per state and per action with Python loops: slow, easy to check ag
 """
 from __future__ import annotations
 
-from collections import deque
 from itertools import product
 
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["cost_table", "build", "to_arrays"]
+from .wncs import explore  # the breadth-first search only: the model's rules are all written here
+
+__all__ = ["cost_table", "build", "to_arrays", "small_scenario", "FIELDS"]
 
 
 def cost_table(pr):
@@ -149,20 +150,8 @@ def build(scenario):
     q = [cost_table(pr) for pr in scenario.processes]
     idle = tuple(((None,) * max(s.uplink_delay - 1, 0), None, (None,) * s.downlink_delay) for s in scenario.servers)
     start = [(tuple(t), (0,) * len(caps), idle) for t in product(*[range(1, c + 1) for c in caps])]
-    seen, order, queue, model = set(start), list(start), deque(start), {}
-    while queue:
-        s = queue.popleft()
-        rows = []
-        for a in _actions(scenario, s[2]):
-            row = _step(scenario, s, a)
-            rows.append((a, row))
-            for s2 in row:
-                if s2 not in seen:
-                    seen.add(s2)
-                    order.append(s2)
-                    queue.append(s2)
-        model[s] = (sum(q[k][t - 1] for k, t in enumerate(s[0])), rows)
-    return order, model
+    return explore(start, lambda s: _actions(scenario, s[2]), lambda s, a: _step(scenario, s, a),
+                   lambda s: sum(q[k][t - 1] for k, t in enumerate(s[0])))
 
 
 def to_arrays(states, model):
@@ -182,3 +171,32 @@ def to_arrays(states, model):
             cost.append(c)
     P = sp.csr_matrix((vals, (rows, cols)), shape=(len(s_idx), len(states)))
     return np.array(s_idx), np.array(a_idx), np.array(cost), P, len(states)
+
+
+# ----------------------------------------------------------------------------- small systems, one per field
+#: Two scalar processes on a cloud (U = D = 1) and an edge (U = D = 0) server, cap 5, and the
+#: fields that make each test system (``small_scenario(name)``): none, per-link probabilities,
+#: cost families, random arrivals.
+SMALL = {"model": {"kind": "wncs"}, "channel": {"success_probability": 0.9},
+         "process": [{"name": "a", "A": [[1.2]], "tau_cap": 5}, {"name": "b", "A": [[1.1]], "tau_cap": 5}],
+         "server": [{"name": "cloud", "uplink_delay": 1, "downlink_delay": 1, "processing_time": [1, 1]},
+                    {"name": "edge", "uplink_delay": 0, "downlink_delay": 0, "processing_time": [1, 2]}]}
+FIELDS = {
+    "none": {},
+    "links": {"server": {0: {"p_up": [0.95, 0.6]}, 1: {"p_down": [0.6, 0.99]}}},
+    "costs": {"process": {0: {"cost": {"power": 2.0}}, 1: {"cost": [1, 2, 4, 8, 16]}}},
+    "arrivals": {"process": {0: {"arrival_probability": 0.5}}},
+}
+
+
+def small_scenario(field):
+    """The small system with one field of ``FIELDS`` in use."""
+    from copy import deepcopy
+
+    from wncs_lp.scenario import scenario_from_dict
+
+    raw = deepcopy(SMALL)
+    for table, entries in FIELDS[field].items():
+        for i, values in entries.items():
+            raw[table][i].update(values)
+    return scenario_from_dict(raw, source=f"<{field}>")

@@ -40,6 +40,7 @@ __all__ = [
     "feasible_actions",
     "step",
     "build_reference",
+    "explore",
     "to_pair_arrays",
     "policy_iteration",
     "reference_gain",
@@ -193,25 +194,31 @@ def build_reference(scenario):
     state -> (cost, [(action tuple, {next_state: prob}), ...]).
     """
     q = cost_tables(scenario)
-    start = initial_states(scenario)
+    return explore(initial_states(scenario), lambda s: feasible_actions(scenario, s),
+                   lambda s, a: step(scenario, s, a),
+                   lambda s: float(sum(q[k][t - 1] for k, t in enumerate(s[0]))))
+
+
+def explore(start, actions, step, cost):
+    """Breadth-first search from ``start``: ``(states in BFS order, {state: (cost, [(action,
+    {next state: probability}), ...])})`` for the functions ``actions(s)``, ``step(s, a)`` and
+    ``cost(s)`` of a model."""
     seen = set(start)
     order = list(start)
     queue = deque(start)
     model = {}
     while queue:
         s = queue.popleft()
-        tau, _ = s
-        c = float(sum(q[k][t - 1] for k, t in enumerate(tau)))
         rows = []
-        for a in feasible_actions(scenario, s):
-            row = step(scenario, s, a)
+        for a in actions(s):
+            row = step(s, a)
             rows.append((a, row))
             for s2 in row:
                 if s2 not in seen:
                     seen.add(s2)
                     order.append(s2)
                     queue.append(s2)
-        model[s] = (c, rows)
+        model[s] = (cost(s), rows)
     return order, model
 
 
