@@ -242,3 +242,16 @@ def test_new_fields_as_overrides():
     assert "cost=aoi^2" in sc.describe() and "pu=[0.9, 0.7]" in sc.describe() and "lambda=0.5" in sc.describe()
     with pytest.raises(ScenarioError, match=r"process\[2\]\.cost.*at least tau_cap = 8"):
         sc.replace(tau_cap=8)  # the table is shorter than the new cap
+
+
+def test_size_bound_counts_the_ages():
+    for raw in (MIXED, {**MIXED, "process": [dict(MIXED["process"][0]), dict(MIXED["process"][1], arrival_probability=0.3)]}):
+        model = model_for(scenario_from_dict(raw))
+        assert model.automaton_bounds().configs >= len(model.automaton.configs)
+
+
+def test_a_process_without_a_working_link_is_warned_about():
+    raw = {**MIXED, "server": [dict(MIXED["server"][0], p_up=[0.95, 0.0]), dict(MIXED["server"][1], p_down=[0.9, 0.0])]}
+    warnings = scenario_from_dict(raw).degenerate_warnings()
+    assert any("process 'b' is never delivered" in w for w in warnings)
+    assert not any("server" in w and "never delivers" in w for w in warnings)  # both servers still serve 'a'
