@@ -108,6 +108,9 @@ def _compute(case: Case, room: str) -> float:
         actions, states, _ = maps.policy_grid(case.mdp, g, "idle", axes=(1, 2))
         ok = states >= 0
         np.testing.assert_array_equal(actions[ok], case.mdp.a_indices[g.policy[states[ok]]])
+        # the title's p: the one success probability of every link, none when the links differ
+        per_link = case.scenario.source == "<links>"
+        assert maps.map_names(case.mdp, case.scenario)["p"] == (None if per_link else 0.9)
         return float(actions[ok].sum())
     if room == "environment":  # a rollout of the static policy: its long-run cost, within 6%
         from wncs_lp.env import WncsEnv

@@ -98,7 +98,7 @@ def map_names(mdp: MDP, scenario: Any = None) -> dict:
             info["processes"] = [_short_process(p.name, k) for k, p in enumerate(sc0.processes, 1)]
             info["servers"] = [s.name for s in sc0.servers]
             if sc0.fingerprint() == mdp.meta.get("fingerprint"):
-                info["p"] = sc0.p
+                info["p"] = _one_p(sc0)
         except Exception:
             pass
     elif sc is not None:
@@ -110,7 +110,14 @@ def map_names(mdp: MDP, scenario: Any = None) -> dict:
 
 def _scenario_names(sc: Any) -> dict:
     return {"processes": [_short_process(p.name, k) for k, p in enumerate(sc.processes, 1)],
-            "servers": [s.name for s in sc.servers], "p": sc.p, "name": Path(str(sc.source)).stem}
+            "servers": [s.name for s in sc.servers], "p": _one_p(sc), "name": Path(str(sc.source)).stem}
+
+
+def _one_p(sc: Any) -> float | None:
+    """The success probability of every link, or None when the links differ (per server or per
+    process: then no single p describes the system)."""
+    links = {float(v) for s in sc.servers for v in (*s.p_up, *s.p_down)}
+    return links.pop() if len(links) == 1 else None
 
 
 def system_names(system: Any) -> dict:

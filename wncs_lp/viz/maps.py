@@ -512,7 +512,8 @@ def plot_matrix_free_map(
     i, j = axes
     _grid_axes(ax, info, i, j, ci, cj)
     caps = [int(c) for c in system.caps]
-    par = [f"p = {info['p']:g}", f"cap {caps[0]}" if len(set(caps)) == 1 else "caps " + ",".join(map(str, caps))]
+    par = ([f"p = {info['p']:g}"] if info.get("p") is not None else []) + [
+        f"cap {caps[0]}" if len(set(caps)) == 1 else "caps " + ",".join(map(str, caps))]
     extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(fixed.items()))
     ax.set_title(title or f"{info['name']}: policy in [{system.model.describe(conf)}] (matrix-free)\n"
                  f"{extra + ', ' if extra else ''}{', '.join(par)}", fontsize=10)
