@@ -42,6 +42,9 @@ from .base import Model
 __all__ = [
     "WncsModel",
     "ArrivalConfig",
+    "aged_server_step",
+    "useful_ages",
+    "initial_arrival_config",
     "build_wncs",
     "wncs_automaton",
     "server_accepts",
