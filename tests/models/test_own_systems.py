@@ -94,6 +94,27 @@ def test_arrivals_aoi_closed_form_at_every_cap(lam, p):
     assert sol.gain == pytest.approx(capped_mean(lambda t: np.asarray(t, dtype=float), lam, p, 15), rel=1e-10)
 
 
+def test_arrivals_hand_built_mdp():
+    """One process (AoI cost, lambda, uplink p, pd = 1) on one server with U = D = 0, T = 1, cap 3,
+    written state by state from docs/model.md: states (tau, alpha), alpha lumped at
+    a = tau_hat - (U + T + D) = 2; the one action sends the buffer, which succeeds w.p. p and
+    sets tau' = min(tau + 1, alpha + 1, 3); alpha' = 0 w.p. lambda, else min(alpha + 1, 2)."""
+    lam, p, cap = 0.35, 0.7, 3
+    states = [(tau, alpha) for tau in range(1, cap + 1) for alpha in range(3)]
+    index = {s: i for i, s in enumerate(states)}
+    P = np.zeros((9, 9))
+    for (tau, alpha), i in index.items():
+        for ok, p_ok in ((True, p), (False, 1 - p)):
+            t2 = min(tau + 1, alpha + 1, cap) if ok else min(tau + 1, cap)
+            for new_alpha, p_gen in ((0, lam), (min(alpha + 1, 2), 1 - lam)):
+                P[i, index[(t2, new_alpha)]] += p_ok * p_gen
+    cost = np.array([float(tau) for tau, _ in states])
+    hand = wncs_lp.solve(MDP.from_dense(P[:, None, :], cost[:, None]), "pi")
+    mine = wncs_lp.solve(one_server(lam, p, cap=cap), "lp")
+    assert mine.gain == pytest.approx(hand.gain, rel=1e-12)
+    assert mine.gain == pytest.approx(capped_mean(lambda t: np.asarray(t, dtype=float), lam, p, cap), rel=1e-12)
+
+
 def test_arrivals_aoi_limit():
     lam, p = 0.4, 0.7
     sol = wncs_lp.solve(one_server(lam, p, cap=80), "vi")
