@@ -80,6 +80,18 @@ def test_reference_gain_from_every_solver(mixed, method):
     assert sol.gain == pytest.approx(g_ref.gain, rel=1e-9)
 
 
+def test_reference_gain_with_pipelines_of_ages():
+    """Uplink and downlink pipelines of several places (U = 2, D = 2; D = 1) carry the ages at send."""
+    raw = {"model": {"kind": "wncs", "allow_idle": True}, "channel": {"success_probability": 0.85},
+           "process": [{"name": "a", "A": [[1.1]], "tau_cap": 7, "arrival_probability": 0.5}],
+           "server": [{"name": "far", "uplink_delay": 2, "downlink_delay": 2, "processing_time": [2], "p_up": [0.9]},
+                      {"name": "near", "uplink_delay": 0, "downlink_delay": 1, "processing_time": [3], "p_down": 0.7}]}
+    sc = scenario_from_dict(raw)
+    s, a, c, P, n = ref.to_arrays(*ref.build(sc))
+    g_ref = wncs_lp.solve(MDP.from_arrays(s, a, c, P, n), "pi").gain
+    assert wncs_lp.solve(sc, "lp").gain == pytest.approx(g_ref, rel=1e-11)
+
+
 def test_reference_costs_are_the_families():
     sc = scenario_from_dict(MIXED)
     for pr, mine in zip(sc.processes, cost_tables(sc)):
