@@ -69,9 +69,6 @@ _TOP_FIELDS = {"model", "channel", "process", "server", "constraint"}
 #: (need ``process``); ``send_rate`` the fraction of slots in which a server is sent an update
 #: (needs ``server``; ``process`` optionally restricts it to that process's updates).
 QUANTITIES = ("cost", "process_cost", "aoi", "send_rate")
-#: The cost families of a process (``cost = ...``): the MSE of ``docs/model.md`` section 1 (the
-#: default), the AoI itself, a power of the AoI (``{ power = x }``), or an explicit table.
-COST_FAMILIES = ("mse", "aoi", "power", "table")
 #: Largest AoI cap accepted on load; far beyond anything enumerable, it only stops absurd input.
 MAX_TAU_CAP = 100_000
 #: Deepest nesting of lists and tables accepted (a scenario needs 5: top table, [[process]] list,
