@@ -37,14 +37,15 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
-from .chain import PolicyChain, stationary_law
+from .chain import PolicyChain, recurrent_classes, stationary_law
 from .errors import PolicyError
 from .mdp import MDP
 from .models.system import System
 from .policy_forms import policy_array
 
-__all__ = ["Evaluation", "evaluate", "MultichainEvaluationError"]
+__all__ = ["Evaluation", "evaluate", "memory_chain", "MultichainEvaluationError"]
 
 
 class MultichainEvaluationError(PolicyError):
@@ -124,7 +125,8 @@ def evaluate(
         Built by :func:`wncs_lp.models.build` (its ``states`` decode tau and C).
     policy : Policy, Solution or array
         A :class:`~wncs_lp.policies.Policy` (anything with ``on_mdp``, ``system`` and ``name``:
-        mapped with ``policy.on_mdp(mdp)``), a solution of ``mdp`` (its ``policy``), or directly
+        mapped with ``policy.on_mdp(mdp)``; a policy with memory, such as round robin, on its
+        augmented chain over (memory, state): :func:`memory_chain`), a solution of ``mdp`` (its ``policy``), or directly
         an (n,) int array of pair indices or an (L,) float array of pair probabilities.
     system : System, optional
         The cost tables and the busy table; default ``policy.system``, else the system of the
@@ -149,20 +151,29 @@ def evaluate(
         multichain induced chain (the message names the policy and two recurrent classes).
     """
     t0 = time.perf_counter()
-    arr, system, name = _policy_array(mdp, policy, system, name, sigma)
     if multichain not in ("error", "initial"):
         raise PolicyError(f"multichain must be 'error' or 'initial', got {multichain!r}")
-    pi, residual, n_classes, c_pi = _long_run_law(mdp, arr, system, name, multichain)
+    if hasattr(policy, "act_memory") and sigma is None:  # a policy with memory: its augmented chain
+        system = system or policy.system
+        name = name or policy.name
+        x, residual, n_classes = _memory_law(mdp, policy, system, name, multichain)
+        randomised = False
+    else:
+        arr, system, name = _policy_array(mdp, policy, system, name, sigma)
+        pi, residual, n_classes = _long_run_law(mdp, arr, system, name, multichain)
+        x = _pair_frequencies(mdp, arr, pi)
+        randomised = not np.issubdtype(arr.dtype, np.integer)
+    pi = np.bincount(mdp.s_indices, weights=x, minlength=mdp.n_states)
     tau = np.asarray(mdp.states.tau, dtype=np.int64)
     sc = system.scenario
     return Evaluation(
         policy=name,
-        gain=float(pi @ c_pi),
+        gain=float(x @ np.asarray(mdp.cost, dtype=float)),
         mse=tuple(float(pi @ system.q[k][tau[:, k] - 1]) for k in range(system.n_processes)),
-        utilisation=_utilisation(mdp, arr, pi, system),
+        utilisation=_utilisation(mdp, x, system),
         process_names=tuple(p.name for p in sc.processes),
         server_names=tuple(s.name for s in sc.servers),
-        randomised=not np.issubdtype(arr.dtype, np.integer),
+        randomised=randomised,
         residual=residual,
         recurrent_classes=n_classes,
         n_states=mdp.n_states,
@@ -200,55 +211,120 @@ def _system_of(mdp: MDP) -> System:
 
 
 def _long_run_law(mdp: MDP, arr: np.ndarray, system: System, name: str, multichain: str):
-    """``(pi, residual, number of recurrent classes, cost per state)``: the stationary law of a
-    unichain policy, or the limit from the initial state of a multichain one (``"initial"``)."""
+    """``(pi, residual, number of recurrent classes)``: the stationary law of a unichain policy,
+    or the limit from the initial state of a multichain one (``"initial"``)."""
     try:
         chain = PolicyChain(mdp, arr)
     except PolicyError as exc:
         raise PolicyError(f"policy {name}: {exc}") from None
     classes = chain.recurrent_classes
-    n_classes = len(classes)
-    if n_classes == 1:
-        return chain.stationary, chain.residual, n_classes, chain.cost
+    if len(classes) == 1:
+        return chain.stationary, chain.residual, 1
     if multichain == "error":
-        a, b = classes[0], classes[1]
-        raise MultichainEvaluationError(
-            f"policy {name} induces a multichain Markov chain with {n_classes} recurrent classes "
-            f"(e.g. state {mdp.state_label(int(a[0]))} in a class of {a.size} state(s) and "
-            f"state {mdp.state_label(int(b[0]))} in another of {b.size}); the average cost depends on "
-            "the start state"
-        )
-    pi, residual = _limit_from_initial(mdp, chain.P, classes, system)
-    return pi, residual, n_classes, chain.cost
+        raise _multichain(mdp, name, classes)
+    pi, residual = _limit_from_initial(chain.P, classes, _initial_state(mdp, system))
+    return pi, residual, len(classes)
 
 
-def _utilisation(mdp: MDP, arr: np.ndarray, pi: np.ndarray, system: System) -> tuple[float, ...]:
-    """Each server's long-run fraction of service steps, from the pair frequencies
-    ``x(l) = pi(s_l) beta(l)``."""
+def _multichain(mdp: MDP, name: str, classes: list, n: int | None = None) -> MultichainEvaluationError:
+    """The error of a multichain policy (states of an augmented chain of size m n are named by
+    their state s = index mod n)."""
+    n = mdp.n_states if n is None else n
+    a, b = classes[0], classes[1]
+    return MultichainEvaluationError(
+        f"policy {name} induces a multichain Markov chain with {len(classes)} recurrent classes "
+        f"(e.g. state {mdp.state_label(int(a[0]) % n)} in a class of {a.size} state(s) and "
+        f"state {mdp.state_label(int(b[0]) % n)} in another of {b.size}); the average cost depends on "
+        "the start state"
+    )
+
+
+def _initial_state(mdp: MDP, system: System) -> int:
+    """The initial state of :func:`wncs_lp.simulate.simulate`: every tau_k at its cap, first
+    initial configuration."""
+    s0 = mdp.states.find(system.caps, system.initial_config)
+    if s0 < 0:  # pragma: no cover - the initial configuration's whole box is in every MDP
+        raise PolicyError("the initial state is not a state of the MDP")
+    return int(s0)
+
+
+def _pair_frequencies(mdp: MDP, arr: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """(L,) long-run frequencies x(l) = pi(s_l) beta(l) of the pairs."""
     if np.issubdtype(arr.dtype, np.integer):
-        pairs = arr.astype(np.int64)
-        weights = pi
+        return np.bincount(arr.astype(np.int64), weights=pi, minlength=mdp.n_pairs)
+    return pi[mdp.s_indices] * arr
+
+
+def memory_chain(mdp: MDP, policy: Any) -> tuple[sp.csr_matrix, np.ndarray]:
+    """The augmented chain of a policy with memory (:class:`~wncs_lp.policies.MemoryPolicy`) on an
+    enumerated MDP.
+
+    Its states are the pairs (m, s), numbered m n + s for the memory values m = 0..M-1; in (m, s)
+    the policy takes the pair l_m(s) (``act_memory``) and moves its memory to m'_m(s)
+    (``next_memory``), so the row of (m, s) is row l_m(s) of P placed in the columns of m'_m(s).
+
+    Returns
+    -------
+    P : (M n, M n) CSR matrix
+    pairs : (M, n) int array
+        l_m(s), the pair taken in (m, s).
+    """
+    n, M = mdp.n_states, int(policy.memory_size)
+    policy.system.check_mdp(mdp)
+    tau = np.asarray(mdp.states.tau, dtype=np.int64)
+    cfg = np.asarray(mdp.states.config, dtype=np.int64)
+    rng = np.random.default_rng(0)
+    pairs = np.empty((M, n), dtype=np.int64)
+    rows, cols, vals = [], [], []
+    for m in range(M):
+        mem = np.full(n, m, dtype=np.int64)
+        j = np.asarray(policy.act_memory(tau, cfg, mem, rng), dtype=np.int64)
+        if j.shape != (n,) or np.any(j < 0) or np.any(j >= np.diff(mdp.pair_ptr)):
+            raise PolicyError(f"policy {policy.name}: a local action index is out of range")
+        pairs[m] = mdp.pair_ptr[:-1] + j
+        nxt = np.asarray(policy.next_memory(mem, cfg, j), dtype=np.int64)
+        Pm = mdp.P[pairs[m]].tocoo()
+        rows.append(m * n + Pm.row)
+        cols.append(nxt[Pm.row] * n + Pm.col)
+        vals.append(Pm.data)
+    P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(M * n, M * n))
+    return P, pairs
+
+
+def _memory_law(mdp: MDP, policy: Any, system: System, name: str, multichain: str):
+    """``(pair frequencies x, residual, number of recurrent classes)`` of a policy with memory, from
+    the stationary law of its augmented chain (:func:`memory_chain`)."""
+    P, pairs = memory_chain(mdp, policy)
+    classes = recurrent_classes(P)
+    if len(classes) == 1:
+        law, residual = stationary_law(P, classes)
+    elif multichain == "error":
+        raise _multichain(mdp, name, classes)
     else:
-        pairs = np.arange(mdp.n_pairs)
-        weights = pi[mdp.s_indices] * arr
-    states = mdp.s_indices[pairs]
-    local = pairs - mdp.pair_ptr[states]
+        s0 = int(policy.initial_memory) * mdp.n_states + _initial_state(mdp, system)
+        law, residual = _limit_from_initial(P, classes, s0)
+    x = np.bincount(pairs.ravel(), weights=law, minlength=mdp.n_pairs)
+    return x, residual, len(classes)
+
+
+def _utilisation(mdp: MDP, x: np.ndarray, system: System) -> tuple[float, ...]:
+    """Each server's long-run fraction of service steps, from the pair frequencies x."""
+    used = np.flatnonzero(x)
+    states = mdp.s_indices[used]
+    local = used - mdp.pair_ptr[states]
     cfg = np.asarray(mdp.states.config, dtype=np.int64)[states]
-    busy = system.busy[cfg, local]  # (len(pairs), M)
-    return tuple(float(x) for x in weights @ busy)
+    busy = system.busy[cfg, local]  # (len(used), M)
+    return tuple(float(v) for v in x[used] @ busy)
 
 
-def _limit_from_initial(mdp: MDP, P, classes: list, system: System) -> tuple:
-    """Limiting state distribution from the initial state of a multichain policy.
+def _limit_from_initial(P, classes: list, s0: int) -> tuple:
+    """Limiting state distribution from the state ``s0`` of a multichain chain P.
 
     The absorption probabilities b_i(s0) are obtained by pushing the distribution of s0
     forward through the transient states until less than 1e-14 of it is left there.
     Returns ``(mu, residual)``.
     """
-    n = mdp.n_states
-    s0 = mdp.states.find(system.caps, system.initial_config)
-    if s0 < 0:  # pragma: no cover - the initial configuration's whole box is in every MDP
-        raise PolicyError("the initial state is not a state of the MDP")
+    n = P.shape[0]
     label = np.full(n, -1, dtype=np.int64)
     for i, cl in enumerate(classes):
         label[cl] = i

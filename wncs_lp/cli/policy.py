@@ -16,7 +16,10 @@ def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
         help="a policy saved by wncs-lp solve --out FILE.npz (on the same scenario and overrides), or by name: "
         "optimal (solved exactly), suboptimal (the paper's separable policy), static (one fixed server per "
         "process), best_static (the best static assignment, by exact evaluation), greedy (the process of largest "
-        "current cost first, to its shortest-loop server) or random (uniform over the feasible actions)",
+        "current cost first, to its shortest-loop server), random (uniform over the feasible actions), max_age "
+        "(the process of largest AoI first), max_weight (the process whose update removes the most expected cost "
+        "first), round_robin (the processes in turn; a policy with memory) or relaxation (the greedy policy of the "
+        "certified lower bound); docs/policies.md",
     )
     add_method_arg(p, "solver of the optimal policy")
     p.add_argument(
@@ -198,7 +201,8 @@ def _configure_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--param", default="p", help="override key to sweep (default p)")
     p.add_argument("--values", required=True, help="START:STOP:STEP (stop included) or a comma list")
     p.add_argument("--policies", default="optimal,suboptimal,static,greedy",
-                   help="comma list from optimal,suboptimal,static,best_static,greedy,random")
+                   help="comma list from optimal,suboptimal,static,best_static,greedy,random,relaxation,max_age,"
+                        "max_weight,round_robin (docs/policies.md)")
     p.add_argument("--out", required=True, help="output folder (resumed when it holds rows)")
     add_method_arg(p, "solver of the optimal policy at every grid value")
     p.add_argument("--simulate-slots", type=int, default=0, help="also simulate each policy for this many slots")
