@@ -50,7 +50,7 @@ from .convert import as_policy, policy_from_file
 from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
-from .optimal import CappedPolicy, OptimalPolicy
+from .optimal import CappedPolicy, ClippedPolicy, OptimalPolicy
 from .rules import (
     GreedyPolicy,
     RandomPolicy,
@@ -85,6 +85,7 @@ __all__ = [
     "policy_array",
     "OptimalPolicy",
     "CappedPolicy",
+    "ClippedPolicy",
     "MixedPolicy",
     "MatrixFreePolicy",
     "TauIndependentPolicy",
