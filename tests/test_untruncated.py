@@ -69,3 +69,24 @@ def test_a_policy_with_memory_runs_uncapped(p12):
 def test_no_policy_no_upper_end():
     iv = untruncated_interval(10.0)
     assert iv.upper == float("inf") and "no upper end" in iv.message()
+
+
+def test_solve_states_the_interval_and_the_time_at_the_cap_on_both_routes(capsys):
+    import json
+
+    from wncs_lp.cli import main
+
+    path = str(scenario_path("paper_p12"))
+    assert main(["solve", path, "--set", "tau_cap=8", "--method", "vi", "--untruncated", "--slots", "1000",
+                 "--reps", "4", "--json"]) == 0
+    vi = json.loads(capsys.readouterr().out)
+    assert main(["solve", path, "--set", "tau_cap=8", "--method", "matrix-free", "--json"]) == 0
+    mf = json.loads(capsys.readouterr().out)
+    iv = vi["untruncated"]
+    assert iv["lower"] == vi["gain_lower"] and vi["gain"] < iv["upper"] < float("inf")
+    assert mf["untruncated"]["lower"] == mf["gain_lower"] and mf["untruncated"]["upper"] is None  # no upper end (JSON null)
+    # the matrix-free route's certified bracket holds the stationary law's mass at the cap
+    cap = mf["cap_mass"]
+    assert cap["total_lower"] - 1e-9 <= vi["cap_mass"]["total"] <= cap["total_upper"] + 1e-9
+    total = sum(vi["cap_mass"]["per_process"])  # E #(processes at their cap)
+    assert cap["expected_at_cap_lower"] - 1e-6 <= total <= cap["expected_at_cap_upper"] + 1e-6

@@ -44,6 +44,7 @@ from .errors import PolicyError
 from .mdp import MDP
 from .models.system import System
 from .policy_forms import policy_array
+from .truncation import CapMass, cap_mass
 
 __all__ = ["Evaluation", "evaluate", "memory_chain", "MultichainEvaluationError"]
 
@@ -87,6 +88,9 @@ class Evaluation:
         Size of the MDP.
     seconds : float
         Wall time of the evaluation (policy mapping and solve).
+    cap_mass : CapMass or None
+        The share of the long-run time with some AoI at its cap, in all and per process
+        (:mod:`wncs_lp.truncation`), from the same stationary law; None where no law was formed.
     """
 
     policy: str
@@ -101,11 +105,14 @@ class Evaluation:
     n_states: int
     n_pairs: int
     seconds: float
+    cap_mass: CapMass | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary (lists instead of tuples)."""
-        d = asdict(self)
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+        """JSON-ready dictionary (lists instead of tuples; ``cap_mass`` as :meth:`CapMass.to_dict`)."""
+        d = {k: v for k, v in asdict(self).items() if k != "cap_mass"}
+        d = {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+        d["cap_mass"] = None if self.cap_mass is None else self.cap_mass.to_dict()
+        return d
 
 
 def evaluate(
@@ -179,6 +186,7 @@ def evaluate(
         n_states=mdp.n_states,
         n_pairs=mdp.n_pairs,
         seconds=time.perf_counter() - t0,
+        cap_mass=cap_mass(mdp, pi),
     )
 
 

@@ -34,12 +34,38 @@ def cmd_bound(args: argparse.Namespace) -> int:
         report = policy_gaps(res, system, ["bound", *compare], exact=None if args.exact_max_states else False,
                              exact_max_states=args.exact_max_states or 0, slots=args.slots, reps=args.reps,
                              seed=args.seed, burn_in=args.burn_in, progress=prog)
+    interval = _untruncated(args, res, system, report, compare, prog)
     if args.json:
         emit_json({**head(args, scenario), "bound": res.summary(),
-                   "policies": None if report is None else report.summary(), "seconds": time.perf_counter() - t0})
+                   "policies": None if report is None else report.summary(), "untruncated": interval.to_dict(),
+                   "seconds": time.perf_counter() - t0})
     else:
         _print(scenario, res, report)
+        tail = "" if interval.upper < float("inf") else " (--untruncated simulates the best policy without the cap for one)"
+        print(interval.message() + tail)
     return 0 if res.ok else 1
+
+
+def _untruncated(args: argparse.Namespace, res, system, report, compare: list[str], prog):
+    """The interval for the optimum without the cap: the certified bound below (g*(cap) <= g*_inf),
+    and with ``--untruncated`` the best policy evaluated (the least upper end; the bound's policy
+    without ``--policy``) simulated without the cap above."""
+    from ..bounds import bound_policy
+    from ..policies import make_policy
+    from ..untruncated import untruncated_interval
+
+    lower_from = f"the certified lower bound ({res.relaxation})"
+    if not args.untruncated:
+        return untruncated_interval(res.lower_bound, lower_from=lower_from)
+    name = "bound"
+    if report is not None:
+        best = min(range(len(report.rows)), key=lambda i: report.rows[i].gain_upper)
+        name = ["bound", *compare][best]
+    policy = bound_policy(res, system) if name == "bound" else make_policy(name, system)
+    prog.phase(f"simulating the {policy.name} policy without the AoI cap ({args.reps} x {args.slots} slots, seed "
+               f"{args.seed})")
+    return untruncated_interval(res.lower_bound, policy, lower_from=lower_from, slots=args.slots, reps=args.reps,
+                                seed=args.seed, burn_in=args.burn_in)
 
 
 def _parse_groups(text: str) -> list[tuple[int, ...]]:
@@ -109,6 +135,9 @@ def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--exact-max-states", type=int, default=50_000_000, metavar="N",
                    help="evaluate exactly (certified matrix-free evaluation) when the AoI box has at most N states, "
                         "else by Monte Carlo (default 50000000; 0: always Monte Carlo)")
+    p.add_argument("--untruncated", action="store_true",
+                   help="also simulate the best policy evaluated (the bound's without --policy) without the AoI cap, "
+                        "for an upper end on the untruncated optimum (the bound is its lower end; docs/model.md)")
     p.add_argument("--slots", type=int, default=40_000, help="Monte Carlo: slots per replication (default 40000)")
     p.add_argument("--reps", type=int, default=20, help="Monte Carlo: independent replications (default 20)")
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo: random seed (default 0)")

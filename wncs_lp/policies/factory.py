@@ -167,7 +167,9 @@ def policy_for(
 
     The MDP is built (after the size guard) when the policy needs it (``optimal``,
     ``best_static``) or ``need_mdp`` is true; ``optimal`` is solved by the one route
-    (:func:`wncs_lp.solvers.route.solve_scenario`).
+    (:func:`wncs_lp.solvers.route.solve_scenario`), which without ``need_mdp`` may take the
+    matrix-free method when the stored matrix would not fit (``auto``, or ``matrix-free`` asked
+    for): the policy is then a :class:`~wncs_lp.policies.MatrixFreePolicy` and no MDP is built.
 
     Parameters
     ----------
@@ -207,7 +209,12 @@ def policy_for(
     mdp = solution = None
     if name == OPTIMAL:
         run = solve_scenario(scenario, method, constrained=False, force=force, threads=threads, progress=prog,
-                             need_mdp=True)
+                             need_mdp=need_mdp)
+        if not run.built:  # auto's matrix-free route (the stored matrix would not fit): its one byte a state
+            from .matrix_free import MatrixFreePolicy
+
+            return PolicySetup(system, None, MatrixFreePolicy.from_solution(run.solution),
+                               time.perf_counter() - t0)
         mdp, solution = run.mdp, run.solution
     elif name in NEED_MDP or need_mdp:
         mdp, _ = build_scenario(scenario, force=force, progress=prog)
