@@ -33,11 +33,20 @@ class OptimalPolicy(Policy):
     system : System
         The scenario's system (``mdp`` must have been built from it); :meth:`from_scenario`
         builds all three.
+    outside : {"error", "first"}
+        A state not in the MDP: a :class:`PolicyError` (default), or the configuration's first
+        action. The MDP holds every state reachable from its initial states under any policy, so a
+        state outside it is never entered from one inside and its action does not change the gain
+        of any state of the MDP; ``"first"`` lets the policy act on a matrix-free layout, whose
+        interval hull holds such states too.
     """
 
     name = "optimal"
 
-    def __init__(self, mdp: MDP, solution: Any, system: System):
+    def __init__(self, mdp: MDP, solution: Any, system: System, outside: str = "error"):
+        if outside not in ("error", "first"):
+            raise PolicyError(f"outside must be 'error' or 'first', got {outside!r}")
+        self.outside = outside
         super().__init__(system)
         system.check_mdp(mdp)
         pol = np.asarray(solution.policy, dtype=np.int64)
@@ -70,7 +79,11 @@ class OptimalPolicy(Policy):
         return s
 
     def act(self, tau, config_ids, rng=None):
-        return self._local[self.states_of(tau, config_ids)]
+        if self.outside == "error":
+            return self._local[self.states_of(tau, config_ids)]
+        tau, c = self._check_inputs(tau, config_ids)
+        s = self.mdp.states.ids(tau, c)
+        return np.where(s >= 0, self._local[np.maximum(s, 0)], 0)
 
     def on_mdp(self, mdp: MDP) -> np.ndarray:
         if mdp is self.mdp:
