@@ -36,3 +36,20 @@ def test_evaluate_takes_the_matrix_free_route_when_the_matrix_would_not_fit(caps
         assert free["how"] == "matrix-free" and free["status"] == "optimal"
         cap = free["cap_mass"]
         assert cap["total_lower"] - 1e-9 <= exact["cap_mass"]["total"] <= cap["total_upper"] + 1e-9
+
+
+def test_the_iterative_law_and_the_certified_bracket_agree_with_the_lu():
+    from wncs_lp import build, load_scenario
+    from wncs_lp.evaluate import evaluate
+    from wncs_lp.models.system import System
+    from wncs_lp.policies import make_policy
+
+    sc = load_scenario(PATH, ["tau_cap=9"])
+    system, mdp = System.from_scenario(sc), build(sc)
+    for name in ("random", "round_robin"):
+        pol = make_policy(name, system, mdp)
+        lu, it = evaluate(mdp, pol, method="lu"), evaluate(mdp, pol, method="iterative", certify=True)
+        assert (lu.method, it.method) == ("lu", "iterative")
+        assert it.gain == pytest.approx(lu.gain, rel=1e-10)
+        assert it.mse == pytest.approx(lu.mse, rel=1e-9) and it.utilisation == pytest.approx(lu.utilisation, rel=1e-9)
+        assert it.gain_lower <= lu.gain <= it.gain_upper and it.gain_upper - it.gain_lower < 1e-6 * lu.gain

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from .chain import PolicyChain, recurrent_classes, stationary_law
+from .chain import ITERATIVE_MIN_STATES, STATIONARY_METHODS, PolicyChain, recurrent_classes, stationary_law
 from .errors import PolicyError
 from .mdp import MDP
 from .models.system import System
@@ -91,6 +91,11 @@ class Evaluation:
     cap_mass : CapMass or None
         The share of the long-run time with some AoI at its cap, in all and per process
         (:mod:`wncs_lp.truncation`), from the same stationary law; None where no law was formed.
+    method : str
+        How the stationary law was solved: ``"lu"`` or ``"iterative"`` (:func:`wncs_lp.chain.class_stationary`).
+    gain_lower, gain_upper : float
+        With ``certify=True``, the certified bracket of the gain by the certified value iteration
+        of the policy's chain (NaN otherwise).
     """
 
     policy: str
@@ -106,6 +111,9 @@ class Evaluation:
     n_pairs: int
     seconds: float
     cap_mass: CapMass | None = None
+    method: str = "lu"
+    gain_lower: float = float("nan")
+    gain_upper: float = float("nan")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (lists instead of tuples; ``cap_mass`` as :meth:`CapMass.to_dict`)."""
@@ -123,6 +131,8 @@ def evaluate(
     *,
     sigma: Any = None,
     multichain: str = "error",
+    method: str = "auto",
+    certify: bool = False,
 ) -> Evaluation:
     """Evaluate a stationary policy exactly on an enumerated MDP.
 
@@ -146,6 +156,15 @@ def evaluate(
     multichain : {"error", "initial"}
         What to do with a multichain induced chain: raise (default), or report the long-run
         averages from the initial state (see the module docstring).
+    method : {"auto", "lu", "iterative"}
+        How each recurrent class's stationary law is solved (:func:`wncs_lp.chain.class_stationary`):
+        a sparse LU, or BiCGSTAB with its true residual checked; ``"auto"``: the LU below
+        :data:`wncs_lp.chain.ITERATIVE_MIN_STATES` states, BiCGSTAB from there on (where the LU
+        fills in: the crossover measured in ``benchmarks/evaluation.py``).
+    certify : bool
+        Also bracket the gain by the certified value iteration of the policy's chain (the solvers'
+        certified driver, :func:`wncs_lp.solvers.dp.value_iteration` on the chain as a one-action
+        MDP): ``gain_lower <= g <= gain_upper``, and the stationary law's gain checked inside it.
 
     Returns
     -------
@@ -160,34 +179,61 @@ def evaluate(
     t0 = time.perf_counter()
     if multichain not in ("error", "initial"):
         raise PolicyError(f"multichain must be 'error' or 'initial', got {multichain!r}")
+    if method not in STATIONARY_METHODS:
+        raise PolicyError(f"unknown evaluation method {method!r}; expected one of {', '.join(STATIONARY_METHODS)}")
     if hasattr(policy, "act_memory") and sigma is None:  # a policy with memory: its augmented chain
         system = system or policy.system
         name = name or policy.name
-        x, residual, n_classes = _memory_law(mdp, policy, system, name, multichain)
+        x, residual, classes, chain = _memory_law(mdp, policy, system, name, multichain, method)
         randomised = False
     else:
         arr, system, name = _policy_array(mdp, policy, system, name, sigma)
-        pi, residual, n_classes = _long_run_law(mdp, arr, system, name, multichain)
+        pi, residual, classes, chain = _long_run_law(mdp, arr, system, name, multichain, method)
         x = _pair_frequencies(mdp, arr, pi)
         randomised = not np.issubdtype(arr.dtype, np.integer)
     pi = np.bincount(mdp.s_indices, weights=x, minlength=mdp.n_states)
+    gain = float(x @ np.asarray(mdp.cost, dtype=float))
+    lo = hi = float("nan")
+    if certify:
+        lo, hi = _certified_gain(*chain, gain, name)
+    solved = method if method != "auto" else (
+        "iterative" if max(c.size for c in classes) >= ITERATIVE_MIN_STATES else "lu")
     tau = np.asarray(mdp.states.tau, dtype=np.int64)
     sc = system.scenario
     return Evaluation(
         policy=name,
-        gain=float(x @ np.asarray(mdp.cost, dtype=float)),
+        gain=gain,
         mse=tuple(float(pi @ system.q[k][tau[:, k] - 1]) for k in range(system.n_processes)),
         utilisation=_utilisation(mdp, x, system),
         process_names=tuple(p.name for p in sc.processes),
         server_names=tuple(s.name for s in sc.servers),
         randomised=randomised,
         residual=residual,
-        recurrent_classes=n_classes,
+        recurrent_classes=len(classes),
         n_states=mdp.n_states,
         n_pairs=mdp.n_pairs,
         seconds=time.perf_counter() - t0,
         cap_mass=cap_mass(mdp, pi),
+        method=solved,
+        gain_lower=lo,
+        gain_upper=hi,
     )
+
+
+def _certified_gain(P: sp.csr_matrix, c: np.ndarray, gain: float, name: str) -> tuple[float, float]:
+    """The certified bracket of a chain's gain by the certified value iteration (the chain as an MDP
+    with one action per state), with the stationary law's ``gain`` checked inside it."""
+    from .solvers.dp import value_iteration
+
+    n = P.shape[0]
+    one = MDP.from_arrays(np.arange(n), np.zeros(n, dtype=np.int64), c, P, n, name=f"chain of {name}")
+    sol = value_iteration(one)
+    lo, hi = float(sol.gain_lower), float(sol.gain_upper)
+    slack = 1e-9 * max(abs(gain), 1.0)
+    if not lo - slack <= gain <= hi + slack:
+        raise PolicyError(f"policy {name}: the stationary law's gain {gain:.12g} is outside the certified bracket "
+                          f"[{lo:.12g}, {hi:.12g}] of its chain (status {sol.status})")
+    return lo, hi
 
 
 def _policy_array(mdp: MDP, policy: Any, system: System | None, name: str | None,
@@ -218,20 +264,20 @@ def _system_of(mdp: MDP) -> System:
     return System.from_scenario(model.scenario, model)
 
 
-def _long_run_law(mdp: MDP, arr: np.ndarray, system: System, name: str, multichain: str):
-    """``(pi, residual, number of recurrent classes)``: the stationary law of a unichain policy,
-    or the limit from the initial state of a multichain one (``"initial"``)."""
+def _long_run_law(mdp: MDP, arr: np.ndarray, system: System, name: str, multichain: str, method: str):
+    """``(pi, residual, recurrent classes, (P, c))``: the stationary law of a unichain policy, or
+    the limit from the initial state of a multichain one (``"initial"``), and its chain."""
     try:
-        chain = PolicyChain(mdp, arr)
+        chain = PolicyChain(mdp, arr, method)
     except PolicyError as exc:
         raise PolicyError(f"policy {name}: {exc}") from None
     classes = chain.recurrent_classes
     if len(classes) == 1:
-        return chain.stationary, chain.residual, 1
+        return chain.stationary, chain.residual, classes, (chain.P, chain.cost)
     if multichain == "error":
         raise _multichain(mdp, name, classes)
-    pi, residual = _limit_from_initial(chain.P, classes, _initial_state(mdp, system))
-    return pi, residual, len(classes)
+    pi, residual = _limit_from_initial(chain.P, classes, _initial_state(mdp, system), method)
+    return pi, residual, classes, (chain.P, chain.cost)
 
 
 def _multichain(mdp: MDP, name: str, classes: list, n: int | None = None) -> MultichainEvaluationError:
@@ -299,20 +345,20 @@ def memory_chain(mdp: MDP, policy: Any) -> tuple[sp.csr_matrix, np.ndarray]:
     return P, pairs
 
 
-def _memory_law(mdp: MDP, policy: Any, system: System, name: str, multichain: str):
-    """``(pair frequencies x, residual, number of recurrent classes)`` of a policy with memory, from
+def _memory_law(mdp: MDP, policy: Any, system: System, name: str, multichain: str, method: str):
+    """``(pair frequencies x, residual, recurrent classes, (P, c))`` of a policy with memory, from
     the stationary law of its augmented chain (:func:`memory_chain`)."""
     P, pairs = memory_chain(mdp, policy)
     classes = recurrent_classes(P)
     if len(classes) == 1:
-        law, residual = stationary_law(P, classes)
+        law, residual = stationary_law(P, classes, method=method)
     elif multichain == "error":
         raise _multichain(mdp, name, classes)
     else:
         s0 = int(policy.initial_memory) * mdp.n_states + _initial_state(mdp, system)
-        law, residual = _limit_from_initial(P, classes, s0)
+        law, residual = _limit_from_initial(P, classes, s0, method)
     x = np.bincount(pairs.ravel(), weights=law, minlength=mdp.n_pairs)
-    return x, residual, len(classes)
+    return x, residual, classes, (P, np.asarray(mdp.cost, dtype=float)[pairs.ravel()])
 
 
 def _utilisation(mdp: MDP, x: np.ndarray, system: System) -> tuple[float, ...]:
@@ -325,7 +371,7 @@ def _utilisation(mdp: MDP, x: np.ndarray, system: System) -> tuple[float, ...]:
     return tuple(float(v) for v in x[used] @ busy)
 
 
-def _limit_from_initial(P, classes: list, s0: int) -> tuple:
+def _limit_from_initial(P, classes: list, s0: int, method: str = "auto") -> tuple:
     """Limiting state distribution from the state ``s0`` of a multichain chain P.
 
     The absorption probabilities b_i(s0) are obtained by pushing the distribution of s0
@@ -351,7 +397,7 @@ def _limit_from_initial(P, classes: list, s0: int) -> tuple:
         x = PT @ x
     else:  # pragma: no cover - transient mass decays geometrically
         raise PolicyError("multichain evaluation: the initial state's mass does not leave the transient states")
-    mu, res = stationary_law(P, classes, weights=b)
+    mu, res = stationary_law(P, classes, weights=b, method=method)
     residual = max(abs(b.sum() - 1.0), res)
     if residual > 1e-8:
         raise PolicyError(f"multichain evaluation from the initial state is inaccurate (residual {residual:.3g})")

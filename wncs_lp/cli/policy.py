@@ -74,21 +74,28 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     mdp, policy = made.mdp, made.policy
     prog.phase(f"evaluating the {policy.name} policy exactly (its chain's stationary law)")
     try:
-        ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error")
+        ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error", method=args.stationary,
+                      certify=args.certify)
     except MultichainEvaluationError as exc:
         raise PolicyError(f"{exc.detail} (rerun with --from-initial for the averages from the initial state)") from None
+    transient = _transient(args, mdp, policy, prog) if args.horizon is not None else None
     payload = {
         **head(args, scenario, mdp),
         **ev.to_dict(),
         "policy_info": policy.describe(),
         "setup_seconds": made.seconds,
     }
+    if transient is not None:
+        payload["transient"] = {"policy": transient[0].to_dict(), "finite_horizon_optimum": transient[1].to_dict()}
     if args.json:
         emit_json(payload)
     else:
         print(scenario.describe())
         print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs")
         print(f"policy {ev.policy}: average cost (gain) {ev.gain:.10g}")
+        if args.certify:
+            print(f"certificate: {ev.gain_lower:.12g} <= g_pi <= {ev.gain_upper:.12g} (certified value iteration of "
+                  "the policy's chain)")
         for name, v in zip(ev.process_names, ev.mse):
             print(f"  {name}: average MSE {v:.8g}")
         for name, v in zip(ev.server_names, ev.utilisation):
@@ -99,7 +106,27 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             print(f"truncation: under the {ev.policy} policy {ev.cap_mass.message()}")
         if "base_gain" in payload["policy_info"]:
             print(f"  base (random) policy gain sum_k g_k = {payload['policy_info']['base_gain']:.10g}")
+        if transient is not None:
+            tr, best = transient
+            print(f"first {tr.horizon} slots from {tr.start}: expected cost {tr.total:.10g} (average {tr.average:.8g} a "
+                  f"slot) under {tr.policy}; the finite-horizon optimum {best.total:.10g} (average {best.average:.8g})")
     return 0
+
+
+def _transient(args: argparse.Namespace, mdp, policy, prog):
+    """``--horizon T``: the policy's expected cost over the first T slots and the finite-horizon
+    optimum's, from ``--start`` (default: every AoI at its cap, servers idle)."""
+    from ..errors import WncsError
+    from ..transient import transient_cost
+
+    start = None
+    if args.start is not None:
+        try:
+            start = tuple(int(x) for x in args.start.split(","))
+        except ValueError:
+            raise WncsError(f"--start {args.start!r}: expected one AoI per process, e.g. 1,1") from None
+    prog.phase(f"the expected cost over the first {args.horizon} slots (exact recursions)")
+    return transient_cost(mdp, policy, args.horizon, start), transient_cost(mdp, "optimal", args.horizon, start)
 
 
 def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> int:
@@ -157,6 +184,17 @@ def _configure_evaluate(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="for a multichain policy, report the averages from the initial state instead of failing",
     )
+    p.add_argument("--stationary", default="auto", choices=("auto", "lu", "iterative"),
+                   help="how the stationary law is solved: a sparse LU, BiCGSTAB (residual checked), or auto: the LU "
+                        "for recurrent classes under 1,000 states, BiCGSTAB above (benchmarks/evaluation.py)")
+    p.add_argument("--certify", action="store_true",
+                   help="also bracket the gain by the certified value iteration of the policy's chain")
+    p.add_argument("--horizon", type=int, default=None, metavar="T",
+                   help="also the expected cost over the first T slots (the policy's, and the finite-horizon "
+                        "optimum's), by exact recursion on the enumerated MDP")
+    p.add_argument("--start", default=None, metavar="TAU",
+                   help="--horizon: the AoI vector to start from, servers idle (e.g. 1,1; default: every AoI at its "
+                        "cap)")
 
 
 # ----------------------------------------------------------------------------- simulate
