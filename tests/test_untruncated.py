@@ -77,8 +77,8 @@ def test_solve_states_the_interval_and_the_time_at_the_cap_on_both_routes(capsys
     from wncs_lp.cli import main
 
     path = str(scenario_path("paper_p12"))
-    assert main(["solve", path, "--set", "tau_cap=8", "--method", "vi", "--untruncated", "--slots", "1000",
-                 "--reps", "4", "--json"]) == 0
+    assert main(["solve", path, "--set", "tau_cap=8", "--method", "vi", "--untruncated", "--slots", "400",
+                 "--reps", "3", "--json"]) == 0
     vi = json.loads(capsys.readouterr().out)
     assert main(["solve", path, "--set", "tau_cap=8", "--method", "matrix-free", "--json"]) == 0
     mf = json.loads(capsys.readouterr().out)
@@ -90,3 +90,18 @@ def test_solve_states_the_interval_and_the_time_at_the_cap_on_both_routes(capsys
     assert cap["total_lower"] - 1e-9 <= vi["cap_mass"]["total"] <= cap["total_upper"] + 1e-9
     total = sum(vi["cap_mass"]["per_process"])  # E #(processes at their cap)
     assert cap["expected_at_cap_lower"] - 1e-6 <= total <= cap["expected_at_cap_upper"] + 1e-6
+
+
+def test_a_policy_that_starves_a_process_past_the_cap_is_unbounded():
+    # at cap 4 the lab's optimal policy leaves sensor 3 alone once its AoI sits at the cap (it costs
+    # nothing more there): without the cap its AoI grows without end; round robin serves everyone
+    sc = load_scenario(scenario_path("lab_5sensors"), ["tau_cap=4"])
+    run = solve_scenario(sc, "vi", need_mdp=True)
+    system = System.from_scenario(sc)
+    iv = untruncated_interval(run.solution.gain_lower, [make_policy("optimal", system, run.mdp, solution=run.solution),
+                                                        make_policy("round_robin", system)],
+                              slots=1_500, reps=4, seed=0)
+    starved, rr = iv.candidates
+    assert starved.upper == float("inf") and "sensor-3" in starved.note
+    assert np.isfinite(rr.upper) and iv.policy == "round_robin" and iv.upper == rr.upper
+    assert "unbounded without the cap: optimal" in iv.message()

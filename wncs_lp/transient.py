@@ -91,7 +91,7 @@ def start_law(mdp: MDP, start: Any = None) -> tuple[np.ndarray, str]:
     """
     n = mdp.n_states
     st = mdp.states
-    if isinstance(start, np.ndarray) and start.dtype.kind == "f":
+    if isinstance(start, np.ndarray) and np.issubdtype(start.dtype, np.floating):
         mu = np.asarray(start, dtype=float)
         if mu.shape != (n,) or not np.all(np.isfinite(mu)) or mu.min() < 0 or abs(mu.sum() - 1.0) > 1e-9:
             raise PolicyError(f"a start law must be {n} nonnegative probabilities summing to 1")

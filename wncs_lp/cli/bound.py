@@ -41,15 +41,15 @@ def cmd_bound(args: argparse.Namespace) -> int:
                    "seconds": time.perf_counter() - t0})
     else:
         _print(scenario, res, report)
-        tail = "" if interval.upper < float("inf") else " (--untruncated simulates the best policy without the cap for one)"
+        tail = "" if interval.candidates else " (--untruncated simulates the policies without the cap for one)"
         print(interval.message() + tail)
     return 0 if res.ok else 1
 
 
 def _untruncated(args: argparse.Namespace, res, system, report, compare: list[str], prog):
     """The interval for the optimum without the cap: the certified bound below (g*(cap) <= g*_inf),
-    and with ``--untruncated`` the best policy evaluated (the least upper end; the bound's policy
-    without ``--policy``) simulated without the cap above."""
+    and with ``--untruncated`` the policies evaluated (the bound's alone without ``--policy``)
+    simulated without the cap, the least upper confidence limit above."""
     from ..bounds import bound_policy
     from ..policies import make_policy
     from ..untruncated import untruncated_interval
@@ -57,14 +57,11 @@ def _untruncated(args: argparse.Namespace, res, system, report, compare: list[st
     lower_from = f"the certified lower bound ({res.relaxation})"
     if not args.untruncated:
         return untruncated_interval(res.lower_bound, lower_from=lower_from)
-    name = "bound"
-    if report is not None:
-        best = min(range(len(report.rows)), key=lambda i: report.rows[i].gain_upper)
-        name = ["bound", *compare][best]
-    policy = bound_policy(res, system) if name == "bound" else make_policy(name, system)
-    prog.phase(f"simulating the {policy.name} policy without the AoI cap ({args.reps} x {args.slots} slots, seed "
-               f"{args.seed})")
-    return untruncated_interval(res.lower_bound, policy, lower_from=lower_from, slots=args.slots, reps=args.reps,
+    names = ["bound", *compare] if report is not None else ["bound"]
+    policies = [bound_policy(res, system) if n == "bound" else make_policy(n, system) for n in names]
+    prog.phase(f"simulating {', '.join(p.name for p in policies)} without the AoI cap ({args.reps} x {args.slots} "
+               f"slots each, seed {args.seed})")
+    return untruncated_interval(res.lower_bound, policies, lower_from=lower_from, slots=args.slots, reps=args.reps,
                                 seed=args.seed, burn_in=args.burn_in)
 
 
@@ -136,8 +133,9 @@ def _configure(p: argparse.ArgumentParser) -> None:
                    help="evaluate exactly (certified matrix-free evaluation) when the AoI box has at most N states, "
                         "else by Monte Carlo (default 50000000; 0: always Monte Carlo)")
     p.add_argument("--untruncated", action="store_true",
-                   help="also simulate the best policy evaluated (the bound's without --policy) without the AoI cap, "
-                        "for an upper end on the untruncated optimum (the bound is its lower end; docs/model.md)")
+                   help="also simulate the policies evaluated (the bound's alone without --policy) without the AoI cap: "
+                        "the least upper confidence limit is an upper end on the untruncated optimum, the bound its "
+                        "lower end (docs/model.md)")
     p.add_argument("--slots", type=int, default=40_000, help="Monte Carlo: slots per replication (default 40000)")
     p.add_argument("--reps", type=int, default=20, help="Monte Carlo: independent replications (default 20)")
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo: random seed (default 0)")

@@ -278,12 +278,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.json:
         emit_json(payload)
     else:
-        print(f"{'value':>8} {'policy':<12} {'gain':>14} {'sim mean':>14} {'stderr':>9} {'seconds':>8}  status")
+        name = res.rows[0].value_column if res.rows else args.param
+        width = max(8, len(name))
+        print(f"{name:>{width}} {'policy':<12} {'gain':>14} {'sim mean':>14} {'stderr':>9} {'seconds':>8}  status")
         for r in res.rows:
             g = "" if r.gain != r.gain else f"{r.gain:.8g}"
             m = "" if r.sim_mean != r.sim_mean else f"{r.sim_mean:.8g}"
             e = "" if r.sim_stderr != r.sim_stderr else f"{r.sim_stderr:.3g}"
-            print(f"{r.value:>8g} {r.policy:<12} {g:>14} {m:>14} {e:>9} {r.seconds:>8.2f}  {r.status}")
+            print(f"{r.value:>{width}g} {r.policy:<12} {g:>14} {m:>14} {e:>9} {r.seconds:>8.2f}  {r.status}")
         print(f"{res.computed} rows computed, {res.reused} reused; files: {', '.join(res.files.values())}")
     bad = [r for r in res.rows if r.status.startswith("error")]
     return 1 if bad else 0

@@ -45,9 +45,33 @@ class Policy(ABC):
 
     name: str = "policy"
     randomised: bool = False
+    #: The rule reads the AoI only through the system's cost tables (or not at all), so it is
+    #: defined for any AoI, also past the cap: :meth:`on_system` moves it to another system.
+    aoi_free: bool = False
 
     def __init__(self, system: System):
         self.system = system
+
+    def on_system(self, system: System) -> "Policy":
+        """The same rule on another system with the same configurations (larger caps, or the
+        uncapped system of :mod:`wncs_lp.untruncated`); only for an :attr:`aoi_free` rule.
+
+        Raises
+        ------
+        PolicyError
+            The policy is a table over its own AoI box (optimal, suboptimal, ...): clip its AoI
+            instead (:class:`~wncs_lp.policies.ClippedPolicy`).
+        """
+        if not self.aoi_free:
+            raise PolicyError(f"policy {self.name} is defined on its own AoI box only: clip the AoI instead "
+                              "(ClippedPolicy)")
+        import copy
+
+        other = copy.copy(self)
+        other.system = system
+        if isinstance(getattr(other, "_cache", None), dict):
+            other._cache = {}
+        return other
 
     @abstractmethod
     def act(self, tau: np.ndarray, config_ids: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:

@@ -70,16 +70,23 @@ def max_weight_index(system: System) -> tuple[np.ndarray, ...]:
 
 class MaxWeightPolicy(GreedyPolicy):
     """Max-weighted-cost-first: the processes ranked by :func:`max_weight_index` (descending, ties:
-    lower index), then served as by the greedy policy."""
+    lower index), then served as by the greedy policy. The index is read from the system's cost
+    tables at every call, so the rule acts on any AoI (:meth:`~wncs_lp.policies.Policy.on_system`)."""
 
     name = "max_weight"
 
     def __init__(self, system: System):
         super().__init__(system)
-        self.index = max_weight_index(system)
+        sc = system.scenario
+        best = [_best_server(system, k) for k in range(system.n_processes)]
+        self._loop = np.array([sc.servers[m].loop[k] for k, m in enumerate(best)], dtype=np.int64)
+        self._p = np.array([sc.servers[m].p_up * sc.servers[m].p_down for m in best])
 
     def ranking(self, tau: np.ndarray) -> np.ndarray:
-        v = np.stack([self.index[k][tau[:, k] - 1] for k in range(self.system.n_processes)], axis=1)
+        caps, q = self.system.caps, self.system.q
+        v = np.stack([self._p[k] * (q[k][np.minimum(tau[:, k] + self._loop[k], caps[k]) - 1]
+                                    - q[k][np.full(1, min(self._loop[k], caps[k])) - 1])
+                      for k in range(self.system.n_processes)], axis=1)
         return np.argsort(-v, axis=1, kind="stable")
 
 
@@ -98,6 +105,7 @@ class RoundRobinPolicy(MemoryPolicy):
     """
 
     name = "round_robin"
+    aoi_free = True
 
     def __init__(self, system: System):
         super().__init__(system)
