@@ -13,7 +13,8 @@ of :math:`(I - P_{RR})^T` replaced by ones): for classes of :data:`ITERATIVE_MIN
 more by BiCGSTAB, restarted until the true residual passes (an LU of a large class fills in
 badly), then if need be by power iteration on the lazy chain :math:`(P + I)/2`; below that size --
 or when both miss -- by a sparse LU of the bordered system, minimum-degree ordering on
-:math:`A^T + A` and one step of iterative refinement; the residual :math:`\|\pi_R P_{RR} - \pi_R\|_\infty` is checked against
+:math:`A^T + A` and one step of iterative refinement; the residual
+:math:`\|\pi_R P_{RR} - \pi_R\|_\infty` is checked against
 :data:`STATIONARY_TOL`. The law of a multichain policy is a mixture of its classes' laws with
 weights the caller chooses (:func:`stationary_law`): equal, or the absorption probabilities from
 a start state.

@@ -6,7 +6,8 @@ import argparse
 import time
 
 from ..errors import WncsError
-from .common import Command, add_progress_arg, add_scenario_args, emit_json, head, load, progress_for
+from .common import (Command, add_progress_arg, add_scenario_args, add_simulation_args, emit_json, head, load,
+                     progress_for)
 
 
 def cmd_bound(args: argparse.Namespace) -> int:
@@ -133,13 +134,10 @@ def _configure(p: argparse.ArgumentParser) -> None:
                    help="evaluate exactly (certified matrix-free evaluation) when the AoI box has at most N states, "
                         "else by Monte Carlo (default 50000000; 0: always Monte Carlo)")
     p.add_argument("--untruncated", action="store_true",
-                   help="also simulate the policies evaluated (the bound's alone without --policy) without the AoI cap: "
-                        "the least upper confidence limit is an upper end on the untruncated optimum, the bound its "
+                   help="also simulate the policies evaluated (the bound's alone without --policy) without the AoI "
+                        "cap: the least upper confidence limit is an upper end on the untruncated optimum, the bound its "
                         "lower end (docs/model.md)")
-    p.add_argument("--slots", type=int, default=40_000, help="Monte Carlo: slots per replication (default 40000)")
-    p.add_argument("--reps", type=int, default=20, help="Monte Carlo: independent replications (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="Monte Carlo: random seed (default 0)")
-    p.add_argument("--burn-in", type=int, default=1000, help="Monte Carlo: slots discarded first (default 1000)")
+    add_simulation_args(p, "Monte Carlo")
     add_progress_arg(p)
 
 

@@ -108,8 +108,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             print(f"  base (random) policy gain sum_k g_k = {payload['policy_info']['base_gain']:.10g}")
         if transient is not None:
             tr, best = transient
-            print(f"first {tr.horizon} slots from {tr.start}: expected cost {tr.total:.10g} (average {tr.average:.8g} a "
-                  f"slot) under {tr.policy}; the finite-horizon optimum {best.total:.10g} (average {best.average:.8g})")
+            print(f"first {tr.horizon} slots from {tr.start}: expected cost {tr.total:.10g} (average "
+                  f"{tr.average:.8g} a slot) under {tr.policy}; the finite-horizon optimum {best.total:.10g} (average {best.average:.8g})")
     return 0
 
 

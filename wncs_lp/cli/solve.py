@@ -5,8 +5,8 @@ import argparse
 import time
 
 from ..methods import DEFAULT_METHOD, METHOD_HELP
-from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_threads_arg, emit_json, head,
-                     load, output_file, progress_for, solution_json, write_after_work)
+from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_simulation_args, add_threads_arg,
+                     emit_json, head, load, output_file, progress_for, solution_json, write_after_work)
 
 
 def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
@@ -258,10 +258,7 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
                         "without the AoI cap (each sees the capped AoI, the true AoI is charged): the least upper "
                         "confidence limit is an upper end on the untruncated optimum, the certified truncated optimum "
                         "its lower end (docs/model.md)")
-    p.add_argument("--slots", type=int, default=40_000, help="--untruncated: slots per replication (default 40000)")
-    p.add_argument("--reps", type=int, default=20, help="--untruncated: independent replications (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="--untruncated: random seed (default 0)")
-    p.add_argument("--burn-in", type=int, default=1000, help="--untruncated: slots discarded first (default 1000)")
+    add_simulation_args(p, "--untruncated")
     add_threads_arg(p)
     add_progress_arg(p)
 
