@@ -59,3 +59,9 @@ def test_gym_baselines():
     rows = re.findall(r"^\s*(random \(masked\)|greedy|suboptimal)\s+([\d.]+) \+- ([\d.]+)", out, re.M)
     assert [r[0] for r in rows] == ["random (masked)", "greedy", "suboptimal"]
     assert all(float(mean) >= g - 4.5 * float(se) for _, mean, se in rows)
+
+
+def test_lab_baselines():
+    out = run("07_lab_baselines.py", "3", "300", "2")
+    assert "lab_5sensors at cap 3" in out and "round_robin" in out and "max_weight" in out
+    assert "<= g*_inf <=" in out

@@ -8,11 +8,13 @@ rule: a state is *recurrent* when it lies in a closed communicating class of ``P
 the states of positive stationary probability).
 
 The stationary law of one closed class R solves :math:`\pi_R (I - P_{RR}) = 0`,
-:math:`\sum \pi_R = 1` (:func:`class_stationary`): by power iteration on the lazy chain
-:math:`(P + I)/2` for classes of :data:`POWER_MIN_STATES` states or more (an LU of a large class
-fills in badly), else -- or when the power iteration misses :data:`POWER_TOL` -- by a sparse LU
-with one row replaced by ones, minimum-degree ordering on :math:`A^T + A` and one step of
-iterative refinement; the residual :math:`\|\pi_R P_{RR} - \pi_R\|_\infty` is checked against
+:math:`\sum \pi_R = 1` (:func:`class_stationary`), written as one bordered linear system (row 0
+of :math:`(I - P_{RR})^T` replaced by ones): for classes of :data:`ITERATIVE_MIN_STATES` states or
+more by BiCGSTAB, restarted until the true residual passes (an LU of a large class fills in
+badly), then if need be by power iteration on the lazy chain :math:`(P + I)/2`; below that size --
+or when both miss -- by a sparse LU of the bordered system, minimum-degree ordering on
+:math:`A^T + A` and one step of iterative refinement; the residual
+:math:`\|\pi_R P_{RR} - \pi_R\|_\infty` is checked against
 :data:`STATIONARY_TOL`. The law of a multichain policy is a mixture of its classes' laws with
 weights the caller chooses (:func:`stationary_law`): equal, or the absorption probabilities from
 a start state.
@@ -36,12 +38,21 @@ __all__ = [
     "class_stationary",
     "stationary_law",
     "STATIONARY_TOL",
+    "STATIONARY_METHODS",
+    "ITERATIVE_MIN_STATES",
+    "bicgstab",
 ]
 
 #: Residual above which a stationary distribution is rejected.
 STATIONARY_TOL = 1e-9
-#: Classes at least this large are first tried by power iteration (LU fill-in grows fast).
-POWER_MIN_STATES = 20_000
+#: Classes at least this large are solved iteratively first (BiCGSTAB, then the power iteration):
+#: the LU's fill-in grows fast (measured in ``benchmarks/evaluation.py``).
+ITERATIVE_MIN_STATES = 1_000
+#: BiCGSTAB's own tolerance in the iterative stationary solve, and its restarts.
+ITERATIVE_RTOL = 1e-13
+ITERATIVE_RESTARTS = 3
+#: The methods of :func:`class_stationary`.
+STATIONARY_METHODS = ("auto", "lu", "iterative")
 #: Power iteration: stop when ||pi P - pi||_1 is below this, give up after POWER_MAX_ITER sweeps.
 POWER_TOL = 1e-14
 POWER_MAX_ITER = 20_000
@@ -153,29 +164,117 @@ def _power_stationary(Pc: sp.spmatrix) -> np.ndarray | None:
     return None
 
 
-def class_stationary(P: sp.spmatrix, cl: np.ndarray) -> tuple[np.ndarray, float]:
+def _bordered(Pc: sp.csr_matrix) -> tuple[sp.csr_matrix, np.ndarray]:
+    """``(A, e_0)`` with A = (I - P)^T whose row 0 is replaced by ones: A pi = e_0 says
+    pi (I - P) = 0 off state 0 and sum pi = 1, which for a closed class is its stationary law."""
+    m = Pc.shape[0]
+    AT = (sp.identity(m, format="csr") - Pc).T.tocsr()
+    A = sp.vstack([sp.csr_matrix(np.ones((1, m))), AT[1:]], format="csr")
+    rhs = np.zeros(m)
+    rhs[0] = 1.0
+    return A, rhs
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    # a plain numpy sum, not BLAS: OpenBLAS's threads spin when the machine is loaded (measured under
+    # load 21 on 2 cores: 11 ms per dot of 31,000 entries, BiCGSTAB 6.6 s against 0.15 s with one
+    # BLAS thread), and the products here are too short to gain from threads
+    return float(np.add.reduce(a * b))
+
+
+def bicgstab(A: sp.csr_matrix, b: np.ndarray, x0: np.ndarray, rtol: float, maxiter: int) -> tuple[np.ndarray, int]:
+    """BiCGSTAB (van der Vorst 1992) for A x = b from x0, until ||b - A x|| <= rtol ||b|| on its
+    recursive residual; returns ``(x, info)``, info 0 when it converged, 1 out of iterations, -1 on a
+    breakdown. The sparse products are scipy's; the vector products plain numpy (:func:`_dot`)."""
+    x = np.array(x0, dtype=float)
+    r = b - A @ x
+    r0 = r.copy()
+    bnorm = np.sqrt(_dot(b, b)) or 1.0
+    rho = alpha = omega = 1.0
+    v = np.zeros_like(x)
+    p = np.zeros_like(x)
+    for _ in range(maxiter):
+        if np.sqrt(_dot(r, r)) <= rtol * bnorm:
+            return x, 0
+        rho_new = _dot(r0, r)
+        if rho_new == 0.0 or omega == 0.0:
+            return x, -1
+        beta = (rho_new / rho) * (alpha / omega)
+        rho = rho_new
+        p = r + beta * (p - omega * v)
+        v = A @ p
+        den = _dot(r0, v)
+        if den == 0.0:
+            return x, -1
+        alpha = rho / den
+        s = r - alpha * v
+        if np.sqrt(_dot(s, s)) <= rtol * bnorm:
+            return x + alpha * p, 0
+        t = A @ s
+        tt = _dot(t, t)
+        omega = _dot(t, s) / tt if tt > 0 else 0.0
+        x = x + alpha * p + omega * s
+        r = s - omega * t
+    return x, 1
+
+
+def _iterative_stationary(Pc: sp.csr_matrix) -> np.ndarray | None:
+    """Stationary distribution by BiCGSTAB on the bordered system (:func:`_bordered`) from the
+    uniform law, restarted from its own answer until the true residual ||pi P - pi||_inf is below
+    :data:`STATIONARY_TOL` (at most :data:`ITERATIVE_RESTARTS` restarts); None if it misses.
+
+    A Krylov solver needs far fewer products with P than the power iteration on a slowly mixing
+    chain, and, unlike the LU, no fill-in."""
+    A, rhs = _bordered(Pc)
+    m = Pc.shape[0]
+    PT = Pc.T.tocsr()
+    x = np.full(m, 1.0 / m)
+    for _ in range(ITERATIVE_RESTARTS + 1):
+        x, info = bicgstab(A, rhs, x, ITERATIVE_RTOL, max(1000, 2 * int(np.sqrt(m))))
+        if not np.all(np.isfinite(x)):
+            return None
+        pi = np.maximum(x, 0.0)
+        pi /= pi.sum()
+        if float(np.max(np.abs(PT @ pi - pi))) <= STATIONARY_TOL:
+            return pi
+        if info != 0:  # out of iterations or a breakdown
+            return None
+    return None
+
+
+def class_stationary(P: sp.spmatrix, cl: np.ndarray, method: str = "auto") -> tuple[np.ndarray, float]:
     """Stationary distribution of the closed class ``cl`` of P; returns ``(pi_cl, residual)``.
+
+    Parameters
+    ----------
+    method : {"auto", "lu", "iterative"}
+        ``"lu"``: the sparse LU of the bordered system (one refinement step). ``"iterative"``:
+        BiCGSTAB on it (:func:`_iterative_stationary`), then the power iteration, then the LU, each
+        tried when the one before misses :data:`STATIONARY_TOL`. ``"auto"``: the LU below
+        :data:`ITERATIVE_MIN_STATES` states, iterative from there on (the crossover measured in
+        ``benchmarks/evaluation.py``).
 
     Raises
     ------
     PolicyError
-        The residual exceeds :data:`STATIONARY_TOL` (``cl`` is then not a closed class).
+        The residual exceeds :data:`STATIONARY_TOL` (``cl`` is then not a closed class), or an
+        unknown method.
     """
+    if method not in STATIONARY_METHODS:
+        raise PolicyError(f"unknown stationary method {method!r}; expected one of {', '.join(STATIONARY_METHODS)}")
     m = cl.size
     if m == 1:
         return np.ones(1), 0.0
     Pc = sp.csr_matrix(P)[cl][:, cl].tocsr()
-    if m >= POWER_MIN_STATES:
-        pi = _power_stationary(Pc)
-        if pi is not None:
-            residual = float(np.max(np.abs(Pc.T @ pi - pi)))
-            if residual <= STATIONARY_TOL:
-                return pi, residual
-    A = (sp.identity(m, format="csr") - Pc).T.tocsr().tolil()
-    A[0, :] = np.ones(m)
+    if method == "iterative" or (method == "auto" and m >= ITERATIVE_MIN_STATES):
+        for solver in (_iterative_stationary, _power_stationary):
+            pi = solver(Pc)
+            if pi is not None:
+                residual = float(np.max(np.abs(Pc.T @ pi - pi)))
+                if residual <= STATIONARY_TOL:
+                    return pi, residual
+    A, rhs = _bordered(Pc)
     A = A.tocsc()
-    rhs = np.zeros(m)
-    rhs[0] = 1.0
     try:
         lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A")
     except RuntimeError as exc:  # pragma: no cover - a closed communicating class is nonsingular
@@ -191,7 +290,7 @@ def class_stationary(P: sp.spmatrix, cl: np.ndarray) -> tuple[np.ndarray, float]
 
 
 def stationary_law(P: sp.spmatrix, classes: list[np.ndarray] | None = None,
-                   weights: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+                   weights: np.ndarray | None = None, method: str = "auto") -> tuple[np.ndarray, float]:
     """The mixture ``sum_i weights[i] pi_i`` of the classes' stationary laws (zero off them).
 
     Parameters
@@ -203,6 +302,8 @@ def stationary_law(P: sp.spmatrix, classes: list[np.ndarray] | None = None,
     weights : array, optional
         One weight per class (default equal weights, summing to 1); a class of weight 0 is not
         solved.
+    method : {"auto", "lu", "iterative"}
+        How each class is solved (:func:`class_stationary`).
 
     Returns
     -------
@@ -217,7 +318,7 @@ def stationary_law(P: sp.spmatrix, classes: list[np.ndarray] | None = None,
     residual = 0.0
     for wi, cl in zip(w, classes):
         if wi > 0:
-            pi_c, res = class_stationary(P, cl)
+            pi_c, res = class_stationary(P, cl, method)
             pi[cl] += wi * pi_c
             residual = max(residual, res)
     return pi, residual
@@ -234,6 +335,8 @@ class PolicyChain:
     mdp : MDP
     policy : array
         Deterministic (n,) pair indices or randomised (L,) pair probabilities.
+    method : {"auto", "lu", "iterative"}
+        How the stationary law is solved (:func:`class_stationary`).
 
     Attributes
     ----------
@@ -241,8 +344,11 @@ class PolicyChain:
     cost : (n,) array
     """
 
-    def __init__(self, mdp: MDP, policy: np.ndarray):
+    def __init__(self, mdp: MDP, policy: np.ndarray, method: str = "auto"):
+        if method not in STATIONARY_METHODS:
+            raise PolicyError(f"unknown stationary method {method!r}; expected one of {', '.join(STATIONARY_METHODS)}")
         self.mdp = mdp
+        self.method = method
         self.policy = np.asarray(policy)
         self.P, self.cost = policy_matrices(mdp, self.policy)
 
@@ -276,7 +382,7 @@ class PolicyChain:
 
     @cached_property
     def _law(self) -> tuple[np.ndarray, float]:
-        return stationary_law(self.P, self.recurrent_classes)
+        return stationary_law(self.P, self.recurrent_classes, method=self.method)
 
     @property
     def stationary(self) -> np.ndarray:

@@ -170,6 +170,7 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
     ot, caps, q, busy, n_act = sysm.outcome_tables, sysm.caps, sysm.q, sysm.busy, sysm.n_actions
     reps, N = tau.shape
     c = np.full(reps, sysm.initial_config, dtype=np.int64)
+    mem = policy.start_memory(reps) if hasattr(policy, "act_memory") else None  # a policy with memory
     proc_sum = np.zeros((reps, N))
     busy_sum = np.zeros(sysm.n_servers)
     chunk = 1000
@@ -177,12 +178,14 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
         if t >= burn_in:
             for k in range(N):
                 proc_sum[:, k] += q[k][tau[:, k] - 1]
-        j = policy.act(tau, c, prng)
+        j = policy.act(tau, c, prng) if mem is None else policy.act_memory(tau, c, mem, prng)
         if t == 0 or t % 997 == 0:  # cheap periodic sanity check of the policy's output
             if j.shape != (reps,) or np.any(j < 0) or np.any(j >= n_act[c]):
                 raise PolicyError(f"policy {policy.name} returned action indices out of range")
         if t >= burn_in:
             busy_sum += busy[c, j].sum(axis=0)
+        if mem is not None:
+            mem = policy.next_memory(mem, c, j)
         o = (chan.random(reps)[:, None] >= ot.cum[c, j]).sum(axis=1)
         d = ot.delta[c, j, o]
         c = ot.nxt[c, j, o]

@@ -24,7 +24,7 @@ import numpy as np
 from .errors import ModelError
 from .mdp import MDP
 
-__all__ = ["CapMass", "cap_mass", "policy_cap_mass", "CAP_MASS_WARN"]
+__all__ = ["CapMass", "CapCount", "cap_mass", "policy_cap_mass", "CAP_MASS_WARN"]
 
 #: Above this stationary mass at the cap a result warns that it leans on the truncation.
 CAP_MASS_WARN = 0.01
@@ -106,3 +106,69 @@ def policy_cap_mass(mdp: MDP, policy: np.ndarray, threshold: float = CAP_MASS_WA
     from .chain import PolicyChain
 
     return cap_mass(mdp, PolicyChain(mdp, policy).stationary, threshold)
+
+
+@dataclass(frozen=True)
+class CapCount:
+    r"""How much a policy leans on the cap where its stationary law is out of reach (the
+    matrix-free route): a certified bracket on the expected number of processes at their cap,
+    :math:`E\#\{k: \tau_k = \hat\tau_k\} = \sum_k m_k`, from
+    :func:`wncs_lp.solvers.matrix_free.matrix_free_cap_mass`.
+
+    It brackets the share of time with *some* AoI at its cap, the :attr:`CapMass.total` of the
+    enumerated route: :math:`\frac1N \sum_k m_k \le m \le \min(1, \sum_k m_k)`; the warning uses
+    the upper end (:attr:`mass_upper`), so it never misses a mass above the threshold.
+
+    Attributes
+    ----------
+    lower, upper : float
+        Certified bracket on sum_k m_k.
+    caps : tuple of int
+    process_names : tuple of str
+    threshold : float
+    """
+
+    lower: float
+    upper: float
+    caps: tuple[int, ...]
+    process_names: tuple[str, ...]
+    threshold: float = CAP_MASS_WARN
+
+    @classmethod
+    def of(cls, evaluation: Any, system: Any, threshold: float = CAP_MASS_WARN) -> "CapCount":
+        """From a matrix-free evaluation under the cap cost and the system it ran on."""
+        return cls(max(float(evaluation.gain_lower), 0.0), float(evaluation.gain_upper),
+                   tuple(int(c) for c in system.caps), tuple(p.name for p in system.scenario.processes), threshold)
+
+    @property
+    def mass_lower(self) -> float:
+        return self.lower / max(len(self.caps), 1)
+
+    @property
+    def mass_upper(self) -> float:
+        return min(1.0, self.upper)
+
+    @property
+    def warn(self) -> bool:
+        return self.mass_upper > self.threshold
+
+    def message(self) -> str:
+        """One sentence in words (a warning when the upper end is above the threshold)."""
+        count = (f"{0.5 * (self.lower + self.upper):.4g}" if self.upper - self.lower <= 1e-4 * max(self.upper, 1e-300)
+                 else f"{self.lower:.4g} to {self.upper:.4g}")
+        text = (f"{self.mass_lower:.2%} to {self.mass_upper:.2%} of the long-run time has some AoI at its cap (the "
+                f"expected number of processes at their caps is {count}, certified; caps {list(self.caps)})")
+        if self.warn:
+            text = (f"warning: {text}; possibly above {self.threshold:.0%}: the result may lean on the truncation; "
+                    "raise tau_cap to see how it moves")
+        return text
+
+    @property
+    def total(self) -> float:
+        """The upper end of the mass with some AoI at its cap (what a study compares with its tolerance)."""
+        return self.mass_upper
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"expected_at_cap_lower": self.lower, "expected_at_cap_upper": self.upper,
+                "total_lower": self.mass_lower, "total_upper": self.mass_upper, "caps": list(self.caps),
+                "threshold": float(self.threshold), "warning": bool(self.warn)}

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from ..display import Display, fmt
 from ..files import json_ready
 from ..status import OPTIMAL
 
@@ -79,8 +80,8 @@ class GroupTables:
         return out
 
 
-@dataclass(frozen=True, eq=False)
-class BoundResult:
+@dataclass(frozen=True, eq=False, repr=False)
+class BoundResult(Display):
     """A certified lower bound on the optimal gain g* of a scenario, from one relaxation.
 
     Attributes
@@ -153,3 +154,26 @@ class BoundResult:
         up = "" if not np.isfinite(self.relaxation_upper) else f" (relaxation <= {self.relaxation_upper:.10g})"
         return (f"BoundResult({self.relaxation}: g* >= {self.lower_bound:.10g}{up}, status {self.status}, "
                 f"{self.iterations} iterations, {self.seconds:.2f} s)")
+
+    # the HTML form in Jupyter and to_frame() (wncs_lp.display): the bound, then one row per part
+    def _display_head(self) -> str:
+        return f"BoundResult: g* >= {fmt(self.lower_bound)} ({self.relaxation})"
+
+    def _display_rows(self) -> list[tuple[str, str]]:
+        rows = [("lower_bound", fmt(self.lower_bound)), ("status", self.status),
+                ("certified_by", self.certified_by)]
+        if np.isfinite(self.relaxation_upper):
+            rows.append(("relaxation_upper", fmt(self.relaxation_upper)))
+        rows += [("multipliers", ", ".join(fmt(x, 8) for x in np.asarray(self.multipliers, float).ravel()[:8])
+                  + (" ..." if np.size(self.multipliers) > 8 else "")),
+                 ("iterations", fmt(self.iterations)), ("seconds", f"{self.seconds:.2f}")]
+        return rows
+
+    def _frame_records(self):
+        """One record per process (per group for the grouped relaxation): its part of the bound."""
+        groups = getattr(self.tables, "groups", None)
+        parts = np.asarray(self.process_gains, float).ravel()
+        names = ([",".join(str(k + 1) for k in g) for g in groups] if groups is not None
+                 else [str(k + 1) for k in range(parts.size)])
+        return (["processes", "part_of_bound"],
+                [{"processes": n, "part_of_bound": float(v)} for n, v in zip(names, parts)])

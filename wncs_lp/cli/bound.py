@@ -6,7 +6,8 @@ import argparse
 import time
 
 from ..errors import WncsError
-from .common import Command, add_progress_arg, add_scenario_args, emit_json, head, load, progress_for
+from .common import (Command, add_progress_arg, add_scenario_args, add_simulation_args, emit_json, head, load,
+                     progress_for)
 
 
 def cmd_bound(args: argparse.Namespace) -> int:
@@ -34,12 +35,35 @@ def cmd_bound(args: argparse.Namespace) -> int:
         report = policy_gaps(res, system, ["bound", *compare], exact=None if args.exact_max_states else False,
                              exact_max_states=args.exact_max_states or 0, slots=args.slots, reps=args.reps,
                              seed=args.seed, burn_in=args.burn_in, progress=prog)
+    interval = _untruncated(args, res, system, report, compare, prog)
     if args.json:
         emit_json({**head(args, scenario), "bound": res.summary(),
-                   "policies": None if report is None else report.summary(), "seconds": time.perf_counter() - t0})
+                   "policies": None if report is None else report.summary(), "untruncated": interval.to_dict(),
+                   "seconds": time.perf_counter() - t0})
     else:
         _print(scenario, res, report)
+        tail = "" if interval.candidates else " (--untruncated simulates the policies without the cap for one)"
+        print(interval.message() + tail)
     return 0 if res.ok else 1
+
+
+def _untruncated(args: argparse.Namespace, res, system, report, compare: list[str], prog):
+    """The interval for the optimum without the cap: the certified bound below (g*(cap) <= g*_inf),
+    and with ``--untruncated`` the policies evaluated (the bound's alone without ``--policy``)
+    simulated without the cap, the least upper confidence limit above."""
+    from ..bounds import bound_policy
+    from ..policies import make_policy
+    from ..untruncated import untruncated_interval
+
+    lower_from = f"the certified lower bound ({res.relaxation})"
+    if not args.untruncated:
+        return untruncated_interval(res.lower_bound, lower_from=lower_from)
+    names = ["bound", *compare] if report is not None else ["bound"]
+    policies = [bound_policy(res, system) if n == "bound" else make_policy(n, system) for n in names]
+    prog.phase(f"simulating {', '.join(p.name for p in policies)} without the AoI cap ({args.reps} x {args.slots} "
+               f"slots each, seed {args.seed})")
+    return untruncated_interval(res.lower_bound, policies, lower_from=lower_from, slots=args.slots, reps=args.reps,
+                                seed=args.seed, burn_in=args.burn_in)
 
 
 def _parse_groups(text: str) -> list[tuple[int, ...]]:
@@ -109,10 +133,11 @@ def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--exact-max-states", type=int, default=50_000_000, metavar="N",
                    help="evaluate exactly (certified matrix-free evaluation) when the AoI box has at most N states, "
                         "else by Monte Carlo (default 50000000; 0: always Monte Carlo)")
-    p.add_argument("--slots", type=int, default=40_000, help="Monte Carlo: slots per replication (default 40000)")
-    p.add_argument("--reps", type=int, default=20, help="Monte Carlo: independent replications (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="Monte Carlo: random seed (default 0)")
-    p.add_argument("--burn-in", type=int, default=1000, help="Monte Carlo: slots discarded first (default 1000)")
+    p.add_argument("--untruncated", action="store_true",
+                   help="also simulate the policies evaluated (the bound's alone without --policy) without the AoI "
+                        "cap: the least upper confidence limit is an upper end on the untruncated optimum, the bound its "
+                        "lower end (docs/model.md)")
+    add_simulation_args(p, "Monte Carlo")
     add_progress_arg(p)
 
 

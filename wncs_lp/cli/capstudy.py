@@ -16,8 +16,10 @@ def cmd_capstudy(args: argparse.Namespace) -> int:
     def show(row) -> None:
         if not args.json:
             change = "" if row.rel_change != row.rel_change else f"{row.rel_change:+.3%}"
+            mass = f"{'<=' if row.method == 'matrix-free' else ''}{row.cap_mass:.3%}"  # a certified upper end there
             print(f"{row.cap:>5} {row.states:>10,} {row.gain:>16.10g} {row.gain_upper - row.gain_lower:>10.2e} "
-                  f"{row.cap_mass:>10.3%} {change:>10} {row.first_policy_gain:>16.10g} {row.seconds:>7.1f}", flush=True)
+                  f"{mass:>10} {change:>10} {row.first_policy_gain:>16.10g} {row.seconds:>7.1f}"
+                  + ("  matrix-free" if row.method == "matrix-free" else ""), flush=True)
         elif sys.stderr.isatty():
             print(f"cap {row.cap}: gain {row.gain:.10g}, mass at cap {row.cap_mass:.3%}", file=sys.stderr)
 

@@ -128,6 +128,15 @@ def executor_of(args: argparse.Namespace):
     return getattr(args, "executor", None)
 
 
+def add_simulation_args(p: argparse.ArgumentParser, what: str) -> None:
+    """``--slots``, ``--reps``, ``--seed``, ``--burn-in`` of a Monte Carlo run; ``what`` prefixes their help
+    (``"Monte Carlo"``, ``"--untruncated"``)."""
+    p.add_argument("--slots", type=int, default=40_000, help=f"{what}: slots per replication (default 40000)")
+    p.add_argument("--reps", type=int, default=20, help=f"{what}: independent replications (default 20)")
+    p.add_argument("--seed", type=int, default=0, help=f"{what}: random seed (default 0)")
+    p.add_argument("--burn-in", type=int, default=1000, help=f"{what}: slots discarded first (default 1000)")
+
+
 def add_progress_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="show progress on stderr (phases, value-iteration sweeps with the certificate gap, LP "

@@ -16,7 +16,10 @@ def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
         help="a policy saved by wncs-lp solve --out FILE.npz (on the same scenario and overrides), or by name: "
         "optimal (solved exactly), suboptimal (the paper's separable policy), static (one fixed server per "
         "process), best_static (the best static assignment, by exact evaluation), greedy (the process of largest "
-        "current cost first, to its shortest-loop server) or random (uniform over the feasible actions)",
+        "current cost first, to its shortest-loop server), random (uniform over the feasible actions), max_age "
+        "(the process of largest AoI first), max_weight (the process whose update removes the most expected cost "
+        "first), round_robin (the processes in turn; a policy with memory) or relaxation (the greedy policy of the "
+        "certified lower bound); docs/policies.md",
     )
     add_method_arg(p, "solver of the optimal policy")
     p.add_argument(
@@ -58,37 +61,119 @@ def _policy_file(args: argparse.Namespace, scenario, prog):
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..errors import PolicyError
     from ..evaluate import MultichainEvaluationError, evaluate
+    from ..models.guard import SizeLimitError
 
     scenario = load(args)
     prog = progress_for(args)
-    made = _policy(args, scenario, need_mdp=True, prog=prog)
+    try:
+        made = _policy(args, scenario, need_mdp=True, prog=prog)
+    except SizeLimitError as refused:  # as solve's auto: the certified matrix-free evaluation, no matrix stored
+        if args.policy.lower().endswith(".npz"):
+            raise
+        return _evaluate_matrix_free(args, scenario, prog, refused)
     mdp, policy = made.mdp, made.policy
     prog.phase(f"evaluating the {policy.name} policy exactly (its chain's stationary law)")
     try:
-        ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error")
+        ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error", method=args.stationary,
+                      certify=args.certify)
     except MultichainEvaluationError as exc:
         raise PolicyError(f"{exc.detail} (rerun with --from-initial for the averages from the initial state)") from None
+    transient = _transient(args, mdp, policy, prog) if args.horizon is not None else None
     payload = {
         **head(args, scenario, mdp),
         **ev.to_dict(),
         "policy_info": policy.describe(),
         "setup_seconds": made.seconds,
     }
+    if transient is not None:
+        payload["transient"] = {"policy": transient[0].to_dict(), "finite_horizon_optimum": transient[1].to_dict()}
     if args.json:
         emit_json(payload)
     else:
         print(scenario.describe())
         print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs")
         print(f"policy {ev.policy}: average cost (gain) {ev.gain:.10g}")
+        if args.certify:
+            print(f"certificate: {ev.gain_lower:.12g} <= g_pi <= {ev.gain_upper:.12g} (certified value iteration of "
+                  "the policy's chain)")
         for name, v in zip(ev.process_names, ev.mse):
             print(f"  {name}: average MSE {v:.8g}")
         for name, v in zip(ev.server_names, ev.utilisation):
             print(f"  server {name}: utilisation {v:.4f}")
         if ev.recurrent_classes > 1:
             print(f"  (multichain: {ev.recurrent_classes} recurrent classes; averages from the initial state)")
+        if ev.cap_mass is not None:
+            print(f"truncation: under the {ev.policy} policy {ev.cap_mass.message()}")
         if "base_gain" in payload["policy_info"]:
             print(f"  base (random) policy gain sum_k g_k = {payload['policy_info']['base_gain']:.10g}")
+        if transient is not None:
+            tr, best = transient
+            print(f"first {tr.horizon} slots from {tr.start}: expected cost {tr.total:.10g} (average "
+                  f"{tr.average:.8g} a slot) under {tr.policy}; the finite-horizon optimum {best.total:.10g} (average {best.average:.8g})")
     return 0
+
+
+def _transient(args: argparse.Namespace, mdp, policy, prog):
+    """``--horizon T``: the policy's expected cost over the first T slots and the finite-horizon
+    optimum's, from ``--start`` (default: every AoI at its cap, servers idle)."""
+    from ..errors import WncsError
+    from ..transient import transient_cost
+
+    start = None
+    if args.start is not None:
+        try:
+            start = tuple(int(x) for x in args.start.split(","))
+        except ValueError:
+            raise WncsError(f"--start {args.start!r}: expected one AoI per process, e.g. 1,1") from None
+    prog.phase(f"the expected cost over the first {args.horizon} slots (exact recursions)")
+    return transient_cost(mdp, policy, args.horizon, start), transient_cost(mdp, "optimal", args.horizon, start)
+
+
+def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> int:
+    """``evaluate`` where the stored matrix would not fit: the certified matrix-free evaluation of
+    the policy and of its time at the cap (round robin: exact on its per-process chains)."""
+    from ..errors import PolicyError
+    from ..solvers.matrix_free import matrix_free_cap_mass, matrix_free_evaluate
+    from ..truncation import CapCount
+
+    if args.from_initial:
+        raise PolicyError("--from-initial needs the enumerated MDP, which would not fit here: "
+                          f"{refused}") from None
+    why = "the stored matrix would not fit in memory"
+    prog.phase(f"{why}: evaluating without it")
+    made = _policy(args, scenario, need_mdp=False, prog=prog)
+    policy, system = made.policy, made.system
+    if hasattr(policy, "separable_evaluation"):
+        prog.phase(f"evaluating the {policy.name} policy exactly on its per-process chains")
+        ev = policy.separable_evaluation()
+        out = {"how": "separable", "gain": ev.gain, "gain_lower": ev.gain, "gain_upper": ev.gain, "mse": list(ev.mse),
+               "utilisation": list(ev.utilisation), "status": "optimal", "states": ev.n_states}
+        cap = None
+    else:
+        prog.phase(f"evaluating the {policy.name} policy exactly (certified matrix-free evaluation)")
+        ev = matrix_free_evaluate(system, policy, threads=args.threads, progress=prog, name=policy.name)
+        out = {"how": "matrix-free", "gain": ev.gain, "gain_lower": ev.gain_lower, "gain_upper": ev.gain_upper,
+               "status": ev.status, "iterations": ev.iterations, "states": int(ev.stats.get("n_states", ev.bias.size))}
+        prog.phase(f"measuring the {policy.name} policy's time at the AoI cap (certified matrix-free evaluation)")
+        cap = CapCount.of(matrix_free_cap_mass(system, policy, threads=args.threads, progress=prog), system)
+    payload = {**head(args, scenario), "policy": policy.name, "route": why, **out,
+               "cap_mass": None if cap is None else cap.to_dict(), "policy_info": policy.describe(),
+               "setup_seconds": made.seconds}
+    if args.json:
+        emit_json(payload)
+        return 0 if out["status"] == "optimal" else 1
+    print(scenario.describe())
+    print(f"no MDP built ({why}); {out['how']} evaluation over {out['states']:,} states")
+    print(f"policy {policy.name}: average cost (gain) {out['gain']:.10g}")
+    if out["how"] == "separable":
+        for name, v in zip([p.name for p in scenario.processes], out["mse"]):
+            print(f"  {name}: average MSE {v:.8g}")
+        for name, v in zip([s.name for s in scenario.servers], out["utilisation"]):
+            print(f"  server {name}: utilisation {v:.4f}")
+    else:
+        print(f"certificate: {out['gain_lower']:.12g} <= g_pi <= {out['gain_upper']:.12g} (status {out['status']})")
+        print(f"truncation: under the {policy.name} policy {cap.message()}")
+    return 0 if out["status"] == "optimal" else 1
 
 
 def _configure_evaluate(p: argparse.ArgumentParser) -> None:
@@ -99,6 +184,17 @@ def _configure_evaluate(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="for a multichain policy, report the averages from the initial state instead of failing",
     )
+    p.add_argument("--stationary", default="auto", choices=("auto", "lu", "iterative"),
+                   help="how the stationary law is solved: a sparse LU, BiCGSTAB (residual checked), or auto: the LU "
+                        "for recurrent classes under 1,000 states, BiCGSTAB above (benchmarks/evaluation.py)")
+    p.add_argument("--certify", action="store_true",
+                   help="also bracket the gain by the certified value iteration of the policy's chain")
+    p.add_argument("--horizon", type=int, default=None, metavar="T",
+                   help="also the expected cost over the first T slots (the policy's, and the finite-horizon "
+                        "optimum's), by exact recursion on the enumerated MDP")
+    p.add_argument("--start", default=None, metavar="TAU",
+                   help="--horizon: the AoI vector to start from, servers idle (e.g. 1,1; default: every AoI at its "
+                        "cap)")
 
 
 # ----------------------------------------------------------------------------- simulate
@@ -182,12 +278,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.json:
         emit_json(payload)
     else:
-        print(f"{'value':>8} {'policy':<12} {'gain':>14} {'sim mean':>14} {'stderr':>9} {'seconds':>8}  status")
+        name = res.rows[0].value_column if res.rows else args.param
+        width = max(8, len(name))
+        print(f"{name:>{width}} {'policy':<12} {'gain':>14} {'sim mean':>14} {'stderr':>9} {'seconds':>8}  status")
         for r in res.rows:
             g = "" if r.gain != r.gain else f"{r.gain:.8g}"
             m = "" if r.sim_mean != r.sim_mean else f"{r.sim_mean:.8g}"
             e = "" if r.sim_stderr != r.sim_stderr else f"{r.sim_stderr:.3g}"
-            print(f"{r.value:>8g} {r.policy:<12} {g:>14} {m:>14} {e:>9} {r.seconds:>8.2f}  {r.status}")
+            print(f"{r.value:>{width}g} {r.policy:<12} {g:>14} {m:>14} {e:>9} {r.seconds:>8.2f}  {r.status}")
         print(f"{res.computed} rows computed, {res.reused} reused; files: {', '.join(res.files.values())}")
     bad = [r for r in res.rows if r.status.startswith("error")]
     return 1 if bad else 0
@@ -198,7 +296,8 @@ def _configure_sweep(p: argparse.ArgumentParser) -> None:
     p.add_argument("--param", default="p", help="override key to sweep (default p)")
     p.add_argument("--values", required=True, help="START:STOP:STEP (stop included) or a comma list")
     p.add_argument("--policies", default="optimal,suboptimal,static,greedy",
-                   help="comma list from optimal,suboptimal,static,best_static,greedy,random")
+                   help="comma list from optimal,suboptimal,static,best_static,greedy,random,relaxation,max_age,"
+                        "max_weight,round_robin (docs/policies.md)")
     p.add_argument("--out", required=True, help="output folder (resumed when it holds rows)")
     add_method_arg(p, "solver of the optimal policy at every grid value")
     p.add_argument("--simulate-slots", type=int, default=0, help="also simulate each policy for this many slots")
@@ -215,7 +314,8 @@ def _configure_sweep(p: argparse.ArgumentParser) -> None:
 
 
 COMMANDS = [
-    Command("evaluate", "evaluate a policy exactly (stationary distribution of the enumerated MDP)",
+    Command("evaluate", "evaluate a policy exactly (stationary distribution of the enumerated MDP; certified "
+            "matrix-free evaluation when the stored matrix would not fit)",
             _configure_evaluate, cmd_evaluate),
     Command("simulate", "Monte Carlo simulation of a policy from the configuration automaton",
             _configure_simulate, cmd_simulate),

@@ -5,19 +5,26 @@ import argparse
 import time
 
 from ..methods import DEFAULT_METHOD, METHOD_HELP
-from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_threads_arg, emit_json, head,
-                     load, output_file, progress_for, solution_json, write_after_work)
+from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_simulation_args, add_threads_arg,
+                     emit_json, head, load, output_file, progress_for, solution_json, write_after_work)
 
 
 def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
     """A solve without a stored matrix (:mod:`wncs_lp.solvers.matrix_free`): asked for, or auto's fallback."""
+    from ..solvers.matrix_free import matrix_free_cap_mass
+    from ..truncation import CapCount
+
     sol = run.solution
+    prog = progress_for(args)
+    prog.phase("measuring the optimal policy's time at the AoI cap (a certified matrix-free evaluation)")
+    cap = CapCount.of(matrix_free_cap_mass(sol.system, sol, threads=args.threads, progress=prog), sol.system)
+    interval = _untruncated(args, sol, None, prog)
     failed = None
     if args.out is not None:  # one byte a state: wncs_lp.solvers.matrix_free.load_solution reads it back
-        progress_for(args).phase(f"writing the policy to {args.out}")
+        prog.phase(f"writing the policy to {args.out}")
         _, failed = write_after_work(lambda: sol.save(args.out), args.out)
     payload = {**head(args, scenario), "states": int(sol.stats.get("n_states", sol.bias.size)),
-               **solution_json(sol),
+               **solution_json(sol), "cap_mass": cap.to_dict(), "untruncated": interval.to_dict(),
                "matrix_free_reason": run.route, "seconds": time.perf_counter() - t0}
     if args.json:
         emit_json(payload)
@@ -26,7 +33,36 @@ def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
         print(f"method matrix-free ({run.route}): status {sol.status}, {sol.iterations} sweeps, {sol.seconds:.2f} s")
         print(f"optimal average cost (gain): {sol.gain:.10g}")
         print(f"certificate: {sol.gain_lower:.12g} <= g* <= {sol.gain_upper:.12g} (relative width {sol.gap:.2e})")
+        print(f"truncation: under the optimal policy {cap.message()}")
+        print(_interval_line(interval))
     return _write_failed(failed) or (0 if sol.ok else 1)
+
+
+#: The policies simulated without the cap beside the optimal one (``--untruncated``): a policy optimal
+#: at a small cap can starve a process past the cap, where its cost stops growing.
+UNTRUNCATED_BASELINES = ("greedy", "max_age", "max_weight", "round_robin")
+
+
+def _untruncated(args: argparse.Namespace, sol, mdp, prog):
+    """The interval for the optimum without the cap: the certified lower end always; with
+    ``--untruncated`` the optimal policy and the field's baselines simulated without the cap, the
+    least upper confidence limit for the upper end."""
+    from ..policies import as_policy, make_policy
+    from ..untruncated import untruncated_interval
+
+    if not args.untruncated:
+        return untruncated_interval(sol.gain_lower, lower_from="the certified truncated optimum")
+    optimal = as_policy(sol, mdp, name="optimal")
+    candidates = [optimal, *(make_policy(n, optimal.system) for n in UNTRUNCATED_BASELINES)]
+    prog.phase(f"simulating the optimal policy and {', '.join(UNTRUNCATED_BASELINES)} without the AoI cap ({args.reps} "
+               f"x {args.slots} slots each, seed {args.seed})")
+    return untruncated_interval(sol.gain_lower, candidates, lower_from="the certified truncated optimum",
+                                slots=args.slots, reps=args.reps, seed=args.seed, burn_in=args.burn_in)
+
+
+def _interval_line(interval) -> str:
+    tail = "" if interval.candidates else " (--untruncated simulates policies without the cap for one)"
+    return interval.message() + tail
 
 
 def _write_failed(message: str | None) -> int:
@@ -69,12 +105,13 @@ def _unconstrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> 
     mdp, sol, t_build = run.mdp, run.solution, run.build_seconds
     prog.phase("measuring the optimal policy's time at the AoI cap")
     cap = policy_cap_mass(mdp, sol.policy)
+    interval = _untruncated(args, sol, mdp, prog)
     extra, failed = {}, None
     if args.out is not None:
         saved, failed = write_after_work(lambda: _save(args, scenario, mdp, sol, prog), args.out)
         extra = {"out": str(saved)} if failed is None else {"out_error": failed}
     if args.json:
-        emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, **extra))
+        emit_json(_payload(args, scenario, mdp, sol, cap, t0, t_build, untruncated=interval.to_dict(), **extra))
         return _write_failed(failed) or (0 if sol.ok else 1)
     _header(scenario, mdp, t_build)
     used = f"{sol.method} -> {sol.stats['auto_choice']}" if "auto_choice" in sol.stats else sol.method
@@ -86,6 +123,7 @@ def _unconstrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> 
     if "auto_choice" in sol.stats:
         _print_auto(sol.stats)
     print(f"truncation: under the optimal policy {cap.message()}")
+    print(_interval_line(interval))
     if "out" in extra:
         print(f"policy and bias written to {extra['out']} (format: see wncs_lp.export)")
     return _write_failed(failed) or (0 if sol.ok else 1)
@@ -215,6 +253,12 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
                         "and the certificate) to this .npz file, in an existing folder; numpy.load reads it "
                         "(format: wncs_lp.export.save_solution_npz); with the matrix-free method, its policy (one "
                         "byte a state) and certificate, read back by wncs_lp.solvers.matrix_free.load_solution")
+    p.add_argument("--untruncated", action="store_true",
+                   help="also simulate the optimal policy and the baselines greedy, max_age, max_weight, round_robin "
+                        "without the AoI cap (each sees the capped AoI, the true AoI is charged): the least upper "
+                        "confidence limit is an upper end on the untruncated optimum, the certified truncated optimum "
+                        "its lower end (docs/model.md)")
+    add_simulation_args(p, "--untruncated")
     add_threads_arg(p)
     add_progress_arg(p)
 

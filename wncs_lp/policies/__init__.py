@@ -25,6 +25,10 @@ Policies (``make_policy`` builds them by name):
 ``best_static``  :func:`best_static`, the static assignment of least exact average cost;
 ``greedy``       :class:`GreedyPolicy`, the paper's greedy baseline;
 ``random``       :class:`RandomPolicy`, uniform over the feasible actions (tau-independent);
+``max_age``      :class:`MaxAgePolicy`, max-age-first (the processes ranked by AoI);
+``max_weight``   :class:`MaxWeightPolicy`, max-weighted-cost-first (ranked by the expected cost an
+                 update removes);
+``round_robin``  :class:`RoundRobinPolicy`, round robin (a :class:`MemoryPolicy`: its pointer);
 ``relaxation``   the greedy policy of the certified lower bound (:mod:`wncs_lp.bounds`), a
                  :class:`SeparableGreedyPolicy` on the relaxation's value tables.
 
@@ -40,12 +44,13 @@ from __future__ import annotations
 
 from ..models.system import OutcomeTables, System
 from ..policy_forms import pairs_to_sigma, policy_array, sigma_to_pairs
-from .base import Configuration, FunctionPolicy, Policy, TablePolicy, as_rng, system_of
+from .base import Configuration, FunctionPolicy, MemoryPolicy, Policy, TablePolicy, as_rng, system_of
+from .baselines import MaxAgePolicy, MaxWeightPolicy, RoundRobinPolicy, max_weight_index
 from .convert import as_policy, policy_from_file
 from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
-from .optimal import CappedPolicy, OptimalPolicy
+from .optimal import CappedPolicy, ClippedPolicy, OptimalPolicy
 from .rules import (
     GreedyPolicy,
     RandomPolicy,
@@ -69,12 +74,18 @@ __all__ = [
     "system_of",
     "Configuration",
     "FunctionPolicy",
+    "MemoryPolicy",
+    "MaxAgePolicy",
+    "MaxWeightPolicy",
+    "RoundRobinPolicy",
+    "max_weight_index",
     "TablePolicy",
     "pairs_to_sigma",
     "sigma_to_pairs",
     "policy_array",
     "OptimalPolicy",
     "CappedPolicy",
+    "ClippedPolicy",
     "MixedPolicy",
     "MatrixFreePolicy",
     "TauIndependentPolicy",

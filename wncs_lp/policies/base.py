@@ -20,7 +20,7 @@ from ..mdp import MDP
 from ..models.system import System
 from ..policy_forms import check_pairs, policy_array, sigma_to_pairs
 
-__all__ = ["Policy", "as_rng", "Configuration", "FunctionPolicy", "TablePolicy", "system_of"]
+__all__ = ["Policy", "as_rng", "Configuration", "FunctionPolicy", "MemoryPolicy", "TablePolicy", "system_of"]
 
 
 def as_rng(rng: np.random.Generator | int | None) -> np.random.Generator:
@@ -45,9 +45,33 @@ class Policy(ABC):
 
     name: str = "policy"
     randomised: bool = False
+    #: The rule reads the AoI only through the system's cost tables (or not at all), so it is
+    #: defined for any AoI, also past the cap: :meth:`on_system` moves it to another system.
+    aoi_free: bool = False
 
     def __init__(self, system: System):
         self.system = system
+
+    def on_system(self, system: System) -> "Policy":
+        """The same rule on another system with the same configurations (larger caps, or the
+        uncapped system of :mod:`wncs_lp.untruncated`); only for an :attr:`aoi_free` rule.
+
+        Raises
+        ------
+        PolicyError
+            The policy is a table over its own AoI box (optimal, suboptimal, ...): clip its AoI
+            instead (:class:`~wncs_lp.policies.ClippedPolicy`).
+        """
+        if not self.aoi_free:
+            raise PolicyError(f"policy {self.name} is defined on its own AoI box only: clip the AoI instead "
+                              "(ClippedPolicy)")
+        import copy
+
+        other = copy.copy(self)
+        other.system = system
+        if isinstance(getattr(other, "_cache", None), dict):
+            other._cache = {}
+        return other
 
     @abstractmethod
     def act(self, tau: np.ndarray, config_ids: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
@@ -299,3 +323,47 @@ class TablePolicy(Policy):
             return self.pairs.copy()
         return super().on_mdp(mdp)
 
+
+
+class MemoryPolicy(Policy):
+    r"""A deterministic policy with a finite memory: the action depends on the state (tau, C) and
+    on a memory value m in 0..``memory_size`` - 1, which moves deterministically with the action
+    taken: m' = :meth:`next_memory` (m, C, j). Round robin's pointer is one
+    (:class:`~wncs_lp.policies.baselines.RoundRobinPolicy`).
+
+    Such a policy is not a stationary policy of the MDP, so ``act`` and ``on_mdp`` refuse (one
+    :class:`~wncs_lp.errors.PolicyError` saying where it is evaluated instead). It is evaluated
+    exactly on the augmented chain over (s, m) (:func:`wncs_lp.evaluate.evaluate`: n x
+    ``memory_size`` states), and simulated with its memory carried along
+    (:func:`wncs_lp.simulate.simulate`, from :attr:`initial_memory` in every replication).
+    """
+
+    memory_size: int = 1
+    initial_memory: int = 0
+
+    @abstractmethod
+    def act_memory(self, tau: np.ndarray, config_ids: np.ndarray, memory: np.ndarray,
+                   rng: np.random.Generator | None = None) -> np.ndarray:
+        """Local action indices for R states with their memory values ``memory`` ((R,) ints)."""
+
+    @abstractmethod
+    def next_memory(self, memory: np.ndarray, config_ids: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """(R,) memory values after local actions ``actions`` were taken in configurations ``config_ids``."""
+
+    def start_memory(self, reps: int) -> np.ndarray:
+        """(R,) memory values of R fresh replications (all :attr:`initial_memory`)."""
+        return np.full(int(reps), int(self.initial_memory), dtype=np.int64)
+
+    def _refuse(self, what: str) -> PolicyError:
+        return PolicyError(f"policy {self.name} has a memory ({self.memory_size} values): it is no stationary policy "
+                           f"of (tau, C), so {what}; evaluate it exactly with wncs_lp.evaluate.evaluate (its "
+                           "augmented chain) or simulate it")
+
+    def act(self, tau, config_ids, rng=None):
+        raise self._refuse("act() needs its memory (act_memory)")
+
+    def on_mdp(self, mdp: MDP) -> np.ndarray:
+        raise self._refuse("it has no single action per state of the MDP")
+
+    def describe(self) -> dict[str, Any]:
+        return {**super().describe(), "memory_size": int(self.memory_size)}

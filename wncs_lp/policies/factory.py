@@ -12,6 +12,7 @@ from ..models.system import System
 from ..solvers import solve
 from ..solvers.route import build_scenario, solve_scenario
 from .base import Policy
+from .baselines import MaxAgePolicy, MaxWeightPolicy, RoundRobinPolicy
 from .optimal import OptimalPolicy
 from .rules import GreedyPolicy, RandomPolicy, StaticPolicy, default_assignment
 from .search import best_static
@@ -20,10 +21,13 @@ from .suboptimal import SuboptimalPolicy
 __all__ = ["POLICY_NAMES", "PolicySetup", "make_policy", "parse_assignment", "parse_policy_names", "policy_for"]
 
 #: Policy names understood by :func:`make_policy` and the command line.
-POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation")
+POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "max_age",
+                "max_weight", "round_robin")
 #: The policy a solve makes, and those that need the enumerated MDP.
 OPTIMAL = "optimal"
 NEED_MDP = ("optimal", "best_static")
+#: The field's baselines (:mod:`wncs_lp.policies.baselines`), by name.
+_BASELINES = {"max_age": MaxAgePolicy, "max_weight": MaxWeightPolicy, "round_robin": RoundRobinPolicy}
 
 
 def make_policy(
@@ -40,8 +44,11 @@ def make_policy(
 
     Parameters
     ----------
-    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation"}
-        ``relaxation`` is the greedy policy of the certified lower bound
+    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "max_age", \
+            "max_weight", "round_robin"}
+        ``max_age``, ``max_weight`` and ``round_robin`` are the field's baselines
+        (:mod:`wncs_lp.policies.baselines`: max-age-first, max-weighted-cost-first, round robin, a
+        policy with memory). ``relaxation`` is the greedy policy of the certified lower bound
         (:func:`wncs_lp.bounds.lower_bound` with ``relaxation="auto"``, then
         :func:`wncs_lp.bounds.bound_policy`): it needs no MDP, so it reaches any number of processes.
     system : System
@@ -80,6 +87,8 @@ def make_policy(
         return GreedyPolicy(system)
     if name == "relaxation":
         return _relaxation_policy(system)
+    if name in _BASELINES:
+        return _BASELINES[name](system)
     return RandomPolicy(system)
 
 
@@ -158,7 +167,9 @@ def policy_for(
 
     The MDP is built (after the size guard) when the policy needs it (``optimal``,
     ``best_static``) or ``need_mdp`` is true; ``optimal`` is solved by the one route
-    (:func:`wncs_lp.solvers.route.solve_scenario`).
+    (:func:`wncs_lp.solvers.route.solve_scenario`), which without ``need_mdp`` may take the
+    matrix-free method when the stored matrix would not fit (``auto``, or ``matrix-free`` asked
+    for): the policy is then a :class:`~wncs_lp.policies.MatrixFreePolicy` and no MDP is built.
 
     Parameters
     ----------
@@ -198,7 +209,12 @@ def policy_for(
     mdp = solution = None
     if name == OPTIMAL:
         run = solve_scenario(scenario, method, constrained=False, force=force, threads=threads, progress=prog,
-                             need_mdp=True)
+                             need_mdp=need_mdp)
+        if not run.built:  # auto's matrix-free route (the stored matrix would not fit): its one byte a state
+            from .matrix_free import MatrixFreePolicy
+
+            return PolicySetup(system, None, MatrixFreePolicy.from_solution(run.solution),
+                               time.perf_counter() - t0)
         mdp, solution = run.mdp, run.solution
     elif name in NEED_MDP or need_mdp:
         mdp, _ = build_scenario(scenario, force=force, progress=prog)

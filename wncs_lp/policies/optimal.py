@@ -14,7 +14,7 @@ from ..scenario import Scenario
 from ..solvers import solve
 from .base import Policy
 
-__all__ = ["OptimalPolicy", "CappedPolicy"]
+__all__ = ["OptimalPolicy", "CappedPolicy", "ClippedPolicy"]
 
 
 class OptimalPolicy(Policy):
@@ -33,11 +33,20 @@ class OptimalPolicy(Policy):
     system : System
         The scenario's system (``mdp`` must have been built from it); :meth:`from_scenario`
         builds all three.
+    outside : {"error", "first"}
+        A state not in the MDP: a :class:`PolicyError` (default), or the configuration's first
+        action. The MDP holds every state reachable from its initial states under any policy, so a
+        state outside it is never entered from one inside and its action does not change the gain
+        of any state of the MDP; ``"first"`` lets the policy act on a matrix-free layout, whose
+        interval hull holds such states too.
     """
 
     name = "optimal"
 
-    def __init__(self, mdp: MDP, solution: Any, system: System):
+    def __init__(self, mdp: MDP, solution: Any, system: System, outside: str = "error"):
+        if outside not in ("error", "first"):
+            raise PolicyError(f"outside must be 'error' or 'first', got {outside!r}")
+        self.outside = outside
         super().__init__(system)
         system.check_mdp(mdp)
         pol = np.asarray(solution.policy, dtype=np.int64)
@@ -70,7 +79,11 @@ class OptimalPolicy(Policy):
         return s
 
     def act(self, tau, config_ids, rng=None):
-        return self._local[self.states_of(tau, config_ids)]
+        if self.outside == "error":
+            return self._local[self.states_of(tau, config_ids)]
+        tau, c = self._check_inputs(tau, config_ids)
+        s = self.mdp.states.ids(tau, c)
+        return np.where(s >= 0, self._local[np.maximum(s, 0)], 0)
 
     def on_mdp(self, mdp: MDP) -> np.ndarray:
         if mdp is self.mdp:
@@ -128,3 +141,50 @@ class CappedPolicy(Policy):
             raise PolicyError(f"state tau={tau[r].tolist()}, configuration {int(c[r])} has no counterpart "
                               f"at caps {self.caps.tolist()}")
         return self._local[s]
+
+
+class ClippedPolicy(Policy):
+    """Any policy of a model with smaller AoI caps, acting on a system with larger ones (or none:
+    :class:`wncs_lp.untruncated.UncappedPolicy`).
+
+    A state (tau, C) acts as the state (min(tau, cap), C) of ``policy``'s own system, as
+    :class:`CappedPolicy` does for a solved MDP; here for any policy (a matrix-free solution's,
+    a rule, one with memory: ``act_memory`` and ``next_memory`` pass through).
+
+    Parameters
+    ----------
+    policy : Policy
+        The policy on the smaller caps.
+    system : System
+        The system it acts on: the same configurations, caps at least ``policy``'s.
+    """
+
+    def __init__(self, policy: Policy, system: System):
+        super().__init__(system)
+        inner = policy.system
+        if inner.n_configs != system.n_configs or any(
+                a != b for a, b in zip(inner.automaton.configs, system.automaton.configs)):
+            raise PolicyError("the policy's configurations differ from the system's: not the same model")
+        self.caps = np.asarray(inner.caps, dtype=np.int64)
+        if np.any(self.caps > system.caps):
+            raise PolicyError(f"the policy's caps {self.caps.tolist()} exceed the system's {system.caps.tolist()}")
+        self.policy = policy
+        self.name = policy.name
+        self.randomised = policy.randomised
+        if hasattr(policy, "act_memory"):
+            self.act_memory = self._act_memory
+            self.next_memory = policy.next_memory
+            self.start_memory = policy.start_memory
+            self.memory_size = policy.memory_size
+            self.initial_memory = policy.initial_memory
+
+    def act(self, tau, config_ids, rng=None):
+        tau, c = self._check_inputs(tau, config_ids)
+        return self.policy.act(np.minimum(tau, self.caps), c, rng)
+
+    def _act_memory(self, tau, config_ids, memory, rng=None):
+        tau, c = self._check_inputs(tau, config_ids)
+        return self.policy.act_memory(np.minimum(tau, self.caps), c, memory, rng)
+
+    def describe(self) -> dict[str, Any]:
+        return {**self.policy.describe(), "clipped_at": self.caps.tolist()}

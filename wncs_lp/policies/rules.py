@@ -38,6 +38,7 @@ class TauIndependentPolicy(Policy):
     """
 
     randomised = True
+    aoi_free = True
 
     def __init__(self, system: System, probs: Sequence[np.ndarray], name: str = "tau-independent"):
         super().__init__(system)
@@ -92,6 +93,8 @@ class RankRulePolicy(Policy):
     The ranking is by current cost q_k(tau_k), descending, ties towards the lower index. The
     action of each (C, ranking) met is computed once by :meth:`rule` and cached.
     """
+
+    aoi_free = True
 
     def __init__(self, system: System):
         super().__init__(system)

@@ -12,8 +12,14 @@ a non-decreasing sequence of lower bounds on the untruncated optimum (tested in
 optimal policy spends at the cap (:mod:`wncs_lp.truncation`) and the change from the previous
 cap; the study stops at the first cap where both the mass and the relative change fall below
 the tolerances (or at the last cap given). Beside each gain, the policy optimal at the first cap
-is evaluated at that cap (:class:`~wncs_lp.policies.CappedPolicy`): what the small model's
+is evaluated at that cap (:class:`~wncs_lp.policies.ClippedPolicy`): what the small model's
 answer is worth in the larger one.
+
+Every cap takes the one route, so the study passes to the matrix-free solver where the stored
+matrix would not fit (``auto``), as ``wncs-lp solve`` does: the mass at the cap is then the
+certified upper end of :class:`~wncs_lp.truncation.CapCount` (the study stops only when even that
+is below the tolerance), and the first cap's policy is evaluated by the certified matrix-free
+evaluation.
 
 The caps are walked in order by the studies' grid runner (:func:`~wncs_lp.studies.runner.run_grid`,
 each cap handing the first cap's policy and its gain to the next), every solve through the one
@@ -52,6 +58,11 @@ class CapRow:
         The exact gain, at this cap, of the policy optimal at the study's first cap (NaN when a
         state of this cap has no counterpart there).
     seconds : float
+    method : str
+        The method that ran (``matrix-free`` where the stored matrix would not fit: then
+        ``pairs`` is 0, ``states`` counts the matrix-free layout, ``cap_mass`` is the certified
+        upper end of the mass (:class:`~wncs_lp.truncation.CapCount`) and ``first_policy_gain``
+        the midpoint of a certified matrix-free evaluation).
     """
 
     cap: int
@@ -64,6 +75,7 @@ class CapRow:
     rel_change: float
     first_policy_gain: float
     seconds: float
+    method: str = ""
 
 
 @dataclass(frozen=True)
@@ -94,35 +106,66 @@ class CapStudy:
 
 def _cap_row(scenario: Scenario, opts: dict[str, Any], cap: int, carry: dict[str, Any] | None,
              emit: Callable[[CapRow], None] | None = None) -> tuple[list[CapRow], dict[str, Any]]:
-    """Solve at one cap (a task of :func:`~wncs_lp.studies.runner.run_grid`, walked in order):
-    the carry holds the first cap's MDP and solution, and the previous gain."""
-    from ..evaluate import evaluate
+    """Solve at one cap (a task of :func:`~wncs_lp.studies.runner.run_grid`, walked in order),
+    through the one route: the enumerated MDP where it fits, else (``auto``) the matrix-free
+    solver. The carry holds the first cap's optimal policy and the previous gain."""
     from ..models.system import System
-    from ..policies import CappedPolicy
     from ..solvers.route import solve_scenario
-    from ..truncation import policy_cap_mass
 
     t0 = time.perf_counter()
     sc = scenario.with_overrides({"tau_cap": cap})
-    run = solve_scenario(sc, opts["method"], constrained=False, force=opts["force"], threads=opts["threads"],
-                         need_mdp=True)
-    mdp, sol = run.mdp, run.solution
-    mass = policy_cap_mass(mdp, sol.policy).total
+    run = solve_scenario(sc, opts["method"], constrained=False, force=opts["force"], threads=opts["threads"])
+    sol = run.solution
+    system = System.from_scenario(sc) if run.built else sol.system
+    mass, states, pairs, policy = (_enumerated(run, system) if run.built else _matrix_free(sol, system, opts))
     if carry is None:
-        carry = {"first": (mdp, sol), "prev": None}
+        carry = {"first": policy, "prev": None}
         fp = float(sol.gain)
     else:
-        try:
-            fp = evaluate(mdp, CappedPolicy(*carry["first"], System.from_scenario(sc))).gain
-        except WncsError:
-            fp = float("nan")
+        fp = _first_policy_gain(carry["first"], run, system, opts)
     prev = carry["prev"]
     change = float("nan") if prev is None else (sol.gain - prev) / abs(sol.gain)
-    row = CapRow(cap, mdp.n_states, mdp.n_pairs, float(sol.gain), float(sol.gain_lower), float(sol.gain_upper),
-                 float(mass), float(change), float(fp), time.perf_counter() - t0)
+    row = CapRow(cap, states, pairs, float(sol.gain), float(sol.gain_lower), float(sol.gain_upper), float(mass),
+                 float(change), float(fp), time.perf_counter() - t0, run.method)
     if emit is not None:
         emit(row)
     return [row], {**carry, "prev": float(sol.gain)}
+
+
+def _enumerated(run: Any, system: Any) -> tuple[float, int, int, Any]:
+    """(mass at the cap, states, pairs, the optimal policy) of a solve on the enumerated MDP."""
+    from ..policies import OptimalPolicy
+    from ..truncation import policy_cap_mass
+
+    mdp, sol = run.mdp, run.solution
+    return (policy_cap_mass(mdp, sol.policy).total, mdp.n_states, mdp.n_pairs, OptimalPolicy(mdp, sol, system, outside="first"))
+
+
+def _matrix_free(sol: Any, system: Any, opts: dict[str, Any]) -> tuple[float, int, int, Any]:
+    """The same of a matrix-free solve: the mass is the certified upper end of :class:`CapCount`."""
+    from ..policies import MatrixFreePolicy
+    from ..solvers.matrix_free import matrix_free_cap_mass
+    from ..truncation import CapCount
+
+    count = CapCount.of(matrix_free_cap_mass(system, sol, threads=opts["threads"]), system)
+    return count.total, int(sol.stats.get("n_states", sol.bias.size)), 0, MatrixFreePolicy.from_solution(sol)
+
+
+def _first_policy_gain(first: Any, run: Any, system: Any, opts: dict[str, Any]) -> float:
+    """The exact gain at this cap of the first cap's optimal policy, fed the clipped AoI (NaN when a
+    state has no counterpart there)."""
+    from ..evaluate import evaluate
+    from ..policies import ClippedPolicy
+
+    try:
+        clipped = ClippedPolicy(first, system)
+        if run.built:
+            return float(evaluate(run.mdp, clipped).gain)
+        from ..solvers.matrix_free import matrix_free_evaluate
+
+        return float(matrix_free_evaluate(system, clipped, threads=opts["threads"]).gain)
+    except WncsError:
+        return float("nan")
 
 
 def cap_study(

@@ -7,7 +7,9 @@ requested policy one row is produced:
 column      meaning
 =========== ==============================================================================
 param       the swept parameter (e.g. ``p``)
-value       its value
+value       its value; the rows of ``sweep.json``, :meth:`SweepResult.table`, ``to_frame()`` and the
+            command's printout name this column by the parameter (``p``, ``tau_cap``), as
+            :func:`value_column` says; ``sweep.csv``, the resumable store, keeps ``value``
 policy      ``optimal``, ``suboptimal``, ``static``, ``best_static``, ``greedy``, ``random``
 gain        exact average cost (stationary distribution of the enumerated MDP), or empty
 sim_mean    Monte Carlo mean average cost (when simulating), or empty
@@ -48,6 +50,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ..display import Display, fmt
 from ..errors import WncsError
 from ..methods import DEFAULT_METHOD, check_method
 from ..models.system import System
@@ -61,12 +64,20 @@ from .folder import FINGERPRINT, StudyFolder, read_table
 from .grid import parse_values, value_key
 from .runner import run_grid
 
-__all__ = ["SweepRow", "SweepResult", "run_sweep", "parse_values", "read_rows", "COLUMNS", "compute_point"]
+__all__ = ["SweepRow", "SweepResult", "run_sweep", "parse_values", "read_rows", "COLUMNS", "compute_point",
+           "value_column"]
 
 #: The columns of ``sweep.csv`` (the fingerprint last).
 COLUMNS = ("param", "value", "policy", "gain", "sim_mean", "sim_stderr", "seconds", "states", "warm_start", "status",
            FINGERPRINT)
 _INT_PARAMS = ("tau_cap", "uplink_delay", "downlink_delay", "slots_per_dimension")
+
+
+def value_column(param: str) -> str:
+    """The column a sweep's table names its values by: the parameter itself (``p``, ``tau_cap``), or
+    ``value`` for a parameter named like another column. ``sweep.csv`` keeps ``value``: it is the
+    resumable store, read back by its fixed header."""
+    return "value" if param in COLUMNS or not param else param
 
 
 def _num(s: str) -> float:
@@ -92,12 +103,19 @@ class SweepRow:
     def key(self) -> tuple[str, str]:
         return (value_key(self.value), self.policy)
 
+    @property
+    def value_column(self) -> str:
+        """The name of the value's column in the row's table: the swept parameter's (``p``)."""
+        return value_column(self.param)
+
     def to_dict(self) -> dict[str, Any]:
+        """The row with its value under the parameter's name: ``{"param": "p", "p": 0.9, "policy": ...}``."""
         d = asdict(self)
         for k in ("gain", "sim_mean", "sim_stderr"):
             if not math.isfinite(d[k]):
                 d[k] = None
-        return d
+        value = d.pop("value")
+        return {"param": d.pop("param"), self.value_column: value, **d}
 
     def to_csv(self) -> list[str]:
         """The row's cells, without its fingerprint."""
@@ -120,8 +138,8 @@ class SweepRow:
         return row
 
 
-@dataclass(frozen=True)
-class SweepResult:
+@dataclass(frozen=True, repr=False)
+class SweepResult(Display):
     """A finished sweep.
 
     Attributes
@@ -152,8 +170,32 @@ class SweepResult:
         return [r.to_dict() for r in self.rows]
 
     def column(self, policy: str, name: str = "gain") -> np.ndarray:
-        """One column for one policy, in grid order."""
-        return np.array([getattr(r, name) for r in self.rows if r.policy == policy], dtype=float)
+        """One column for one policy, in grid order (``name``: a field of :class:`SweepRow`, or the
+        parameter's name for its values)."""
+        return np.array([getattr(r, "value" if name == r.value_column else name) for r in self.rows
+                         if r.policy == policy], dtype=float)
+
+    # the printout, the HTML form in Jupyter and to_frame() (wncs_lp.display): one record per row
+    def _display_head(self) -> str:
+        params = sorted({r.param for r in self.rows})
+        values = len({r.key[0] for r in self.rows})
+        policies = list(dict.fromkeys(r.policy for r in self.rows))
+        return (f"SweepResult: {len(self.rows)} rows, {', '.join(params) or 'no parameter'} over {values} values, "
+                f"policies {', '.join(policies)}")
+
+    def _display_rows(self) -> list[tuple[str, str]]:
+        errors = sum(r.status.startswith("error") for r in self.rows)
+        rows = [("computed", fmt(self.computed)), ("reused", fmt(self.reused)), ("errors", fmt(errors)),
+                ("seconds", f"{self.seconds:.2f}")]
+        if self.dropped:
+            rows.append(("dropped", fmt(self.dropped)))
+        rows += [(k, v) for k, v in self.files.items()]
+        return rows
+
+    def _frame_records(self):
+        name = self.rows[0].value_column if self.rows else "value"
+        cols = [name, "policy", "gain", "sim_mean", "sim_stderr", "seconds", "states", "warm_start", "status"]
+        return cols, [{**r.to_dict(), name: r.value} for r in self.rows]
 
 
 def _row_key(row: SweepRow) -> str:
@@ -291,7 +333,8 @@ class _Table:
         order_p = {p: i for i, p in enumerate(POLICY_NAMES)}
         rows = sorted(self.done.values(), key=lambda r: (order_v.get(value_key(r.value), len(self.grid)), r.value,
                                                          order_p.get(r.policy, 99)))
-        payload = {"settings": self.settings, "columns": list(COLUMNS[:-1]), "rows": [r.to_dict() for r in rows]}
+        named = [value_column(self.settings["param"]) if c == "value" else c for c in COLUMNS[:-1]]
+        payload = {"settings": self.settings, "columns": named, "rows": [r.to_dict() for r in rows]}
         self.files.update(self.folder.write(((_row_key(r), r.to_csv()) for r in rows), payload))
 
     def rows(self) -> tuple[SweepRow, ...]:

@@ -207,7 +207,7 @@ def plot_policy_map(
     rec_mask = recurrent_mask(mdp, chain_pol, stationary)
     info = map_names(mdp, scenario)
     if ax is None:
-        _, ax = plt.subplots(figsize=(8.6, 6.2))
+        _, ax = plt.subplots(figsize=(8.6, 6.2), layout="constrained")  # room for the legend outside the panel
     ci, cj = A.shape
     bg = np.ones((cj, ci, 3))
     reach = S >= 0
@@ -339,7 +339,7 @@ def plot_policy_slice(
     rec_mask = recurrent_mask(mdp, chain_pol, stationary)
     info = map_names(mdp, scenario)
     if ax is None:
-        _, ax = plt.subplots(figsize=(9.0, 6.8))
+        _, ax = plt.subplots(figsize=(9.0, 6.8), layout="constrained")  # room for the legend outside the panel
     i, j, k = axes
     ci, cj = A.shape
     TI, TJ = np.meshgrid(np.arange(1, ci + 1), np.arange(1, cj + 1), indexing="ij")
@@ -489,7 +489,7 @@ def plot_matrix_free_map(
     every = sorted({tuple(int(x) for x in np.atleast_1d(a)) for acts in system.automaton.actions for a in acts})
     style_of = {lab: every.index(lab) for lab in every}
     if ax is None:
-        _, ax = plt.subplots(figsize=(8.6, 6.2))
+        _, ax = plt.subplots(figsize=(8.6, 6.2), layout="constrained")  # room for the legend outside the panel
     ci, cj = A.shape
     bg = np.ones((cj, ci, 3))
     reach = A >= 0

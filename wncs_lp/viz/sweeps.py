@@ -64,9 +64,12 @@ def plot_sweep(rows: Sequence[Any], ax=None, *, metric: str = "auto", logy: bool
     def val(x: Any) -> float:
         return math.nan if x is None else float(x)
 
+    def at(r: dict) -> float:  # a row's value: under the parameter's name (table rows) or "value" (sweep.csv)
+        return float(r["value"] if "value" in r else r[r["param"]])
+
     for pol in policies:
-        sel = sorted((r for r in recs if r["policy"] == pol), key=lambda r: r["value"])
-        x = np.array([r["value"] for r in sel], dtype=float)
+        sel = sorted((r for r in recs if r["policy"] == pol), key=at)
+        x = np.array([at(r) for r in sel], dtype=float)
         g = np.array([val(r["gain"]) for r in sel])
         m = np.array([val(r["sim_mean"]) for r in sel])
         e = np.array([val(r["sim_stderr"]) for r in sel])
