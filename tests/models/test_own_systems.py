@@ -288,3 +288,47 @@ def test_a_process_without_a_working_link_is_warned_about():
     warnings = scenario_from_dict(raw).degenerate_warnings()
     assert any("process 'b' is never delivered" in w for w in warnings)
     assert not any("server" in w and "never delivers" in w for w in warnings)  # both servers still serve 'a'
+
+
+# ----------------------------------------------------------------------------- reach
+def test_exploration_keeps_no_raw_outcome_list():
+    """A step's plain outcome lists are dropped once merged (with random arrivals an action has
+    hundreds of raw outcomes: keeping them all ran 5 sensors out of memory before the budget
+    stopped the exploration); a SharedOutcomes list is merged once for every configuration."""
+    import gc
+    import weakref
+
+    from wncs_lp.models.automaton import SharedOutcomes, explore_configs
+
+    class Plain(list):
+        pass
+
+    refs, merged = [], []
+
+    class Shared(SharedOutcomes):
+        def __iter__(self):
+            merged.append(1)
+            return super().__iter__()
+
+    shared = Shared([(0, (0,), 0.5), (1, (2,), 0.5)])
+
+    def step(c):
+        outs = Plain([((c + 1) % 3, (1,), 0.25), ((c + 2) % 3, (0,), 0.75)])
+        refs.append(weakref.ref(outs))
+        return [((1,), outs), ((2,), shared)]
+
+    auto = explore_configs([0], step)
+    gc.collect()
+    assert len(auto.configs) == 3 and all(r() is None for r in refs) and len(merged) == 1
+
+
+def test_many_sensors_with_arrivals_are_refused_by_the_budget():
+    from wncs_lp.models.automaton import ExplorationLimitError, exploration_limit
+
+    raw = {"model": {"kind": "wncs"}, "channel": {"success_probability": 0.9},
+           "process": [{"A": [[1.1]], "tau_cap": 10, "arrival_probability": 0.5} for _ in range(6)],
+           "server": [{"uplink_delay": 0, "downlink_delay": 0, "processing_time": [1] * 6}]}
+    model = model_for(scenario_from_dict(raw))
+    assert model.automaton_bounds().configs >= 10 ** 6
+    with exploration_limit(500), pytest.raises(ExplorationLimitError, match="exploration budget"):
+        model.automaton

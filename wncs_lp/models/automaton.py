@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import ModelError, SizeLimitError
 
-__all__ = ["Outcome", "ConfigAutomaton", "FlatAutomaton", "AutomatonBounds", "explore_configs",
+__all__ = ["Outcome", "SharedOutcomes", "ConfigAutomaton", "FlatAutomaton", "AutomatonBounds", "explore_configs",
            "ExplorationLimitError", "exploration_limit", "approx_count", "MAX_CONFIGS", "MAX_EDGES", "MAX_WORK"]
 
 #: The most configurations :func:`explore_configs` explores (about 45 s and 1 GB of Python
@@ -155,6 +155,15 @@ class _Budget:
 Outcome = tuple[Hashable, tuple[int, ...], float]
 
 
+class SharedOutcomes(list):
+    """An outcome list that a model's ``step`` returns for many configurations, keeping it alive
+    itself (the preemption model's slot after the action depends on few things):
+    :func:`explore_configs` merges it once and remembers the merge by the list's identity. A
+    plain list is merged where it is met and not kept, so a step that builds a new list for every
+    action (the Section II model, with random arrivals hundreds of outcomes each) holds no raw
+    outcome after its merge."""
+
+
 @dataclass(frozen=True, eq=False)
 class FlatAutomaton:
     """The automaton's edges as flat arrays (what the vectorised builder consumes).
@@ -255,9 +264,10 @@ def explore_configs(
     Outcomes of probability 0 are dropped and equal (next, delta) outcomes merged, so the
     automaton only has edges of positive probability.
 
-    The merge of an outcome list is cached by the identity of the list object (a reference
-    is kept, so the identity cannot be reused): a ``step`` that returns the same cached list
-    for many configurations -- the preemption model does -- is merged once.
+    The merge of a :class:`SharedOutcomes` list is cached by the identity of the list object (a
+    reference is kept, so the identity cannot be reused): a ``step`` that returns the same cached
+    list for many configurations -- the preemption model does -- is merged once. Other lists are
+    merged each time and dropped.
 
     Raises
     ------
@@ -289,6 +299,7 @@ def explore_configs(
     outcomes: list[list[list[tuple[int, tuple[int, ...], float]]]] = []
     merge_cache: dict[int, tuple] = {}
     delta_id: dict[tuple[int, ...], int] = {}
+    same_delta: dict[tuple[int, ...], tuple[int, ...]] = {}
     max_edges = budget.max_edges
     while queue:
         c = queue.popleft()
@@ -296,12 +307,14 @@ def explore_configs(
         for label, outs_raw in step(configs[c]):  # a generator is consumed lazily: the budget stops it
             if len(f_nxt) > max_edges:
                 raise budget.error(len(configs), len(f_nxt))
-            hit = merge_cache.get(id(outs_raw))
+            shared = isinstance(outs_raw, SharedOutcomes)
+            hit = merge_cache.get(id(outs_raw)) if shared else None
             if hit is None or hit[0] is not outs_raw:
                 merged: dict[tuple[int, tuple[int, ...]], float] = {}
                 for nxt, delta, prob in outs_raw:
                     if prob > 0.0:
-                        key = (intern(nxt), tuple(int(x) for x in delta))
+                        d = tuple(int(x) for x in delta)
+                        key = (intern(nxt), same_delta.setdefault(d, d))  # one tuple per distinct delta
                         merged[key] = merged.get(key, 0.0) + float(prob)
                 if not merged:
                     raise ModelError(f"configuration {configs[c]!r}, action {label}: no outcome of positive probability")
@@ -314,7 +327,8 @@ def explore_configs(
                     [delta_id.setdefault(o[1], len(delta_id)) for o in lst],
                     [o[2] for o in lst],
                 )
-                merge_cache[id(outs_raw)] = hit
+                if shared:
+                    merge_cache[id(outs_raw)] = hit
             acts.append(tuple(label))
             outs.append(list(hit[1]))
             f_nout.append(len(hit[2]))

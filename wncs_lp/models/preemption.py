@@ -92,7 +92,7 @@ import numpy as np
 from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario
-from .automaton import AutomatonBounds, ConfigAutomaton, explore_configs
+from .automaton import AutomatonBounds, ConfigAutomaton, SharedOutcomes, explore_configs
 from .base import Model
 
 __all__ = [
@@ -238,7 +238,7 @@ def preemption_automaton(scenario: Scenario) -> ConfigAutomaton:
             outs = cache.get(key)
             if outs is None:
                 full_b = (1,) * scenario.n_processes
-                outs = cache[key] = preemption_step(scenario, (full_b,) + tuple(config[1:]), a)
+                outs = cache[key] = SharedOutcomes(preemption_step(scenario, (full_b,) + tuple(config[1:]), a))
             result.append((label, outs))
         return result
 
