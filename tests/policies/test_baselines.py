@@ -78,7 +78,7 @@ def max_weight_order(sc, tau):
         m = min(range(len(sc.servers)), key=lambda m: (loop(sc.servers[m], k), m))
         srv = sc.servers[m]
         L = loop(srv, k)
-        v.append(srv.p_up * srv.p_down * (q[k][min(t + L, cap) - 1] - q[k][min(L, cap) - 1]))
+        v.append(srv.p_up[k] * srv.p_down[k] * (q[k][min(t + L, cap) - 1] - q[k][min(L, cap) - 1]))  # k's own links
     return sorted(range(len(tau)), key=lambda k: (-v[k], k))
 
 

@@ -11,7 +11,7 @@ what they do with two servers and pipelines, are in ``docs/policies.md``.
 * :class:`MaxAgePolicy` ranks by the AoI tau_k (descending, ties: lower index);
 * :class:`MaxWeightPolicy` ranks by the expected cost reduction of an update sent now through
   the process's shortest-loop server m_k,
-  :math:`v_k(\tau) = p^{up}_{m_k} p^{down}_{m_k}\,[q_k(\min(\tau + L_{m_k,k}, \hat\tau_k)) -
+  :math:`v_k(\tau) = p^{up}_{m_k,k} p^{down}_{m_k,k}\,[q_k(\min(\tau + L_{m_k,k}, \hat\tau_k)) -
   q_k(\min(L_{m_k,k}, \hat\tau_k))]` (Kadota et al.'s Max-Weight index for this cost);
 * :class:`RoundRobinPolicy` ranks cyclically from a pointer that moves past the processes sent:
   a policy with memory (:class:`~wncs_lp.policies.base.MemoryPolicy`).
@@ -50,12 +50,13 @@ def _best_server(system: System, k: int) -> int:
 def max_weight_index(system: System) -> tuple[np.ndarray, ...]:
     r"""Per process k, the table ``v[k][tau - 1]`` of the max-weight index of :class:`MaxWeightPolicy`:
 
-    .. math:: v_k(\tau) = p^{up}_{m} p^{down}_{m}\,\bigl[q_k(\min(\tau + L_{m,k}, \hat\tau_k))
+    .. math:: v_k(\tau) = p^{up}_{m,k} p^{down}_{m,k}\,\bigl[q_k(\min(\tau + L_{m,k}, \hat\tau_k))
               - q_k(\min(L_{m,k}, \hat\tau_k))\bigr],
 
     m the shortest-loop server of process k (ties: lower index), L_{m,k} = U_m + T_{m,k} + D_m.
     The bracket is the cost the update removes when it lands L slots from now (the AoI is then
-    L instead of tau + L, both within the cap); the factor is the chance that it lands.
+    L instead of tau + L, both within the cap); the factor is the chance that it lands, through
+    process k's own links to m (``docs/model.md``: per-link success probabilities).
     """
     out = []
     for k, cap in enumerate(system.caps.tolist()):
@@ -64,7 +65,7 @@ def max_weight_index(system: System) -> tuple[np.ndarray, ...]:
         L = int(srv.loop[k])
         tau = np.arange(1, cap + 1)
         q = system.q[k]
-        out.append(srv.p_up * srv.p_down * (q[np.minimum(tau + L, cap) - 1] - q[min(L, cap) - 1]))
+        out.append(srv.p_up[k] * srv.p_down[k] * (q[np.minimum(tau + L, cap) - 1] - q[min(L, cap) - 1]))
     return tuple(out)
 
 
@@ -80,7 +81,7 @@ class MaxWeightPolicy(GreedyPolicy):
         sc = system.scenario
         best = [_best_server(system, k) for k in range(system.n_processes)]
         self._loop = np.array([sc.servers[m].loop[k] for k, m in enumerate(best)], dtype=np.int64)
-        self._p = np.array([sc.servers[m].p_up * sc.servers[m].p_down for m in best])
+        self._p = np.array([sc.servers[m].p_up[k] * sc.servers[m].p_down[k] for k, m in enumerate(best)])
 
     def ranking(self, tau: np.ndarray) -> np.ndarray:
         caps, q = self.system.caps, self.system.q
