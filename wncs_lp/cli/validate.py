@@ -36,7 +36,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
         print(f"valid. A solve would refuse to build it: {refusal}")
         return 0
     bound = "up to " if est.complete else "at least "
-    print(f"valid. The MDP: {est.configs:,} server configurations, {bound}{est.states:,} states, "
+    what = "configurations (servers and sensors' ages)" if scenario.has_arrivals else "server configurations"
+    print(f"valid. The MDP: {est.configs:,} {what}, {bound}{est.states:,} states, "
           f"{est.pairs:,} state-action pairs, {est.nnz:,} transition nonzeros")
     print(f"memory: build about {_gib(est.build_bytes)}, LP about {_gib(est.lp_bytes)}, matrix-free solver about "
           f"{_gib(est.matrix_free_bytes)} ({est.matrix_free_states:,} states); available now {_gib(avail)}")
