@@ -332,3 +332,31 @@ def test_many_sensors_with_arrivals_are_refused_by_the_budget():
     assert model.automaton_bounds().configs >= 10 ** 6
     with exploration_limit(500), pytest.raises(ExplorationLimitError, match="exploration budget"):
         model.automaton
+
+
+def test_preemption_fields_in_the_other_rooms():
+    """The preemption model with per-link probabilities, a cost family and random arrivals: the
+    matrix-free solver's gain is the LP's, the simulator agrees with the exact evaluation, and the
+    bounds refuse the kind by name (as without the fields)."""
+    from wncs_lp.bounds import lower_bound
+    from wncs_lp.errors import WncsError
+    from wncs_lp.evaluate import evaluate
+    from wncs_lp.models.system import System
+    from wncs_lp.policies import GreedyPolicy
+    from wncs_lp.simulate import simulate
+
+    raw = {"model": {"kind": "preemption"}, "channel": {"success_probability": 0.9},
+           "process": [{"A": [[1.1]], "tau_cap": 6, "arrival_probability": 0.6},
+                       {"A": [[1.0]], "tau_cap": 5, "cost": {"power": 2.0}}],
+           "server": [{"uplink_delay": 1, "downlink_delay": 1, "processing_time": [2, 1], "p_up": [0.95, 0.7],
+                       "p_down": [0.8, 0.99]}]}
+    sc = scenario_from_dict(raw)
+    lp = wncs_lp.solve(sc, "lp")
+    assert wncs_lp.solve(sc, "matrix-free").gain == pytest.approx(lp.gain, rel=1e-9)
+    system, mdp = System.from_scenario(sc), build(sc)
+    greedy = GreedyPolicy(system)
+    exact = evaluate(mdp, greedy.on_mdp(mdp)).gain
+    sim = simulate(greedy, slots=8_000, reps=6, seed=2, burn_in=200)
+    assert abs(sim.mean - exact) <= 4.5 * sim.stderr and exact >= lp.gain_lower
+    with pytest.raises(WncsError, match="preemption"):
+        lower_bound(sc, 1)
