@@ -360,3 +360,13 @@ def test_preemption_fields_in_the_other_rooms():
     assert abs(sim.mean - exact) <= 4.5 * sim.stderr and exact >= lp.gain_lower
     with pytest.raises(WncsError, match="preemption"):
         lower_bound(sc, 1)
+
+
+@pytest.mark.parametrize("cost, tau", [({"power": 1e308}, 2), ([1e200] * 5, 1)])
+def test_overflowing_family_refused_naming_the_aoi(cost, tau):
+    from wncs_lp.errors import ModelError
+
+    raw = {**MIXED, "process": [dict(MIXED["process"][0], cost=cost), MIXED["process"][1]]}
+    with pytest.raises(ModelError, match=rf"process 'a': the cost .* at AoI tau = {tau} ") as info:
+        cost_tables(scenario_from_dict(raw))
+    assert ("lower tau_cap below" in str(info.value)) == (tau > 1)

@@ -93,8 +93,9 @@ def family_table(cost: CostSpec, tau_max: int, weight: float = 1.0, *, what: str
     if bad.size:
         t = int(bad[0]) + 1
         found = "overflows float64" if not np.isfinite(out[t - 1]) else f"is {out[t - 1]:.3g}, beyond {MAX_COST:g}"
+        lower = f"lower tau_cap below {t}, or " if t > 1 else ""
         raise ModelError(f"{what}: the cost q(tau) = weight * {cost} {found} at AoI tau = {t} (the largest cost the "
-                         f"solvers take is {MAX_COST:g}): lower tau_cap below {t}, or scale the cost or the weight down")
+                         f"solvers take is {MAX_COST:g}): {lower}scale the cost or the weight down")
     return out
 
 
