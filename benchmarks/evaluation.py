@@ -13,7 +13,9 @@ its recurrent class found, and the class's stationary law solved by
   (``method="iterative"``; the power iteration and the LU only if it misses);
 * ``power``: the power iteration on the lazy chain alone (the former default from 20,000 states);
 * ``certified``: the certified value iteration of the policy's chain (``value_iteration`` on the
-  one-action MDP of P_pi: the solve's own driver and kernels), for the gain's certified bracket.
+  one-action MDP of P_pi: the solve's own driver and kernels), for the gain's certified bracket;
+* ``matrix-free``: the certified matrix-free evaluation (``matrix_free_evaluate``, the driver of
+  ``bound --policy``) over the AoI box without the stored matrix (not for round robin's memory).
 
 Each is the best of ``--repeat`` runs after one warm-up (numba's compilation is not counted),
 with the gain it gives (the LU's is the reference). ``ratio`` = LU seconds / iterative seconds:
@@ -91,10 +93,16 @@ def measure(name: str, cap: int, policy: str, repeat: int, lu_max: int) -> list[
         sol = value_iteration(one, tol=1e-10)
         return sol.gain
 
+    def matrix_free():
+        from wncs_lp.solvers.matrix_free import matrix_free_evaluate
+
+        return matrix_free_evaluate(system, pol, tol=1e-10).gain
+
     ref = None
     times = {}
-    for method, fn in (("lu", law("lu")), ("iterative", law("iterative")), ("power", power), ("certified", certified)):
-        if method == "lu" and m > lu_max:
+    for method, fn in (("lu", law("lu")), ("iterative", law("iterative")), ("power", power), ("certified", certified),
+                       ("matrix-free", matrix_free)):
+        if (method == "lu" and m > lu_max) or (method == "matrix-free" and hasattr(pol, "act_memory")):
             continue
         sec, gain = _best(fn, repeat)
         times[method] = sec
