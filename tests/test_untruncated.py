@@ -106,3 +106,17 @@ def test_a_policy_that_starves_a_process_past_the_cap_is_unbounded():
     assert starved.upper == float("inf") and "sensor-3" in starved.note
     assert np.isfinite(rr.upper) and iv.policy == "round_robin" and iv.upper == rr.upper
     assert "unbounded without the cap: optimal" in iv.message()
+
+
+def test_bound_states_the_interval_with_its_bound_below(capsys):
+    import json
+
+    from wncs_lp.cli import main
+
+    path = str(scenario_path("paper_p12"))
+    assert main(["bound", path, "--set", "tau_cap=8", "--relaxation", "1", "--policy", "--compare", "greedy",
+                 "--untruncated", "--slots", "300", "--reps", "3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    iv = out["untruncated"]
+    assert iv["lower"] == out["bound"]["lower_bound"] and iv["lower"] < iv["upper"]
+    assert [c["policy"] for c in iv["candidates"]][1:] == ["greedy"]
