@@ -136,9 +136,9 @@ def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> 
     from ..solvers.matrix_free import matrix_free_cap_mass, matrix_free_evaluate
     from ..truncation import CapCount
 
-    if args.from_initial:
-        raise PolicyError("--from-initial needs the enumerated MDP, which would not fit here: "
-                          f"{refused}") from None
+    for flag, given in (("--from-initial", args.from_initial), ("--horizon", args.horizon is not None)):
+        if given:
+            raise PolicyError(f"{flag} needs the enumerated MDP, which would not fit here: {refused}") from None
     why = "the stored matrix would not fit in memory"
     prog.phase(f"{why}: evaluating without it")
     made = _policy(args, scenario, need_mdp=False, prog=prog)
