@@ -53,6 +53,7 @@ MODULES = [
     ("wncs_lp.constrained.convex", "Convex programs over the occupation measure"),
     ("wncs_lp.bounds", "Certified lower bounds on g* and their policies (any number of processes)"),
     ("wncs_lp.bounds.gaps", "Certified optimality gaps"),
+    ("wncs_lp.bounds.inputs", "What enters the bounds: a System checked, the private chains checked"),
     ("wncs_lp.truncation", "Mass at the cap"),
     ("wncs_lp.simulate", "Monte Carlo"),
     ("wncs_lp.studies", "Studies (sweeps, trade-off curves, cap studies)"),
