@@ -26,7 +26,10 @@ independent samples. Two standard ways give an interval that holds anyway:
   :data:`MIN_BATCHES` batches the test has no power left and the interval says so
   (``independent = False``). It serves one long run (R = 1), where replications give nothing.
 
-Both are normal-theory intervals: stated at their level, never certified.
+Both are normal-theory intervals: stated at their level, never certified. Both assume the runs
+estimate one number: :func:`replications_agree` tests it (the runs' means against the spread of
+their own batches), which catches runs too short for the chain and policies whose chain has
+several recurrent classes (a run's average then depends on where it settles).
 
 References: A. M. Law, *Simulation Modeling and Analysis*, 5th ed., ch. 9 (replication /
 deletion and batch means); G. S. Fishman, *Discrete-Event Simulation* (2001), sec. 6.6
@@ -44,8 +47,8 @@ from scipy import stats as sps
 from .display import Display, fmt
 from .errors import WncsError
 
-__all__ = ["ConfidenceInterval", "replication_interval", "batch_means_interval", "SIDES", "MIN_BATCHES",
-           "INDEPENDENCE_LEVEL"]
+__all__ = ["ConfidenceInterval", "replication_interval", "batch_means_interval", "replications_agree", "SIDES",
+           "MIN_BATCHES", "INDEPENDENCE_LEVEL", "AGREEMENT_LEVEL"]
 
 #: ``"upper"``: (-inf, upper]; ``"lower"``: [lower, inf); ``"two-sided"``: [lower, upper].
 SIDES = ("upper", "lower", "two-sided")
@@ -53,6 +56,8 @@ SIDES = ("upper", "lower", "two-sided")
 MIN_BATCHES = 4
 #: Level of the one-sided test of the batch means' lag-1 autocorrelation.
 INDEPENDENCE_LEVEL = 0.10
+#: p-value of :func:`replications_agree` below which a simulation's result warns.
+AGREEMENT_LEVEL = 0.001
 
 
 @dataclass(frozen=True, repr=False)
@@ -171,6 +176,28 @@ def _merge_pairs(sums: np.ndarray, sizes: np.ndarray) -> tuple[np.ndarray, np.nd
     return np.add.reduceat(sums, starts, axis=1), np.add.reduceat(sizes, starts)
 
 
+def _independent_batches(sums: np.ndarray, sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, bool]:
+    """Batches merged in pairs while their lag-1 autocorrelation fails the test (module docstring):
+    (sums, sizes, lag-1 autocorrelation, passed)."""
+    z = float(sps.norm.ppf(1 - INDEPENDENCE_LEVEL))
+    while True:
+        R, B = sums.shape
+        rho = _lag1(sums / sizes)
+        independent = bool(rho <= z / math.sqrt(R * (B - 1)))
+        if independent or B < 2 * MIN_BATCHES:
+            return sums, sizes, rho, independent
+        sums, sizes = _merge_pairs(sums, sizes)
+
+
+def _batches(batch_sums: Any, sizes: Any) -> tuple[np.ndarray, np.ndarray]:
+    sums = np.atleast_2d(np.asarray(batch_sums, dtype=float))
+    sizes = np.asarray(sizes, dtype=float).ravel()
+    if sums.shape[1] != sizes.size or sizes.size < 2 or np.any(sizes <= 0):
+        raise WncsError(f"batch means need >= 2 batches of positive size per run and one size per batch; got "
+                        f"sums of shape {sums.shape} and {sizes.size} sizes")
+    return sums, sizes
+
+
 def batch_means_interval(batch_sums: Any, sizes: Any, confidence: float = 0.95, side: str = "upper"
                          ) -> ConfidenceInterval:
     """The batch-means t interval of R runs cut into B batches each (module docstring).
@@ -191,23 +218,36 @@ def batch_means_interval(batch_sums: Any, sizes: Any, confidence: float = 0.95, 
         ``independent`` whether they passed the independence test.
     """
     _check(confidence, side)
-    sums = np.atleast_2d(np.asarray(batch_sums, dtype=float))
-    sizes = np.asarray(sizes, dtype=float).ravel()
-    if sums.shape[1] != sizes.size or sizes.size < 2 or np.any(sizes <= 0):
-        raise WncsError(f"batch means need >= 2 batches of positive size per run and one size per batch; got "
-                        f"sums of shape {sums.shape} and {sizes.size} sizes")
-    z = float(sps.norm.ppf(1 - INDEPENDENCE_LEVEL))
-    while True:
-        y = sums / sizes
-        R, B = y.shape
-        rho = _lag1(y)
-        independent = bool(rho <= z / math.sqrt(R * (B - 1)))
-        if independent or B < 2 * MIN_BATCHES:
-            break
-        sums, sizes = _merge_pairs(sums, sizes)
+    sums, sizes, rho, independent = _independent_batches(*_batches(batch_sums, sizes))
+    R, B = sums.shape
+    y = sums / sizes
     estimate = float(sums.sum() / (R * sizes.sum()))
     d = y - y.mean(axis=1, keepdims=True)
     df = R * (B - 1)
     se = math.sqrt(float((d * d).sum()) / df / (R * B))
     return _t_interval(estimate, se, df, confidence, side, "batch-means", R * B, batches=B, lag1=rho,
                        independent=independent)
+
+
+def replications_agree(batch_sums: Any, sizes: Any) -> float:
+    r"""The p-value of the replications' agreement with their own batches (one-way analysis of variance).
+
+    With the batches merged until independent (module docstring), under "every run has the same
+    mean and independent batches" the ratio of the between-run mean square to the within-run one,
+    :math:`F = B \sum_r (\bar Y_r - \bar Y)^2 / (R - 1) \,\big/\, \hat\sigma^2`, follows
+    F(R - 1, R(B - 1)). A tiny p-value says the runs disagree more than their batches allow: runs
+    too short for the chain's autocorrelation, or a chain with several recurrent classes whose
+    runs settle in different ones (the long-run average then depends on the start, and no
+    interval over the runs means anything). NaN for fewer than 2 runs.
+    """
+    sums, sizes, _, _ = _independent_batches(*_batches(batch_sums, sizes))
+    R, B = sums.shape
+    if R < 2:
+        return math.nan
+    y = sums / sizes
+    ybar = y.mean(axis=1)
+    within = float(((y - ybar[:, None]) ** 2).sum()) / (R * (B - 1))
+    between = B * float(((ybar - ybar.mean()) ** 2).sum()) / (R - 1)
+    if within <= 0:
+        return 1.0 if between <= 0 else 0.0
+    return float(sps.f.sf(between / within, R - 1, R * (B - 1)))

@@ -62,7 +62,8 @@ import numpy as np
 from .aoi import AoIDistribution, aoi_from_counts
 from .display import Display, describe_array, fmt
 from .errors import PolicyError
-from .intervals import ConfidenceInterval, batch_means_interval, replication_interval
+from .intervals import (AGREEMENT_LEVEL, ConfidenceInterval, batch_means_interval, replication_interval,
+                        replications_agree)
 from .mdp import MDP
 from .policies import Policy, as_policy
 
@@ -194,6 +195,16 @@ class SimulationResult(Display):
             return 1.0
         return float(self.plain_stderr ** 2 / self.stderr ** 2) if self.stderr > 0 else math.inf
 
+    @property
+    def agreement(self) -> float:
+        """The p-value of the replications' agreement with their own batches
+        (:func:`wncs_lp.intervals.replications_agree`): below :data:`~wncs_lp.intervals.AGREEMENT_LEVEL`
+        the runs disagree more than their autocorrelation allows (too short, or several recurrent
+        classes), and the printout warns. NaN for one replication."""
+        if self.batch_sums is None or self.reps < 2 or self.batch_sizes.size < 2:
+            return math.nan
+        return replications_agree(self.batch_sums, self.batch_sizes)
+
     def interval(self, confidence: float = 0.95, side: str = "upper", method: str | None = None
                  ) -> ConfidenceInterval:
         """A confidence interval for the policy's average cost.
@@ -225,6 +236,7 @@ class SimulationResult(Display):
             v = getattr(self, k)
             out[k] = list(v) if isinstance(v, tuple) else v
         out["variance_reduction"] = self.variance_reduction
+        out["agreement"] = self.agreement
         out["batches"] = 0 if self.batch_sizes is None else int(self.batch_sizes.size)
         if self.reps >= 2:
             out["upper_95"] = self.interval().upper
@@ -241,6 +253,9 @@ class SimulationResult(Display):
         if self.reps >= 2:
             ci = self.interval()
             rows.append(("upper_95", f"{fmt(ci.upper)} (one-sided 95% upper confidence limit, t with {ci.df} df)"))
+        if self.agreement < AGREEMENT_LEVEL:
+            rows.append(("warning", f"the replications disagree beyond their own batches (p = {self.agreement:.2g}): "
+                                    "runs too short, or several recurrent classes"))
         if self.control is not None:
             rows += [("control", f"martingale of {self.control}: variance / {fmt(self.variance_reduction, 3)}"),
                      ("plain_mean", f"{fmt(self.plain_mean)} +- {fmt(self.plain_stderr, 3)}")]
@@ -444,7 +459,8 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
         if value is not None and after:
             if t == burn_in:
                 h_now = _values(value, tau, c)
-            tau, c, h_now = _controlled_step(ot, caps, value, tau, c, j, o, rows, h_now, acc, b)
+                nxt_real = np.where(ot.prob > 0, ot.nxt, sysm.initial_config)  # padded outcomes: any real config
+            tau, c, h_now = _controlled_step(ot, nxt_real, caps, value, tau, c, j, o, rows, h_now, acc, b)
         else:
             d = ot.delta[c, j, o]
             c = ot.nxt[c, j, o]
@@ -464,18 +480,17 @@ def _values(value: Callable, tau: np.ndarray, c: np.ndarray) -> np.ndarray:
     return v
 
 
-def _controlled_step(ot, caps, value: Callable, tau, c, j, o, rows, h_now, acc: _Accumulators, b: int):
+def _controlled_step(ot, nxt_real, caps, value: Callable, tau, c, j, o, rows, h_now, acc: _Accumulators, b: int):
     """One transition with the control variate: the next state under every outcome of (C, a), h
-    there, E[h(s') | s, a] - h(s) into batch b; returns the realised next state and h there."""
-    nx = ot.nxt[c, j]  # (R, O)
+    there, E[h(s') | s, a] - h(s) into batch b; returns the realised next state and h there.
+    Padded outcomes (probability 0) read h at some real configuration and weigh nothing."""
+    reps, N = tau.shape
+    nx = nxt_real[c, j]  # (R, O)
     dl = ot.delta[c, j]  # (R, O, N)
-    pr = ot.prob[c, j]
     tnew = np.minimum(tau + 1, caps)[:, None, :]
     tau_o = np.where(dl > 0, np.minimum(tnew, dl), tnew)
-    real = pr > 0  # padded outcomes may point anywhere: read h only where an outcome exists
-    hv = np.zeros(pr.shape)
-    hv[real] = _values(value, tau_o[real], nx[real])
-    acc.ctrl_b[:, b] += (pr * hv).sum(axis=1) - h_now
+    hv = _values(value, tau_o.reshape(-1, N), nx.reshape(-1)).reshape(nx.shape)
+    acc.ctrl_b[:, b] += (ot.prob[c, j] * hv).sum(axis=1) - h_now
     return tau_o[rows, o], nx[rows, o], hv[rows, o]
 
 

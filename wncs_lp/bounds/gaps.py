@@ -66,7 +66,8 @@ class PolicyGap:
     detail : dict
         Exact: status, gain_lower, iterations. Monte Carlo: stderr, reps, slots, burn_in, seed,
         confidence, interval (how the limit was made), control (the control variate's tables, or
-        None), plain_mean and plain_stderr (the plain time average), variance_reduction.
+        None), plain_mean and plain_stderr (the plain time average), variance_reduction, agreement
+        (:attr:`wncs_lp.simulate.SimulationResult.agreement`).
     seconds : float
     """
 
@@ -159,7 +160,8 @@ def _monte_carlo(policy: Policy, lb: float, slots: int, reps: int, seed: int, bu
                      {"stderr": float(res.stderr), "reps": reps, "slots": slots, "burn_in": burn_in, "seed": seed,
                       "confidence": confidence, "interval": f"one-sided t, {ci.df} df (independent replications)",
                       "control": res.control, "plain_mean": float(res.plain_mean),
-                      "plain_stderr": float(res.plain_stderr), "variance_reduction": float(res.variance_reduction)},
+                      "plain_stderr": float(res.plain_stderr), "variance_reduction": float(res.variance_reduction),
+                      "agreement": float(res.agreement)},
                      time.perf_counter() - t0)
 
 

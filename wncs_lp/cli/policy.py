@@ -228,6 +228,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _print_simulation(scenario, res) -> None:
+    from ..intervals import AGREEMENT_LEVEL
+
     print(scenario.describe())
     print(f"policy {res.policy}: {res.reps} replications x {res.slots} slots (burn-in {res.burn_in}, seed {res.seed})")
     print(f"average cost {res.mean:.8g} +- {res.stderr:.3g} (standard error over the independent replications), "
@@ -239,6 +241,9 @@ def _print_simulation(scenario, res) -> None:
     if res.control is not None:
         print(f"  control variate: relaxation 1's value tables (variance / {res.variance_reduction:.3g}; the plain "
               f"average {res.plain_mean:.8g} +- {res.plain_stderr:.3g})")
+    if res.agreement < AGREEMENT_LEVEL:
+        print(f"  WARNING: the replications disagree more than their own batches allow (p = {res.agreement:.2g}): "
+              "runs too short for the chain, or a policy with several recurrent classes; no interval holds")
     aoi = res.aoi
     q = aoi.quantile([0.5, 0.99])
     for k, (name, v) in enumerate(zip([p.name for p in scenario.processes], res.process_means)):
