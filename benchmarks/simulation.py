@@ -1,7 +1,7 @@
 """Issue 33 item 4 / issue 36: how precise the Monte Carlo half of a certified gap is, and whether
 its interval holds.
 
-    python benchmarks/simulation.py --out benchmarks/simulation.csv        # ~25 min on 2 cores
+    python benchmarks/simulation.py --out benchmarks/simulation.csv        # ~1 hour on 2 cores
     python benchmarks/simulation.py --sections precision --relaxation 1    # the bound in seconds
     python benchmarks/simulation.py --sections coverage --groups 100
 
@@ -19,7 +19,12 @@ it started: the machine is shared; compare rows of one run):
   exact (certified matrix-free evaluation), ``--groups`` independent runs of 10 replications x
   20,000 slots (one vectorised simulation of groups x 10 replications): how often the one-sided
   95% upper limit, the lower one and the batch-means one cover the exact gain, the largest
-  |mean - exact| / stderr, without and with relaxation 1's tables as control variate.
+  |mean - exact| / stderr, the runs beyond 3 standard errors, the grand mean's distance to the
+  exact gain in its standard errors, the replication means' skewness and excess kurtosis, without
+  and with relaxation 1's tables as control variate.
+* ``seeds``: the same system at caps 8 and 10, 20 seeds of 10 x 20,000 slots of each of five
+  policies (relaxation 1's, suboptimal, greedy, max-age-first, max-cost-first), against the exact
+  gain: the largest |mean - exact| / stderr and the runs beyond 3.
 """
 from __future__ import annotations
 
@@ -32,6 +37,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -40,14 +46,14 @@ from wncs_lp.bounds import BoundPolicy, bound_policy, lower_bound, policy_gaps  
 from wncs_lp.files import atomic_write_text  # noqa: E402
 from wncs_lp.intervals import batch_means_interval, replication_interval  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
-from wncs_lp.policies import make_policy  # noqa: E402
+from wncs_lp.policies import Policy, make_policy  # noqa: E402
 from wncs_lp.scenario import load_scenario, scenario_from_dict  # noqa: E402
 from wncs_lp.formulations import scenario_path  # noqa: E402
 from wncs_lp.simulate import simulate  # noqa: E402
 
 COLUMNS = ["section", "instance", "policy", "setting", "control", "reps", "slots", "mean", "upper", "stat_pct",
            "gap_pct", "variance_reduction", "exact", "cover_upper", "cover_lower", "cover_batch_means", "max_abs_z",
-           "seconds", "load1"]
+           "beyond_3", "grand_z", "skew", "excess_kurtosis", "seconds", "load1"]
 #: (reps, slots) of the reproduction's B3 and of ``wncs-lp bound --policy``.
 SETTINGS = {"b3": (10, 20_000), "bound-cli": (20, 40_000)}
 
@@ -111,12 +117,71 @@ def coverage(args, emit) -> None:
                   "cover_upper": np.mean([c.contains(g) for c in up]),
                   "cover_lower": np.mean([c.contains(g) for c in lo]),
                   "cover_batch_means": np.mean([c.contains(g) for c in bm]),
-                  "max_abs_z": float(np.abs(z).max()), "seconds": time.perf_counter() - t0, "load1": l1})
+                  "max_abs_z": float(np.abs(z).max()), "beyond_3": int((np.abs(z) > 3).sum()),
+                  "grand_z": (res.mean - g) / res.stderr, "skew": float(stats.skew(res.rep_means)),
+                  "excess_kurtosis": float(stats.kurtosis(res.rep_means)), "seconds": time.perf_counter() - t0,
+                  "load1": l1})
+
+
+def seeds(args, emit) -> None:
+    """20 seeds of 10 x 20,000 slots per policy at caps 8 and 10 of the 5-sensor system: how far each
+    run's mean lies from the exact gain, in its own standard errors."""
+    from wncs_lp.solvers.matrix_free import matrix_free_evaluate
+
+    for cap in (8, 10):
+        system = System.from_scenario(scenario_from_dict({**LAB5, "model": {**LAB5["model"], "tau_cap": cap}}))
+        bound = lower_bound(system, 1)
+        pols = [bound_policy(bound, system), make_policy("suboptimal", system), make_policy("greedy", system),
+                MaxAgeFirst(system), MaxCostFirst(system)]
+        for pol in pols:
+            l1, t0 = load1(), time.perf_counter()
+            g = float(matrix_free_evaluate(system, pol).gain)
+            z = np.array([(r.mean - g) / r.stderr for r in
+                          (simulate(pol, slots=20_000, reps=10, seed=seed, burn_in=1000, progress=False)
+                           for seed in range(20))])
+            emit({"section": "seeds", "instance": f"5 sensors, cap {cap}, p = 0.8", "policy": pol.name,
+                  "setting": "20 seeds of 10 x 20000", "control": False, "reps": 10, "slots": 20_000, "exact": g,
+                  "max_abs_z": float(np.abs(z).max()), "beyond_3": int((np.abs(z) > 3).sum()),
+                  "seconds": time.perf_counter() - t0, "load1": l1})
+
+
+class MaxAgeFirst(Policy):
+    """Send the processes of largest AoI: the action maximising the summed AoI of the processes it sends."""
+
+    name = "max-age-first"
+
+    def __init__(self, system):
+        super().__init__(system)
+        S = np.zeros((system.n_configs, system.max_actions, system.n_processes))
+        for c, acts in enumerate(system.automaton.actions):
+            for j, label in enumerate(acts):
+                for k in label:
+                    if k > 0:
+                        S[c, j, k - 1] += 1
+        self.S = S
+
+    def weights(self, tau):
+        return tau.astype(float)
+
+    def act(self, tau, config_ids, rng=None):
+        tau, c = self._check_inputs(tau, config_ids)
+        v = np.einsum("rak,rk->ra", self.S[c], self.weights(tau))
+        v[~self.system.action_valid[c]] = -np.inf
+        return np.argmax(v, axis=1).astype(np.int64)
+
+
+class MaxCostFirst(MaxAgeFirst):
+    """The same with each process's current MSE q_k(tau_k) instead of its AoI."""
+
+    name = "max-cost-first"
+
+    def weights(self, tau):
+        return np.stack([self.system.q[k][tau[:, k] - 1] for k in range(self.system.n_processes)], axis=1)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sections", default="precision,coverage")
+    ap.add_argument("--sections", default="precision,coverage,seeds")
     ap.add_argument("--relaxation", default="3", help="the 8-process bound's relaxation (default 3)")
     ap.add_argument("--cap", type=int, default=20)
     ap.add_argument("--groups", type=int, default=200, help="coverage: independent runs (default 200)")
@@ -130,7 +195,7 @@ def main() -> None:
         print("  ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
 
     for section in args.sections.split(","):
-        {"precision": precision, "coverage": coverage}[section](args, emit)
+        {"precision": precision, "coverage": coverage, "seeds": seeds}[section](args, emit)
     if args.out:
         buf = io.StringIO()
         w = csv.DictWriter(buf, fieldnames=COLUMNS)

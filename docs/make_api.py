@@ -55,6 +55,8 @@ MODULES = [
     ("wncs_lp.bounds.gaps", "Certified optimality gaps"),
     ("wncs_lp.truncation", "Mass at the cap"),
     ("wncs_lp.simulate", "Monte Carlo"),
+    ("wncs_lp.intervals", "Confidence intervals for simulated averages"),
+    ("wncs_lp.aoi", "AoI distributions and quantiles"),
     ("wncs_lp.studies", "Studies (sweeps, trade-off curves, cap studies)"),
     ("wncs_lp.studies.sweep", "Sweeps (also importable as wncs_lp.sweep)"),
     ("wncs_lp.studies.tradeoff", "Trade-off curves"),

@@ -62,8 +62,8 @@ import numpy as np
 from .aoi import AoIDistribution, aoi_from_counts
 from .display import Display, describe_array, fmt
 from .errors import PolicyError
-from .intervals import (AGREEMENT_LEVEL, ConfidenceInterval, batch_means_interval, replication_interval,
-                        replications_agree)
+from .intervals import (AGREEMENT_LEVEL, ConfidenceInterval, batch_means_interval, difference_interval,
+                        replication_interval, replications_agree)
 from .mdp import MDP
 from .policies import Policy, as_policy
 
@@ -227,6 +227,15 @@ class SimulationResult(Display):
                 raise PolicyError("this result has no batches (made by hand?)")
             return batch_means_interval(self.batch_sums, self.batch_sizes, confidence, side)
         raise PolicyError(f"method must be 'replications' or 'batch-means', got {method!r}")
+
+    def compare(self, other: "SimulationResult", confidence: float = 0.95, side: str = "two-sided"
+                ) -> ConfidenceInterval:
+        """An interval for ``self.mean - other.mean``: paired over the replications when both runs
+        share their random numbers (same seed, replications, slots and burn-in: common random
+        numbers), else Welch's (:func:`wncs_lp.intervals.difference_interval`)."""
+        paired = (self.seed is not None and (self.seed, self.reps, self.slots, self.burn_in)
+                  == (other.seed, other.reps, other.slots, other.burn_in))
+        return difference_interval(self.rep_means, other.rep_means, paired, confidence, side)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready scalars and short lists (not the batches or the path); the AoI distribution's summary."""
