@@ -184,3 +184,21 @@ def test_common_random_numbers_pair_two_policies(p12):
     assert welch.method == "welch" and paired.stderr < 0.9 * welch.stderr
     c = simulate(pols[1], slots=1000, reps=40, seed=5, burn_in=100, progress=False)
     assert a.compare(c).method == "welch"
+
+
+def test_simulate_command(capsys):
+    import json
+
+    from wncs_lp.cli import main
+
+    args = ["simulate", str(FORMULATIONS / "paper_p12.toml"), "--set", "tau_cap=8", "--set", "p=0.8", "--policy",
+            "static", "--slots", "500", "--reps", "4", "--burn-in", "50"]
+    assert main(args + ["--control-variate", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["control"] == "ValueTables" and out["variance_reduction"] > 1
+    assert out["upper_95"] >= out["mean"] and len(out["plain_rep_means"]) == 4
+    for proc in out["aoi"]["processes"]:
+        assert sum(proc["pmf"]) == pytest.approx(1.0) and 1 <= proc["median"] <= proc["q99"] <= proc["cap"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "95% confidence interval [" in text and "one-sided 95% upper limit" in text and "99% quantile" in text

@@ -232,12 +232,10 @@ def _print_simulation(scenario, res) -> None:
 
     print(scenario.describe())
     print(f"policy {res.policy}: {res.reps} replications x {res.slots} slots (burn-in {res.burn_in}, seed {res.seed})")
-    print(f"average cost {res.mean:.8g} +- {res.stderr:.3g} (standard error over the independent replications), "
-          f"{res.seconds:.2f} s")
-    if res.reps >= 2:
-        two, up = res.interval(0.95, "two-sided"), res.interval(0.95, "upper")
-        print(f"  95% confidence interval [{two.lower:.8g}, {two.upper:.8g}]; one-sided 95% upper limit "
-              f"{up.upper:.8g} (Student t, {up.df} df)")
+    two, up = res.interval(0.95, "two-sided"), res.interval(0.95, "upper")  # batch means for one replication
+    print(f"average cost {res.mean:.8g} +- {two.stderr:.3g} (standard error, {two.method}), {res.seconds:.2f} s")
+    print(f"  95% confidence interval [{two.lower:.8g}, {two.upper:.8g}]; one-sided 95% upper limit "
+          f"{up.upper:.8g} (Student t, {up.df} df{'' if two.independent else '; the batches are still correlated: longer runs needed'})")
     if res.control is not None:
         print(f"  control variate: relaxation 1's value tables (variance / {res.variance_reduction:.3g}; the plain "
               f"average {res.plain_mean:.8g} +- {res.plain_stderr:.3g})")
