@@ -451,14 +451,13 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
                 cost += qk
             b = acc.batch_of[t - burn_in]
             acc.cost_b[:, b] += cost
-            acc.aoi_counts += np.bincount((acc.aoi_base + tau).ravel(), minlength=acc.aoi_counts.size)
+            acc.aoi_counts[acc.aoi_base + tau] += 1  # one bin per (replication, process): no index repeats
         j = policy.act(tau, c, prng) if mem is None else policy.act_memory(tau, c, mem, prng)
         if t == 0 or t % 997 == 0:  # cheap periodic sanity check of the policy's output
             if j.shape != (reps,) or np.any(j < 0) or np.any(j >= n_act[c]):
                 raise PolicyError(f"policy {policy.name} returned action indices out of range")
         if after:
-            busy_sum = busy[c, j].sum(axis=0)
-            acc.busy_sum += busy_sum
+            acc.busy_sum += busy[c, j].sum(axis=0)
             if t - burn_in < n_path:
                 i = t - burn_in
                 acc.path[0][i], acc.path[1][i], acc.path[2][i], acc.path[3][i] = tau[0], c[0], j[0], cost[0]
