@@ -106,6 +106,12 @@ def _print(scenario, res, report) -> None:
     for r in report.rows:
         print(f"  {r.policy:<{w}} {r.gain:>16.10g} {r.gain_upper:>16.10g} {100 * r.gap:>8.3f}%")
     print("  gap = (upper - lower bound) / lower bound, an upper bound on (g_pi - g*) / g*")
+    from ..intervals import AGREEMENT_LEVEL
+
+    for r in report.rows:
+        if r.detail.get("agreement", 1.0) < AGREEMENT_LEVEL:
+            print(f"  WARNING: {r.policy}: its replications disagree more than their own batches allow (p = "
+                  f"{r.detail['agreement']:.2g}): runs too short, or several recurrent classes; its limit is void")
 
 
 def _configure(p: argparse.ArgumentParser) -> None:
