@@ -2,7 +2,7 @@
 its interval holds.
 
     python benchmarks/simulation.py --out benchmarks/simulation.csv        # ~1 hour on 2 cores
-    python benchmarks/simulation.py --sections precision --relaxation 1    # the bound in seconds
+    python benchmarks/simulation.py --sections precision,cost --relaxation 1   # the bound in seconds
     python benchmarks/simulation.py --sections coverage --groups 100
 
 Two sections, one CSV row per measured quantity (every row records the 1-minute load average when
@@ -14,6 +14,8 @@ it started: the machine is shared; compare rows of one run):
   (20 x 40,000), each without and with the bound's tables as control variate: per policy the
   mean, the one-sided 95% upper limit, the statistical term (upper - mean) / mean, the certified
   gap, the variance reduction and the seconds.
+* ``cost``: the CPU seconds of the bound's own policy over 10 replications of 20,000 and of 5,000
+  slots, without and with the control variate, and the statistical term each gives.
 * ``coverage``: on a 5-sensor system (five scalar processes A = 1.3, 1.2, 1.15, 1.1, 1.05 on a
   cloud server U = D = 1 and an edge server U = D = 0, p = 0.8, cap 8) with every policy's gain
   exact (certified matrix-free evaluation), ``--groups`` independent runs of 10 replications x
@@ -90,6 +92,26 @@ def precision(args, emit) -> None:
                       "upper": r.gain_upper, "stat_pct": 100 * (r.gain_upper - r.gain) / r.gain,
                       "gap_pct": 100 * r.gap, "variance_reduction": r.detail["variance_reduction"],
                       "seconds": r.seconds, "load1": l1})
+
+
+def cost(args, emit) -> None:
+    """CPU seconds of the bound's own policy, 10 replications at 20,000 and 5,000 slots, without and
+    with the control variate (process time: the machine's load inflates the wall clock, not this)."""
+    sc = load_scenario(scenario_path("bounds_p1234_twice"), [f"tau_cap={args.cap}"])
+    system = System.from_scenario(sc)
+    bound = lower_bound(system, args.relaxation)
+    pol = bound_policy(bound, system)
+    for slots in (20_000, 5_000):
+        for control in (False, True):
+            l1, c0, t0 = load1(), time.process_time(), time.perf_counter()
+            res = simulate(pol, slots=slots, reps=10, seed=0, burn_in=1000, control=bound.tables if control else None,
+                           progress=False)
+            cpu = time.process_time() - c0
+            ci = res.interval()
+            emit({"section": "cost", "instance": f"bounds_p1234_twice:{args.cap}", "policy": pol.name,
+                  "setting": f"10 x {slots}, CPU seconds {cpu:.2f}", "control": control, "reps": 10, "slots": slots,
+                  "mean": res.mean, "upper": ci.upper, "stat_pct": 100 * (ci.upper - ci.estimate) / ci.estimate,
+                  "variance_reduction": res.variance_reduction, "seconds": time.perf_counter() - t0, "load1": l1})
 
 
 def coverage(args, emit) -> None:
@@ -195,7 +217,7 @@ def main() -> None:
         print("  ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
 
     for section in args.sections.split(","):
-        {"precision": precision, "coverage": coverage, "seeds": seeds}[section](args, emit)
+        {"precision": precision, "cost": cost, "coverage": coverage, "seeds": seeds}[section](args, emit)
     if args.out:
         buf = io.StringIO()
         w = csv.DictWriter(buf, fieldnames=COLUMNS)
