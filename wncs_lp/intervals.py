@@ -31,6 +31,10 @@ estimate one number: :func:`replications_agree` tests it (the runs' means agains
 their own batches), which catches runs too short for the chain and policies whose chain has
 several recurrent classes (a run's average then depends on where it settles).
 
+Two policies simulated with one seed share their random numbers; :func:`difference_interval`
+pairs their replications for the interval of the difference of their averages (common random
+numbers).
+
 References: A. M. Law, *Simulation Modeling and Analysis*, 5th ed., ch. 9 (replication /
 deletion and batch means); G. S. Fishman, *Discrete-Event Simulation* (2001), sec. 6.6
 (LBATCH).
