@@ -202,3 +202,15 @@ def test_simulate_command(capsys):
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "95% confidence interval [" in text and "one-sided 95% upper limit" in text and "99% quantile" in text
+
+
+def test_uncapped_runs_count_their_aoi_in_a_bounded_histogram(p12, greedy):
+    """Without the cap the system's caps are raised out of reach: the AoI histogram stops at
+    AOI_BINS_MAX values (the last read "at least") and still sums to 1."""
+    from wncs_lp.simulate import AOI_BINS_MAX
+    from wncs_lp.untruncated import simulate_uncapped
+
+    pol, _ = greedy
+    res, _ = simulate_uncapped(pol, slots=1100, reps=2, seed=1, burn_in=30)  # caps raised to 1,139
+    assert res.aoi.pmf.shape[1] == AOI_BINS_MAX and max(res.aoi.caps) == AOI_BINS_MAX
+    np.testing.assert_allclose(res.aoi.pmf.sum(axis=1), 1.0)

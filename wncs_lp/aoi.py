@@ -16,6 +16,8 @@ Under a stationary policy the fraction of slots in which process k's AoI equals 
 The quantile of level q is the smallest x with :math:`F_k(x) = \sum_{y \le x} p_k(y) \ge q`.
 The mass at :math:`\hat\tau_k` is the time at the cap: the distribution above the cap is not
 modelled (the AoI is truncated there), so a quantile equal to the cap means "at least the cap".
+A simulation without the cap (:mod:`wncs_lp.untruncated`) counts AoI values up to
+:data:`wncs_lp.simulate.AOI_BINS_MAX`, the last one read "at least" the same way.
 """
 from __future__ import annotations
 

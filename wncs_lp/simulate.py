@@ -71,6 +71,9 @@ __all__ = ["SimulationResult", "SamplePath", "simulate", "DEFAULT_BATCHES"]
 
 #: Batches each replication is cut into for the batch-means interval.
 DEFAULT_BATCHES = 32
+#: Most AoI values the histogram of a process counts; a larger AoI (a system whose caps are raised
+#: out of reach, :mod:`wncs_lp.untruncated`) is counted in the last value, read "at least".
+AOI_BINS_MAX = 1024
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -416,7 +419,9 @@ class _Accumulators:
     value the slots; the path of replication 0."""
 
     def __init__(self, sysm, reps: int, slots: int, batches: int, path: int, controlled: bool):
-        N, K = sysm.n_processes, int(sysm.caps.max())
+        N, K = sysm.n_processes, int(min(sysm.caps.max(), AOI_BINS_MAX))
+        self.aoi_clip = K if K < int(sysm.caps.max()) else None
+        self.aoi_caps = np.minimum(sysm.caps, K).tolist()
         self.proc_sum = np.zeros((reps, N))
         self.busy_sum = np.zeros(sysm.n_servers)
         self.batch_of = np.arange(slots, dtype=np.int64) * batches // slots  # slot after burn-in -> batch
@@ -451,7 +456,8 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
                 cost += qk
             b = acc.batch_of[t - burn_in]
             acc.cost_b[:, b] += cost
-            acc.aoi_counts[acc.aoi_base + tau] += 1  # one bin per (replication, process): no index repeats
+            seen = tau if acc.aoi_clip is None else np.minimum(tau, acc.aoi_clip)
+            acc.aoi_counts[acc.aoi_base + seen] += 1  # one bin per (replication, process): no index repeats
         j = policy.act(tau, c, prng) if mem is None else policy.act_memory(tau, c, mem, prng)
         if t == 0 or t % 997 == 0:  # cheap periodic sanity check of the policy's output
             if j.shape != (reps,) or np.any(j < 0) or np.any(j >= n_act[c]):
@@ -534,6 +540,6 @@ def _result(policy, acc: _Accumulators, slots: int, reps: int, burn_in: int, see
         control=control,
         batch_sums=batch_sums,
         batch_sizes=acc.batch_sizes,
-        aoi=aoi_from_counts(acc.aoi_counts.reshape(acc.shape), sysm.caps.tolist(), names, policy.name),
+        aoi=aoi_from_counts(acc.aoi_counts.reshape(acc.shape), acc.aoi_caps, names, policy.name),
         path=path,
     )
