@@ -214,3 +214,23 @@ def test_uncapped_runs_count_their_aoi_in_a_bounded_histogram(p12, greedy):
     res, _ = simulate_uncapped(pol, slots=1100, reps=2, seed=1, burn_in=30)  # caps raised to 1,139
     assert res.aoi.pmf.shape[1] == AOI_BINS_MAX and max(res.aoi.caps) == AOI_BINS_MAX
     np.testing.assert_allclose(res.aoi.pmf.sum(axis=1), 1.0)
+
+
+def test_fitted_coefficient(p12, greedy):
+    """control_coef="fit": the regression estimate is the least-squares intercept at control 0
+    (scipy's linregress on the same numbers), with R - 2 degrees of freedom, and it agrees with
+    the exact gain; the default coefficient 1 keeps R - 1."""
+    from scipy import stats
+
+    system, _, bound = p12
+    pol, g = greedy
+    fit = simulate(pol, slots=1000, reps=20, seed=2, burn_in=100, control=bound.tables, control_coef="fit",
+                   progress=False)
+    line = stats.linregress(fit.control_means, fit.plain_rep_means)
+    assert fit.control_fitted and fit.control_coef == pytest.approx(-line.slope, rel=1e-9)
+    assert fit.mean == pytest.approx(line.intercept, rel=1e-12)
+    assert fit.stderr == pytest.approx(line.intercept_stderr, rel=1e-9)
+    assert fit.interval().df == 18 and abs(fit.mean - g) <= 4 * fit.stderr
+    one = simulate(pol, slots=1000, reps=20, seed=2, burn_in=100, control=bound.tables, progress=False)
+    assert one.control_coef == 1.0 and not one.control_fitted and one.interval().df == 19
+    np.testing.assert_allclose(one.rep_means, np.add(one.plain_rep_means, one.control_means), rtol=1e-13)

@@ -15,11 +15,12 @@ where :math:`\bar g_\pi \ge g_\pi` is
   of freedom: :func:`wncs_lp.intervals.replication_interval`): a statement at that confidence
   level, not a certificate.
 
-The Monte Carlo estimate uses the bound's own tables h as a control variate by default: each
-replication averages the Bellman residual c(s_t) + E[h(s_{t+1}) | s_t, a_t] - h(s_t) instead of
-the cost c(s_t) (:mod:`wncs_lp.simulate`). That is the cost plus a zero-mean martingale and a
-boundary term, so it estimates the same g_pi under any policy; the closer h is to the policy's
-relative values, the smaller its variance (at 8 processes, cap 20, the variance of relaxation
+The Monte Carlo estimate uses the bound's own tables h as a control variate by default: beside
+its cost, each replication averages C = E[h(s_{t+1}) | s_t, a_t] - h(s_t), a zero-mean martingale
+plus a boundary term (:mod:`wncs_lp.simulate`), and the estimate is the average of the Bellman
+residual c(s_t) + E[h(s_{t+1}) | s_t, a_t] - h(s_t), the cost's average plus C's. It estimates
+the same g_pi under any policy; the closer h is to the policy's relative values, the smaller its
+variance (at 8 processes, cap 20, the variance of relaxation
 3's policy falls about 200-fold with relaxation 3's tables: ``benchmarks/README.md``). Every
 policy is simulated with the same seed, so they see the same channel outcomes (common random
 numbers).
@@ -66,7 +67,7 @@ class PolicyGap:
     detail : dict
         Exact: status, gain_lower, iterations. Monte Carlo: stderr, reps, slots, burn_in, seed,
         confidence, interval (how the limit was made), control (the control variate's tables, or
-        None), plain_mean and plain_stderr (the plain time average), variance_reduction, agreement
+        None), control_coef (its coefficient, 1), plain_mean and plain_stderr (the plain time average), variance_reduction, agreement
         (:attr:`wncs_lp.simulate.SimulationResult.agreement`).
     seconds : float
     """
@@ -156,10 +157,11 @@ def _monte_carlo(policy: Policy, lb: float, slots: int, reps: int, seed: int, bu
     t0 = time.perf_counter()
     res = simulate(policy, slots=slots, reps=reps, seed=seed, burn_in=burn_in, control=control, progress=False)
     ci = res.interval(confidence, side="upper", method="replications")
+    how = "regression on the control over" if res.control_fitted else "over"
     return PolicyGap(policy.name, "monte-carlo", float(res.mean), ci.upper, (ci.upper - lb) / lb,
                      {"stderr": float(res.stderr), "reps": reps, "slots": slots, "burn_in": burn_in, "seed": seed,
-                      "confidence": confidence, "interval": f"one-sided t, {ci.df} df (independent replications)",
-                      "control": res.control, "plain_mean": float(res.plain_mean),
+                      "confidence": confidence, "interval": f"one-sided t, {ci.df} df ({how} independent replications)",
+                      "control": res.control, "control_coef": float(res.control_coef), "plain_mean": float(res.plain_mean),
                       "plain_stderr": float(res.plain_stderr), "variance_reduction": float(res.variance_reduction),
                       "agreement": float(res.agreement)},
                      time.perf_counter() - t0)

@@ -237,8 +237,8 @@ def _print_simulation(scenario, res) -> None:
     print(f"  95% confidence interval [{two.lower:.8g}, {two.upper:.8g}]; one-sided 95% upper limit "
           f"{up.upper:.8g} (Student t, {up.df} df{'' if two.independent else '; the batches are still correlated: longer runs needed'})")
     if res.control is not None:
-        print(f"  control variate: relaxation 1's value tables (variance / {res.variance_reduction:.3g}; the plain "
-              f"average {res.plain_mean:.8g} +- {res.plain_stderr:.3g})")
+        print(f"  control variate: relaxation 1's value tables, beta = {res.control_coef:.4g} (variance / "
+              f"{res.variance_reduction:.3g}; the plain average {res.plain_mean:.8g} +- {res.plain_stderr:.3g})")
     if res.agreement < AGREEMENT_LEVEL:
         print(f"  WARNING: the replications disagree more than their own batches allow (p = {res.agreement:.2g}): "
               "runs too short for the chain, or a policy with several recurrent classes; no interval holds")
