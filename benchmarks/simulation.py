@@ -1,11 +1,11 @@
 """Issue 33 item 4 / issue 36: how precise the Monte Carlo half of a certified gap is, and whether
 its interval holds.
 
-    python benchmarks/simulation.py --out benchmarks/simulation.csv        # ~1 hour on 2 cores
+    python benchmarks/simulation.py --out benchmarks/simulation.csv        # ~1.5 hours on 2 cores, loaded
     python benchmarks/simulation.py --sections precision,cost --relaxation 1   # the bound in seconds
     python benchmarks/simulation.py --sections coverage --groups 100
 
-Two sections, one CSV row per measured quantity (every row records the 1-minute load average when
+Four sections, one CSV row per measured quantity (every row records the 1-minute load average when
 it started: the machine is shared; compare rows of one run):
 
 * ``precision``: at 8 processes (``bounds_p1234_twice``, cap 20) the bound (``--relaxation``,
@@ -203,7 +203,7 @@ class MaxCostFirst(MaxAgeFirst):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sections", default="precision,coverage,seeds")
+    ap.add_argument("--sections", default="precision,cost,coverage,seeds")
     ap.add_argument("--relaxation", default="3", help="the 8-process bound's relaxation (default 3)")
     ap.add_argument("--cap", type=int, default=20)
     ap.add_argument("--groups", type=int, default=200, help="coverage: independent runs (default 200)")
