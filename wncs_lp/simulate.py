@@ -43,9 +43,8 @@ beta = 1 by default: the residual's average, nothing fitted to the data, R - 1 d
 freedom; and where h is the policy's bias the boundary term also cancels the start's transient.
 ``control_coef="fit"`` fits beta across the replications instead (the regression
 control-variate estimator, :func:`wncs_lp.intervals.control_variate_interval`, R - 2 degrees
-of freedom), for an h unrelated to the policy; on the instances measured the fit found beta in
-0.65-1.12 and gave no smaller variance than beta = 1. Per batch, the residuals carry no boundary
-term, so their batch means stay nearly independent.
+of freedom), for an h that may be unrelated to the policy. Per batch, the residuals carry no
+boundary term, so their batch means stay nearly independent.
 
 **Distributions and paths.** Every run counts its slots at each AoI value of each process
 after the burn-in (:attr:`SimulationResult.aoi`, an :class:`wncs_lp.aoi.AoIDistribution` with a
