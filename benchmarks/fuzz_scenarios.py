@@ -1,6 +1,7 @@
 """Fuzz the toolkit's inputs with generated hostile cases and report the counts.
 
-    python benchmarks/fuzz_scenarios.py [--cases 2000] [--npz-cases 400] [--cache-cases 2000] [--sweep-cases 60]
+    python benchmarks/fuzz_scenarios.py [--cases 2000] [--npz-cases 400] [--cache-cases 2000] [--system-cases 120]
+                                        [--sweep-cases 60]
 
 Families and their contracts (any other outcome is a bug, re-raised with the failing example,
 which hypothesis shrinks):
@@ -12,6 +13,10 @@ which hypothesis shrinks):
   file; a loaded MDP is solved by value iteration and the LP, which agree when both certify;
 * reproduction cache entries (a number, key or value of the JSON edited, bytes flipped, the
   arrays truncated or missing): the cache returns the true result, reused or recomputed;
+* edited systems (a ``System`` whose cost tables, caps, action counts, automaton or model were
+  replaced by hand, given to ``lower_bound`` with relaxation 1, 2 or 3): refused with one
+  WncsError naming the field, or bounded as the system the edit describes, never above its exact
+  optimum (cost tables are honoured; an automaton of another system only by relaxation 2);
 * sweep folders (``sweep.csv`` / ``sweep.json`` / ``sweep_meta.json`` deleted, truncated, edited,
   garbled, replaced by a folder; rerun with the same or another scenario): the command ends with
   an exit status and at most one ``error:`` line, never a traceback. Rows whose gain is not the
@@ -36,6 +41,7 @@ from fuzz_strategies import (  # noqa: E402
     cache_base,
     cache_mutation,
     check_cache_case,
+    check_system_edit,
     check_case,
     check_npz_case,
     check_override_forms,
@@ -50,6 +56,8 @@ from fuzz_strategies import (  # noqa: E402
     scratch_dir,
     sweep_base,
     sweep_mutation,
+    system_bases,
+    system_edit,
     to_toml,
     valid_raw,
 )
@@ -70,6 +78,12 @@ def families(tmp: Path, args) -> dict:
     def cache_case(m):
         cache.setdefault("b", cache_base(tmp))
         return check_cache_case(cache["b"], m, tmp)
+
+    systems = {}
+
+    def system_case(m):
+        systems.setdefault("b", system_bases())
+        return check_system_edit(systems["b"], m)
 
     def sweep_case(m):
         sweep.setdefault("b", sweep_base(tmp))
@@ -93,6 +107,7 @@ def families(tmp: Path, args) -> dict:
             lambda pr: check_override_forms(pr[0], pr[1], tmp), n),
         "npz files": (npz_mutation(), npz_case, args.npz_cases),
         "cache entries": (cache_mutation(), cache_case, args.cache_cases),
+        "edited systems": (system_edit(), system_case, args.system_cases),
         "sweep folders": (sweep_mutation(), sweep_case, args.sweep_cases),
     }, sweep
 
@@ -102,6 +117,8 @@ def main() -> int:
     ap.add_argument("--cases", type=int, default=2000, help="examples per scenario family (default 2000; 7 families)")
     ap.add_argument("--npz-cases", type=int, default=400, help="mutated .npz files (default 400; each MDP is solved twice)")
     ap.add_argument("--cache-cases", type=int, default=2000, help="mutated cache entries (default 2000)")
+    ap.add_argument("--system-cases", type=int, default=120,
+                    help="Systems edited by hand, given to the bounds (default 120; each computes a bound)")
     ap.add_argument("--sweep-cases", type=int, default=60, help="mutated sweep folders (default 60; each reruns a sweep)")
     args = ap.parse_args()
     tmp = scratch_dir()

@@ -558,3 +558,83 @@ def check_sweep_case(base: tuple[dict[str, bytes], dict, dict], mutation: tuple,
     wrong = sum(1 for key, g in got.items() if key in expected and abs(g - expected[key]) > 1e-6 * abs(expected[key]))
     wrong += sum(1 for key in got if key not in expected)
     return ("ok" if code == 0 else "failed rows"), wrong
+
+
+# ----------------------------------------------------------------------------- issue 39: edited systems
+def system_bases() -> dict[str, Any]:
+    """The small systems an edit starts from (tests/reference/own_systems.py): the plain one and
+    the per-link one, with their Systems and exact optima."""
+    import wncs_lp
+    from reference.own_systems import small_scenario
+    from wncs_lp.models.system import System
+
+    out = {}
+    for field in ("none", "links"):
+        sc = small_scenario(field)
+        out[field] = (sc, System.from_scenario(sc), wncs_lp.solve(sc, "lp").gain_upper)
+    return out
+
+
+@st.composite
+def system_edit(draw) -> tuple:
+    """``(relaxation, field, value)``: one field of the plain System replaced by hand."""
+    rel = draw(st.sampled_from([1, 2, 3]))
+    field = draw(st.sampled_from(["q", "q", "q", "caps", "n_actions", "automaton", "model"]))
+    if field == "q":
+        which = draw(st.sampled_from(["power", "table", "bad"]))
+        if which == "power":
+            value = ("power", draw(st.floats(0.2, 3.0)))
+        elif which == "table":
+            value = ("table", sorted(draw(st.lists(st.floats(0, 50), min_size=5, max_size=5))))
+        else:
+            value = ("bad", draw(st.lists(st.one_of(finite, weird_number.filter(lambda x: isinstance(x, float))),
+                                          min_size=0, max_size=7)))
+    elif field in ("caps", "n_actions"):
+        value = draw(st.integers(-2, 2).filter(bool))
+    else:
+        value = None
+    return rel, field, value
+
+
+def check_system_edit(bases: dict[str, Any], edit: tuple) -> str:
+    """``lower_bound`` on an edited System: refused with one WncsError ("refused"), or a bound of
+    the system the edit describes, at most its exact optimum ("honoured"); anything else raises."""
+    import dataclasses
+
+    import numpy as np
+
+    import wncs_lp
+    from wncs_lp.bounds import lower_bound
+    from wncs_lp.errors import WncsError
+
+    rel, field, value = edit
+    sc, system, g_plain = bases["none"]
+    truth = g_plain
+    if field == "q":
+        kind, x = value
+        if kind == "power":
+            q = tuple(np.arange(1, c + 1, dtype=float) ** x for c in system.caps)
+        else:
+            q = (np.asarray(x, dtype=float), system.q[1])
+        edited = dataclasses.replace(system, q=q)
+        ok = all(t.shape == (int(c),) and np.all(np.isfinite(t)) and np.all(t >= 0) and np.all(np.diff(t) >= 0)
+                 for t, c in zip(q, system.caps))
+        truth = (wncs_lp.solve(sc.replace(**{f"process.{k + 1}.{f}": v for k, t in enumerate(q)
+                                            for f, v in (("cost", t.tolist()), ("weight", 1.0))}), "lp").gain_upper
+                 if ok else None)
+    elif field == "caps":
+        edited = dataclasses.replace(system, caps=system.caps + value)
+    elif field == "n_actions":
+        edited = dataclasses.replace(system, n_actions=system.n_actions + value)
+    else:
+        links_sc, links_system, g_links = bases["links"]
+        edited = dataclasses.replace(system, **{field: getattr(links_system, field)})
+        truth = g_links if field == "automaton" else None
+    try:
+        bound = lower_bound(edited, rel).lower_bound
+    except WncsError:
+        return "refused"
+    if truth is None or not bound <= truth * (1 + 1e-9):
+        raise AssertionError(f"relaxation {rel} on a System with {field} edited ({value!r}) gave {bound!r}, "
+                             f"above the optimum {truth!r} of the system it describes")
+    return "honoured"

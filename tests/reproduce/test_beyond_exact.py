@@ -88,7 +88,9 @@ def test_monte_carlo_rows_against_the_exact_evaluation(tiny):
     assert lb <= ev.gain_upper
     exact = ev.gain
     row = next(r for r in inst["policies"] if r["policy"].startswith("bound"))
-    assert abs(row["gain"] - exact) <= 4 * row["stderr"]
+    # (+ the exact bracket's width: with the bound's tables as control variate the residual can be
+    # constant along the path, a standard error of round-off size)
+    assert abs(row["gain"] - exact) <= 4 * row["stderr"] + (ev.gain_upper - ev.gain_lower)
     for r in inst["policies"]:
         assert r["gain_upper"] >= r["gain"]
         assert r["gap"] == pytest.approx((r["gain_upper"] - lb) / lb, rel=1e-12)

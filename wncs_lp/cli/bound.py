@@ -34,7 +34,8 @@ def cmd_bound(args: argparse.Namespace) -> int:
     if args.policy:
         report = policy_gaps(res, system, ["bound", *compare], exact=None if args.exact_max_states else False,
                              exact_max_states=args.exact_max_states or 0, slots=args.slots, reps=args.reps,
-                             seed=args.seed, burn_in=args.burn_in, progress=prog)
+                             seed=args.seed, burn_in=args.burn_in, control=not args.no_control_variate,
+                             progress=prog)
     interval = _untruncated(args, res, system, report, compare, prog)
     if args.json:
         emit_json({**head(args, scenario), "bound": res.summary(),
@@ -96,14 +97,21 @@ def _print(scenario, res, report) -> None:
         print(f"policies, evaluated exactly (matrix-free, {report.states:,} states); upper = certified upper end:")
     else:
         r0 = report.rows[0].detail
-        print(f"policies, by Monte Carlo ({r0.get('reps')} x {r0.get('slots')} slots, seed {r0.get('seed')}); upper = "
-              f"one-sided {100 * r0.get('confidence', 0.95):g}% upper confidence limit (the AoI box has "
-              f"{report.states:,} states, above --exact-max-states):")
+        ctl = f", control variate: {r0['control']}" if r0.get("control") else ""
+        print(f"policies, by Monte Carlo ({r0.get('reps')} x {r0.get('slots')} slots, seed {r0.get('seed')}{ctl}); "
+              f"upper = one-sided {100 * r0.get('confidence', 0.95):g}% upper confidence limit, Student t over the "
+              f"independent replications (the AoI box has {report.states:,} states, above --exact-max-states):")
     w = max(len("policy"), *(len(r.policy) for r in report.rows))
     print(f"  {'policy':<{w}} {'gain':>16} {'upper':>16} {'gap <=':>9}")
     for r in report.rows:
         print(f"  {r.policy:<{w}} {r.gain:>16.10g} {r.gain_upper:>16.10g} {100 * r.gap:>8.3f}%")
     print("  gap = (upper - lower bound) / lower bound, an upper bound on (g_pi - g*) / g*")
+    from ..intervals import AGREEMENT_LEVEL
+
+    for r in report.rows:
+        if r.detail.get("agreement", 1.0) < AGREEMENT_LEVEL:
+            print(f"  WARNING: {r.policy}: its replications disagree more than their own batches allow (p = "
+                  f"{r.detail['agreement']:.2g}): runs too short, or several recurrent classes; its limit is void")
 
 
 def _configure(p: argparse.ArgumentParser) -> None:
@@ -138,6 +146,8 @@ def _configure(p: argparse.ArgumentParser) -> None:
                         "cap: the least upper confidence limit is an upper end on the untruncated optimum, the bound its "
                         "lower end (docs/model.md)")
     add_simulation_args(p, "Monte Carlo")
+    p.add_argument("--no-control-variate", action="store_true",
+                   help="Monte Carlo: the plain time average, without the bound's tables as control variate")
     add_progress_arg(p)
 
 

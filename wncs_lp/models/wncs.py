@@ -261,6 +261,7 @@ def _arrival_automaton(scenario: Scenario) -> ConfigAutomaton:
     servers = scenario.servers
     N = scenario.n_processes
     sensor_cap, job_cap = useful_ages(scenario)
+    loops = [s.loop for s in servers]
     steps = [lru_cache(maxsize=None)(lambda st, ag, a, age, s=s: aged_server_step(s, st, ag, a, age)) for s in servers]
     draws = _generations(scenario, sensor_cap)
 
@@ -278,7 +279,7 @@ def _arrival_automaton(scenario: Scenario) -> ConfigAutomaton:
                     prob *= pr
                     if delivered:
                         k = delivered - 1
-                        age = sent + servers[m].loop[k]
+                        age = sent + loops[m][k]
                         delta[k] = age if delta[k] == 0 else min(delta[k], age)
                 nsrv, nages, delta = tuple(c[0] for c in combo), tuple(c[1] for c in combo), tuple(delta)
                 outs.extend((ArrivalConfig(nsrv, nages, nalpha), delta, prob * pa) for nalpha, pa in nexts)

@@ -115,7 +115,8 @@ def _compute(ctx: Context, sc, inst: Instance, st: BeyondExactSettings) -> dict[
 def _params(sc, inst: Instance, st: BeyondExactSettings) -> dict[str, Any]:
     return {"fingerprint": sc.fingerprint(), "exact": inst.exact, "slots": st.slots, "reps": st.reps,
             "seed": st.seed, "burn_in": st.burn_in, "policies": list(POLICIES), "steps": st.steps,
-            "relaxation_1_policy": True, "auto": "relaxations 1, 2, 3; relaxation 2's tables from its priced chains"}
+            "relaxation_1_policy": True, "auto": "relaxations 1, 2, 3; relaxation 2's tables from its priced chains",
+            "monte_carlo": "the bound's tables as control variate"}  # a cache of plain averages is not reused
 
 
 def _instance(ctx: Context, inst: Instance, st: BeyondExactSettings) -> dict[str, Any]:

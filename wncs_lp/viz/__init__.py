@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from .maps import ACTION_STYLES, plot_matrix_free_map, plot_policy_map, plot_policy_slice
 from .save import save_figure
+from .simulation import plot_aoi, plot_path
 from .sweeps import POLICY_STYLE, plot_sweep, save_sweep_figure
 from .tradeoff import plot_tradeoff, save_tradeoff_figure
 
@@ -20,6 +21,8 @@ __all__ = [
     "plot_matrix_free_map",
     "plot_policy_slice",
     "plot_sweep",
+    "plot_aoi",
+    "plot_path",
     "save_sweep_figure",
     "plot_tradeoff",
     "save_tradeoff_figure",
