@@ -16,6 +16,9 @@ the enumerated MDP).
   instance is within its reach, else the reason in words;
 * :func:`bound_policy` / :class:`BoundPolicy` / :class:`GroupBoundPolicy` -- the greedy policy on a
   bound's value tables;
+* :class:`LookaheadPolicy` -- the two-step lookahead on a greedy policy's tables (greedy on T h);
+* :func:`whittle_indices` / :class:`IndexPolicy` -- Whittle-type indices of relaxation 1's priced
+  chains and the index policy;
 * :func:`~wncs_lp.bounds.gaps.policy_gaps` -- policies evaluated against a bound: the certified
   optimality gap of each.
 
@@ -29,10 +32,12 @@ from __future__ import annotations
 from .gaps import GapReport, PolicyGap, policy_gaps
 from .lower import AUTO_SEARCH, RELAXATIONS, lower_bound, parse_relaxation
 from .grouped import grouped_bound
+from .index import IndexPolicy, IndexTables, whittle_indices
+from .lookahead import LookaheadPolicy
 from .policy import BoundPolicy, GroupBoundPolicy, bound_policy
 from .private import private_bound
 from .result import BoundResult, GroupTables, ValueTables
 
 __all__ = ["BoundResult", "ValueTables", "GroupTables", "BoundPolicy", "GroupBoundPolicy", "GapReport", "PolicyGap",
            "RELAXATIONS", "lower_bound", "bound_policy", "policy_gaps", "private_bound", "grouped_bound",
-           "parse_relaxation", "AUTO_SEARCH"]
+           "parse_relaxation", "AUTO_SEARCH", "LookaheadPolicy", "IndexPolicy", "IndexTables", "whittle_indices"]

@@ -39,6 +39,8 @@ from ..models.system import System
 from ..policies import Policy, make_policy
 from ..progress import as_progress
 from ..simulate import simulate
+from .index import IndexPolicy, whittle_indices
+from .lookahead import LookaheadPolicy
 from .policy import bound_policy
 from .result import BoundResult
 
@@ -100,7 +102,15 @@ class GapReport:
         lines = [f"GapReport({self.relaxation}, LB = {self.lower_bound:.10g}, {self.how}, {self.states:,} states)"]
         lines += [f"  {r.policy:<28} gain {r.gain:.10g}  upper {r.gain_upper:.10g}  gap <= {100 * r.gap:.3f}%"
                   for r in self.rows]
+        if self.rows:
+            lines.append(f"  best: {self.best.policy}")
         return "\n".join(lines)
+
+    @property
+    def best(self) -> PolicyGap:
+        """The row of the least upper value ``gain_upper``: the policy with the smallest certified
+        (or, by Monte Carlo, confidence-limit) gap; the first of equals."""
+        return min(self.rows, key=lambda r: r.gain_upper)
 
     def row(self, policy: str) -> PolicyGap:
         """The row of a policy by name (a bound's policy also answers to ``"bound"``)."""
@@ -111,13 +121,22 @@ class GapReport:
 
     def summary(self) -> dict[str, Any]:
         return {"lower_bound": self.lower_bound, "relaxation": self.relaxation, "how": self.how,
-                "states": self.states, "policies": [r.summary() for r in self.rows], "seconds": self.seconds}
+                "states": self.states, "policies": [r.summary() for r in self.rows],
+                "best": self.best.policy if self.rows else None, "seconds": self.seconds}
 
 
 def _policy(name: str | Policy, bound: BoundResult, system: System) -> Policy:
+    """A policy by name; ``bound`` and ``lookahead`` on this bound's tables, ``index`` priced from
+    relaxation 1 (this bound when it is relaxation 1's, else computed: seconds)."""
     if isinstance(name, Policy):
         return name
-    return bound_policy(bound, system) if name == "bound" else make_policy(name, system)
+    if name == "bound":
+        return bound_policy(bound, system)
+    if name == "lookahead":
+        return LookaheadPolicy(bound_policy(bound, system))
+    if name == "index":
+        return IndexPolicy(system, whittle_indices(system, bound if bound.relaxation == "private-servers" else None))
+    return make_policy(name, system)
 
 
 def _exact_route(system: System, exact: bool | None, exact_max_states: int) -> tuple[bool, int]:
@@ -190,9 +209,10 @@ def policy_gaps(
     system : System
         The system the bound was computed on.
     policies : sequence of str or Policy
-        ``"bound"`` (the bound's greedy policy), any name of :func:`wncs_lp.policies.make_policy`
-        that needs no enumerated MDP (``suboptimal``, ``static``, ``greedy``, ``random``), or
-        policies.
+        ``"bound"`` (the bound's greedy policy), ``"lookahead"`` (the two-step lookahead on the
+        bound's tables), ``"index"`` (the index policy of relaxation 1's chains), any name of
+        :func:`wncs_lp.policies.make_policy` that needs no enumerated MDP (``suboptimal``,
+        ``static``, ``greedy``, ``random``), or policies.
     exact : bool, optional
         Evaluate by the certified matrix-free evaluation (True) or by Monte Carlo (False);
         default: exact when the AoI box has at most ``exact_max_states`` states.

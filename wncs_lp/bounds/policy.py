@@ -106,8 +106,9 @@ class GroupBoundPolicy(Policy):
         self.tables = tables
         self.name = f"bound[{result.relaxation}]"
         valid = system.action_valid
-        self._pair = np.full(valid.shape, -1, dtype=np.int64)  # (C, a) -> its row in the W tables
-        self._pair[valid] = np.arange(int(valid.sum()))
+        #: (C, a) -> its row in the W tables (-1: not a feasible action)
+        self.pair_row = np.full(valid.shape, -1, dtype=np.int64)
+        self.pair_row[valid] = np.arange(int(valid.sum()))
         self.lookahead = tuple(group_lookahead(system, g, h, col)
                                for g, h, col in zip(tables.groups, tables.h, tables.column))
         self.build_seconds = time.perf_counter() - t0
@@ -116,7 +117,7 @@ class GroupBoundPolicy(Policy):
         """(R, A_max) lookahead values (+inf on infeasible actions)."""
         tau, c = self._check_inputs(tau, config_ids)
         s = self.system
-        rows = np.maximum(self._pair[c], 0)
+        rows = np.maximum(self.pair_row[c], 0)
         out = np.zeros(rows.shape)
         lazy = []
         for g, W, i in zip(self.tables.groups, self.lookahead, range(len(self.lookahead))):

@@ -30,7 +30,10 @@ Policies (``make_policy`` builds them by name):
                  update removes);
 ``round_robin``  :class:`RoundRobinPolicy`, round robin (a :class:`MemoryPolicy`: its pointer);
 ``relaxation``   the greedy policy of the certified lower bound (:mod:`wncs_lp.bounds`), a
-                 :class:`SeparableGreedyPolicy` on the relaxation's value tables.
+                 :class:`SeparableGreedyPolicy` on the relaxation's value tables;
+``lookahead``    the two-step lookahead on the same tables (:class:`wncs_lp.bounds.LookaheadPolicy`);
+``index``        the Whittle-type index policy of relaxation 1's priced chains
+                 (:class:`wncs_lp.bounds.IndexPolicy`).
 
 Policies of one's own: :meth:`Policy.from_function` (a function of (tau, configuration) returning
 an action label), :meth:`Policy.from_sigma` (an action per state of an enumerated MDP) and

@@ -21,8 +21,8 @@ from .suboptimal import SuboptimalPolicy
 __all__ = ["POLICY_NAMES", "PolicySetup", "make_policy", "parse_assignment", "parse_policy_names", "policy_for"]
 
 #: Policy names understood by :func:`make_policy` and the command line.
-POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "max_age",
-                "max_weight", "round_robin")
+POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "lookahead",
+                "index", "max_age", "max_weight", "round_robin")
 #: The policy a solve makes, and those that need the enumerated MDP.
 OPTIMAL = "optimal"
 NEED_MDP = ("optimal", "best_static")
@@ -44,13 +44,16 @@ def make_policy(
 
     Parameters
     ----------
-    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "max_age", \
-            "max_weight", "round_robin"}
+    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "lookahead", \
+            "index", "max_age", "max_weight", "round_robin"}
         ``max_age``, ``max_weight`` and ``round_robin`` are the field's baselines
         (:mod:`wncs_lp.policies.baselines`: max-age-first, max-weighted-cost-first, round robin, a
         policy with memory). ``relaxation`` is the greedy policy of the certified lower bound
         (:func:`wncs_lp.bounds.lower_bound` with ``relaxation="auto"``, then
         :func:`wncs_lp.bounds.bound_policy`): it needs no MDP, so it reaches any number of processes.
+        ``lookahead`` is the two-step lookahead on the same tables
+        (:class:`wncs_lp.bounds.LookaheadPolicy`), ``index`` the Whittle-type index policy of
+        relaxation 1's priced chains (:class:`wncs_lp.bounds.IndexPolicy`); neither needs an MDP.
     system : System
     mdp : MDP, optional
         Needed by ``optimal`` (solved with ``method`` unless ``solution`` is given) and
@@ -85,21 +88,30 @@ def make_policy(
         return best_static(system, mdp)
     if name == "greedy":
         return GreedyPolicy(system)
-    if name == "relaxation":
-        return _relaxation_policy(system)
+    if name in ("relaxation", "lookahead", "index"):
+        return _bound_room_policy(name, system)
     if name in _BASELINES:
         return _BASELINES[name](system)
     return RandomPolicy(system)
 
 
-def _relaxation_policy(system: System) -> Policy:
+def _bound_room_policy(name: str, system: System) -> Policy:
     # imported when asked for: the bounds room builds on policies (its policies are a
-    # SeparableGreedyPolicy or, for relaxation 3, a Policy on group tables); its gaps module takes comparators from this factory, so only the
-    # bound and the policy modules are named here
+    # SeparableGreedyPolicy or, for relaxation 3, a Policy on group tables); its gaps module takes
+    # comparators from this factory, so only the bound and the policy modules are named here
+    if name == "index":
+        from ..bounds.index import index_policy
+
+        return index_policy(system)
     from ..bounds.lower import lower_bound
     from ..bounds.policy import bound_policy
 
-    return bound_policy(lower_bound(system, "auto"), system)
+    greedy = bound_policy(lower_bound(system, "auto"), system)
+    if name == "lookahead":
+        from ..bounds.lookahead import LookaheadPolicy
+
+        return LookaheadPolicy(greedy)
+    return greedy
 
 
 def parse_policy_names(text: str | Sequence[str]) -> list[str]:

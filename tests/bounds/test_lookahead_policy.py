@@ -1,0 +1,103 @@
+"""The two-step lookahead policy: its act() against a brute-force argmin over the automaton's
+outcome lists, its gain by two exact evaluators and against the optimum, and where the tables are
+exact (one process, one server, idling allowed) the optimum itself."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from bounds_reference import brute_lookahead, shape
+
+from wncs_lp import scenario_path
+from wncs_lp.bounds import LookaheadPolicy, bound_policy, grouped_bound, private_bound
+from wncs_lp.errors import PolicyError
+from wncs_lp.evaluate import evaluate
+from wncs_lp.models import build
+from wncs_lp.models.system import System
+from wncs_lp.policies import GreedyPolicy, make_policy
+from wncs_lp.scenario import load_scenario, scenario_from_dict
+from wncs_lp.solvers import solve
+from wncs_lp.solvers.matrix_free import matrix_free_evaluate
+
+pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
+
+
+def brute_two_step(system, groups, h, column, tau, c: int) -> np.ndarray:
+    """sum_o P(o | C, a) [c(tau'_o) + min_a' brute_lookahead(tau'_o, C'_o)[a']] per feasible action
+    of configuration c, by loops over the automaton's outcome lists."""
+    out = []
+    for outs in system.automaton.outcomes[c]:
+        v = 0.0
+        for nxt, delta, p in outs:
+            nt = [min(tau[k] + 1, int(system.caps[k])) for k in range(system.n_processes)]
+            nt = np.array([min(t, delta[k]) if delta[k] > 0 else t for k, t in enumerate(nt)])
+            cost = sum(float(system.q[k][nt[k] - 1]) for k in range(system.n_processes))
+            v += p * (cost + brute_lookahead(system, groups, h, column, nt, nxt).min())
+        out.append(v)
+    return np.array(out)
+
+
+def _check_argmin(system, pol, groups, h, column, n=150, seed=1):
+    rng = np.random.default_rng(seed)
+    tau = np.stack([rng.integers(1, int(system.caps[k]) + 1, n) for k in range(system.n_processes)], axis=1)
+    cfg = rng.integers(0, system.n_configs, n)
+    acts = pol.act(tau, cfg)
+    for r in range(n):
+        v = brute_two_step(system, groups, h, column, tau[r], int(cfg[r]))
+        assert v[acts[r]] <= v.min() + 1e-9 * max(1.0, abs(v.min())), (tau[r], cfg[r], v, acts[r])
+
+
+@pytest.mark.parametrize("name", ["paper", "u3", "three-servers"])
+def test_act_is_the_argmin_of_the_two_step_lookahead(name):
+    system = System.from_scenario(shape(name))
+    res = private_bound(system)
+    pol = LookaheadPolicy(bound_policy(res, system))
+    _check_argmin(system, pol, [(k,) for k in range(system.n_processes)], res.tables.h, res.tables.column)
+
+
+def test_act_on_group_tables():
+    system = System.from_scenario(shape("3x3"))
+    res = grouped_bound(system, [(0, 2), (1,)])
+    pol = LookaheadPolicy(bound_policy(res, system))
+    _check_argmin(system, pol, res.tables.groups, res.tables.h, res.tables.column, n=80)
+
+
+def test_gain_by_two_exact_evaluators_and_against_the_optimum():
+    sc = load_scenario(scenario_path("paper_p1234"), ["tau_cap=6"])
+    system = System.from_scenario(sc)
+    greedy = bound_policy(private_bound(system), system)
+    pol = LookaheadPolicy(greedy)
+    mdp = build(sc)
+    exact = evaluate(mdp, pol)
+    mf = matrix_free_evaluate(system, pol)
+    assert mf.gain_lower - 1e-9 * mf.gain <= exact.gain <= mf.gain_upper + 1e-9 * mf.gain
+    opt = solve(mdp)
+    assert exact.gain >= opt.gain_lower * (1 - 1e-9)
+    # the greedy policy's tables are left intact (the lookahead reads them through views)
+    assert np.array_equal(greedy.on_mdp(mdp), bound_policy(private_bound(system), system).on_mdp(mdp))
+
+
+def test_exact_tables_give_the_optimum():
+    # one process on one server with idling allowed: relaxation 1 is the system itself at
+    # lambda = 0, its table the optimal bias, and both the greedy and the lookahead policy optimal
+    sc = scenario_from_dict({
+        "model": {"kind": "wncs", "tau_cap": 12, "allow_idle": True},
+        "channel": {"success_probability": 0.8},
+        "process": [{"A": [[1.1]]}],
+        "server": [{"name": "edge", "uplink_delay": 1, "downlink_delay": 0, "processing_time": [2]}],
+    }, source="<one>")
+    system = System.from_scenario(sc)
+    mdp = build(sc)
+    opt = solve(mdp)
+    pol = LookaheadPolicy(bound_policy(private_bound(system), system))
+    assert evaluate(mdp, pol).gain == pytest.approx(opt.gain, rel=1e-9)
+
+
+def test_factory_name_and_refusals():
+    sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=6"])
+    system = System.from_scenario(sc)
+    pol = make_policy("lookahead", system)
+    assert isinstance(pol, LookaheadPolicy) and pol.name.startswith("lookahead[bound[")
+    with pytest.raises(PolicyError, match="SeparableGreedyPolicy"):
+        LookaheadPolicy(GreedyPolicy(system))
+    with pytest.raises(PolicyError, match="tau"):
+        pol.act(np.array([[0, 1]]), np.array([0]))

@@ -1,0 +1,138 @@
+r"""The two-step lookahead policy: one step of value iteration on a separable value function,
+then greedy.
+
+With separable value tables h(s) ~ sum_k h_k(tau_k, column_k(C)) (a bound's, or the paper's
+suboptimal policy's), the greedy policy (:class:`~wncs_lp.policies.suboptimal.SeparableGreedyPolicy`)
+minimises E[h(s')]. The lookahead policy minimises instead
+
+.. math:: Q_2(s, a) = \sum_o P(o \mid C, a) \Bigl[c(s'_o) + \min_{a'} \sum_{o'} P(o' \mid C'_o, a')
+          h(s''_{o,o'})\Bigr] = \sum_o P(o \mid C, a)\, (T h)(s'_o),
+
+the greedy policy on T h, one Bellman step of h (equivalently: the rollout of the greedy policy
+for one step, with h as terminal value). Where h is exact (h = h*) both are optimal; where h
+is a relaxation's approximation, T h is closer to the optimal bias in the sup-norm span
+(contraction over the step), at A x O times the greedy's work per state. The inner minimum is
+the greedy's value at s'_o, read from the same precomputed tables W_k[C', a', tau'_k]
+(:func:`~wncs_lp.policies.suboptimal.separable_table`): per state the policy makes
+sum_{a, o} A(C'_o) N lookups, in a numba kernel (:mod:`~wncs_lp.bounds.lookahead_kernels`).
+Ties go to the first action.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from ..errors import PolicyError
+from ..models.system import System
+from ..policies.base import Policy
+from ..policies.suboptimal import SeparableGreedyPolicy
+from .policy import TABLE_MAX_BYTES, GroupBoundPolicy
+
+__all__ = ["LookaheadPolicy", "lookahead_policy"]
+
+#: States per call of the kernel from which it runs threaded (:func:`wncs_lp.solvers.threads.resolve_threads`).
+PARALLEL_MIN_STATES = 20_000
+
+
+def _kernels() -> Any:
+    try:
+        from . import lookahead_kernels
+    except ImportError as exc:  # numba missing
+        raise PolicyError(f"the lookahead policy needs numba ({exc})") from None
+    return lookahead_kernels
+
+
+class LookaheadPolicy(Policy):
+    """The greedy policy on T h for the value function of a greedy policy on tables (module docstring).
+
+    Parameters
+    ----------
+    base : SeparableGreedyPolicy or GroupBoundPolicy
+        A greedy policy on separable tables (a bound's :class:`~wncs_lp.bounds.BoundPolicy`, the
+        paper's :class:`~wncs_lp.policies.suboptimal.SuboptimalPolicy`, ...) or on a grouped
+        bound's group tables (:class:`~wncs_lp.bounds.GroupBoundPolicy`, every group's lookahead
+        table precomputed). Its tables are moved into one flat array that the base then reads
+        through views: no second copy.
+    threads : int, optional
+        Kernel threads (default: every usable core from :data:`PARALLEL_MIN_STATES` states a call,
+        one below).
+
+    Attributes
+    ----------
+    base : Policy
+    build_seconds : float
+    """
+
+    def __init__(self, base: SeparableGreedyPolicy | GroupBoundPolicy, threads: int | None = None):
+        if not isinstance(base, (SeparableGreedyPolicy, GroupBoundPolicy)):
+            raise PolicyError(f"the lookahead policy works on a greedy policy of separable or group tables "
+                              f"(SeparableGreedyPolicy, GroupBoundPolicy), got {type(base).__name__}")
+        super().__init__(base.system)
+        t0 = time.perf_counter()
+        self.kernels = _kernels()
+        s = self.system
+        self.base = base
+        self.name = f"lookahead[{base.name}]"
+        self.threads = threads
+        caps = np.asarray(s.caps, np.int64)
+        if isinstance(base, SeparableGreedyPolicy):
+            blocks = [(k,) for k in range(s.n_processes)]
+            tables = list(base.tables)
+            row = np.arange(s.n_configs * s.max_actions, dtype=np.int64)  # W_k[c, a, t]: row c * A + a
+        else:
+            blocks = [tuple(g) for g in base.tables.groups]
+            tables = list(base.lookahead)
+            if any(t is None for t in tables):
+                raise PolicyError("the lookahead policy needs every group's lookahead table; a group of this bound "
+                                  f"is too large for one (over {TABLE_MAX_BYTES:,} bytes)")
+            row = np.maximum(base.pair_row, 0).reshape(-1)  # W_G[pair, t_G]: the valid pair's row
+        sizes = [t.size for t in tables]
+        flat = np.empty(sum(sizes))
+        woff = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        views = []
+        for t, o in zip(tables, woff):
+            flat[o:o + t.size] = t.ravel()
+            views.append(flat[o:o + t.size].reshape(t.shape))
+        if isinstance(base, SeparableGreedyPolicy):
+            base.tables = tuple(views)
+        else:
+            base.lookahead = tuple(views)
+        width = np.array([int(np.prod([caps[k] for k in g])) for g in blocks], np.int64)
+        members = np.array([k for g in blocks for k in g], np.int64)
+        mptr = np.concatenate([[0], np.cumsum([len(g) for g in blocks])]).astype(np.int64)
+        stride = np.array([int(np.prod([caps[k] for k in g[i + 1:]])) for g in blocks for i in range(len(g))],
+                          np.int64)
+        ot = s.outcome_tables
+        q = np.zeros((s.n_processes, int(caps.max())))
+        for k, qk in enumerate(s.q):
+            q[k, : qk.size] = qk
+        self._caps = caps
+        self._args = (np.asarray(s.n_actions, np.int64), ot.nxt, ot.delta, ot.prob, caps, q, flat, woff, width, row,
+                      mptr, members, stride)
+        self.build_seconds = time.perf_counter() - t0 + getattr(base, "build_seconds", 0.0)
+
+    def act(self, tau, config_ids, rng=None):
+        from ..solvers.threads import resolve_threads, run_parallel
+
+        tau, c = self._check_inputs(tau, config_ids)
+        if tau.shape[1] != self._caps.size or np.any(tau < 1) or np.any(tau > self._caps):
+            raise PolicyError(f"policy {self.name}: tau must have {self._caps.size} columns in 1..tau_hat = "
+                              f"{self._caps.tolist()}")
+        out = np.empty(c.size, dtype=np.int64)
+        args = (np.ascontiguousarray(tau), np.ascontiguousarray(c), *self._args, out)
+        threads = resolve_threads(self.threads, None if c.size >= PARALLEL_MIN_STATES else 0)
+        if threads > 1:
+            run_parallel(self.kernels.lookahead_par, threads, *args)
+        else:
+            self.kernels.lookahead_ser(*args)
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        return {**super().describe(), "base": self.base.describe(), "build_seconds": self.build_seconds}
+
+
+def lookahead_policy(base: SeparableGreedyPolicy | GroupBoundPolicy, threads: int | None = None) -> LookaheadPolicy:
+    """The two-step lookahead policy on a greedy policy's tables."""
+    return LookaheadPolicy(base, threads)
