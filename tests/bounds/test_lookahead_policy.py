@@ -55,14 +55,15 @@ def test_act_is_the_argmin_of_the_two_step_lookahead(name):
 
 
 def test_act_on_group_tables():
-    system = System.from_scenario(shape("3x3"))
-    res = grouped_bound(system, [(0, 2), (1,)])
+    # both processes in one group: a table over (tau_1, tau_2, C_G), read through C-order strides
+    system = System.from_scenario(shape("paper"))
+    res = grouped_bound(system, [(0, 1)])
     pol = LookaheadPolicy(bound_policy(res, system))
-    _check_argmin(system, pol, res.tables.groups, res.tables.h, res.tables.column, n=80)
+    _check_argmin(system, pol, res.tables.groups, res.tables.h, res.tables.column, n=60)
 
 
 def test_gain_by_two_exact_evaluators_and_against_the_optimum():
-    sc = load_scenario(scenario_path("paper_p1234"), ["tau_cap=6"])
+    sc = load_scenario(scenario_path("paper_p123"), ["tau_cap=6"])
     system = System.from_scenario(sc)
     greedy = bound_policy(private_bound(system), system)
     pol = LookaheadPolicy(greedy)
@@ -101,3 +102,19 @@ def test_factory_name_and_refusals():
         LookaheadPolicy(GreedyPolicy(system))
     with pytest.raises(PolicyError, match="tau"):
         pol.act(np.array([[0, 1]]), np.array([0]))
+
+
+def test_policy_gaps_by_name_and_the_best_row():
+    from wncs_lp.bounds import policy_gaps
+
+    sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=6"])
+    system = System.from_scenario(sc)
+    res = private_bound(system)
+    report = policy_gaps(res, system, ["bound", "lookahead", "index"])
+    mdp = build(sc)
+    names = [r.policy for r in report.rows]
+    assert names[1] == "lookahead[bound[private-servers]]" and names[2] == "index"
+    assert report.rows[1].gain == pytest.approx(evaluate(mdp, LookaheadPolicy(bound_policy(res, system))).gain,
+                                                rel=1e-8)
+    assert report.best.gain_upper == min(r.gain_upper for r in report.rows)
+    assert report.summary()["best"] == report.best.policy

@@ -47,7 +47,7 @@ from .result import BoundResult
 __all__ = ["PolicyGap", "GapReport", "policy_gaps", "DEFAULT_POLICIES", "EXACT_MAX_STATES"]
 
 #: The policies :func:`policy_gaps` evaluates by default.
-DEFAULT_POLICIES = ("bound", "suboptimal", "static", "greedy")
+DEFAULT_POLICIES = ("bound", "lookahead", "suboptimal", "static", "greedy")
 #: Largest AoI box (states of the matrix-free layout) evaluated exactly by default.
 EXACT_MAX_STATES = 50_000_000
 

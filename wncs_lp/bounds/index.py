@@ -281,7 +281,8 @@ def chain_index(chain: PrivateChain, lam: np.ndarray, m: int, *, tol: float = IN
                           f"{max_solves} priced solves (at price {x:.6g} of [{x_lo:.6g}, {x_hi:.6g}])")
     clipped_hi = int(np.sum(w.can_send & sign))  # still sending at x_hi
     last[w.can_send & np.isnan(last)] = x_lo
-    return {"index": last, "reversals": int(reversals.sum()), "clipped": clipped_lo + clipped_hi,
+    return {"index": last, "reversals": int(reversals.sum()), "reversal_states": np.flatnonzero(reversals),
+            "clipped": clipped_lo + clipped_hi,
             "bracket": (x_lo, x_hi), "solves": w.solves}
 
 

@@ -106,6 +106,7 @@ def _print(scenario, res, report) -> None:
     for r in report.rows:
         print(f"  {r.policy:<{w}} {r.gain:>16.10g} {r.gain_upper:>16.10g} {100 * r.gap:>8.3f}%")
     print("  gap = (upper - lower bound) / lower bound, an upper bound on (g_pi - g*) / g*")
+    print(f"  best: {report.best.policy} (the least upper value)")
     from ..intervals import AGREEMENT_LEVEL
 
     for r in report.rows:
@@ -135,9 +136,10 @@ def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy", action="store_true",
                    help="also evaluate the bound's greedy policy and the --compare policies, with the certified "
                         "optimality gap of each")
-    p.add_argument("--compare", default="suboptimal,static,greedy", metavar="NAMES",
-                   help="policies evaluated with --policy besides the bound's (default suboptimal,static,greedy; "
-                        "'' for none)")
+    p.add_argument("--compare", default="lookahead,suboptimal,static,greedy", metavar="NAMES",
+                   help="policies evaluated with --policy besides the bound's greedy one (default "
+                        "lookahead,suboptimal,static,greedy; lookahead: the two-step lookahead on the bound's tables, "
+                        "index: the Whittle-type index policy of relaxation 1's chains; '' for none)")
     p.add_argument("--exact-max-states", type=int, default=50_000_000, metavar="N",
                    help="evaluate exactly (certified matrix-free evaluation) when the AoI box has at most N states, "
                         "else by Monte Carlo (default 50000000; 0: always Monte Carlo)")

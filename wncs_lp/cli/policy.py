@@ -18,8 +18,9 @@ def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
         "process), best_static (the best static assignment, by exact evaluation), greedy (the process of largest "
         "current cost first, to its shortest-loop server), random (uniform over the feasible actions), max_age "
         "(the process of largest AoI first), max_weight (the process whose update removes the most expected cost "
-        "first), round_robin (the processes in turn; a policy with memory) or relaxation (the greedy policy of the "
-        "certified lower bound); docs/policies.md",
+        "first), round_robin (the processes in turn; a policy with memory), relaxation (the greedy policy of the "
+        "certified lower bound), lookahead (the two-step lookahead on the bound's tables) or index (the "
+        "Whittle-type index policy of relaxation 1's priced chains); docs/policies.md",
     )
     add_method_arg(p, "solver of the optimal policy")
     p.add_argument(
