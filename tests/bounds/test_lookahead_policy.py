@@ -118,3 +118,29 @@ def test_policy_gaps_by_name_and_the_best_row():
                                                 rel=1e-8)
     assert report.best.gain_upper == min(r.gain_upper for r in report.rows)
     assert report.summary()["best"] == report.best.policy
+
+
+def test_candidates_restrict_the_lookahead_to_the_greedy_best():
+    system = System.from_scenario(shape("three-servers"))
+    res = private_bound(system)
+    greedy = bound_policy(res, system)
+    rng = np.random.default_rng(4)
+    tau = np.stack([rng.integers(1, int(system.caps[k]) + 1, 200) for k in range(system.n_processes)], axis=1)
+    cfg = rng.integers(0, system.n_configs, 200)
+    # one candidate: the greedy policy's own action
+    assert np.array_equal(LookaheadPolicy(greedy, candidates=1).act(tau, cfg), greedy.act(tau, cfg))
+    # as many as any configuration has: the full lookahead
+    full = LookaheadPolicy(bound_policy(res, system))
+    assert np.array_equal(LookaheadPolicy(bound_policy(res, system), candidates=system.max_actions).act(tau, cfg),
+                          full.act(tau, cfg))
+    # two: the two-step argmin over the two actions of least greedy value
+    assert system.max_actions > 2
+    two = LookaheadPolicy(bound_policy(res, system), candidates=2).act(tau, cfg)
+    groups = [(k,) for k in range(system.n_processes)]
+    for r in range(60):
+        g = greedy.values(tau[r:r + 1], cfg[r:r + 1])[0][: system.n_actions[cfg[r]]]
+        best2 = np.sort(np.argsort(g, kind="stable")[:2])
+        v = brute_two_step(system, groups, res.tables.h, res.tables.column, tau[r], int(cfg[r]))
+        assert two[r] == best2[np.argmin(v[best2])]
+    with pytest.raises(PolicyError, match="candidates"):
+        LookaheadPolicy(greedy, candidates=0)

@@ -19,6 +19,7 @@ Ties go to the first action.
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -55,6 +56,9 @@ class LookaheadPolicy(Policy):
         bound's group tables (:class:`~wncs_lp.bounds.GroupBoundPolicy`, every group's lookahead
         table precomputed). Its tables are moved into one flat array that the base then reads
         through views: no second copy.
+    candidates : int, optional
+        Evaluate the two-step value only for the ``candidates`` actions of least greedy value in
+        each state (ties: the first); default every action (the exact two-step lookahead).
     threads : int, optional
         Kernel threads (default: every usable core from :data:`PARALLEL_MIN_STATES` states a call,
         one below).
@@ -62,55 +66,62 @@ class LookaheadPolicy(Policy):
     Attributes
     ----------
     base : Policy
+    candidates : int or None
     build_seconds : float
     """
 
-    def __init__(self, base: SeparableGreedyPolicy | GroupBoundPolicy, threads: int | None = None):
+    def __init__(self, base: SeparableGreedyPolicy | GroupBoundPolicy, candidates: int | None = None,
+                 threads: int | None = None):
         if not isinstance(base, (SeparableGreedyPolicy, GroupBoundPolicy)):
             raise PolicyError(f"the lookahead policy works on a greedy policy of separable or group tables "
                               f"(SeparableGreedyPolicy, GroupBoundPolicy), got {type(base).__name__}")
+        if candidates is not None and not (isinstance(candidates, (int, np.integer)) and candidates >= 1):
+            raise PolicyError(f"candidates must be a whole number >= 1 (or None: every action), got {candidates!r}")
         super().__init__(base.system)
         t0 = time.perf_counter()
         self.kernels = _kernels()
         s = self.system
         self.base = base
-        self.name = f"lookahead[{base.name}]"
+        self.candidates = None if candidates is None else int(candidates)
+        self.name = f"lookahead[{base.name}]" if candidates is None else f"lookahead{int(candidates)}[{base.name}]"
         self.threads = threads
         caps = np.asarray(s.caps, np.int64)
+        nC, A = s.n_configs, s.max_actions
         if isinstance(base, SeparableGreedyPolicy):
             blocks = [(k,) for k in range(s.n_processes)]
             tables = list(base.tables)
-            row = np.arange(s.n_configs * s.max_actions, dtype=np.int64)  # W_k[c, a, t]: row c * A + a
+            row = np.arange(nC * A, dtype=np.int64)  # W_k[c, a, t]: row c * A + a
         else:
             blocks = [tuple(g) for g in base.tables.groups]
             tables = list(base.lookahead)
             if any(t is None for t in tables):
                 raise PolicyError("the lookahead policy needs every group's lookahead table; a group of this bound "
                                   f"is too large for one (over {TABLE_MAX_BYTES:,} bytes)")
-            row = np.maximum(base.pair_row, 0).reshape(-1)  # W_G[pair, t_G]: the valid pair's row
-        sizes = [t.size for t in tables]
-        flat = np.empty(sum(sizes))
-        woff = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-        views = []
-        for t, o in zip(tables, woff):
-            flat[o:o + t.size] = t.ravel()
-            views.append(flat[o:o + t.size].reshape(t.shape))
-        if isinstance(base, SeparableGreedyPolicy):
-            base.tables = tuple(views)
-        else:
-            base.lookahead = tuple(views)
-        width = np.array([int(np.prod([caps[k] for k in g])) for g in blocks], np.int64)
+            row = np.maximum(base.pair_row, 0).reshape(-1)  # W_G[pair, t_G]: the feasible pair's row
+        W, off = _flatten(base, tables)
+        B = len(blocks)
+        width = np.array([math.prod(int(caps[k]) for k in g) for g in blocks], np.int64)
         members = np.array([k for g in blocks for k in g], np.int64)
         mptr = np.concatenate([[0], np.cumsum([len(g) for g in blocks])]).astype(np.int64)
-        stride = np.array([int(np.prod([caps[k] for k in g[i + 1:]])) for g in blocks for i in range(len(g))],
+        stride = np.array([math.prod(int(caps[k]) for k in g[i + 1:]) for g in blocks for i in range(len(g))],
                           np.int64)
+        # pairs in the padded layout p = c * A + j; joint tables: every block corrected on every pair
         ot = s.outcome_tables
+        O = ot.nxt.shape[2]
+        first = np.arange(nC, dtype=np.int64) * A
+        deltas, delta = np.unique(ot.delta.reshape(-1, s.n_processes), axis=0, return_inverse=True)
+        base_row = np.full((B, nC), -1, np.int64)
+        corr_ptr = np.arange(0, nC * A * B + 1, B, dtype=np.int64)
+        corr_block = np.tile(np.arange(B, dtype=np.int64), nC * A)
+        corr_row = np.repeat(row, B)
         q = np.zeros((s.n_processes, int(caps.max())))
         for k, qk in enumerate(s.q):
             q[k, : qk.size] = qk
         self._caps = caps
-        self._args = (np.asarray(s.n_actions, np.int64), ot.nxt, ot.delta, ot.prob, caps, q, flat, woff, width, row,
-                      mptr, members, stride)
+        self._args = (first, np.asarray(s.n_actions, np.int64), ot.nxt.reshape(-1, O),
+                      np.asarray(delta, np.int64).reshape(-1, O), np.ascontiguousarray(deltas, dtype=np.int64),
+                      ot.prob.reshape(-1, O), caps, q, W, off, width, mptr, members, stride, base_row, corr_ptr,
+                      corr_block, corr_row, -1 if self.candidates is None else self.candidates, int(A))
         self.build_seconds = time.perf_counter() - t0 + getattr(base, "build_seconds", 0.0)
 
     def act(self, tau, config_ids, rng=None):
@@ -130,9 +141,27 @@ class LookaheadPolicy(Policy):
         return out
 
     def describe(self) -> dict[str, Any]:
-        return {**super().describe(), "base": self.base.describe(), "build_seconds": self.build_seconds}
+        return {**super().describe(), "base": self.base.describe(), "candidates": self.candidates,
+                "build_seconds": self.build_seconds}
 
 
-def lookahead_policy(base: SeparableGreedyPolicy | GroupBoundPolicy, threads: int | None = None) -> LookaheadPolicy:
+def _flatten(base: Policy, tables: list) -> tuple[np.ndarray, np.ndarray]:
+    """The base policy's tables as one flat array and each one's offset; the base keeps views."""
+    sizes = [t.size for t in tables]
+    flat = np.empty(sum(sizes))
+    off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    views = []
+    for t, o in zip(tables, off):
+        flat[o:o + t.size] = t.ravel()
+        views.append(flat[o:o + t.size].reshape(t.shape))
+    if isinstance(base, SeparableGreedyPolicy):
+        base.tables = tuple(views)
+    else:
+        base.lookahead = tuple(views)
+    return flat, off
+
+
+def lookahead_policy(base: SeparableGreedyPolicy | GroupBoundPolicy, candidates: int | None = None,
+                     threads: int | None = None) -> LookaheadPolicy:
     """The two-step lookahead policy on a greedy policy's tables."""
-    return LookaheadPolicy(base, threads)
+    return LookaheadPolicy(base, candidates, threads)
