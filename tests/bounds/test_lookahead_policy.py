@@ -73,7 +73,7 @@ def test_gain_by_two_exact_evaluators_and_against_the_optimum():
     assert mf.gain_lower - 1e-9 * mf.gain <= exact.gain <= mf.gain_upper + 1e-9 * mf.gain
     opt = solve(mdp)
     assert exact.gain >= opt.gain_lower * (1 - 1e-9)
-    # the greedy policy's tables are left intact (the lookahead reads them through views)
+    # the greedy policy is left intact by the lookahead built on it
     assert np.array_equal(greedy.on_mdp(mdp), bound_policy(private_bound(system), system).on_mdp(mdp))
 
 

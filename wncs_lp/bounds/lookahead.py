@@ -54,8 +54,8 @@ class LookaheadPolicy(Policy):
         A greedy policy on separable tables (a bound's :class:`~wncs_lp.bounds.BoundPolicy`, the
         paper's :class:`~wncs_lp.policies.suboptimal.SuboptimalPolicy`, ...) or on a grouped
         bound's group tables (:class:`~wncs_lp.bounds.GroupBoundPolicy`, every group's lookahead
-        table precomputed). Its tables are moved into one flat array that the base then reads
-        through views: no second copy.
+        table precomputed). Its tables are copied into one flat array, each configuration's
+        entries AoI-major (the values of its actions at one AoI vector contiguous).
     candidates : int, optional
         Evaluate the two-step value only for the ``candidates`` actions of least greedy value in
         each state (ties: the first); default every action (the exact two-step lookahead).
@@ -86,42 +86,40 @@ class LookaheadPolicy(Policy):
         self.name = f"lookahead[{base.name}]" if candidates is None else f"lookahead{int(candidates)}[{base.name}]"
         self.threads = threads
         caps = np.asarray(s.caps, np.int64)
-        nC, A = s.n_configs, s.max_actions
+        valid = s.action_valid
+        c_of, j_of = np.nonzero(valid)  # the feasible pairs, configuration-major: p = first[c] + j
+        count = np.asarray(s.n_actions, np.int64)
+        first = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
         if isinstance(base, SeparableGreedyPolicy):
             blocks = [(k,) for k in range(s.n_processes)]
-            tables = list(base.tables)
-            row = np.arange(nC * A, dtype=np.int64)  # W_k[c, a, t]: row c * A + a
+            rows = [t[c_of, j_of] for t in base.tables]  # (P, tau_hat_k)
         else:
             blocks = [tuple(g) for g in base.tables.groups]
-            tables = list(base.lookahead)
-            if any(t is None for t in tables):
+            if any(t is None for t in base.lookahead):
                 raise PolicyError("the lookahead policy needs every group's lookahead table; a group of this bound "
                                   f"is too large for one (over {TABLE_MAX_BYTES:,} bytes)")
-            row = np.maximum(base.pair_row, 0).reshape(-1)  # W_G[pair, t_G]: the feasible pair's row
-        W, off = _flatten(base, tables)
-        B = len(blocks)
+            rows = [t[base.pair_row[c_of, j_of]] for t in base.lookahead]  # (P, prod tau_hat_G)
         width = np.array([math.prod(int(caps[k]) for k in g) for g in blocks], np.int64)
+        off = np.concatenate([[0], np.cumsum(width * c_of.size)[:-1]]).astype(np.int64)
+        W = np.empty(int(np.sum(width)) * c_of.size)
+        for b, (r, w) in enumerate(zip(rows, width)):  # AoI-major within each configuration
+            dst = off[b] + (first[c_of] * w)[:, None] + np.arange(w)[None, :] * count[c_of][:, None] + j_of[:, None]
+            W[dst] = r
         members = np.array([k for g in blocks for k in g], np.int64)
         mptr = np.concatenate([[0], np.cumsum([len(g) for g in blocks])]).astype(np.int64)
         stride = np.array([math.prod(int(caps[k]) for k in g[i + 1:]) for g in blocks for i in range(len(g))],
                           np.int64)
-        # pairs in the padded layout p = c * A + j; joint tables: every block corrected on every pair
         ot = s.outcome_tables
         O = ot.nxt.shape[2]
-        first = np.arange(nC, dtype=np.int64) * A
-        deltas, delta = np.unique(ot.delta.reshape(-1, s.n_processes), axis=0, return_inverse=True)
-        base_row = np.full((B, nC), -1, np.int64)
-        corr_ptr = np.arange(0, nC * A * B + 1, B, dtype=np.int64)
-        corr_block = np.tile(np.arange(B, dtype=np.int64), nC * A)
-        corr_row = np.repeat(row, B)
+        deltas, delta = np.unique(ot.delta[c_of, j_of].reshape(-1, s.n_processes), axis=0, return_inverse=True)
         q = np.zeros((s.n_processes, int(caps.max())))
         for k, qk in enumerate(s.q):
             q[k, : qk.size] = qk
         self._caps = caps
-        self._args = (first, np.asarray(s.n_actions, np.int64), ot.nxt.reshape(-1, O),
+        self._args = (first, count, np.ascontiguousarray(ot.nxt[c_of, j_of]),
                       np.asarray(delta, np.int64).reshape(-1, O), np.ascontiguousarray(deltas, dtype=np.int64),
-                      ot.prob.reshape(-1, O), caps, q, W, off, width, mptr, members, stride, base_row, corr_ptr,
-                      corr_block, corr_row, -1 if self.candidates is None else self.candidates, int(A))
+                      np.ascontiguousarray(ot.prob[c_of, j_of]), caps, q, W, off, width, mptr, members, stride,
+                      -1 if self.candidates is None else self.candidates, int(s.max_actions))
         self.build_seconds = time.perf_counter() - t0 + getattr(base, "build_seconds", 0.0)
 
     def act(self, tau, config_ids, rng=None):
@@ -143,22 +141,6 @@ class LookaheadPolicy(Policy):
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "base": self.base.describe(), "candidates": self.candidates,
                 "build_seconds": self.build_seconds}
-
-
-def _flatten(base: Policy, tables: list) -> tuple[np.ndarray, np.ndarray]:
-    """The base policy's tables as one flat array and each one's offset; the base keeps views."""
-    sizes = [t.size for t in tables]
-    flat = np.empty(sum(sizes))
-    off = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-    views = []
-    for t, o in zip(tables, off):
-        flat[o:o + t.size] = t.ravel()
-        views.append(flat[o:o + t.size].reshape(t.shape))
-    if isinstance(base, SeparableGreedyPolicy):
-        base.tables = tuple(views)
-    else:
-        base.lookahead = tuple(views)
-    return flat, off
 
 
 def lookahead_policy(base: SeparableGreedyPolicy | GroupBoundPolicy, candidates: int | None = None,
