@@ -44,7 +44,7 @@ from .lookahead import LookaheadPolicy
 from .policy import bound_policy
 from .result import BoundResult
 
-__all__ = ["PolicyGap", "GapReport", "policy_gaps", "DEFAULT_POLICIES", "EXACT_MAX_STATES"]
+__all__ = ["PolicyGap", "GapReport", "policy_gaps", "policy_by_name", "DEFAULT_POLICIES", "EXACT_MAX_STATES"]
 
 #: The policies :func:`policy_gaps` evaluates by default.
 DEFAULT_POLICIES = ("bound", "lookahead", "suboptimal", "static", "greedy")
@@ -125,9 +125,11 @@ class GapReport:
                 "best": self.best.policy if self.rows else None, "seconds": self.seconds}
 
 
-def _policy(name: str | Policy, bound: BoundResult, system: System) -> Policy:
-    """A policy by name; ``bound`` and ``lookahead`` on this bound's tables, ``index`` priced from
-    relaxation 1 (this bound when it is relaxation 1's, else computed: seconds)."""
+def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Policy:
+    """A policy of a gap report by name: ``"bound"`` (the bound's greedy policy) and
+    ``"lookahead"`` on this bound's tables, ``"index"`` priced from relaxation 1 (this bound when
+    it is relaxation 1's, else computed: seconds), any other name by
+    :func:`wncs_lp.policies.make_policy`; a :class:`Policy` is returned as it is."""
     if isinstance(name, Policy):
         return name
     if name == "bound":
@@ -238,7 +240,7 @@ def policy_gaps(
     use_exact, n = _exact_route(system, exact, exact_max_states)
     rows = []
     for name in policies:
-        pol = _policy(name, bound, system)
+        pol = policy_by_name(name, bound, system)
         prog.phase(f"evaluating the {pol.name} policy " + ("exactly (matrix-free)" if use_exact else
                                                            f"by Monte Carlo ({reps} x {slots} slots)"))
         if use_exact:

@@ -52,15 +52,14 @@ def _untruncated(args: argparse.Namespace, res, system, report, compare: list[st
     """The interval for the optimum without the cap: the certified bound below (g*(cap) <= g*_inf),
     and with ``--untruncated`` the policies evaluated (the bound's alone without ``--policy``)
     simulated without the cap, the least upper confidence limit above."""
-    from ..bounds import bound_policy
-    from ..policies import make_policy
+    from ..bounds.gaps import policy_by_name
     from ..untruncated import untruncated_interval
 
     lower_from = f"the certified lower bound ({res.relaxation})"
     if not args.untruncated:
         return untruncated_interval(res.lower_bound, lower_from=lower_from)
     names = ["bound", *compare] if report is not None else ["bound"]
-    policies = [bound_policy(res, system) if n == "bound" else make_policy(n, system) for n in names]
+    policies = [policy_by_name(n, res, system) for n in names]
     prog.phase(f"simulating {', '.join(p.name for p in policies)} without the AoI cap ({args.reps} x {args.slots} "
                f"slots each, seed {args.seed})")
     return untruncated_interval(res.lower_bound, policies, lower_from=lower_from, slots=args.slots, reps=args.reps,
