@@ -116,6 +116,10 @@ def shape(name: str):
                    {"name": "b", "uplink_delay": 1, "downlink_delay": 1, "slots_per_dimension": 1},
                    {"name": "c", "uplink_delay": 2, "downlink_delay": 0, "processing_time": [1, 3, 2]}]
         model = {"kind": "wncs", "tau_cap": 5}
+    elif name == "one-idle":  # one process on one server, idling allowed: relaxation 1 is the system
+        procs = [{"A": [[1.1]]}]
+        servers = [{"name": "edge", "uplink_delay": 1, "downlink_delay": 0, "processing_time": [2]}]
+        model = {"kind": "wncs", "tau_cap": 12, "allow_idle": True}
     elif name != "paper":
         raise KeyError(name)
     return scenario_from_dict({"model": model, "channel": {"success_probability": 0.9}, "process": procs,

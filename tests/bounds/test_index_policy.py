@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from bounds_reference import shape
 
 from wncs_lp import scenario_path
 from wncs_lp.bounds import IndexPolicy, private_bound, whittle_indices
@@ -16,7 +17,7 @@ from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.policies import make_policy
-from wncs_lp.scenario import load_scenario, scenario_from_dict
+from wncs_lp.scenario import load_scenario
 from wncs_lp.solvers import solve
 from wncs_lp.solvers.matrix_free import matrix_free_evaluate
 
@@ -120,12 +121,7 @@ def test_the_index_policy_is_optimal_when_the_relaxation_is_the_system():
     # one process on one server with idling allowed: the capacity constraint never binds
     # (lambda* = 0), the private chain is the system, and sending when the index exceeds 0 is
     # sending when it is optimal
-    sc = scenario_from_dict({
-        "model": {"kind": "wncs", "tau_cap": 12, "allow_idle": True},
-        "channel": {"success_probability": 0.8},
-        "process": [{"A": [[1.1]]}],
-        "server": [{"name": "edge", "uplink_delay": 1, "downlink_delay": 0, "processing_time": [2]}],
-    }, source="<one>")
+    sc = shape("one-idle")
     system = System.from_scenario(sc)
     ix = whittle_indices(system)
     assert ix.indexable

@@ -14,7 +14,7 @@ from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.policies import GreedyPolicy, make_policy
-from wncs_lp.scenario import load_scenario, scenario_from_dict
+from wncs_lp.scenario import load_scenario
 from wncs_lp.solvers import solve
 from wncs_lp.solvers.matrix_free import matrix_free_evaluate
 
@@ -80,12 +80,7 @@ def test_gain_by_two_exact_evaluators_and_against_the_optimum():
 def test_exact_tables_give_the_optimum():
     # one process on one server with idling allowed: relaxation 1 is the system itself at
     # lambda = 0, its table the optimal bias, and both the greedy and the lookahead policy optimal
-    sc = scenario_from_dict({
-        "model": {"kind": "wncs", "tau_cap": 12, "allow_idle": True},
-        "channel": {"success_probability": 0.8},
-        "process": [{"A": [[1.1]]}],
-        "server": [{"name": "edge", "uplink_delay": 1, "downlink_delay": 0, "processing_time": [2]}],
-    }, source="<one>")
+    sc = shape("one-idle")
     system = System.from_scenario(sc)
     mdp = build(sc)
     opt = solve(mdp)

@@ -133,9 +133,9 @@ class LookaheadPolicy(Policy):
         args = (np.ascontiguousarray(tau), np.ascontiguousarray(c), *self._args, out)
         threads = resolve_threads(self.threads, None if c.size >= PARALLEL_MIN_STATES else 0)
         if threads > 1:
-            run_parallel(self.kernels.lookahead_par, threads, *args)
+            run_parallel(self.kernels.lookahead, threads, *args)
         else:
-            self.kernels.lookahead_ser(*args)
+            self.kernels.lookahead_serial(*args)
         return out
 
     def describe(self) -> dict[str, Any]:

@@ -13,12 +13,14 @@ sum over blocks b (a process, or a group of processes) of one flat array's entri
 
 each configuration's entries are stored AoI-major, so the values of all its actions at one AoI
 vector are contiguous (the inner minimum reads one short run per block instead of one cache line
-per action). ``_par`` runs the loop over states with ``prange``.
+per action). ``lookahead`` runs the loop over states on numba's threads, ``lookahead_serial`` on one.
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit, prange
+
+from ..solvers.threads import twins
 
 
 @njit(inline="always")
@@ -96,24 +98,8 @@ def _decide(r, tau, cfg, first, count, nxt, delta, deltas, prob, caps, q, W, off
     out[r] = arg
 
 
-@njit(cache=True)
-def lookahead_ser(tau, cfg, first, count, nxt, delta, deltas, prob, caps, q, W, off, width, mptr, members, stride,
-                  k_cand, amax, out):
-    N = caps.size
-    t0 = np.empty(N, dtype=np.int64)
-    t1 = np.empty(N, dtype=np.int64)
-    tb = np.empty(off.size, dtype=np.int64)
-    gv = np.empty(amax)
-    v2 = np.empty(amax)
-    cand = np.empty(amax, dtype=np.int64)
-    for r in range(cfg.size):
-        _decide(r, tau, cfg, first, count, nxt, delta, deltas, prob, caps, q, W, off, width, mptr, members, stride,
-                k_cand, out, t0, t1, tb, gv, v2, cand)
-
-
-@njit(cache=True, parallel=True)
-def lookahead_par(tau, cfg, first, count, nxt, delta, deltas, prob, caps, q, W, off, width, mptr, members, stride,
-                  k_cand, amax, out):
+def _lookahead_body(tau, cfg, first, count, nxt, delta, deltas, prob, caps, q, W, off, width, mptr, members, stride,
+                    k_cand, amax, out):
     n = cfg.size
     N = caps.size
     chunk = 4096
@@ -127,3 +113,7 @@ def lookahead_par(tau, cfg, first, count, nxt, delta, deltas, prob, caps, q, W, 
         for r in range(blk * chunk, min(n, (blk + 1) * chunk)):
             _decide(r, tau, cfg, first, count, nxt, delta, deltas, prob, caps, q, W, off, width, mptr, members,
                     stride, k_cand, out, t0, t1, tb, gv, v2, cand)
+
+
+#: The kernel on numba's threads and on one (``prange`` then ``range``).
+lookahead, lookahead_serial = twins(_lookahead_body, "lookahead")
