@@ -139,3 +139,37 @@ def test_candidates_restrict_the_lookahead_to_the_greedy_best():
         assert two[r] == best2[np.argmin(v[best2])]
     with pytest.raises(PolicyError, match="candidates"):
         LookaheadPolicy(greedy, candidates=0)
+    with pytest.raises(PolicyError, match="depth"):
+        LookaheadPolicy(greedy, depth=4)
+
+
+def brute_three_step(system, groups, h, column, tau, c: int, middle: int) -> np.ndarray:
+    """sum_o P(o | C, a) [c(tau'_o) + min over the ``middle`` actions of least greedy value at s'_o
+    (ties: the first) of brute_two_step there], per feasible action of configuration c."""
+    out = []
+    for outs in system.automaton.outcomes[c]:
+        v = 0.0
+        for nxt, delta, p in outs:
+            nt = [min(tau[k] + 1, int(system.caps[k])) for k in range(system.n_processes)]
+            nt = np.array([min(t, delta[k]) if delta[k] > 0 else t for k, t in enumerate(nt)])
+            cost = sum(float(system.q[k][nt[k] - 1]) for k in range(system.n_processes))
+            g = brute_lookahead(system, groups, h, column, nt, nxt)
+            best = np.sort(np.argsort(g, kind="stable")[:middle])
+            v += p * (cost + brute_two_step(system, groups, h, column, nt, nxt)[best].min())
+        out.append(v)
+    return np.array(out)
+
+
+def test_depth_three_against_a_brute_force():
+    system = System.from_scenario(shape("three-servers"))
+    res = private_bound(system)
+    pol = LookaheadPolicy(bound_policy(res, system), depth=3, middle=2)
+    assert pol.name.startswith("lookahead3-m2[")
+    groups = [(k,) for k in range(system.n_processes)]
+    rng = np.random.default_rng(5)
+    tau = np.stack([rng.integers(1, int(system.caps[k]) + 1, 25) for k in range(system.n_processes)], axis=1)
+    cfg = rng.integers(0, system.n_configs, 25)
+    acts = pol.act(tau, cfg)
+    for r in range(25):
+        v = brute_three_step(system, groups, res.tables.h, res.tables.column, tau[r], int(cfg[r]), 2)
+        assert v[acts[r]] <= v.min() + 1e-9 * max(1.0, abs(v.min())), (tau[r], cfg[r], v, acts[r])

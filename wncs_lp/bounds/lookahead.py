@@ -57,8 +57,14 @@ class LookaheadPolicy(Policy):
         table precomputed). Its tables are copied into one flat array, each configuration's
         entries AoI-major (the values of its actions at one AoI vector contiguous).
     candidates : int, optional
-        Evaluate the two-step value only for the ``candidates`` actions of least greedy value in
+        Evaluate the lookahead value only for the ``candidates`` actions of least greedy value in
         each state (ties: the first); default every action (the exact two-step lookahead).
+    depth : {2, 3}
+        2 (default): the greedy policy on T h. 3: one step further, the greedy policy on T' T h with
+        T' the Bellman step restricted to the ``middle`` actions of least greedy value at the
+        intermediate state (about ``middle`` times the work of depth 2 a state).
+    middle : int
+        Actions tried at the intermediate state of depth 3 (default 3).
     threads : int, optional
         Kernel threads (default: every usable core from :data:`PARALLEL_MIN_STATES` states a call,
         one below).
@@ -71,19 +77,23 @@ class LookaheadPolicy(Policy):
     """
 
     def __init__(self, base: SeparableGreedyPolicy | GroupBoundPolicy, candidates: int | None = None,
-                 threads: int | None = None):
+                 threads: int | None = None, *, depth: int = 2, middle: int = 3):
         if not isinstance(base, (SeparableGreedyPolicy, GroupBoundPolicy)):
             raise PolicyError(f"the lookahead policy works on a greedy policy of separable or group tables "
                               f"(SeparableGreedyPolicy, GroupBoundPolicy), got {type(base).__name__}")
         if candidates is not None and not (isinstance(candidates, (int, np.integer)) and candidates >= 1):
             raise PolicyError(f"candidates must be a whole number >= 1 (or None: every action), got {candidates!r}")
+        if depth not in (2, 3) or not (isinstance(middle, (int, np.integer)) and middle >= 1):
+            raise PolicyError(f"depth must be 2 or 3 and middle a whole number >= 1, got {depth!r} and {middle!r}")
         super().__init__(base.system)
         t0 = time.perf_counter()
         self.kernels = _kernels()
         s = self.system
         self.base = base
         self.candidates = None if candidates is None else int(candidates)
-        self.name = f"lookahead[{base.name}]" if candidates is None else f"lookahead{int(candidates)}[{base.name}]"
+        self.depth, self.middle = int(depth), int(middle)
+        label = "lookahead" + ("" if depth == 2 else f"3-m{int(middle)}")
+        self.name = f"{label}[{base.name}]" if candidates is None else f"{label}-k{int(candidates)}[{base.name}]"
         self.threads = threads
         caps = np.asarray(s.caps, np.int64)
         valid = s.action_valid
@@ -119,7 +129,8 @@ class LookaheadPolicy(Policy):
         self._args = (first, count, np.ascontiguousarray(ot.nxt[c_of, j_of]),
                       np.asarray(delta, np.int64).reshape(-1, O), np.ascontiguousarray(deltas, dtype=np.int64),
                       np.ascontiguousarray(ot.prob[c_of, j_of]), caps, q, W, off, width, mptr, members, stride,
-                      -1 if self.candidates is None else self.candidates, int(s.max_actions))
+                      *_NONE, -1 if self.candidates is None else self.candidates, self.depth, self.middle,
+                      int(s.max_actions))
         self.build_seconds = time.perf_counter() - t0 + getattr(base, "build_seconds", 0.0)
 
     def act(self, tau, config_ids, rng=None):
@@ -140,10 +151,15 @@ class LookaheadPolicy(Policy):
 
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "base": self.base.describe(), "candidates": self.candidates,
-                "build_seconds": self.build_seconds}
+                "depth": self.depth, "middle": self.middle, "build_seconds": self.build_seconds}
+
+
+#: The stand-ins for the arrays of tables read through projections (the kernel tells joint tables by
+#: an empty ``idle``).
+_NONE = (np.zeros((0, 0), np.int64), np.zeros((0, 1), np.int64), np.zeros((0, 1), np.int64))
 
 
 def lookahead_policy(base: SeparableGreedyPolicy | GroupBoundPolicy, candidates: int | None = None,
-                     threads: int | None = None) -> LookaheadPolicy:
-    """The two-step lookahead policy on a greedy policy's tables."""
-    return LookaheadPolicy(base, candidates, threads)
+                     threads: int | None = None, *, depth: int = 2, middle: int = 3) -> LookaheadPolicy:
+    """The lookahead policy on a greedy policy's tables."""
+    return LookaheadPolicy(base, candidates, threads, depth=depth, middle=middle)
