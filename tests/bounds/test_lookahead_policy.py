@@ -66,7 +66,7 @@ def test_gain_by_two_exact_evaluators_and_against_the_optimum():
     sc = load_scenario(scenario_path("paper_p123"), ["tau_cap=6"])
     system = System.from_scenario(sc)
     greedy = bound_policy(private_bound(system), system)
-    pol = LookaheadPolicy(greedy)
+    pol = LookaheadPolicy(greedy, threads=1)  # the serial kernel only: one compilation in the tests
     mdp = build(sc)
     exact = evaluate(mdp, pol)
     mf = matrix_free_evaluate(system, pol)
