@@ -33,7 +33,7 @@ def test_replaced_cost_tables_are_honoured():
 
 def test_replaced_cost_tables_checked():
     plain = System.from_scenario(small_scenario("none"))
-    with pytest.raises(WncsError, match=r"process\[1\]\.cost\[3\].*nondecreasing"):
+    with pytest.raises(WncsError, match=r"System\.q\[0\]: .* nondecreasing table"):
         lower_bound(dataclasses.replace(plain, q=(np.array([1.0, 2, 1, 4, 5]), plain.q[1])), 1)
     with pytest.raises(WncsError, match=r"System\.q\[1\]: expected q_2\(1\.\.5\)"):
         lower_bound(dataclasses.replace(plain, q=(plain.q[0], plain.q[1][:3])), 1)

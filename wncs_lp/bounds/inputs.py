@@ -25,7 +25,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..errors import WncsError
+from ..errors import ScenarioError, WncsError
 from ..mdp import MAX_COST
 from ..models import Model, model_for
 from ..models.cost import cost_tables
@@ -55,9 +55,8 @@ def bound_system(obj: Any) -> System:
     ------
     WncsError
         Not a Scenario or System, or a System field that does not fit (named: ``System.caps``,
-        ``System.q[k]``, ``System.model``, ``System.automaton``, ``System.n_actions``); a
-        cost table that is not a valid scenario table (negative, decreasing: the scenario's
-        ``process[k].cost`` error).
+        ``System.q[k]``, ``System.model``, ``System.automaton``, ``System.n_actions``), among them
+        a cost table that is not a valid scenario cost table (negative, decreasing).
     """
     if isinstance(obj, Scenario):
         return System.from_scenario(obj)
@@ -126,7 +125,13 @@ def _with_costs(system: System) -> System:
     for k, table in enumerate(system.q):
         fields[f"process.{k + 1}.cost"] = [float(x) for x in np.asarray(table, float)]
         fields[f"process.{k + 1}.weight"] = 1.0
-    new = sc.replace(**fields)
+    try:
+        new = sc.replace(**fields)
+    except ScenarioError as exc:  # the tables of one's own, read as the scenario's cost tables
+        k = exc.field.split("]")[0].split("[")[-1] if exc.field.startswith("process[") else "?"
+        raise _refuse(f"System.q[{int(k) - 1 if k.isdigit() else k}]",
+                      f"the bounds honour cost tables of one's own as the processes' cost field "
+                      f"(docs/scenarios.md), which this one is not: {exc.expected}") from None
     model = model_for(new)
     model.__dict__["automaton"] = system.automaton  # Model.automaton is a cached property
     return System.from_automaton(new, system.automaton, model)
