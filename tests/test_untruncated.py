@@ -2,6 +2,8 @@
 confidence limit] against a closed form, and the coupling it rests on (docs/model.md)."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -120,3 +122,26 @@ def test_bound_states_the_interval_with_its_bound_below(capsys):
     iv = out["untruncated"]
     assert iv["lower"] == out["bound"]["lower_bound"] and iv["lower"] < iv["upper"]
     assert [c["policy"] for c in iv["candidates"]][1:] == ["greedy"]
+
+
+def test_no_upper_end_where_a_run_without_the_cap_would_under_report():
+    """Random arrivals: one process sent every slot on a U = D = 0, T = 1 server with p = 1 has AoI
+    1 + A, A geometric(lambda) (docs/model.md's closed form), so g_inf = 1 / lambda = 10 for the
+    AoI cost, while the capped system lumps the sensor's age at the cap (g*(3) = 2.71): a run
+    without the cap on its configurations would state g*_inf <= 2.72. A cost table stops at its
+    last value. Both: the certified lower end only, and the reason names the field."""
+    from wncs_lp.errors import ModelError
+
+    def one(**proc):
+        return scenario_from_dict({"model": {"kind": "wncs", "tau_cap": 3}, "process": [{"A": [[1.0]], **proc}],
+                                   "server": [{"uplink_delay": 0, "downlink_delay": 0, "processing_time": [1],
+                                               "p_up": 1.0, "p_down": 1.0}]})
+
+    for sc, field in ((one(cost="aoi", arrival_probability=0.1), "process[1].arrival_probability"),
+                      (one(cost=[1, 2, 3, 4]), "process[1].cost")):
+        run = solve_scenario(sc, "pi", need_mdp=True)
+        iv = untruncated_interval(run.solution.gain_lower, run.solution, run.mdp, slots=2_000, reps=4)
+        assert iv.lower == run.solution.gain_lower and not iv.upper < 10.0 and field in iv.message()
+        with pytest.raises(ModelError, match=re.escape(field)):
+            simulate_uncapped(run.solution, run.mdp, slots=100, reps=2)
+    assert untruncated_interval(1.0).note == ""

@@ -20,6 +20,12 @@ The upper end is only as good as the simulation: when (1 - p) rho(A)^2 approache
 untruncated cost has heavy tails (and beyond it an infinite mean), which a finite run
 under-reports; :attr:`UntruncatedInterval.max_tau` (the largest AoI the run reached) shows how
 far the run went past the cap.
+
+No upper end is simulated for a system with random arrivals or with a cost given as a table
+(:func:`uncapped_refusal` says why, naming the field): the capped system keeps the ages of the
+sensors' updates only up to the cap (``docs/model.md``, "Random arrivals"), so a run without the
+cap would deliver an old update with a smaller age than its true one and under-report the cost;
+and a table defines q only up to its last value. The lower end holds for both.
 """
 from __future__ import annotations
 
@@ -38,7 +44,7 @@ from .policies import ClippedPolicy, Policy, as_policy
 from .simulate import SimulationResult, simulate
 
 __all__ = ["UntruncatedInterval", "Candidate", "UncappedPolicy", "UnboundedCost", "simulate_uncapped",
-           "untruncated_interval"]
+           "untruncated_interval", "uncapped_refusal"]
 
 
 class UnboundedCost(ModelError):
@@ -48,6 +54,27 @@ class UnboundedCost(ModelError):
     def __init__(self, message: str, note: str):
         super().__init__(message)
         self.note = note
+
+
+def uncapped_refusal(scenario: Any) -> str:
+    """Why no policy can be simulated without the cap on ``scenario`` (empty when it can).
+
+    * random arrivals (``arrival_probability < 1``): the configurations keep a sensor's age and
+      the jobs' ages at send only up to a_k (lumped, ``docs/model.md``), exact for the capped model
+      only; without the cap a delivered old update would set the AoI to the cap instead of its true
+      age, a cost below the true one -- no upper end;
+    * a cost given as a table: q is defined only up to the table's last value, and the system
+      without the cap needs q at every AoI.
+    """
+    for k, pr in enumerate(scenario.processes, start=1):
+        if pr.has_arrivals:
+            return (f"process[{k}].arrival_probability = {pr.arrival_probability:g} ({pr.name}): with random "
+                    "arrivals the capped system keeps the sensors' and the jobs' ages only up to the cap, so a run "
+                    "without the cap cannot carry an old update's true age")
+        if pr.cost.family == "table":
+            return (f"process[{k}].cost ({pr.name}) is a table of {len(pr.cost.table)} values: the cost past AoI "
+                    f"{len(pr.cost.table)} is not defined, and the system without the cap needs it")
+    return ""
 
 
 class _GrowingCost:
@@ -92,6 +119,9 @@ class UncappedPolicy(ClippedPolicy):
     def __init__(self, policy: Policy, horizon: int):
         base = policy.system
         sc = base.scenario
+        why = uncapped_refusal(sc)
+        if why:
+            raise ModelError(f"{sc.source}: no run without the AoI cap: {why}")
         q = tuple(_GrowingCost(pr, max(2 * int(c), 64), sc.source) for pr, c in zip(sc.processes, base.caps))
         caps = np.full_like(base.caps, max(int(horizon), int(base.caps.max())))
         free = dataclasses.replace(base, caps=caps, q=q)
@@ -183,6 +213,8 @@ class UntruncatedInterval:
     candidates : tuple of Candidate
         Every policy simulated, in the order given.
     seconds : float
+    note : str
+        Why no policy was simulated although some were given (:func:`uncapped_refusal`), else empty.
     """
 
     lower: float
@@ -199,6 +231,7 @@ class UntruncatedInterval:
     caps: tuple[int, ...]
     candidates: tuple[Candidate, ...] = ()
     seconds: float = 0.0
+    note: str = ""
 
     @property
     def width(self) -> float:
@@ -206,6 +239,9 @@ class UntruncatedInterval:
 
     def message(self) -> str:
         """One line in words."""
+        if self.note:
+            return (f"untruncated optimum (no AoI cap): g*_inf >= {self.lower:.10g} ({self.lower_from}); no upper end: "
+                    f"{self.note}")
         if not self.candidates:
             return (f"untruncated optimum (no AoI cap): g*_inf >= {self.lower:.10g} ({self.lower_from}); no upper end "
                     "simulated")
@@ -244,7 +280,9 @@ def untruncated_interval(lower: float, policy: Any = None, mdp: Any = None, *, l
         The candidate(s) for the upper end (with ``mdp`` for a ``Solution``): usually the truncated
         optimum's policy, and the field's baselines beside it -- a policy optimal at a small cap can
         starve a process once its AoI passes the cap (it costs nothing more there), and then its
-        untruncated cost is unbounded. None: no upper end (+inf).
+        untruncated cost is unbounded. None: no upper end (+inf); none either, with
+        :attr:`UntruncatedInterval.note` saying why, on a system no run without the cap can
+        simulate (:func:`uncapped_refusal`: random arrivals, a cost table).
     lower_from : str, optional
         What ``lower`` is, for the message.
     slots, reps, seed, burn_in : int
@@ -269,6 +307,10 @@ def untruncated_interval(lower: float, policy: Any = None, mdp: Any = None, *, l
         raise SolverError("the upper end needs at least 2 replications (for its confidence limit)")
     many = isinstance(policy, (list, tuple))
     pols = [as_policy(p, mdp) for p in (policy if many else [policy])]
+    why = uncapped_refusal(pols[0].system.scenario) if pols else ""
+    if why:
+        return UntruncatedInterval(float(lower), float("inf"), lower_from, "", float("nan"), float("nan"), confidence,
+                                   0, 0, seed, (), (), (), time.perf_counter() - t0, why)
     t = float(sps.t.ppf(1.0 - (1.0 - confidence) / len(pols), reps - 1))
     cands = [_candidate(p, t, slots, reps, seed, burn_in, progress) for p in pols]
     best = min(range(len(cands)), key=lambda i: cands[i].upper)

@@ -24,7 +24,9 @@ from wncs_lp.scenario import scenario_from_dict
 from wncs_lp.simulate import simulate
 
 # three scalar processes of different growth and weight on a remote (U = D = 1) and an edge server
-# (U = D = 0), the edge's uplink worse than the remote's: the rankings differ from one another
+# (U = D = 0), the edge's uplinks per process (every process's shortest loop is the edge's, so the
+# max-weight index reads pu_{edge,k}: one link for all would give 16.62 instead of 15.82): the
+# rankings differ from one another
 RAW = {
     "model": {"kind": "wncs", "allow_idle": False, "distinct": True},
     "channel": {"success_probability": 0.8},
@@ -35,7 +37,8 @@ RAW = {
     ],
     "server": [
         {"name": "remote", "uplink_delay": 1, "downlink_delay": 1, "processing_time": [1, 1, 2]},
-        {"name": "edge", "uplink_delay": 0, "downlink_delay": 0, "processing_time": [2, 1, 2], "p_up": 0.6},
+        {"name": "edge", "uplink_delay": 0, "downlink_delay": 0, "processing_time": [2, 1, 2],
+         "p_up": [0.6, 0.95, 0.5]},
     ],
 }
 

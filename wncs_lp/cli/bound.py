@@ -43,7 +43,7 @@ def cmd_bound(args: argparse.Namespace) -> int:
                    "seconds": time.perf_counter() - t0})
     else:
         _print(scenario, res, report)
-        tail = "" if interval.candidates else " (--untruncated simulates the policies without the cap for one)"
+        tail = "" if interval.candidates or interval.note else " (--untruncated simulates the policies without the cap for one)"
         print(interval.message() + tail)
     return 0 if res.ok else 1
 

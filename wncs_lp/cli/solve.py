@@ -61,7 +61,7 @@ def _untruncated(args: argparse.Namespace, sol, mdp, prog):
 
 
 def _interval_line(interval) -> str:
-    tail = "" if interval.candidates else " (--untruncated simulates policies without the cap for one)"
+    tail = "" if interval.candidates or interval.note else " (--untruncated simulates policies without the cap for one)"
     return interval.message() + tail
 
 
