@@ -1,9 +1,13 @@
-"""Issue 17: the matrix-free certified solver against the stored-matrix one, and alone at scale.
+"""Issues 17 and 34: the matrix-free certified solver against the stored-matrix one, alone at
+scale, and its sweeps against the memory bandwidth (before / after a change, in one run).
 
     python benchmarks/matrix_free.py --out benchmarks/matrix_free.csv         # ~40 min on 2 cores
     python benchmarks/matrix_free.py --quick --out /tmp/mf.csv                # ~2 min
     python benchmarks/matrix_free.py --sections big --caps 20 --out /tmp/mf20.csv
     python benchmarks/matrix_free.py --sections big --caps 40 --policies "" --no-extrapolate   # largest
+    # sweeps and GB/s of this tree and of an older one (git archive <commit> | tar -x -C /tmp/base)
+    python benchmarks/matrix_free.py --sections sweeps --baseline /tmp/base \
+        --instances paper_p1234:20,paper_p1234:30,bounds_mix6:10 --out /tmp/sweeps.csv
 
 Sections (one CSV row per measurement, a table on stdout):
 
@@ -18,8 +22,19 @@ Sections (one CSV row per measurement, a table on stdout):
   the exact (certified) gains of the ``--policies`` (default suboptimal, static, greedy) by
   matrix-free policy evaluation, and their gaps to the optimum.
 
+* ``sweeps`` -- ``--instances`` (scenario:cap), each solved by ``matrix_free_value_iteration``
+  with its defaults (or ``--options``) in a fresh process per tree: this one and, with
+  ``--baseline DIR``, an older tree, in turn (A, B per instance, so a change of load hits both).
+  Each worker first measures the machine's copy bandwidth (``np.copyto`` of 400 MB, bytes read +
+  written, best of 5) and then solves; the row gives the passes over the layout (improvement
+  sweeps and certificates + evaluation sweeps), seconds per pass, the bytes a pass must move at
+  least (the value vector read and written, the policy byte written: 17 bytes a state) and the
+  GB/s that makes, beside the copy bandwidth: ``floor_ratio`` = seconds per pass / (bytes per
+  pass / copy bandwidth), the factor over the bandwidth floor. The ``ratio`` column of a
+  baseline row is baseline seconds / this tree's seconds.
+
 The machine is shared: every row records the 1-minute load average when it started (2 cores;
-a load above ~1 means another job competed for them).
+a load above ~1 means another job competed for them), and the CPU seconds of the worker.
 """
 from __future__ import annotations
 
@@ -35,7 +50,8 @@ import warnings
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+# a sweeps worker of another tree (--baseline) imports that tree's package
+sys.path.insert(0, os.environ.get("WNCS_LP_BENCH_TREE", str(ROOT)))
 
 import wncs_lp  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
@@ -47,7 +63,8 @@ from wncs_lp.solvers.matrix_free import (  # noqa: E402
 
 COLUMNS = ["section", "instance", "cap", "states", "method", "threads", "seconds", "seconds_to_1e-6", "sweeps",
            "eval_sweeps", "gain", "gain_lower", "gain_upper", "rel_gap", "gap_to_optimum", "ratio",
-           "peak_rss_gib", "load1", "status", "note"]
+           "peak_rss_gib", "load1", "status", "note", "tree", "cpu_seconds", "passes", "seconds_per_pass",
+           "bytes_per_pass", "gb_per_s", "copy_gb_per_s", "floor_ratio"]
 
 COMPARE = [("paper_p12", c) for c in (12, 16, 20, 24, 28, 32, 36, 40)] + \
           [("paper_p123", c) for c in (12, 14, 16, 18)] + [("paper_p1234", c) for c in (6, 8, 10)]
@@ -181,17 +198,96 @@ def big(caps, threads, tol, policies, extrapolate=True):
         cmd = [sys.executable, __file__, "--worker", str(cap), "--threads", str(threads), "--tol", str(tol),
                "--policies", ",".join(policies)] + ([] if extrapolate else ["--no-extrapolate"])
         print(f"big: processes 1-4 at cap {cap} (load {load1()}) ...", flush=True)
-        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None, text=True)
-        for line in proc.stdout.splitlines():
-            if line.startswith("{"):
-                r = json.loads(line)
+        for r in worker_rows(cmd):
+            rows.append(r)
+            print(f"  {r['method']:10s} gain {float(r['gain']):.9f} [{float(r['gain_lower']):.9f}, "
+                  f"{float(r['gain_upper']):.9f}] {r['seconds']} s (1e-6 at {r['seconds_to_1e-6']} s), "
+                  f"sweeps {r['sweeps']}, peak {r['peak_rss_gib']} GiB, gap {float(r['gap_to_optimum']):.4%}, "
+                  f"load {r['load1']}", flush=True)
+    return rows
+
+
+def worker_rows(cmd, **kw):
+    """The JSON rows a worker process prints on stdout (its stderr passes through), in order."""
+    proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None, text=True, **kw)
+    rows = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
+    if proc.returncode != 0:
+        print(f"  worker failed with exit code {proc.returncode}", flush=True)
+    return rows
+
+
+# ----------------------------------------------------------------------------- sweeps (worker)
+#: Bytes a pass must move per state at least: the float64 value read and written, the policy byte.
+FLOOR_BYTES_PER_STATE = 17
+
+
+def copy_bandwidth(nbytes=400 << 20, repeats=5) -> float:
+    """GB/s of ``np.copyto`` (bytes read + written), best of ``repeats``."""
+    import numpy as np
+
+    a = np.ones(nbytes // 8)
+    b = np.empty_like(a)
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.perf_counter()
+        np.copyto(b, a)
+        best = min(best, time.perf_counter() - t)
+    return 2 * a.nbytes / best / 1e9
+
+
+def sweeps_worker(name, cap, threads, options):
+    import numpy as np  # noqa: F401  (the worker's own tree is the one imported)
+
+    from wncs_lp.solvers.matrix_free import matrix_free_value_iteration as mfvi
+
+    mfvi(scenario("paper_p12", 6), threads=threads)  # compile (or load) the kernels before timing
+    bw = copy_bandwidth()
+    sc = scenario(name, cap)
+    ld = load1()
+    c0 = time.process_time()
+    sol = mfvi(sc, threads=threads, progress=True, **options)
+    cpu = time.process_time() - c0
+    st = sol.stats
+    n = st["n_states"]
+    passes = st["sweeps"] + st["eval_sweeps"]
+    per = (sol.seconds - st["seconds_setup"]) / passes
+    nbytes = FLOOR_BYTES_PER_STATE * n
+    out = row(section="sweeps", instance=name, cap=cap, states=n, method="optimal", threads=st["threads"],
+              seconds=round(sol.seconds, 2), **{"seconds_to_1e-6": time_to(st["history"], 1e-6)},
+              sweeps=st["sweeps"], eval_sweeps=st["eval_sweeps"], gain=sol.gain, gain_lower=sol.gain_lower,
+              gain_upper=sol.gain_upper, rel_gap=sol.gap, peak_rss_gib=round(rss_gib(), 2), load1=ld,
+              status=sol.status, cpu_seconds=round(cpu, 1), passes=passes, seconds_per_pass=round(per, 4),
+              bytes_per_pass=nbytes, gb_per_s=round(nbytes / per / 1e9, 2), copy_gb_per_s=round(bw, 2),
+              floor_ratio=round(per / (nbytes / (bw * 1e9)), 2),
+              note=f"setup {st['seconds_setup']:.1f} s; {st.get('value_vectors')} value vector(s); "
+                   f"{st.get('extrapolations')} extrapolation(s); options {options or 'defaults'}; "
+                   f"package {Path(wncs_lp.__file__).parent.parent}")
+    print(json.dumps(out), flush=True)
+
+
+def sweeps(instances, threads, options, baseline):
+    trees = [("this", ROOT)] + ([("baseline", Path(baseline).resolve())] if baseline else [])
+    rows = []
+    for name, cap in instances:
+        mine = None
+        for label, tree in trees:
+            env = dict(os.environ)
+            env["WNCS_LP_BENCH_TREE"] = str(tree)
+            cmd = [sys.executable, str(ROOT / "benchmarks" / "matrix_free.py"), "--sweeps-worker", f"{name}:{cap}",
+                   "--threads", str(threads), "--options", json.dumps(options)]
+            print(f"sweeps: {name} cap {cap}, {label} tree (load {load1()}) ...", flush=True)
+            for r in worker_rows(cmd, cwd=tree, env=env):
+                r["tree"] = label
+                if label == "this":
+                    mine = float(r["seconds"])
+                elif mine:
+                    r["ratio"] = round(float(r["seconds"]) / mine, 2)
                 rows.append(r)
-                print(f"  {r['method']:10s} gain {float(r['gain']):.9f} [{float(r['gain_lower']):.9f}, "
-                      f"{float(r['gain_upper']):.9f}] {r['seconds']} s (1e-6 at {r['seconds_to_1e-6']} s), "
-                      f"sweeps {r['sweeps']}, peak {r['peak_rss_gib']} GiB, gap {float(r['gap_to_optimum']):.4%}, "
-                      f"load {r['load1']}", flush=True)
-        if proc.returncode != 0:
-            print(f"  worker failed with exit code {proc.returncode}", flush=True)
+                print(f"  {label:8s} {r['seconds']} s, {r['passes']} passes ({r['sweeps']} sweeps + "
+                      f"{r['eval_sweeps']} evaluation), {r['seconds_per_pass']} s a pass = {r['gb_per_s']} GB/s "
+                      f"of the floor's bytes against {r['copy_gb_per_s']} GB/s copy ({r['floor_ratio']}x the "
+                      f"floor), g* {float(r['gain']):.10f} [{float(r['gain_lower']):.10f}, "
+                      f"{float(r['gain_upper']):.10f}], peak {r['peak_rss_gib']} GiB, load {r['load1']}", flush=True)
     return rows
 
 
@@ -207,11 +303,20 @@ def main(argv=None):
     ap.add_argument("--tol", type=float, default=1e-9)
     ap.add_argument("--no-extrapolate", action="store_true",
                     help="solve with one value vector (no extrapolation): the largest caps")
+    ap.add_argument("--instances", default="paper_p1234:20,paper_p1234:30,bounds_mix6:10",
+                    help="scenario:cap list of the sweeps section")
+    ap.add_argument("--options", default="{}", help="JSON dict of matrix_free_value_iteration options (sweeps)")
+    ap.add_argument("--baseline", default=None, help="an older source tree to time beside this one (sweeps)")
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--sweeps-worker", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     policies = [p for p in a.policies.split(",") if p]
     if a.worker is not None:
         big_worker(a.worker, a.threads, a.tol, policies, not a.no_extrapolate)
+        return 0
+    if a.sweeps_worker is not None:
+        name, cap = a.sweeps_worker.split(":")
+        sweeps_worker(name, int(cap), a.threads, json.loads(a.options))
         return 0
     sections = a.sections.split(",")
     caps = [int(c) for c in a.caps.split(",")] if a.caps else ([16] if a.quick else [20, 25, 30])
@@ -221,6 +326,9 @@ def main(argv=None):
         rows += compare(COMPARE_QUICK if a.quick else COMPARE, a.threads, a.tol)
     if "big" in sections:
         rows += big(caps, a.threads, a.tol, policies, not a.no_extrapolate)
+    if "sweeps" in sections:
+        inst = [(x.split(":")[0], int(x.split(":")[1])) for x in a.instances.split(",") if x]
+        rows += sweeps(inst, a.threads, json.loads(a.options), a.baseline)
     if a.out:
         with open(a.out, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=COLUMNS)

@@ -216,3 +216,26 @@ def test_the_guard_counts_the_matrix_free_bytes_of_the_solver():
     sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=9"])
     est = estimate_size(sc)
     assert est.matrix_free_bytes - guard.MATRIX_FREE_OVERHEAD == matrix_free_bytes(est.matrix_free_states, mask=True)
+
+
+def test_validate_says_whether_the_matrix_free_solve_fits_and_with_how_many_vectors(capsys):
+    from dataclasses import replace
+
+    from wncs_lp.cli import main
+    from wncs_lp.models.guard import matrix_free_fit
+    from wncs_lp.solvers.matrix_free import matrix_free_bytes
+
+    sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=9"])
+    est = estimate_size(sc)
+    n = est.matrix_free_states
+    # the solver's own accounting: the floor has one value vector, the full solve two
+    assert est.matrix_free_full_bytes - guard.MATRIX_FREE_OVERHEAD == matrix_free_bytes(n, vectors=2, mask=True)
+    # the verdicts against the available memory (the floor within 90% of it, the second vector
+    # with a quarter to spare beside the floor), on sizes where the fixed overhead does not decide
+    big = replace(est, matrix_free_bytes=10 << 30, matrix_free_full_bytes=18 << 30)
+    assert matrix_free_fit(big, 30 << 30).endswith("fits with both vectors")
+    assert "fits with one vector only" in matrix_free_fit(big, 19 << 30)
+    assert "does not fit" in matrix_free_fit(big, 11 << 30)
+    assert main(["validate", "paper_p12", "--set", "tau_cap=9"]) == 0
+    out = capsys.readouterr().out
+    assert f"matrix-free solver: {n:,} states" in out and "one value vector" in out

@@ -22,11 +22,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
         raise WncsError("validate needs a scenario file or the name of a shipped scenario (or --list)")
     scenario = load(args)
     est, refusal = _estimate(scenario, args.force)
-    from ..models.guard import available_memory
+    from ..models.guard import available_memory, matrix_free_fit
 
     avail = available_memory()
     payload = {**head(args, scenario), "file": str(scenario_file(args.scenario)), "valid": True,
                "estimate": None if est is None else est.to_dict(), "available_bytes": avail,
+               "matrix_free": None if est is None else matrix_free_fit(est, avail),
                "would_build": refusal is None, "refusal": refusal}
     if args.json:
         emit_json(payload)
@@ -39,8 +40,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
     what = "configurations (servers and sensors' ages)" if scenario.has_arrivals else "server configurations"
     print(f"valid. The MDP: {est.configs:,} {what}, {bound}{est.states:,} states, "
           f"{est.pairs:,} state-action pairs, {est.nnz:,} transition nonzeros")
-    print(f"memory: build about {_gib(est.build_bytes)}, LP about {_gib(est.lp_bytes)}, matrix-free solver about "
-          f"{_gib(est.matrix_free_bytes)} ({est.matrix_free_states:,} states); available now {_gib(avail)}")
+    print(f"memory: build about {_gib(est.build_bytes)}, LP about {_gib(est.lp_bytes)}; available now {_gib(avail)}")
+    print(f"matrix-free solver: {est.matrix_free_states:,} states, {matrix_free_fit(est, avail)}")
     print("a solve would build it" if refusal is None else f"a solve would refuse to build it: {refusal}")
     return 0
 

@@ -15,7 +15,9 @@ actions and outcomes (upper bounds too: merging of equal successors only lowers 
 The matrix-free solver (:mod:`wncs_lp.solvers.matrix_free`) stores no matrix: it sweeps, per
 configuration, the box spanned by the per-axis sets' intervals (their hull), keeping one float64
 value vector, one byte of policy and (only when its bracket needs it) one byte of reachability
-mask per box state: ``matrix_free_bytes``.
+mask per box state: ``matrix_free_bytes``, the floor of a solve. A second float64 vector (the
+extrapolation's and the Jacobi fallback's) is taken only when it fits when the solve starts:
+``matrix_free_full_bytes``.
 
 Before exploring, :func:`check_size` looks at what the scenario alone tells
 (:meth:`~wncs_lp.models.base.Model.automaton_bounds`): every initial configuration carries the
@@ -44,7 +46,7 @@ from ..scenario import Scenario
 from .automaton import MAX_CONFIGS, MAX_EDGES, MAX_WORK, approx_count as _count, exploration_limit
 
 __all__ = ["SizeEstimate", "SizeLimitError", "estimate_size", "check_size", "build_checked", "available_memory",
-           "memory_limits"]
+           "memory_limits", "matrix_free_fit"]
 
 #: Bytes per stored transition nonzero at the peak of a build followed by a stored-matrix value
 #: iteration: P's float64 data and int32 indices (12) and the sweeps' uint8 probability code (1),
@@ -63,9 +65,12 @@ BYTES_PER_STATE = 100
 LP_FACTOR = 40.0
 #: Fraction of the available memory a build may use before it is refused.
 MEMORY_FRACTION = 0.5
-#: Bytes per state of the matrix-free solver: the float64 value vector, the uint8 policy and the
-#: uint8 reachability mask (used only when the hull's bracket needs it; counted always).
+#: Bytes per state of the matrix-free solver at its floor: the float64 value vector, the uint8
+#: policy and the uint8 reachability mask (used only when the hull's bracket needs it; counted
+#: always).
 MATRIX_FREE_BYTES_PER_STATE = 10
+#: Bytes per state of the second float64 vector (extrapolation, Jacobi fallback), when it fits.
+MATRIX_FREE_SECOND_VECTOR = 8
 #: Fixed extra of the matrix-free solver (interpreter, numba, tables), measured ~0.3 GB.
 MATRIX_FREE_OVERHEAD = 400 << 20
 
@@ -89,7 +94,11 @@ class SizeEstimate:
     matrix_free_states : int
         States of the matrix-free solver's layout (the per-axis interval hull; exact).
     matrix_free_bytes : int
-        Peak memory of a matrix-free solve (no matrix: see the module docstring).
+        Peak memory of a matrix-free solve at its floor, one value vector (no matrix: see the
+        module docstring).
+    matrix_free_full_bytes : int
+        The same with the second value vector (extrapolation, Jacobi fallback), which a solve
+        takes when it fits.
     configs_bound : int or None
         The model's upper bound on the configurations, from the scenario alone.
     complete : bool
@@ -106,6 +115,7 @@ class SizeEstimate:
     lp_bytes: int
     matrix_free_states: int = 0
     matrix_free_bytes: int = 0
+    matrix_free_full_bytes: int = 0
     configs_bound: int | None = None
     complete: bool = True
 
@@ -257,7 +267,24 @@ def estimate_size(scenario: Scenario, model=None) -> SizeEstimate:
     mf_states = int(hull.sum())
     mf = mf_states * MATRIX_FREE_BYTES_PER_STATE + MATRIX_FREE_OVERHEAD
     return SizeEstimate(nC, box, states, pairs, nnz, int(build), lp, mf_states, int(mf),
-                        model.automaton_bounds().configs)
+                        int(mf + mf_states * MATRIX_FREE_SECOND_VECTOR), model.automaton_bounds().configs)
+
+
+def matrix_free_fit(est: SizeEstimate, available: int) -> str:
+    """What a matrix-free solve of ``est`` would hold in ``available`` bytes, in words: its floor
+    (one value vector) against 90% of them (the size guard's limit for the method), then whether
+    the second value vector fits beside it (the solver takes it when ``1.25 x`` its size is still
+    free once the floor is allocated)."""
+    floor, full = est.matrix_free_bytes, est.matrix_free_full_bytes
+    words = (f"about {_gib(floor)} with one value vector (the floor: value, policy and mask bytes), "
+             f"{_gib(full)} with the second vector of the extrapolation and the Jacobi fallback")
+    if floor > 0.9 * available:
+        return words + f": does not fit in {_gib(available)} available now (a solve is refused: a smaller cap)"
+    second = 1.25 * (full - floor)
+    if second <= available - floor:
+        return words + ": fits with both vectors"
+    return words + (": fits with one vector only (a solve then runs without the extrapolation and the Jacobi "
+                    "fallback)")
 
 
 def _axis_masks(auto, caps: tuple[int, ...]) -> list[np.ndarray]:
@@ -308,8 +335,8 @@ def _lower_bounds(scenario: Scenario, model) -> SizeEstimate:
     build = states * (BUILD_BYTES_PER_NNZ + BYTES_PER_PAIR + BYTES_PER_STATE)
     lp = states * 24 * int(LP_FACTOR)
     mf = states * MATRIX_FREE_BYTES_PER_STATE + MATRIX_FREE_OVERHEAD
-    return SizeEstimate(bounds.initial, box, states, states, states, build, lp, states, mf, bounds.configs,
-                        complete=False)
+    return SizeEstimate(bounds.initial, box, states, states, states, build, lp, states, mf,
+                        mf + states * MATRIX_FREE_SECOND_VECTOR, bounds.configs, complete=False)
 
 
 def _refuse_before_exploring(scenario: Scenario, model, limit: int, words: str, *, need_lp: bool,

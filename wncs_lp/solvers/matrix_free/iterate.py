@@ -13,20 +13,20 @@ from ...errors import PolicyError, SolverError
 from ...models.system import System
 from ...progress import Progress, as_progress
 from ...scenario import Scenario
-from ..dp import initial_bias
 from ..iteration import IterationOutcome, IterationScheme, certified_iteration, gamma, max_abs, options_from
 from .extrapolate import Extrapolator
 from .layout import BoxLayout, check_local_actions, resolve_domain
 from .operator import Operator, Reduce, Write, with_cost
 from .options import MatrixFreeOptions
 from .result import MatrixFreeEvaluation, MatrixFreeSolution, as_system
+from .start import start_vector
 from .sweeper import Sweeper, load_kernels, reachable_mask
 
 __all__ = ["matrix_free_value_iteration", "matrix_free_evaluate", "policy_table", "matrix_free_bytes",
            "BoxSweeps", "BYTES_PER_STATE", "JACOBI_TAU"]
 
-#: Bytes per state of a solve: one float64 value vector and the uint8 policy (a Jacobi
-#: iteration, or the stall fallback, adds a second vector: 17 bytes).
+#: Bytes per state of a solve at its floor: one float64 value vector and the uint8 policy (the
+#: extrapolation, a Jacobi iteration or the stall fallback add a second vector: 17 bytes).
 BYTES_PER_STATE = 9
 
 #: The aperiodicity transform of the Jacobi passes (warm start, scheme ``"jacobi"``, fallback).
@@ -83,9 +83,7 @@ def _setup(system: System, opts: MatrixFreeOptions, h0: Any, cost: Any = None,
         op = with_cost(op, cost)
     mask = reachable_mask(system, layout) if use_mask else None
     sw = Sweeper(op, opts.threads, mask, reverse=opts.tile_order == "reverse")
-    if isinstance(h0, (MatrixFreeSolution, MatrixFreeEvaluation)):
-        h0 = h0.bias
-    return Setup(system, layout, op, mask, sw, initial_bias(h0, layout.n_states, 0), closes)
+    return Setup(system, layout, op, mask, sw, start_vector(h0, layout), closes)
 
 
 # ============================================================================ the passes
@@ -112,7 +110,8 @@ class BoxSweeps(IterationScheme):
         self._out: np.ndarray | None = None  # where the last certificate pass wrote the next iterate
 
     def pass_(self, h: np.ndarray, h_out: np.ndarray | None, write: Write, relax: float, shift: float) -> tuple[float, float]:
-        """One pass over the layout; (min, max) of T h - h on the h it read."""
+        """One pass over the layout; (min, max) of T h - h on the h it read (an in-place pass
+        computes none: (inf, -inf))."""
         raise NotImplementedError
 
     def evaluation_sweeps(self, shift: float) -> int:
@@ -259,8 +258,11 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
         How to iterate; any of its fields can be given as a keyword instead (or on top), e.g.
         ``tol=1e-10, threads=2`` (an unknown keyword is a :class:`~wncs_lp.errors.SolverError`
         naming the fields).
-    h0 : array, MatrixFreeSolution or MatrixFreeEvaluation, optional
-        Warm start, one value per layout state.
+    h0 : array, MatrixFreeSolution, MatrixFreeEvaluation, value tables or BoundResult, optional
+        Warm start (:func:`~.start.start_vector`): one value per layout state, a solution's bias,
+        or a separable value function sum_k h_k(tau_k, column_k(c)) such as the tables of
+        :func:`wncs_lp.bounds.lower_bound` (written straight into the solve's value vector).
+        The certificate holds whatever the start; a good one saves sweeps.
     progress : bool or Progress
         The setup, then the certificate passes (sweeps, bracket, relative width) on stderr.
 

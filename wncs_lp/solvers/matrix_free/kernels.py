@@ -33,8 +33,9 @@ as ``*_serial``, for one: :func:`wncs_lp.solvers.threads.twins`):
   (:attr:`Reduce.WEIGHTED <.operator.Reduce.WEIGHTED>`: a tau-independent randomised policy).
   ``write`` (:class:`.operator.Write`) ``NONE`` only computes min / max of (T h - h) (over the
   states with ``mask`` set when ``use_mask``), ``IN_PLACE`` updates h in place (Gauss-Seidel:
-  ``h += relax (T h - h - shift)``), ``OUT`` writes ``h_out`` (Jacobi); ``write_pol`` stores
-  the minimiser in ``pol`` (uint8).
+  ``h += relax (T h - h - shift)``; such a pass computes no bracket, as its d(s) are taken on a
+  moving h: it returns (inf, -inf), and its update is one fused loop), ``OUT`` writes ``h_out``
+  (Jacobi); ``write_pol`` stores the minimiser in ``pol`` (uint8).
 * :func:`fixed_policy` -- the same for one action per state (``pol``), which must be in range
   for its configuration (checked by the callers: :func:`.layout.check_local_actions`).
 * :func:`reach_all` -- marks the successors of the marked states to a fixed point.
@@ -171,6 +172,17 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                             best[i] += w * acc[i]
                 first = False
             su = uint64(s0)
+            if write == Write.IN_PLACE:
+                # an improvement sweep: no bracket (only certificate passes give one), one loop
+                for i in range(L):
+                    hs = h[su + uint64(i)]
+                    h[su + uint64(i)] = hs + relax * (((qo + qN[qu + uint64(i)] + best[i]) - hs) - shift)
+                if write_pol:
+                    for i in range(L):
+                        pol[su + uint64(i)] = arg[i]
+                s0 += L
+                tr += 1
+                continue
             for i in range(L):
                 dd[i] = (qo + qN[qu + uint64(i)] + best[i]) - h[su + uint64(i)]
             if use_mask:
@@ -252,6 +264,13 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
                             acc[i] += v
                 for i in range(L):
                     best[i] = acc[i] if arg[i] == j else best[i]
+            if write == Write.IN_PLACE:
+                for i in range(L):
+                    hs = h[su + uint64(i)]
+                    h[su + uint64(i)] = hs + relax * (((qo + qN[qu + uint64(i)] + best[i]) - hs) - shift)
+                s0 += L
+                tr += 1
+                continue
             for i in range(L):
                 dd[i] = (qo + qN[qu + uint64(i)] + best[i]) - h[su + uint64(i)]
             if use_mask:

@@ -62,7 +62,8 @@ class Sweeper:
     def all_actions(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, W: np.ndarray | None,
                     reduce: Reduce, write: Write, write_pol: bool, relax: float, shift: float) -> tuple[float, float]:
         """A pass of every action: the Bellman operator (``Reduce.MIN``, its minimiser into ``pol``
-        with ``write_pol``) or the weights ``W`` (``Reduce.WEIGHTED``); returns min / max of T h - h."""
+        with ``write_pol``) or the weights ``W`` (``Reduce.WEIGHTED``); returns min / max of T h - h
+        (``(inf, -inf)`` for an in-place pass, which computes no bracket)."""
         o = self.op
         return self._run(
             self.K.all_actions, self.K.all_actions_serial,
@@ -75,7 +76,8 @@ class Sweeper:
 
     def fixed(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, write: Write, relax: float,
               shift: float) -> tuple[float, float]:
-        """A pass of the fixed policy ``pol`` (one local action per state); min / max of T_pol h - h."""
+        """A pass of the fixed policy ``pol`` (one local action per state); min / max of T_pol h - h
+        (``(inf, -inf)`` in place)."""
         o = self.op
         return self._run(
             self.K.fixed_policy, self.K.fixed_policy_serial,
