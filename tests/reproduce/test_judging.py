@@ -22,10 +22,11 @@ from wncs_lp.truncation import CAP_MASS_WARN
 # ============================================================================ verdicts over caps
 def test_subclaims_verdict():
     assert subclaims_verdict({"a": {12: True, 20: True}, "b": {12: True, 20: None}}) == "HOLDS"
-    assert subclaims_verdict({"a": {12: False, 20: True}, "b": {12: True, 20: True}}) == "DEPENDS"
-    # one sub-claim false at every cap where it is checked: false whatever the truncation
+    # the least truncated cap decides: false at cap 12 only is a caveat, false at cap 20 a failure
+    assert subclaims_verdict({"a": {12: False, 20: True}, "b": {12: True, 20: True}}) == "HOLDS"
+    assert subclaims_verdict({"a": {12: True, 20: False}, "b": {12: True, 20: True}}) == "FAILS"
     assert subclaims_verdict({"a": {12: False, 20: False}, "b": {12: True, 20: True}}) == "FAILS"
-    assert subclaims_verdict({"a": {12: False, 20: None}}) == "FAILS"
+    assert subclaims_verdict({"a": {12: False, 20: None}}) == "FAILS"  # checked at cap 12 only: cap 12 decides
     assert across(["HOLDS", "HOLDS"]) == "HOLDS" and across(["FAILS", "HOLDS"]) == "DEPENDS"
 
 
