@@ -11,7 +11,7 @@ from html.parser import HTMLParser
 
 import pytest
 
-CLAIMS = [f"C{i}" for i in range(1, 14)]
+CLAIMS = [f"C{i}" for i in range(1, 17)]
 PNG = b"\x89PNG\r\n\x1a\n"
 
 

@@ -21,7 +21,7 @@ from ..methods import EXACT_METHOD_MAX_STATES, exact_method
 from ..solvers.result import Solution
 from ..solvers.route import solve_scenario
 from ..truncation import CAP_MASS_WARN, CapMass, cap_mass
-from ..verify.verdict import subclaims_verdict  # the compound-claim rule lives with the other verdict rules
+from ..verify.verdict import decide, subclaims_verdict  # the rules of the verdicts live together
 from ..viz import save_figure
 from .cache import StepCache, code_version
 
@@ -122,10 +122,10 @@ class Table:
 class ClaimResult:
     """One claim of ``claims.md`` with its verdict and the numbers that decide it.
 
-    ``basis`` says which caps the verdict rests on: every instance used (scenario, cap, p) with the
-    stationary mass the optimal policy spends with some AoI at its cap, the deciding instance and
-    whether its mass exceeds :data:`~wncs_lp.truncation.CAP_MASS_WARN` (``flag``); see
-    :func:`cap_basis`. ``shown`` are the tables of the report, ``captions`` the figures' captions
+    ``basis`` says where the verdict is decided: every instance used (scenario, cap, p) with the
+    stationary mass the optimal policy spends with some AoI at its cap, the deciding (least
+    truncated) instances, whether their mass exceeds :data:`~wncs_lp.truncation.CAP_MASS_WARN`
+    (``flag``) and the more truncated instances that disagree (``caveats``); see :func:`cap_basis`. ``shown`` are the tables of the report, ``captions`` the figures' captions
     (keyed by the PNG's path).
     """
 
@@ -193,55 +193,48 @@ class ExtraResult:
 
 
 def evidence(label: str, cap: int, mass: float, verdict: str, scenario: str = "", p: float | None = None,
-             per_process: Sequence[float] = ()) -> dict[str, Any]:
-    """One instance a verdict rests on (see :func:`cap_basis`)."""
+             per_process: Sequence[float] = (), group: str | None = None) -> dict[str, Any]:
+    """One instance a verdict rests on (see :func:`cap_basis`). ``group``: what the instance is of
+    apart from its cap (default: its scenario; e.g. a scenario and a plane), so that the largest cap
+    of each group decides."""
     def share(x: float) -> float:  # a probability, round-off of a summed law clipped to [0, 1]
         return float(min(1.0, max(0.0, x)))
 
     return {"label": label, "scenario": scenario, "cap": int(cap), "p": p, "mass": share(mass),
-            "per_process": [share(m) for m in per_process], "verdict": verdict}
+            "per_process": [share(m) for m in per_process], "verdict": verdict,
+            "group": scenario if group is None else group}
 
 
-def cap_basis(entries: Sequence[dict[str, Any]], verdict: str, note: str = "", decides: bool = True) -> dict[str, Any]:
-    """Which caps a verdict rests on, and whether the deciding one leans on the truncation.
+def cap_basis(entries: Sequence[dict[str, Any]], verdict: str | None = None, note: str = "", decides: bool = True,
+              how: str = "structural") -> dict[str, Any]:
+    """Where a verdict is decided, and whether its deciding instances lean on the truncation.
 
-    ``entries`` come from :func:`evidence`, one per instance (scenario, cap, p or p-grid) with
+    ``entries`` come from :func:`evidence`, one per instance (scenario, cap, p or p-grid, ...) with
     its own verdict and the stationary mass of the optimal policy at the cap (for a p-grid: the
-    largest over p). The *deciding* instances are the least-truncated ones that show the
-    verdict: for HOLDS, in each scenario the instance of smallest mass (the verdict needs them
-    all); otherwise the single instance of smallest mass among those whose own verdict equals
-    the claim's (all instances when none does, e.g. a verdict that changes with the cap). The
-    verdict is *flagged* when a deciding instance has more than CAP_MASS_WARN of its long-run time
-    with some AoI at its cap. ``decides=False`` (a claim the truncation cannot change, said in
-    ``note``): nothing is flagged.
+    largest over p). The *least truncated* instance of each group (the largest cap of each
+    scenario, or scenario and plane) decides (:func:`wncs_lp.verify.verdict.decide`: the deciding
+    instances combined structurally -- any FAILS decides -- or, ``how="descriptive"``, DEPENDS when
+    they differ); a more truncated instance whose verdict differs from its group's deciding one is
+    a *caveat* (``caveats``, printed beside the verdict), never the verdict. ``verdict``: the claim's
+    verdict when the claim decides it itself (sub-claims, :func:`subclaims_verdict`, by the same
+    rule); default: the one of :func:`~wncs_lp.verify.verdict.decide`. The verdict is *flagged*
+    when a deciding instance has more than CAP_MASS_WARN of its long-run time with some AoI at its
+    cap. ``decides=False`` (a claim the truncation cannot change, said in ``note``): nothing is
+    flagged and the verdict is the one given.
     """
     entries = list(entries)
     out: dict[str, Any] = {"instances": entries, "caps": sorted({e["cap"] for e in entries}),
                            "threshold": CAP_MASS_WARN, "note": note}
     if not entries or not decides:
-        return {**out, "deciding": [], "deciding_mass": None, "flag": False}
-    if verdict == "HOLDS":
-        by_sc: dict[str, dict] = {}
-        for e in entries:
-            cur = by_sc.get(e["scenario"])
-            if cur is None or (e["mass"], -e["cap"]) < (cur["mass"], -cur["cap"]):
-                by_sc[e["scenario"]] = e
-        deciding = list(by_sc.values())
-    else:
-        agree = [e for e in entries if e["verdict"] == verdict] or entries
-        deciding = [min(agree, key=lambda e: (e["mass"], -e["cap"]))]
+        return {**out, "verdict": verdict, "deciding": [], "deciding_mass": None, "flag": False, "caveats": []}
+    d = decide([(e.get("group", e["scenario"]), e["cap"], e["verdict"]) for e in entries], how)
+    deciding = [entries[i] for i in d.deciding]
     worst = max(e["mass"] for e in deciding)
-    return {**out, "deciding": [e["label"] for e in deciding], "deciding_caps": sorted({e["cap"] for e in deciding}),
-            "deciding_mass": worst, "flag": bool(worst > CAP_MASS_WARN)}
-
-
-def one_verdict(holds: bool | None, fails: bool | None = None) -> str:
-    """HOLDS when ``holds``; FAILS when ``fails`` (default: not ``holds``); DEPENDS otherwise."""
-    if holds:
-        return "HOLDS"
-    if fails is None or fails:
-        return "FAILS"
-    return "DEPENDS"
+    return {**out, "verdict": d.verdict if verdict is None else verdict, "deciding": [e["label"] for e in deciding],
+            "deciding_caps": sorted({e["cap"] for e in deciding}), "deciding_mass": worst,
+            "flag": bool(worst > CAP_MASS_WARN),
+            "caveats": [{"label": entries[i]["label"], "verdict": entries[i]["verdict"], "cap": entries[i]["cap"],
+                         "mass": entries[i]["mass"]} for i in d.caveats]}
 
 
 def short_name(name: str) -> str:
@@ -284,11 +277,11 @@ class Solved:
         """The stationary mass of the optimal policy with some AoI at its cap (:mod:`wncs_lp.truncation`)."""
         return cap_mass(self.mdp, self.stationary)
 
-    def evidence(self, label: str, verdict: str) -> dict[str, Any]:
-        """This solve as one instance a verdict rests on (:func:`cap_basis`)."""
+    def evidence(self, label: str, verdict: str, group: str | None = None) -> dict[str, Any]:
+        """This solve as one instance a verdict rests on (:func:`cap_basis`; ``group`` as in :func:`evidence`)."""
         m = self.cap_mass
         return evidence(label, max(self.scenario.tau_caps), m.total, verdict, Path(str(self.scenario.source)).stem,
-                        self.scenario.p, m.per_process)
+                        self.scenario.p, m.per_process, group)
 
     @property
     def actions(self) -> np.ndarray:
@@ -647,8 +640,14 @@ class Context:
 
 
 def _fmt(v: Any) -> Any:
-    if isinstance(v, float):
-        return repr(v)
-    if isinstance(v, (list, tuple)):
-        return " ".join(str(x) for x in v)
+    """A CSV cell: numbers as plain numbers (numpy scalars too: never ``np.float64(...)`` text), lists
+    space-separated."""
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v))
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return " ".join(str(_fmt(x)) for x in v)
     return v
