@@ -13,7 +13,8 @@ import numpy as np
 
 from ..models.system import System
 from ..policies import StaticPolicy, default_assignment
-from ..verify import idle_configs, policy_context
+from ..solvers.certify import q_values
+from ..verify import Tolerance, idle_configs
 from ..verify.verdict import EQ_RTOL, SIGNIFICANT, structural_verdict, subclaims_verdict
 from .context import ClaimResult, Context, Solved, Step, Table, assignment_label, cap_basis, evidence
 from .performance import subclaim_table, subclaims_json, caveat_words
@@ -38,12 +39,13 @@ def static_disagreement(solved: Solved, assignment) -> dict[str, Any]:
     states, the idle-server mask, and the Q-gap (for the largest one).
     """
     mdp = solved.mdp
-    pctx = policy_context(mdp, solved.as_solution(), stationary=solved.stationary)
+    q = q_values(mdp, solved.bias)
+    tol = Tolerance().resolve(float(np.ptp(solved.bias)) if mdp.n_states else 0.0)  # the verifiers' tie tolerance
     static = StaticPolicy(System.from_scenario(solved.scenario), assignment).on_mdp(mdp)
-    gap = pctx.q[static] - pctx.q_pi
-    differ = gap > pctx.tol
+    gap = q[static] - q[solved.policy]
+    differ = gap > tol
     idle = np.isin(np.asarray(mdp.states.config), idle_configs(mdp))
-    return {"differ": differ, "idle": idle, "gap": gap, "tol": pctx.tol}
+    return {"differ": differ, "idle": idle, "gap": gap, "tol": tol}
 
 
 # ============================================================================ C14
