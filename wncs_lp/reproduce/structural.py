@@ -179,9 +179,10 @@ def claim_c1(ctx: Context) -> ClaimResult:
         s = r["other_action_states"]
         if not s["total"]:
             return f"every idle-server state chooses (1 to remote, 4 to edge) at cap {r['cap']}"
-        return (f"at cap {r['cap']}, {s['total']} of {r['idle_states']} idle-server states choose "
-                f"{', '.join(r['other_actions'])}, {s['observable_below_cap'] or 'none'} of them recurrent, of weight "
-                f"and below the cap (stationary mass {mass_words(s['stationary_mass'])}; shown: {shown_words(s)})")
+        return (f"at cap {r['cap']} ({pct(r['cap_mass']['total'], 1)} of the time at the cap), {s['total']} of "
+                f"{r['idle_states']} idle-server states choose {', '.join(r['other_actions'])}, "
+                f"{s['observable_below_cap'] or 'none'} of them recurrent, of weight and below the cap (stationary mass "
+                f"{mass_words(s['stationary_mass'])}; shown: {shown_words(s)})")
 
     clean = [r["cap"] for r in rest if not r["other_action_states"]["total"]]
     if not dec["other_action_states"]["total"] and clean:
@@ -190,9 +191,9 @@ def claim_c1(ctx: Context) -> ClaimResult:
                  + ", ".join(map(str, clean)))
         rest = [r for r in rest if r["cap"] not in clean]
     else:
-        first = at(dec) + f", the least truncated cap ({pct(dec['cap_mass']['total'], 3)} of the time at the cap), which decides"
-    parts = [first] + [("caveat, at a more truncated cap: " if r["verdict"] != dec["verdict"] else "")
-                       + at(r) + f" ({pct(r['cap_mass']['total'], 1)} of the time at the cap)" for r in rest]
+        first = at(dec) + ": the least truncated cap, which decides"
+    parts = [first] + [("caveat, at a more truncated cap: " if r["verdict"] != dec["verdict"] else "") + at(r)
+                       for r in rest]
     summary = "; ".join(parts)
     summary = summary[0].upper() + summary[1:]
     return ClaimResult("C1", "Fig. 3", "", verdict, summary + ".", {"per_cap": per_cap}, figs, [tab],
