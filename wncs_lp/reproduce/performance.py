@@ -689,7 +689,22 @@ def _c11_summary(rows: list[dict], sub: dict, caps: list[int], grids: dict[int, 
 
 
 # ============================================================================ C12: p = 1
-def _aoi_period(solved) -> dict:
+def _aoi_period(ctx: Context, sc) -> dict:
+    """The cycle of the optimal p = 1 chain and the AoI's period on it (:func:`_aoi_cycle`), cached;
+    each server's key of ``destinations`` back to an int after the JSON round trip."""
+    res, _ = ctx.cache.get_or_compute("aoi-period", {"fingerprint": sc.fingerprint()},
+                                      lambda: (_aoi_cycle(ctx.solve(sc)), None))
+    if res.get("destinations") is not None:
+        res = {**res, "destinations": [{int(m): n for m, n in c.items()} for c in res["destinations"]]}
+    return res
+
+
+def _c12_prefetch(ctx: Context, file: str, cap: int) -> None:
+    """The cached steps of one p = 1 instance of C12 (run in a worker by :meth:`Context.prefetch_calls`)."""
+    _c12_instance(ctx, file, "", cap)
+
+
+def _aoi_cycle(solved) -> dict:
     """Follow the deterministic p = 1 chain under the optimal policy from the first idle state
     until a state repeats; return the cycle and the AoI's minimal period on it."""
     mdp = solved.mdp
@@ -738,7 +753,7 @@ def _c12_instance(ctx: Context, file: str, label: str, cap: int) -> dict[str, An
     search = ctx.static_search(sc)
     best_cycle = min((_best_cycle(ctx, sc, e["assignment"]), assignment_label(sc, e["assignment"]))
                      for e in search["all"])
-    per = _aoi_period(solved)
+    per = _aoi_period(ctx, sc)
     sends = per.get("destinations")
     names = [short_name(pr.name) for pr in sc.processes]
     return {"scenario": file.replace(".toml", ""), "label": label, "cap": cap, "optimal": solved.gain,
@@ -765,8 +780,10 @@ def claim_c12(ctx: Context) -> ClaimResult:
     sub: dict[str, dict[int, bool | None]] = {}
     scenarios = [("paper_p12.toml", "processes 1, 2"), ("paper_p14.toml", "processes 1, 4"),
                  ("paper_p123.toml", "processes 1, 2, 3")]
-    at_p1 = [ctx.scenario(f, [f"tau_cap={c}", "p=1"]) for f, _ in reversed(scenarios) for c in ctx.profile.caps_2p]
-    ctx.prefetch([Step(sc, static=True) for sc in at_p1 if estimate_size(sc).states <= C12_MAX_STATES])
+    # every instance's solve, static search, best phases and AoI cycle in the worker processes, the largest first
+    at_p1 = [(f, c) for f, _ in reversed(scenarios) for c in reversed(ctx.profile.caps_2p)
+             if estimate_size(ctx.scenario(f, [f"tau_cap={c}", "p=1"])).states <= C12_MAX_STATES]
+    ctx.prefetch_calls(_c12_prefetch, at_p1)
     for file, label in scenarios:
         for cap in ctx.profile.caps_2p:  # the caps of claims.md (12, 20, 30): a perfect channel keeps the chain small
             r = _c12_instance(ctx, file, label, cap)
