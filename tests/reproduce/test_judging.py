@@ -50,6 +50,11 @@ def test_cap_basis_decides_at_the_least_truncated_instance_and_keeps_the_others_
     # a scenario's deciding instance that fails decides the claim (any FAILS), the other scenario holding
     b = cap_basis([_ev("p12", 30, 0.0, "FAILS"), _ev("p14", 30, 0.0, "HOLDS"), _ev("p14", 12, 0.7, "DEPENDS")])
     assert b["verdict"] == "FAILS" and [c["label"] for c in b["caveats"]] == ["p14 at cap 12"]
+    # a FAILS leans on the truncation only when every failing deciding instance does
+    b = cap_basis([_ev("p12", 30, 0.00003, "FAILS"), _ev("p123", 20, 0.019, "FAILS")])
+    assert b["verdict"] == "FAILS" and b["deciding_mass"] == 0.00003 and not b["flag"]
+    b = cap_basis([_ev("p12", 30, 0.00003, "HOLDS"), _ev("p123", 20, 0.019, "FAILS")])
+    assert b["verdict"] == "FAILS" and b["deciding_mass"] == 0.019 and b["flag"]
     nod = cap_basis(ev, "HOLDS", note="cap-free", decides=False)
     assert nod["deciding"] == [] and not nod["flag"] and nod["note"] == "cap-free" and nod["verdict"] == "HOLDS"
 

@@ -219,8 +219,10 @@ def cap_basis(entries: Sequence[dict[str, Any]], verdict: str | None = None, not
     verdict when the claim decides it itself (sub-claims, :func:`subclaims_verdict`, by the same
     rule); default: the one of :func:`~wncs_lp.verify.verdict.decide`. The verdict is *flagged*
     when a deciding instance has more than CAP_MASS_WARN of its long-run time with some AoI at its
-    cap. ``decides=False`` (a claim the truncation cannot change, said in ``note``): nothing is
-    flagged and the verdict is the one given.
+    cap (``deciding_mass``: the largest of them; for a structural FAILS, where one counterexample
+    decides, the smallest among the failing deciding instances: a FAILS leans on the truncation
+    only when every counterexample does). ``decides=False`` (a claim the truncation cannot change,
+    said in ``note``): nothing is flagged and the verdict is the one given.
     """
     entries = list(entries)
     out: dict[str, Any] = {"instances": entries, "caps": sorted({e["cap"] for e in entries}),
@@ -229,8 +231,13 @@ def cap_basis(entries: Sequence[dict[str, Any]], verdict: str | None = None, not
         return {**out, "verdict": verdict, "deciding": [], "deciding_mass": None, "flag": False, "caveats": []}
     d = decide([(e.get("group", e["scenario"]), e["cap"], e["verdict"]) for e in entries], how)
     deciding = [entries[i] for i in d.deciding]
-    worst = max(e["mass"] for e in deciding)
-    return {**out, "verdict": d.verdict if verdict is None else verdict, "deciding": [e["label"] for e in deciding],
+    verdict = d.verdict if verdict is None else verdict
+    failing = [e for e in deciding if e["verdict"] == "FAILS"]
+    if verdict == "FAILS" and how == "structural" and failing:  # one counterexample decides: its own truncation
+        worst = min(e["mass"] for e in failing)
+    else:
+        worst = max(e["mass"] for e in deciding)
+    return {**out, "verdict": verdict, "deciding": [e["label"] for e in deciding],
             "deciding_caps": sorted({e["cap"] for e in deciding}), "deciding_mass": worst,
             "flag": bool(worst > CAP_MASS_WARN),
             "caveats": [{"label": entries[i]["label"], "verdict": entries[i]["verdict"], "cap": entries[i]["cap"],

@@ -450,15 +450,17 @@ def _c4_figures(ctx: Context, by_cap: dict[int, Solved]) -> tuple[list[str], dic
 def _shared_legend(fig, axes) -> None:
     """One legend for a figure of several slices, under the panels: each panel's own legend would sit
     inside a grid's panels, over the triangle's corners and its points."""
+    import re
+
     handles: dict[str, Any] = {}
     for ax in axes:
         leg = ax.get_legend()
         if leg is None:
             continue
-        for h, t in zip(leg.legend_handles, leg.get_texts()):
-            handles.setdefault(t.get_text(), h)
+        for h, t in zip(leg.legend_handles, leg.get_texts()):  # one entry per action: the panels' counts dropped
+            handles.setdefault(re.sub(r"\s*\[\d[\d,]* points?\]$", "", t.get_text()), h)
         leg.remove()
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    fig.tight_layout(rect=(0, 0.06, 1, 0.95))
     if handles:
         fig.legend(list(handles.values()), list(handles), loc="lower center", ncol=min(4, len(handles)),
                    fontsize=9, frameon=False, title="action (each panel)", title_fontsize=9)
