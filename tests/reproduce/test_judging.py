@@ -55,6 +55,9 @@ def test_cap_basis_decides_at_the_least_truncated_instance_and_keeps_the_others_
     assert b["verdict"] == "FAILS" and b["deciding_mass"] == 0.00003 and not b["flag"]
     b = cap_basis([_ev("p12", 30, 0.00003, "HOLDS"), _ev("p123", 20, 0.019, "FAILS")])
     assert b["verdict"] == "FAILS" and b["deciding_mass"] == 0.019 and b["flag"]
+    # a verdict the claim gives (from sub-claims reading both instances together): the largest mass
+    b = cap_basis([_ev("pre", 25, 0.02, "FAILS"), _ev("non", 25, 0.036, "FAILS")], "FAILS")
+    assert b["deciding_mass"] == 0.036 and b["flag"]
     nod = cap_basis(ev, "HOLDS", note="cap-free", decides=False)
     assert nod["deciding"] == [] and not nod["flag"] and nod["note"] == "cap-free" and nod["verdict"] == "HOLDS"
 

@@ -87,7 +87,7 @@ def test_every_verdict_says_which_caps_it_rests_on(quick):
             assert 0.0 <= e["mass"] <= 1.0 and e["cap"] in b["caps"]
         if b["deciding"]:
             masses = [e["mass"] for e in b["instances"] if e["label"] in b["deciding"]]
-            if c["verdict"] == "FAILS":  # a counterexample decides: the least truncated failing one
+            if c["verdict"] == "FAILS":  # a structural counterexample decides: its own mass; sub-claims: the largest
                 assert b["deciding_mass"] in masses
             else:
                 assert b["deciding_mass"] == max(masses)

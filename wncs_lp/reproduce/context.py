@@ -219,9 +219,10 @@ def cap_basis(entries: Sequence[dict[str, Any]], verdict: str | None = None, not
     verdict when the claim decides it itself (sub-claims, :func:`subclaims_verdict`, by the same
     rule); default: the one of :func:`~wncs_lp.verify.verdict.decide`. The verdict is *flagged*
     when a deciding instance has more than CAP_MASS_WARN of its long-run time with some AoI at its
-    cap (``deciding_mass``: the largest of them; for a structural FAILS, where one counterexample
-    decides, the smallest among the failing deciding instances: a FAILS leans on the truncation
-    only when every counterexample does). ``decides=False`` (a claim the truncation cannot change,
+    cap (``deciding_mass``: the largest of them; for a FAILS decided here by the structural rule,
+    where one counterexample decides, the smallest among the failing deciding instances: such a
+    FAILS leans on the truncation only when every counterexample does; a verdict given by the
+    claim, from sub-claims that read every deciding instance together, takes the largest). ``decides=False`` (a claim the truncation cannot change,
     said in ``note``): nothing is flagged and the verdict is the one given.
     """
     entries = list(entries)
@@ -231,12 +232,12 @@ def cap_basis(entries: Sequence[dict[str, Any]], verdict: str | None = None, not
         return {**out, "verdict": verdict, "deciding": [], "deciding_mass": None, "flag": False, "caveats": []}
     d = decide([(e.get("group", e["scenario"]), e["cap"], e["verdict"]) for e in entries], how)
     deciding = [entries[i] for i in d.deciding]
-    verdict = d.verdict if verdict is None else verdict
     failing = [e for e in deciding if e["verdict"] == "FAILS"]
-    if verdict == "FAILS" and how == "structural" and failing:  # one counterexample decides: its own truncation
-        worst = min(e["mass"] for e in failing)
+    if verdict is None and d.verdict == "FAILS" and how == "structural" and failing:
+        worst = min(e["mass"] for e in failing)  # one counterexample decides: its own truncation
     else:
         worst = max(e["mass"] for e in deciding)
+    verdict = d.verdict if verdict is None else verdict
     return {**out, "verdict": verdict, "deciding": [e["label"] for e in deciding],
             "deciding_caps": sorted({e["cap"] for e in deciding}), "deciding_mass": worst,
             "flag": bool(worst > CAP_MASS_WARN),
@@ -282,6 +283,15 @@ class Solved:
     stored_cap_mass: CapMass | None = None
     stored_classes: int | None = None
     stored_states: int | None = None
+    stored_utilisation: tuple[float, ...] | None = None
+
+    @cached_property
+    def utilisation(self) -> tuple[float, ...]:
+        """Each server's long-run share of slots with a service step under the optimal policy
+        (:func:`utilisation`)."""
+        if self.stored_utilisation is not None:
+            return self.stored_utilisation
+        return utilisation(self.mdp, self.policy, self.stationary)
 
     @cached_property
     def mdp(self) -> MDP:
@@ -352,6 +362,18 @@ class Step:
     evaluate: tuple[str, ...] = ()
     static: bool = False
     simulate: tuple[tuple[str, int, int, int, int], ...] = ()
+
+
+def utilisation(mdp: MDP, policy: np.ndarray, stationary: np.ndarray) -> list[float]:
+    """Each server's long-run share of slots in which it performs a service step under a
+    deterministic policy: ``sum_s pi(s) busy_m(C(s), a(s))`` with the model's busy table
+    (:attr:`wncs_lp.models.system.System.busy`: a job in service, or one the action starts)."""
+    from ..models.system import System
+
+    system = System.from_scenario(mdp.states.model.scenario)
+    local = np.asarray(policy, np.int64) - mdp.pair_ptr[:-1]
+    busy = system.busy[np.asarray(mdp.states.config, np.int64), local]  # (n, M)
+    return [float(x) for x in np.asarray(stationary) @ busy]
 
 
 def _solved_law(sol: Solution, P_pi, n_pairs: int) -> np.ndarray | None:
@@ -563,6 +585,7 @@ class Context:
             m = cap_mass(mdp, stationary)  # stored, so a claim reading the solve needs no MDP for it
             res["cap_mass"] = {"total": m.total, "per_process": list(m.per_process), "caps": list(m.caps),
                                "process_names": list(m.process_names)}
+            res["utilisation"] = utilisation(mdp, sol.policy, stationary)
             return res, {"policy": sol.policy, "bias": sol.bias, "stationary": stationary}
 
         res, arr = self.cache.get_or_compute("solve", {"fingerprint": key}, compute)
@@ -584,6 +607,7 @@ class Context:
             stored,
             res.get("recurrent_classes"),
             res.get("states"),
+            None if res.get("utilisation") is None else tuple(float(x) for x in res["utilisation"]),
         )
         return solved
 

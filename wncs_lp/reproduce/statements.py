@@ -224,22 +224,10 @@ def claim_c15(ctx: Context) -> ClaimResult:
 
 # ============================================================================ C16
 def idle_share(solved: Solved) -> float:
-    """The long-run share of slots in which the server performs no service step under the optimal
-    policy: ``1 - sum_s pi(s) busy(C(s), a(s))`` with the model's busy table (:attr:`System.busy`:
-    a job in service at the start of the slot, or one started by the action)."""
-    mdp = solved.mdp
-    system = System.from_scenario(solved.scenario)
-    local = solved.policy - mdp.pair_ptr[:-1]
-    busy = system.busy[np.asarray(mdp.states.config, np.int64), local].sum(axis=1)
-    return float(1.0 - np.asarray(solved.stationary) @ busy)
-
-
-def _idle_step(ctx: Context, sc) -> float:
-    """:func:`idle_share` of a scenario's optimal solve, cached (the worker processes of
-    :meth:`Context.prefetch_calls` compute it beside the solve; the run then builds no model for it)."""
-    res, _ = ctx.cache.get_or_compute("idle-share", {"fingerprint": sc.fingerprint()},
-                                      lambda: ({"idle": idle_share(ctx.solve(sc))}, None))
-    return float(res["idle"])
+    """The long-run share of slots in which the one server performs no service step under the
+    optimal policy: ``1 - sum_s pi(s) busy(C(s), a(s))`` (:attr:`Solved.utilisation`, stored with
+    the solve: a job in service at the start of the slot, or one started by the action)."""
+    return float(1.0 - solved.utilisation[0])
 
 
 def claim_c16(ctx: Context) -> ClaimResult:
@@ -253,11 +241,12 @@ def claim_c16(ctx: Context) -> ClaimResult:
         return (ctx.scenario("paper_preemption_p12.toml", over),
                 ctx.scenario("paper_preemption_p12.toml", over + ["model.preemptive=false"]))
 
-    ctx.prefetch_calls(_idle_step, [(sc,) for cap in sorted(caps, reverse=True) for p in ps for sc in scenarios(cap, p)])
+    ctx.prefetch([Step(sc) for cap in sorted(caps, reverse=True) for p in ps for sc in scenarios(cap, p)])
     rows = []
     for cap in caps:
         for p in ps:
-            (pre, i_pre), (non, i_non) = ((ctx.solve(sc), _idle_step(ctx, sc)) for sc in scenarios(cap, p))
+            pre, non = (ctx.solve(sc) for sc in scenarios(cap, p))
+            i_pre, i_non = idle_share(pre), idle_share(non)
             rows.append({"cap": cap, "p": p, "idle_preemptive": i_pre, "idle_non_preemptive": i_non,
                          "idle_reduction_rel": (i_non - i_pre) / i_non if i_non > IDLE_TOL else 0.0,
                          "performance_not_reduced": bool(pre.gain <= non.gain * (1 + EQ_RTOL)),
