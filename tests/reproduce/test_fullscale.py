@@ -39,7 +39,7 @@ def test_section_has_numbers_figure_table_and_no_verdict(tiny):
         assert (out / f).stat().st_size > 1000
     (tab,) = b2["tables"]
     assert (out / tab).read_text().startswith("cap,p,states,policy,gain")
-    assert "| cap | p | states | policy |" in b2["details"]
+    assert "| cap | p | states (box) | policy |" in b2["details"]
     assert b2["numbers"]["all_certified"]
     # three instances: (6, 0.9), (7, 0.9) and (6, 0.8); (6, 0.9) is shared by both lists
     assert sorted((i["cap"], i["p"]) for i in b2["numbers"]["instances"]) == [(6, 0.8), (6, 0.9), (7, 0.9)]

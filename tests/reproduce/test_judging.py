@@ -22,10 +22,11 @@ from wncs_lp.truncation import CAP_MASS_WARN
 # ============================================================================ verdicts over caps
 def test_subclaims_verdict():
     assert subclaims_verdict({"a": {12: True, 20: True}, "b": {12: True, 20: None}}) == "HOLDS"
-    assert subclaims_verdict({"a": {12: False, 20: True}, "b": {12: True, 20: True}}) == "DEPENDS"
-    # one sub-claim false at every cap where it is checked: false whatever the truncation
+    # the least truncated cap decides: false at cap 12 only is a caveat, false at cap 20 a failure
+    assert subclaims_verdict({"a": {12: False, 20: True}, "b": {12: True, 20: True}}) == "HOLDS"
+    assert subclaims_verdict({"a": {12: True, 20: False}, "b": {12: True, 20: True}}) == "FAILS"
     assert subclaims_verdict({"a": {12: False, 20: False}, "b": {12: True, 20: True}}) == "FAILS"
-    assert subclaims_verdict({"a": {12: False, 20: None}}) == "FAILS"
+    assert subclaims_verdict({"a": {12: False, 20: None}}) == "FAILS"  # checked at cap 12 only: cap 12 decides
     assert across(["HOLDS", "HOLDS"]) == "HOLDS" and across(["FAILS", "HOLDS"]) == "DEPENDS"
 
 
@@ -33,21 +34,32 @@ def _ev(sc, cap, mass, v):
     return evidence(f"{sc} at cap {cap}", cap, mass, v, sc)
 
 
-def test_cap_basis_picks_the_least_truncated_instance_that_shows_the_verdict():
+def test_cap_basis_decides_at_the_least_truncated_instance_and_keeps_the_others_as_caveats():
     ev = [_ev("p12", 12, 0.168, "FAILS"), _ev("p12", 20, 0.0076, "HOLDS"), _ev("p12", 30, 0.00003, "HOLDS")]
-    b = cap_basis(ev, "FAILS")  # the only failing instance decides, and it leans on the truncation
-    assert b["deciding"] == ["p12 at cap 12"] and b["deciding_mass"] == 0.168 and b["flag"]
+    b = cap_basis(ev)  # cap 30 decides: HOLDS; the failing cap 12 is a caveat, never the verdict
+    assert b["verdict"] == "HOLDS" and b["deciding"] == ["p12 at cap 30"] and not b["flag"]
+    assert [c["label"] for c in b["caveats"]] == ["p12 at cap 12"] and b["caveats"][0]["verdict"] == "FAILS"
     assert b["caps"] == [12, 20, 30] and b["threshold"] == CAP_MASS_WARN
-    b = cap_basis(ev, "DEPENDS")  # no instance says DEPENDS: the least-truncated one of all
-    assert b["deciding"] == ["p12 at cap 30"] and not b["flag"]
-    # HOLDS needs every scenario: each one's least-truncated instance decides, the worst of them flags
+    assert cap_basis(ev, "FAILS")["verdict"] == "FAILS"  # a verdict the claim decided itself is kept
+    # the largest cap of each scenario decides, whatever the masses; the worst of them flags
     ev2 = [_ev("p12", 30, 0.0001, "HOLDS"), _ev("p123", 12, 0.39, "HOLDS"), _ev("p123", 20, 0.019, "HOLDS")]
-    b = cap_basis(ev2, "HOLDS")
-    assert sorted(b["deciding"]) == ["p12 at cap 30", "p123 at cap 20"]
-    assert b["deciding_mass"] == 0.019 and b["flag"]
-    assert not cap_basis([_ev("p12", 30, CAP_MASS_WARN, "HOLDS")], "HOLDS")["flag"]  # at the threshold: no flag
+    b = cap_basis(ev2)
+    assert sorted(b["deciding"]) == ["p12 at cap 30", "p123 at cap 20"] and b["verdict"] == "HOLDS"
+    assert b["deciding_mass"] == 0.019 and b["flag"] and b["caveats"] == []
+    assert not cap_basis([_ev("p12", 30, CAP_MASS_WARN, "HOLDS")])["flag"]  # at the threshold: no flag
+    # a scenario's deciding instance that fails decides the claim (any FAILS), the other scenario holding
+    b = cap_basis([_ev("p12", 30, 0.0, "FAILS"), _ev("p14", 30, 0.0, "HOLDS"), _ev("p14", 12, 0.7, "DEPENDS")])
+    assert b["verdict"] == "FAILS" and [c["label"] for c in b["caveats"]] == ["p14 at cap 12"]
+    # a FAILS leans on the truncation only when every failing deciding instance does
+    b = cap_basis([_ev("p12", 30, 0.00003, "FAILS"), _ev("p123", 20, 0.019, "FAILS")])
+    assert b["verdict"] == "FAILS" and b["deciding_mass"] == 0.00003 and not b["flag"]
+    b = cap_basis([_ev("p12", 30, 0.00003, "HOLDS"), _ev("p123", 20, 0.019, "FAILS")])
+    assert b["verdict"] == "FAILS" and b["deciding_mass"] == 0.019 and b["flag"]
+    # a verdict the claim gives (from sub-claims reading both instances together): the largest mass
+    b = cap_basis([_ev("pre", 25, 0.02, "FAILS"), _ev("non", 25, 0.036, "FAILS")], "FAILS")
+    assert b["deciding_mass"] == 0.036 and b["flag"]
     nod = cap_basis(ev, "HOLDS", note="cap-free", decides=False)
-    assert nod["deciding"] == [] and not nod["flag"] and nod["note"] == "cap-free"
+    assert nod["deciding"] == [] and not nod["flag"] and nod["note"] == "cap-free" and nod["verdict"] == "HOLDS"
 
 
 def test_monte_carlo_agreement():
@@ -75,7 +87,7 @@ def made_up(tmp_path):
     fig, ax = subplots()
     ax.plot([0, 1], [1, 0])
     fig.savefig(tmp_path / "figures" / "x.png")
-    basis = cap_basis([_ev("p12", 12, 0.2, "FAILS"), _ev("p12", 30, 0.0, "HOLDS")], "FAILS")
+    basis = cap_basis([_ev("p12", 12, 0.2, "HOLDS"), _ev("p12", 30, 0.05, "FAILS")], "FAILS")
     claims = [
         ClaimResult("C1", "Fig. 3", "", "HOLDS", "all good", {"a": None, "b": {"c": float("nan"), "d": [1, None]}},
                     ["figures/x.png"], [], basis=cap_basis([_ev("p14", 30, 0.0005, "HOLDS")], "HOLDS"),
@@ -104,7 +116,8 @@ def test_html_contents_links_colours_captions(made_up, html_check):
     for v in ("HOLDS", "FAILS", "DEPENDS", "ERROR"):
         assert sum(COLOURS[v][0] in s for s in page.badges) >= 2
     assert page.figcaptions == 1 and "Figure C1.1." in html and "a line" in html
-    assert "⚠" in html and "Leans on the truncation" in html  # C2 rests on a cap with 20% at the cap
+    assert "⚠" in html and "Leans on the truncation" in html  # C2 rests on a cap with 5% at the cap
+    assert "Caveat, a more truncated instance that disagrees" in html and "p12 at cap 12 says HOLDS" in html
     text = " ".join(page.text)
     assert "2026-01-01 00:00 UTC" in text and "abc123" in text
     assert html.index('id="contents"') < html.index('id="c1"')  # the contents come first
@@ -115,7 +128,7 @@ def test_markdown_anchors_and_tables(made_up):
     for cid in ("c1", "c2", "c3", "c4"):
         assert f"[{cid.upper()}](#{cid})" in md and f'<a id="{cid}"></a>' in md
     assert not re.search(r"\bNone\b", md) and "{'" not in md
-    assert "Rests on** caps 12, 30; deciding cap 12 (20.00% at the cap)" in md
+    assert "Rests on** caps 12, 30; deciding cap 30 (5.00% at the cap)" in md
     assert "*Figure C1.1. a line*" in md
     # each section: the paper's own sentence, then the conclusion, then what was checked
     c3 = md[md.index('<a id="c3"></a>'):md.index('<a id="c4"></a>')]

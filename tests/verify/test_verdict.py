@@ -235,7 +235,8 @@ def test_a_gap_with_a_witness_below_the_cap_is_filed_below_it(pre8):
     # keeps going at tau_1 = 1, 2, preempts at 3, 4 and keeps going again from 5 to the cap: its last
     # keep-going state is at the cap, but (2, 3, 5) witnesses the gap well below it
     ctx, c, grid, act = _planted(mdp, sol, lambda t1, t2: (3 <= t1 <= 4) if t2 == 5 else t1 >= 6)
-    ctx = dataclasses.replace(ctx, recurrent=np.ones(mdp.n_states, bool))  # every state observable
+    n = mdp.n_states
+    ctx = dataclasses.replace(ctx, recurrent=np.ones(n, bool), stationary=np.full(n, 1.0 / n))  # every state observable
     tau = mdp.states.tau
     row5 = [int(grid[i, 4]) for i in range(cap) if grid[i, 4] >= 0]
     assert tau[row5[-1]][0] == cap and act[row5[-1]] == act[row5[0]]  # the old rule's "last state": at the cap
@@ -305,5 +306,80 @@ def test_magnitude_and_compound_rules():
     # "vastly improved" read with the bar of "much better": 1.94% at best fails at every cap
     vast = {cap: gap >= MUCH for cap, gap in ((12, 0.0), (20, 0.0003), (30, 0.0194))}
     assert subclaims_verdict({"vastly": vast, "equal at p = 1": {12: True, 20: True, 30: True}}) == FAILS
-    assert subclaims_verdict({"vastly": {12: False, 30: True}}) == DEPENDS
     assert across([HOLDS, FAILS]) == DEPENDS and across([FAILS, FAILS]) == FAILS
+
+
+# ============================================================================ where a verdict is decided
+def test_a_sub_claim_false_only_at_the_most_truncated_cap_is_a_caveat():
+    from wncs_lp.verify.verdict import subclaim_caveats, subclaims_verdict
+
+    only12 = {"gap shrinks": {12: False, 20: True, 30: True}, "equal at p = 1": {12: True, 20: True, 30: True}}
+    assert subclaims_verdict(only12) == HOLDS  # cap 30 decides; cap 12 only adds a caveat
+    assert subclaim_caveats(only12) == ["'gap shrinks' fails at cap 12 (holds at cap 30, which decides)"]
+    # the converse: true at the small caps, false at the least truncated one
+    only30 = {"vastly": {12: True, 20: True, 30: False}}
+    assert subclaims_verdict(only30) == FAILS
+    assert subclaim_caveats(only30) == ["'vastly' holds at cap 12, 20 (fails at cap 30, which decides)"]
+    # not checked at the largest cap: the largest cap where it is checked decides
+    assert subclaims_verdict({"a": {12: False, 20: True, 30: None}}) == HOLDS
+    assert subclaims_verdict({"a": {12: None, 30: None}}) == DEPENDS  # decided nowhere
+
+
+def test_a_structural_violation_only_at_the_most_truncated_cap_is_a_caveat():
+    from wncs_lp.verify.verdict import decide
+
+    # C1's shape: a recurrent violation below the cap at cap 12 only
+    d = decide([("p14", 12, FAILS), ("p14", 20, HOLDS), ("p14", 30, HOLDS)])
+    assert d.verdict == HOLDS and d.deciding == (2,) and d.caveats == (0,)
+    # the least truncated instance of each scenario decides; one FAILS among them decides the claim
+    d = decide([("p12", 12, HOLDS), ("p12", 30, FAILS), ("p14", 12, FAILS), ("p14", 30, DEPENDS)])
+    assert d.verdict == FAILS and d.deciding == (1, 3) and d.caveats == (0, 2)
+    assert decide([("p12", 30, HOLDS), ("p14", 30, DEPENDS)]).verdict == DEPENDS
+    # descriptive claims: the deciding instances (e.g. planes at the largest cap) must agree
+    d = decide([(18, 16, HOLDS), (18, 20, HOLDS), (45, 20, FAILS)], how="descriptive")
+    assert d.verdict == DEPENDS and d.deciding == (1, 2) and d.caveats == ()
+    assert decide([]).verdict == ERROR and decide([("a", 12, ERROR), ("a", 20, HOLDS)]).verdict == ERROR
+
+
+def test_a_violation_of_negligible_weight_is_a_caveat_not_a_counterexample(pre8):
+    from wncs_lp.verify.verdict import NEGLIGIBLE
+
+    _, mdp, sol = pre8
+    # one gap, on the row tau_2 = 5 (witness (2, 5), (3, 5), (5, 5), below the cap); every state recurrent
+    ctx, c, grid, act = _planted(mdp, sol, lambda t1, t2: (3 <= t1 <= 4) if t2 == 5 else t1 >= 6)
+    n = mdp.n_states
+    row5 = [int(s) for s in grid[:, 4] if s >= 0]
+    for weight, want in ((NEGLIGIBLE / 100, DEPENDS), (NEGLIGIBLE * 100, FAILS)):
+        law = np.full(n, (1.0 - weight * len(row5)) / (n - len(row5)))
+        law[row5] = weight  # the row visited `weight` of the time per state
+        rep = check_threshold(mdp, sol, ctx=dataclasses.replace(ctx, recurrent=np.ones(n, bool), stationary=law),
+                              configs=[c])
+        assert rep.split["recurrent_below_cap"] > 0  # recurrent and below the cap either way ...
+        assert (rep.split["observable_below_cap"] > 0) == (want == FAILS)  # ... of weight only above the bar
+        assert rep.verdict == want == verdict_of(rep.to_json())
+        row_ex = [e for e in rep.examples if all(mdp.states.tau[s][1] == 5 for s in e.states)]
+        assert row_ex and row_ex[0].observable == (want == FAILS)
+
+
+def test_the_witness_shown_first_is_the_farthest_from_the_cap(pre8):
+    from wncs_lp.verify.report import pick_examples
+
+    # hand-made: both recurrent and below the cap; the bigger one hugs the cap (distance 1), the other lies 6 away
+    rec, cap = np.array([True, True]), np.array([False, False])
+    assert list(pick_examples(rec, cap, np.array([20.0, 10.0]), 2, dist=np.array([1, 6]))) == [1, 0]
+    assert list(pick_examples(rec, cap, np.array([20.0, 10.0]), 2)) == [0, 1]  # without distances: by size
+    # an observable witness beats a heavier-sized one of negligible weight, whatever the distance
+    assert list(pick_examples(rec, cap, np.array([20.0, 10.0]), 2, obs=np.array([False, True]),
+                              dist=np.array([6, 1]))) == [1, 0]
+    # planted: a gap on the row tau_2 = 2 (far from the cap 8) and one on the row tau_2 = 7 (next to it)
+    _, mdp, sol = pre8
+    ctx, c, grid, act = _planted(mdp, sol, lambda t1, t2: (3 <= t1 <= 4) if t2 in (2, 7) else t1 >= 6)
+    n = mdp.n_states
+    rep = check_threshold(mdp, sol, ctx=dataclasses.replace(ctx, recurrent=np.ones(n, bool),
+                                                            stationary=np.full(n, 1.0 / n)), configs=[c])
+    first = rep.examples[0]
+    tau = mdp.states.tau
+    assert {int(tau[s][1]) for s in first.states} == {2} and first.cap_distance == 8 - 5
+    dists = [e.cap_distance for e in rep.examples]
+    assert dists == sorted(dists, reverse=True)
+    assert first.to_json()["cap_distance"] == first.cap_distance

@@ -1,8 +1,9 @@
 """``wncs-lp verify``: check the structural theorems on the solved model.
 
 Each check's verdict comes from its numbers by the one rule the reproduction uses too
-(:mod:`wncs_lp.verify.verdict`): HOLDS (no violation), FAILS (a violation in recurrent states away
-from the AoI cap), DEPENDS (violations only in transient states or at the cap). Exit status: 0 when
+(:mod:`wncs_lp.verify.verdict`): HOLDS (no violation), FAILS (a violation in recurrent states of
+weight, each visited at least 1e-9 of the time, away from the AoI cap), DEPENDS (violations only in
+transient states, in states of negligible weight or at the cap). Exit status: 0 when
 no check FAILS and the solve is certified, 1 otherwise (2: bad input).
 """
 from __future__ import annotations
@@ -55,8 +56,10 @@ def cmd_verify(args: argparse.Namespace) -> int:
         for r in reports:
             if r.examples:
                 e = r.examples[0]
-                print(f"{r.name}: first example ({'recurrent' if e.recurrent else 'transient'}, "
-                      f"{'at' if e.at_cap else 'below'} the cap, size {e.size:.4g}):")
+                weight = "" if e.stationary is None else f", weight {min(e.stationary):.3g}"
+                far = "" if e.cap_distance is None else f" ({e.cap_distance} from it)"
+                print(f"{r.name}: first example ({'recurrent' if e.recurrent else 'transient'}{weight}, "
+                      f"{'at' if e.at_cap else 'below'} the cap{far}, size {e.size:.4g}):")
                 for lab in e.labels:
                     print(f"    {lab}")
                 for step in e.info.get("trajectory", []):

@@ -1,4 +1,4 @@
-"""Reproduce every figure and claim of the paper (claims C1-C13, ``docs/reproduction.md``).
+"""Reproduce every figure and claim of the paper (claims C1-C16, ``docs/reproduction.md``).
 
 :func:`run_reproduction` computes each claim step by step, caching every step on disk (keyed by
 scenario fingerprint and parameters) so an interrupted run resumes and a second run is fast, and
@@ -29,7 +29,7 @@ __all__ = ["run_reproduction", "PROFILES", "Profile", "CLAIMS"]
 
 
 def _claims() -> dict[str, Callable[[Context], ClaimResult]]:
-    from . import performance, structural
+    from . import performance, statements, structural
 
     return {
         "C1": structural.claim_c1,
@@ -45,13 +45,16 @@ def _claims() -> dict[str, Callable[[Context], ClaimResult]]:
         "C11": performance.claim_c11,
         "C12": performance.claim_c12,
         "C13": performance.claim_c13,
+        "C14": statements.claim_c14,
+        "C15": statements.claim_c15,
+        "C16": statements.claim_c16,
     }
 
 
-CLAIMS = tuple(f"C{i}" for i in range(1, 14))
+CLAIMS = tuple(f"C{i}" for i in range(1, 17))
 PAPER = {"C1": "Fig. 3", "C2": "Fig. 4", "C3": "Fig. 5", "C4": "Figs. 6-7", "C5": "Figs. 8-9", "C6": "Fig. 10",
          "C7": "Theorem 1", "C8": "Theorem 2", "C9": "Figs. 11-12", "C10": "Theorem 3", "C11": "Fig. 13",
-         "C12": "Sec. V end", "C13": "Sec. III"}
+         "C12": "Sec. V end", "C13": "Sec. III", "C14": "Sec. V", "C15": "Sec. V", "C16": "Sec. IV"}
 
 
 def _versions() -> dict[str, str]:
@@ -143,7 +146,7 @@ def run_reproduction(
     force : bool
         Recompute every step, ignoring the cache.
     claims : sequence of str, optional
-        Only these claims (default all, C1-C13, and the "beyond the paper" sections, B1, B2 and
+        Only these claims (default all, C1-C16, and the "beyond the paper" sections, B1, B2 and
         B3; name one of them here to compute it in a partial run).
     progress : bool
         The estimate up front and one line per section (its time, the time elapsed and left) on

@@ -21,7 +21,7 @@ from ..methods import EXACT_METHOD_MAX_STATES, exact_method
 from ..solvers.result import Solution
 from ..solvers.route import solve_scenario
 from ..truncation import CAP_MASS_WARN, CapMass, cap_mass
-from ..verify.verdict import subclaims_verdict  # the compound-claim rule lives with the other verdict rules
+from ..verify.verdict import decide, subclaims_verdict  # the rules of the verdicts live together
 from ..viz import save_figure
 from .cache import StepCache, code_version
 
@@ -122,10 +122,10 @@ class Table:
 class ClaimResult:
     """One claim of ``claims.md`` with its verdict and the numbers that decide it.
 
-    ``basis`` says which caps the verdict rests on: every instance used (scenario, cap, p) with the
-    stationary mass the optimal policy spends with some AoI at its cap, the deciding instance and
-    whether its mass exceeds :data:`~wncs_lp.truncation.CAP_MASS_WARN` (``flag``); see
-    :func:`cap_basis`. ``shown`` are the tables of the report, ``captions`` the figures' captions
+    ``basis`` says where the verdict is decided: every instance used (scenario, cap, p) with the
+    stationary mass the optimal policy spends with some AoI at its cap, the deciding (least
+    truncated) instances, whether their mass exceeds :data:`~wncs_lp.truncation.CAP_MASS_WARN`
+    (``flag``) and the more truncated instances that disagree (``caveats``); see :func:`cap_basis`. ``shown`` are the tables of the report, ``captions`` the figures' captions
     (keyed by the PNG's path).
     """
 
@@ -193,55 +193,56 @@ class ExtraResult:
 
 
 def evidence(label: str, cap: int, mass: float, verdict: str, scenario: str = "", p: float | None = None,
-             per_process: Sequence[float] = ()) -> dict[str, Any]:
-    """One instance a verdict rests on (see :func:`cap_basis`)."""
+             per_process: Sequence[float] = (), group: str | None = None) -> dict[str, Any]:
+    """One instance a verdict rests on (see :func:`cap_basis`). ``group``: what the instance is of
+    apart from its cap (default: its scenario; e.g. a scenario and a plane), so that the largest cap
+    of each group decides."""
     def share(x: float) -> float:  # a probability, round-off of a summed law clipped to [0, 1]
         return float(min(1.0, max(0.0, x)))
 
     return {"label": label, "scenario": scenario, "cap": int(cap), "p": p, "mass": share(mass),
-            "per_process": [share(m) for m in per_process], "verdict": verdict}
+            "per_process": [share(m) for m in per_process], "verdict": verdict,
+            "group": scenario if group is None else group}
 
 
-def cap_basis(entries: Sequence[dict[str, Any]], verdict: str, note: str = "", decides: bool = True) -> dict[str, Any]:
-    """Which caps a verdict rests on, and whether the deciding one leans on the truncation.
+def cap_basis(entries: Sequence[dict[str, Any]], verdict: str | None = None, note: str = "", decides: bool = True,
+              how: str = "structural") -> dict[str, Any]:
+    """Where a verdict is decided, and whether its deciding instances lean on the truncation.
 
-    ``entries`` come from :func:`evidence`, one per instance (scenario, cap, p or p-grid) with
+    ``entries`` come from :func:`evidence`, one per instance (scenario, cap, p or p-grid, ...) with
     its own verdict and the stationary mass of the optimal policy at the cap (for a p-grid: the
-    largest over p). The *deciding* instances are the least-truncated ones that show the
-    verdict: for HOLDS, in each scenario the instance of smallest mass (the verdict needs them
-    all); otherwise the single instance of smallest mass among those whose own verdict equals
-    the claim's (all instances when none does, e.g. a verdict that changes with the cap). The
-    verdict is *flagged* when a deciding instance has more than CAP_MASS_WARN of its long-run time
-    with some AoI at its cap. ``decides=False`` (a claim the truncation cannot change, said in
-    ``note``): nothing is flagged.
+    largest over p). The *least truncated* instance of each group (the largest cap of each
+    scenario, or scenario and plane) decides (:func:`wncs_lp.verify.verdict.decide`: the deciding
+    instances combined structurally -- any FAILS decides -- or, ``how="descriptive"``, DEPENDS when
+    they differ); a more truncated instance whose verdict differs from its group's deciding one is
+    a *caveat* (``caveats``, printed beside the verdict), never the verdict. ``verdict``: the claim's
+    verdict when the claim decides it itself (sub-claims, :func:`subclaims_verdict`, by the same
+    rule); default: the one of :func:`~wncs_lp.verify.verdict.decide`. The verdict is *flagged*
+    when a deciding instance has more than CAP_MASS_WARN of its long-run time with some AoI at its
+    cap (``deciding_mass``: the largest of them; for a FAILS decided here by the structural rule,
+    where one counterexample decides, the smallest among the failing deciding instances: such a
+    FAILS leans on the truncation only when every counterexample does; a verdict given by the
+    claim, from sub-claims that read every deciding instance together, takes the largest). ``decides=False`` (a claim the truncation cannot change,
+    said in ``note``): nothing is flagged and the verdict is the one given.
     """
     entries = list(entries)
     out: dict[str, Any] = {"instances": entries, "caps": sorted({e["cap"] for e in entries}),
                            "threshold": CAP_MASS_WARN, "note": note}
     if not entries or not decides:
-        return {**out, "deciding": [], "deciding_mass": None, "flag": False}
-    if verdict == "HOLDS":
-        by_sc: dict[str, dict] = {}
-        for e in entries:
-            cur = by_sc.get(e["scenario"])
-            if cur is None or (e["mass"], -e["cap"]) < (cur["mass"], -cur["cap"]):
-                by_sc[e["scenario"]] = e
-        deciding = list(by_sc.values())
+        return {**out, "verdict": verdict, "deciding": [], "deciding_mass": None, "flag": False, "caveats": []}
+    d = decide([(e.get("group", e["scenario"]), e["cap"], e["verdict"]) for e in entries], how)
+    deciding = [entries[i] for i in d.deciding]
+    failing = [e for e in deciding if e["verdict"] == "FAILS"]
+    if verdict is None and d.verdict == "FAILS" and how == "structural" and failing:
+        worst = min(e["mass"] for e in failing)  # one counterexample decides: its own truncation
     else:
-        agree = [e for e in entries if e["verdict"] == verdict] or entries
-        deciding = [min(agree, key=lambda e: (e["mass"], -e["cap"]))]
-    worst = max(e["mass"] for e in deciding)
-    return {**out, "deciding": [e["label"] for e in deciding], "deciding_caps": sorted({e["cap"] for e in deciding}),
-            "deciding_mass": worst, "flag": bool(worst > CAP_MASS_WARN)}
-
-
-def one_verdict(holds: bool | None, fails: bool | None = None) -> str:
-    """HOLDS when ``holds``; FAILS when ``fails`` (default: not ``holds``); DEPENDS otherwise."""
-    if holds:
-        return "HOLDS"
-    if fails is None or fails:
-        return "FAILS"
-    return "DEPENDS"
+        worst = max(e["mass"] for e in deciding)
+    verdict = d.verdict if verdict is None else verdict
+    return {**out, "verdict": verdict, "deciding": [e["label"] for e in deciding],
+            "deciding_caps": sorted({e["cap"] for e in deciding}), "deciding_mass": worst,
+            "flag": bool(worst > CAP_MASS_WARN),
+            "caveats": [{"label": entries[i]["label"], "verdict": entries[i]["verdict"], "cap": entries[i]["cap"],
+                         "mass": entries[i]["mass"]} for i in d.caveats]}
 
 
 def short_name(name: str) -> str:
@@ -260,10 +261,15 @@ def assignment_label(scenario: Scenario, assignment: Sequence[int]) -> str:
 
 @dataclass(frozen=True, eq=False)
 class Solved:
-    """An optimal solution (cached on disk) with the stationary law of its policy."""
+    """An optimal solution (cached on disk) with the stationary law of its policy.
+
+    ``built`` is the MDP, or a function that builds it: a solve read from the cache builds its MDP
+    only when something asks for :attr:`mdp` (a claim that needs only the gains, the mass at the
+    cap and the number of recurrent classes, stored with the solve, builds none).
+    """
 
     scenario: Scenario
-    mdp: MDP
+    built: MDP | Callable[[], MDP]
     gain: float
     gain_lower: float
     gain_upper: float
@@ -273,22 +279,51 @@ class Solved:
     method: str
     seconds: float
     status: str = "optimal"  # the solver's; anything else is said in the claim's section
+    #: The mass at the cap, the number of recurrent classes and of states, when the solve stored them.
+    stored_cap_mass: CapMass | None = None
+    stored_classes: int | None = None
+    stored_states: int | None = None
+    stored_utilisation: tuple[float, ...] | None = None
+
+    @cached_property
+    def utilisation(self) -> tuple[float, ...]:
+        """Each server's long-run share of slots with a service step under the optimal policy
+        (:func:`utilisation`)."""
+        if self.stored_utilisation is not None:
+            return self.stored_utilisation
+        return utilisation(self.mdp, self.policy, self.stationary)
+
+    @cached_property
+    def mdp(self) -> MDP:
+        return self.built if isinstance(self.built, MDP) else self.built()
 
     @cached_property
     def recurrent(self) -> np.ndarray:
         """(n,) bool: the state lies in a closed class of the policy's chain (:mod:`wncs_lp.chain`)."""
         return PolicyChain(self.mdp, self.policy).recurrent
 
+    @property
+    def n_states(self) -> int:
+        """The number of states of the MDP."""
+        return self.stored_states if self.stored_states is not None else self.mdp.n_states
+
+    @property
+    def n_classes(self) -> int:
+        """The number of recurrent classes of the policy's chain."""
+        if self.stored_classes is not None:
+            return self.stored_classes
+        return len(PolicyChain(self.mdp, self.policy).recurrent_classes)
+
     @cached_property
     def cap_mass(self) -> CapMass:
         """The stationary mass of the optimal policy with some AoI at its cap (:mod:`wncs_lp.truncation`)."""
-        return cap_mass(self.mdp, self.stationary)
+        return self.stored_cap_mass if self.stored_cap_mass is not None else cap_mass(self.mdp, self.stationary)
 
-    def evidence(self, label: str, verdict: str) -> dict[str, Any]:
-        """This solve as one instance a verdict rests on (:func:`cap_basis`)."""
+    def evidence(self, label: str, verdict: str, group: str | None = None) -> dict[str, Any]:
+        """This solve as one instance a verdict rests on (:func:`cap_basis`; ``group`` as in :func:`evidence`)."""
         m = self.cap_mass
         return evidence(label, max(self.scenario.tau_caps), m.total, verdict, Path(str(self.scenario.source)).stem,
-                        self.scenario.p, m.per_process)
+                        self.scenario.p, m.per_process, group)
 
     @property
     def actions(self) -> np.ndarray:
@@ -312,6 +347,8 @@ class Solved:
 
 #: Worker processes of :meth:`Context.prefetch` (independent instances computed side by side).
 WORKERS = 2
+#: The policies :meth:`Context.simulate` runs as a table of their actions on the enumerated MDP.
+TABLE_FORM = ("static", "greedy")
 
 
 @dataclass(frozen=True)
@@ -325,6 +362,18 @@ class Step:
     evaluate: tuple[str, ...] = ()
     static: bool = False
     simulate: tuple[tuple[str, int, int, int, int], ...] = ()
+
+
+def utilisation(mdp: MDP, policy: np.ndarray, stationary: np.ndarray) -> list[float]:
+    """Each server's long-run share of slots in which it performs a service step under a
+    deterministic policy: ``sum_s pi(s) busy_m(C(s), a(s))`` with the model's busy table
+    (:attr:`wncs_lp.models.system.System.busy`: a job in service, or one the action starts)."""
+    from ..models.system import System
+
+    system = System.from_scenario(mdp.states.model.scenario)
+    local = np.asarray(policy, np.int64) - mdp.pair_ptr[:-1]
+    busy = system.busy[np.asarray(mdp.states.config, np.int64), local]  # (n, M)
+    return [float(x) for x in np.asarray(stationary) @ busy]
 
 
 def _solved_law(sol: Solution, P_pi, n_pairs: int) -> np.ndarray | None:
@@ -509,9 +558,10 @@ class Context:
         return solved
 
     def _solve(self, scenario: Scenario, key: str) -> Solved:
-        mdp = self.mdp(scenario)
-
         def compute():
+            mdp = self.mdp(scenario)
+            self.log(f"solving {Path(scenario.source).name} caps {scenario.tau_caps} p={scenario.p:g} "
+                     f"({mdp.n_states:,} states)")
             t0 = time.perf_counter()
             sol = solve_scenario(scenario, exact_method(mdp.n_states), constrained=False, mdp=mdp).solution
             P_pi = mdp.P[sol.policy]
@@ -529,19 +579,22 @@ class Context:
                 "states": mdp.n_states,
                 "pairs": mdp.n_pairs,
                 "unichain": unichain,
+                "recurrent_classes": len(classes),
                 "seconds": time.perf_counter() - t0,
             }
+            m = cap_mass(mdp, stationary)  # stored, so a claim reading the solve needs no MDP for it
+            res["cap_mass"] = {"total": m.total, "per_process": list(m.per_process), "caps": list(m.caps),
+                               "process_names": list(m.process_names)}
+            res["utilisation"] = utilisation(mdp, sol.policy, stationary)
             return res, {"policy": sol.policy, "bias": sol.bias, "stationary": stationary}
 
-        def logged():
-            self.log(f"solving {Path(scenario.source).name} caps {scenario.tau_caps} p={scenario.p:g} "
-                     f"({mdp.n_states:,} states)")
-            return compute()
-
-        res, arr = self.cache.get_or_compute("solve", {"fingerprint": key}, logged)
+        res, arr = self.cache.get_or_compute("solve", {"fingerprint": key}, compute)
+        m = res.get("cap_mass")
+        stored = None if m is None else CapMass(float(m["total"]), tuple(float(x) for x in m["per_process"]),
+                                                tuple(int(c) for c in m["caps"]), tuple(m["process_names"]))
         solved = Solved(
             scenario,
-            mdp,
+            lambda: self.mdp(scenario),
             res["gain"],
             res["gain_lower"],
             res["gain_upper"],
@@ -551,6 +604,10 @@ class Context:
             res["method"],
             res["seconds"],
             res.get("status", "optimal"),
+            stored,
+            res.get("recurrent_classes"),
+            res.get("states"),
+            None if res.get("utilisation") is None else tuple(float(x) for x in res["utilisation"]),
         )
         return solved
 
@@ -588,11 +645,14 @@ class Context:
 
         ``optimal`` simulates the policy of :meth:`solve` (the instance is solved once per run,
         whichever claim asks first); the others are built as a sweep builds them
-        (:func:`wncs_lp.policies.make_policy`, the static one on the spec's default assignment).
+        (:func:`wncs_lp.policies.make_policy`, the static one on the spec's default assignment); the
+        rule-based ones of :data:`TABLE_FORM` are simulated through their action in each state of the
+        enumerated MDP (a deterministic rule draws no random numbers, so the sample paths are the
+        same, and a table lookup is cheaper than the rule: about 40% less time per slot).
         Returns ``{"mean", "stderr"}``.
         """
         from ..models.system import System
-        from ..policies import make_policy
+        from ..policies import TablePolicy, make_policy
         from ..simulate import simulate
 
         def compute():
@@ -602,6 +662,9 @@ class Context:
                 pol = make_policy(policy, system, solved.mdp, solution=solved.as_solution())
             else:
                 pol = make_policy(policy, system)
+                if policy in TABLE_FORM:  # the same actions looked up per state: the same paths, faster
+                    mdp = self.mdp(scenario)
+                    pol = TablePolicy(system, mdp, pol.on_mdp(mdp), name=pol.name)
             res = simulate(pol, slots=slots, reps=reps, seed=seed, burn_in=burn_in, progress=False)
             return {"mean": float(res.mean), "stderr": float(res.stderr)}, None
 
@@ -647,8 +710,14 @@ class Context:
 
 
 def _fmt(v: Any) -> Any:
-    if isinstance(v, float):
-        return repr(v)
-    if isinstance(v, (list, tuple)):
-        return " ".join(str(x) for x in v)
+    """A CSV cell: numbers as plain numbers (numpy scalars too: never ``np.float64(...)`` text), lists
+    space-separated."""
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v))
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return " ".join(str(_fmt(x)) for x in v)
     return v

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..maps import NEIGHBOURS, action_name, region_stats, slice_grid
 from ..verify import check_consistency, check_monotonicity, check_threshold, policy_context
-from ..verify.verdict import across, combine, structural_verdict, verdict_of
+from ..verify.verdict import NEGLIGIBLE, across, cap_distance, combine, structural_verdict, verdict_of, witness_rank
 from ..viz import plot_policy_map, plot_policy_slice, subplots
 from .context import ClaimResult, Context, Solved, Step, Table, cap_basis
 
@@ -36,21 +36,48 @@ def _idle_ids(solved: Solved) -> np.ndarray:
     return grid[grid >= 0]
 
 
-def _split(solved: Solved, states: np.ndarray) -> dict[str, Any]:
-    """The states where a map claim fails: how many, recurrent / transient, at the cap, and their
-    stationary probability under the optimal policy (the weight of the counterexample)."""
+def state_split(solved: Solved, states: np.ndarray) -> dict[str, Any]:
+    """The states where a map claim fails: how many, recurrent / transient, at the cap, observable
+    (recurrent, visited at least NEGLIGIBLE of the time) and below the cap, their stationary
+    probability under the optimal policy (the weight of the counterexample), and the witness shown
+    (``shown``: the best by the verifiers' order -- observable and below the cap first -- then the
+    farthest from the cap, with its weight)."""
     states = np.asarray(states, np.int64)
     rec = solved.recurrent[states]
     caps = np.asarray(solved.mdp.states.caps)
-    at_cap = np.any(solved.mdp.states.tau[states] == caps, axis=1)
-    return {
+    tau = solved.mdp.states.tau[states]
+    at_cap = np.any(tau == caps, axis=1)
+    law = np.asarray(solved.stationary)[states]
+    obs = rec & (law >= NEGLIGIBLE)
+    out = {
         "total": int(states.size),
         "recurrent": int(rec.sum()),
         "transient": int((~rec).sum()),
         "at_cap": int(at_cap.sum()),
         "recurrent_below_cap": int((rec & ~at_cap).sum()),
-        "stationary_mass": float(np.asarray(solved.stationary)[states].sum()),
+        "observable_below_cap": int((obs & ~at_cap).sum()),
+        "stationary_mass": float(law.sum()),
     }
+    if states.size:
+        dist = cap_distance(tau, caps)
+        i = int(np.lexsort((-law, -dist, witness_rank(rec, at_cap, obs)))[0])
+        out["shown"] = {"state": int(states[i]), "tau": [int(x) for x in tau[i]], "cap_distance": int(dist[i]),
+                        "stationary": float(law[i]), "recurrent": bool(rec[i])}
+    return out
+
+
+def _map_verdict(split: dict[str, Any]) -> str:
+    """The structural rule on the states where a map claim fails."""
+    return structural_verdict(split["total"] == 0, split["recurrent_below_cap"], split["observable_below_cap"])
+
+
+def shown_words(split: dict[str, Any]) -> str:
+    """The witness shown of a map claim's states, e.g. "tau = (6, 15), 14 from the cap, weight 2.1e-06"."""
+    w = split.get("shown")
+    if not w:
+        return ""
+    return (f"tau = ({', '.join(map(str, w['tau']))}), {w['cap_distance']} from the cap, "
+            f"{'weight ' + mass_words(w['stationary']) if w['recurrent'] else 'transient'}")
 
 
 def span_words(values: Sequence[float], digits: int = 2) -> str:
@@ -121,44 +148,60 @@ def claim_c1(ctx: Context) -> ClaimResult:
         ids = _idle_ids(solved)
         acts = [solved.action_tuple(s) for s in ids]
         other = ids[np.array([a != (1, 2) for a in acts], dtype=bool)]
-        split = _split(solved, other)
-        v = structural_verdict(split["total"] == 0, split["recurrent_below_cap"])
+        split = state_split(solved, other)
+        v = _map_verdict(split)
         others = sorted({a for a in acts if a != (1, 2)})
         per_cap.append({"cap": cap, "idle_states": int(ids.size), "other_actions": [_act(solved, a) for a in others],
                         "other_action_states": split, "gain": solved.gain, "verdict": v,
                         "cap_mass": solved.cap_mass.to_dict()})
         solves.append(solved)
         ev.append(solved.evidence(f"processes 1, 4 at cap {cap}", v))
-    verdict = combine([r["verdict"] for r in per_cap])
+    basis = cap_basis(ev)
+    verdict = basis["verdict"]
     figs = _idle_maps(ctx, solves, "c1_fig3_policy_p14", "Processes 1 and 4, idle servers (Fig. 3)")
     tab = ctx.save_table([{"cap": r["cap"], "idle_states": r["idle_states"], "verdict": r["verdict"],
                            "cap_mass": r["cap_mass"]["total"],
-                           **{f"other_{k}": v for k, v in r["other_action_states"].items()}} for r in per_cap],
-                         "c1_fig3_counts")
+                           **{f"other_{k}": v for k, v in r["other_action_states"].items() if k != "shown"}}
+                          for r in per_cap], "c1_fig3_counts")
     shown = [Table("Idle-server states that do not choose (1 to remote, 4 to edge), per cap, with their stationary "
-                   "probability under the optimal policy.",
+                   "probability under the optimal policy; the largest cap decides.",
                    ["cap", "idle states", "other action", "recurrent", "transient", "at the cap",
-                    "recurrent below the cap", "stationary mass", "verdict at this cap", "mass at the cap"],
+                    "recurrent below the cap", "of weight", "stationary mass", "verdict at this cap", "mass at the cap"],
                    [[r["cap"], r["idle_states"], r["other_action_states"]["total"],
                      r["other_action_states"]["recurrent"], r["other_action_states"]["transient"],
                      r["other_action_states"]["at_cap"], r["other_action_states"]["recurrent_below_cap"],
+                     r["other_action_states"]["observable_below_cap"],
                      mass_words(r["other_action_states"]["stationary_mass"]), r["verdict"],
                      pct(r["cap_mass"]["total"])] for r in per_cap])]
-    clean = [r["cap"] for r in per_cap if not r["other_action_states"]["total"]]
-    parts = [f"every idle-server state chooses (1 to remote, 4 to edge) at cap{'s' if len(clean) > 1 else ''} "
-             + ", ".join(map(str, clean))] if clean else []
-    for r in per_cap:
+    dec, rest = per_cap[-1], per_cap[:-1]
+
+    def at(r: dict) -> str:
         s = r["other_action_states"]
-        if s["total"]:
-            parts.append(f"at cap {r['cap']}, {s['total']} of {r['idle_states']} idle-server states choose "
-                         f"{', '.join(r['other_actions'])}, "
-                         f"{s['recurrent_below_cap'] or 'none'} of them recurrent and below the cap (stationary mass "
-                         f"{mass_words(s['stationary_mass'])}; {pct(r['cap_mass']['total'])} of the time at the cap)")
-    summary = "; ".join(parts) + "."
-    return ClaimResult("C1", "Fig. 3", "", verdict, summary[0].upper() + summary[1:], {"per_cap": per_cap}, figs, [tab],
+        if not s["total"]:
+            return f"every idle-server state chooses (1 to remote, 4 to edge) at cap {r['cap']}"
+        return (f"at cap {r['cap']} ({pct(r['cap_mass']['total'], 1)} of the time at the cap), {s['total']} of "
+                f"{r['idle_states']} idle-server states choose {', '.join(r['other_actions'])}, "
+                f"{s['observable_below_cap'] or 'none'} of them recurrent, of weight and below the cap (stationary mass "
+                f"{mass_words(s['stationary_mass'])}; shown: {shown_words(s)})")
+
+    clean = [r["cap"] for r in rest if not r["other_action_states"]["total"]]
+    if not dec["other_action_states"]["total"] and clean:
+        first = (f"every idle-server state chooses (1 to remote, 4 to edge) at cap {dec['cap']}, the least truncated "
+                 f"({pct(dec['cap_mass']['total'], 3)} of the time at the cap), which decides, and at cap "
+                 + ", ".join(map(str, clean)))
+        rest = [r for r in rest if r["cap"] not in clean]
+    else:
+        first = at(dec) + ": the least truncated cap, which decides"
+    parts = [first] + [("caveat, at a more truncated cap: " if r["verdict"] != dec["verdict"] else "") + at(r)
+                       for r in rest]
+    summary = "; ".join(parts)
+    summary = summary[0].upper() + summary[1:]
+    return ClaimResult("C1", "Fig. 3", "", verdict, summary + ".", {"per_cap": per_cap}, figs, [tab],
                        details="Action (1, 2) here means paper process 1 to the remote server and paper process 4 "
-                               "(our process 2 of this scenario) to the edge. " + CONFIGURATION_NOTE,
-                       basis=cap_basis(ev, verdict), shown=shown,
+                               "(our process 2 of this scenario) to the edge. Whether the optimal policy of this case "
+                               "is the static policy in every state, not only in the idle-server states, is claim "
+                               "C14. " + CONFIGURATION_NOTE,
+                       basis=basis, shown=shown,
                        captions={figs[0]: "The optimal action in the idle-server states over (tau_1, tau_4) at the "
                                           "smallest and the largest cap; grey background: transient states."})
 
@@ -187,11 +230,11 @@ def claim_c2(ctx: Context) -> ClaimResult:
             "idle_states": int(ids.size),
             "share_12": share,
             "count_21": int(is21.sum()),
-            "split_21": _split(solved, s21),
+            "split_21": state_split(solved, s21),
             "tau1_range_21": [int(t21[:, 0].min()), int(t21[:, 0].max())] if s21.size else [],
             "tau2_range_21": [int(t21[:, 1].min()), int(t21[:, 1].max())] if s21.size else [],
             "all_upper_left_21": upper_left,
-            "outside_upper_left_21": _split(solved, s21[t21[:, 1] <= t21[:, 0]]),
+            "outside_upper_left_21": state_split(solved, s21[t21[:, 1] <= t21[:, 0]]),
             "gain": solved.gain,
             "verdict": v,
             "cap_mass": solved.cap_mass.to_dict(),
@@ -199,7 +242,8 @@ def claim_c2(ctx: Context) -> ClaimResult:
         per_cap.append(rec)
         solves.append(solved)
         ev.append(solved.evidence(f"processes 1, 2 at cap {cap}", v))
-    verdict = across([r["verdict"] for r in per_cap])
+    basis = cap_basis(ev, how="descriptive")
+    verdict = basis["verdict"]
     figs = _idle_maps(ctx, solves, "c2_fig4_policy_p12", "Processes 1 and 2, idle servers (Fig. 4)")
 
     def rng(x: list[int]) -> str:
@@ -221,19 +265,28 @@ def claim_c2(ctx: Context) -> ClaimResult:
                      r["all_upper_left_21"] if r["count_21"] else "n/a", r["split_21"]["recurrent"],
                      mass_words(r["split_21"]["stationary_mass"]), r["outside_upper_left_21"]["total"], r["verdict"],
                      pct(r["cap_mass"]["total"])] for r in per_cap])]
-    shares = [r["share_12"] for r in per_cap]
-    parts = [f"no (2,1) state at cap {r['cap']}" if not r["count_21"] else
-             f"(2,1) in {r['count_21']} states at cap {r['cap']} ({'all' if r['all_upper_left_21'] else 'not all'} "
-             f"with tau_2 > tau_1; {r['split_21']['recurrent']} recurrent, stationary mass "
-             f"{mass_words(r['split_21']['stationary_mass'])})" for r in per_cap]
-    summary = (f"Mostly (1,2) ({span_words(shares, 0)} of the idle states); " + "; ".join(parts)
-               + (": the upper-left corner is a matter of the cap." if verdict == "DEPENDS" else "."))
+    def at(r: dict) -> str:
+        if not r["count_21"]:
+            return f"no (2,1) state at cap {r['cap']}"
+        return (f"(2,1) in {r['count_21']} of {r['idle_states']} idle states at cap {r['cap']} (tau_1 "
+                f"{rng(r['tau1_range_21'])}, tau_2 {rng(r['tau2_range_21'])}, "
+                f"{'all' if r['all_upper_left_21'] else 'not all'} with tau_2 > tau_1; {r['split_21']['recurrent']} "
+                f"recurrent, stationary mass {mass_words(r['split_21']['stationary_mass'])})")
+
+    dec, rest = per_cap[-1], per_cap[:-1]
+    summary = (f"Mostly (1,2) ({pct(dec['share_12'], 0)} of the idle states) with " + at(dec)
+               + f", the least truncated cap ({pct(dec['cap_mass']['total'], 3)} of the time at the cap), which "
+               "decides" + "".join(("; caveat, at a more truncated cap: " if r["verdict"] != dec["verdict"] else "; ")
+                                   + at(r) + f" ({pct(r['cap_mass']['total'], 1)} of the time at the cap)"
+                                   for r in rest) + ".")
     return ClaimResult("C2", "Fig. 4", "", verdict, summary, {"per_cap": per_cap}, figs, [tab],
                        details="Per cap: HOLDS when (1,2) is the majority and a (2,1) region exists with every state "
                                "above the diagonal (tau_2 > tau_1); FAILS when no (2,1) state exists or (1,2) is not "
-                               "the majority. Across caps: DEPENDS when the caps disagree. " + ", ".join(
-                                   f"{r['verdict']} at cap {r['cap']}" for r in per_cap) + ". " + CONFIGURATION_NOTE,
-                       basis=cap_basis(ev, verdict), shown=shown,
+                               "the majority. The largest cap decides; a smaller cap that disagrees is a caveat. "
+                               + ", ".join(f"{r['verdict']} at cap {r['cap']}" for r in per_cap) + ". Whether the "
+                               "corner is the only place where the optimal policy differs from the static one is "
+                               "claim C15. " + CONFIGURATION_NOTE,
+                       basis=basis, shown=shown,
                        captions={figs[0]: "The optimal action in the idle-server states over (tau_1, tau_2) at the "
                                           "smallest and the largest cap; grey background: transient states."})
 
@@ -273,7 +326,7 @@ def _c4_slice(solved: Solved, total: int) -> dict[str, Any]:
             "regions_total": stats["regions_total"], "fifth_action": stats["actions_present"] > 4,
             "split_actions": [k for k, v in regions.items() if v["components"] > 1],
             "holed_actions": [k for k, v in regions.items() if v["holes"] > 0],
-            "offending_cells": _split(solved, S[extra & ok]), "regions": regions,
+            "offending_cells": state_split(solved, S[extra & ok]), "regions": regions,
             "verdict": "HOLDS" if good else "FAILS", "cap_mass": solved.cap_mass.total}
 
 
@@ -286,8 +339,10 @@ def claim_c4(ctx: Context) -> ClaimResult:
         by_cap[cap] = solved
         for total in _planes(prof, cap):
             rows.append(_c4_slice(solved, total))
-            ev.append(solved.evidence(f"processes 1, 2, 3 at cap {cap}, plane {total}", rows[-1]["verdict"]))
-    verdict = across([r["verdict"] for r in rows])
+            ev.append(solved.evidence(f"processes 1, 2, 3 at cap {cap}, plane {total}", rows[-1]["verdict"],
+                                      group=f"plane {total}"))
+    basis = cap_basis(ev, how="descriptive")
+    verdict = basis["verdict"]
     figs, captions = _c4_figures(ctx, by_cap)
     tab = ctx.save_table([{"cap": r["cap"], "plane_total": r["plane_total"], "action": name, **v}
                           for r in rows for name, v in r["regions"].items()], "c4_fig7_regions")
@@ -309,38 +364,45 @@ def claim_c4(ctx: Context) -> ClaimResult:
                 v["cells_at_cap"]] for r in rows for name, v in r["regions"].items()]),
     ]
     return ClaimResult("C4", "Figs. 6-7", "", verdict, _c4_summary(rows), {"slices": rows}, figs, [tab],
-                       details="Per slice: HOLDS when exactly four regions, each simply connected; across slices: "
-                               "DEPENDS when they disagree. Planes up to 2.25 x cap are used (beyond, most of the "
-                               "plane touches the cap). Slices that fail: " + "; ".join(
+                       details="Per slice: HOLDS when exactly four regions, each simply connected. Each plane is "
+                               "decided at the largest cap where it fits (a smaller cap that disagrees is a caveat); "
+                               "across planes: DEPENDS when they disagree. Planes up to 2.25 x cap are used (beyond, "
+                               "most of the plane touches the cap). Slices that fail: " + "; ".join(
                                    f"plane {r['plane_total']} at cap {r['cap']}: {r['actions_present']} actions, "
                                    f"{r['regions_total']} regions"
                                    + (f", in several pieces: {', '.join(r['split_actions'])}" if r["split_actions"] else "")
                                    + (f", with a hole: {', '.join(r['holed_actions'])}" if r["holed_actions"] else "")
                                    for r in rows if r["verdict"] != "HOLDS") + ".",
-                       basis=cap_basis(ev, verdict), shown=shown, captions=captions)
+                       basis=basis, shown=shown, captions=captions)
 
 
 def _c4_summary(rows: list[dict]) -> str:
-    """One sentence: how many slices show four simply connected regions, and why the others do not."""
-    good = [r for r in rows if r["verdict"] == "HOLDS"]
-    fifth = [f"{r['plane_total']}@{r['cap']}" for r in rows if r["fifth_action"]]
-    pieces = [f"{r['plane_total']}@{r['cap']}" for r in rows
-              if r["verdict"] != "HOLDS" and (r["split_actions"] or r["holed_actions"])]
-    off = [r["offending_cells"] for r in rows if r["verdict"] != "HOLDS"]
-    names = [f"{r['plane_total']}@{r['cap']}" for r in good]
-    text = (f"{len(good)} of {len(rows)} (plane@cap) slices show four simply connected regions"
-            + (f" ({', '.join(names)})" if good else ""))
-    few = [f"{r['plane_total']}@{r['cap']}" for r in rows if r["regions_total"] < 4]
-    if few:
-        text += f"; fewer than four regions on {len(few)} ({', '.join(few)})"
-    if fifth:
-        text += f"; a fifth action appears on {len(fifth)} ({', '.join(fifth)})"
-    if pieces:
-        text += f"; an action's region is not simply connected (several pieces or a hole) on {len(pieces)} ({', '.join(pieces)})"
-    if off:
-        text += (f"; the offending cells are {sum(o['recurrent'] for o in off)} recurrent and "
-                 f"{sum(o['transient'] for o in off)} transient (stationary mass "
-                 f"{mass_words(sum(o['stationary_mass'] for o in off))})")
+    """One sentence: on how many planes of the deciding cap (each plane's largest) the four simply
+    connected regions show, why the others do not, and the smaller caps' slices that disagree."""
+    last = {}
+    for r in rows:
+        if r["plane_total"] not in last or r["cap"] > last[r["plane_total"]]["cap"]:
+            last[r["plane_total"]] = r
+    deciding = list(last.values())
+    good = [r for r in deciding if r["verdict"] == "HOLDS"]
+
+    def name(r: dict) -> str:
+        return f"{r['plane_total']}@{r['cap']}"
+
+    text = (f"{len(good)} of {len(deciding)} planes, each at the largest cap where it fits, show four simply connected "
+            "regions" + (f" ({', '.join(map(name, good))})" if good else ""))
+    bad = [r for r in deciding if r["verdict"] != "HOLDS"]
+    if bad:
+        text += "; not " + "; ".join(
+            f"{name(r)}: {r['regions_total']} regions" + (", a fifth action" if r["fifth_action"] else "")
+            + (f", in several pieces: {', '.join(r['split_actions'])}" if r["split_actions"] else "")
+            + (f", with a hole: {', '.join(r['holed_actions'])}" if r["holed_actions"] else "")
+            + f" (offending cells {r['offending_cells']['recurrent']} recurrent, {r['offending_cells']['transient']} "
+              f"transient, stationary mass {mass_words(r['offending_cells']['stationary_mass'])})" for r in bad)
+    caveats = [r for r in rows if r is not last[r["plane_total"]] and r["verdict"] != last[r["plane_total"]]["verdict"]]
+    if caveats:
+        text += ("; caveat, at smaller caps: " + ", ".join(name(r) for r in caveats) + " "
+                 + ("disagree" if len(caveats) > 1 else "disagrees") + " with the same plane at the larger cap")
     return text + "."
 
 
@@ -359,7 +421,7 @@ def _c4_figures(ctx: Context, by_cap: dict[int, Solved]) -> tuple[list[str], dic
                               title=f"cap {cap}: plane tau_1 + tau_2 + tau_3 = {t}")
         fig.suptitle(f"Processes 1, 2, 3, idle servers (Figs. 6-7): the plane {t} at caps "
                      + ", ".join(map(str, prof.caps_3p)))
-        fig.tight_layout()
+        _shared_legend(fig, axes.ravel())
         f = ctx.save_figure(fig, f"c4_fig7_plane{t}_by_cap")
         figs += f
         captions[f[0]] = (f"The same plane tau_1 + tau_2 + tau_3 = {t} at every cap: how the regions move as the "
@@ -377,12 +439,31 @@ def _c4_figures(ctx: Context, by_cap: dict[int, Solved]) -> tuple[list[str], dic
         plot_policy_slice(s.mdp, s.as_solution(), "idle", planes[k], ax=ax, stationary=s.stationary,
                           scenario=s.scenario, title=f"cap {cap}: plane tau_1 + tau_2 + tau_3 = {planes[k]}")
     fig.suptitle(f"Processes 1, 2, 3, idle servers (Figs. 6-7): every plane at cap {cap}")
-    fig.tight_layout()
+    _shared_legend(fig, axes.ravel())
     f = ctx.save_figure(fig, f"c4_fig7_planes_cap{cap}")
     figs += f
     captions[f[0]] = (f"Several planes at the same cap {cap}, so the plane's effect is not confounded with the "
                       "cap's; faded markers: transient states.")
     return figs, captions
+
+
+def _shared_legend(fig, axes) -> None:
+    """One legend for a figure of several slices, under the panels: each panel's own legend would sit
+    inside a grid's panels, over the triangle's corners and its points."""
+    import re
+
+    handles: dict[str, Any] = {}
+    for ax in axes:
+        leg = ax.get_legend()
+        if leg is None:
+            continue
+        for h, t in zip(leg.legend_handles, leg.get_texts()):  # one entry per action: the panels' counts dropped
+            handles.setdefault(re.sub(r"\s*\[\d[\d,]* points?\]$", "", t.get_text()), h)
+        leg.remove()
+    fig.tight_layout(rect=(0, 0.06, 1, 0.95))
+    if handles:
+        fig.legend(list(handles.values()), list(handles), loc="lower center", ncol=min(4, len(handles)),
+                   fontsize=9, frameon=False, title="action (each panel)", title_fontsize=9)
 
 
 def claim_c5(ctx: Context) -> ClaimResult:
@@ -411,21 +492,20 @@ def claim_c5(ctx: Context) -> ClaimResult:
             ids = grid[grid >= 0]
             acts = np.array([solved.action_tuple(s) for s in ids])
             same = ids[acts[:, free_server] == busy_proc]
-            split = _split(solved, same)
+            split = state_split(solved, same)
             splits.append(split)
             counts: dict[str, int] = {}
             for a in map(tuple, acts):
                 key = _act(solved, a, c)
                 counts[key] = counts.get(key, 0) + 1
             cfgs[name] = {"reachable": True, "config": c, "states": int(ids.size), "action_counts": counts,
-                          "busy_process_also_sent": split,
-                          "verdict": structural_verdict(split["total"] == 0, split["recurrent_below_cap"])}
-        v = (combine([structural_verdict(s["total"] == 0, s["recurrent_below_cap"]) for s in splits])
-             if splits else "ERROR")
+                          "busy_process_also_sent": split, "verdict": _map_verdict(split)}
+        v = combine([_map_verdict(s) for s in splits]) if splits else "ERROR"
         per_cap.append({"cap": cap, "cases": cfgs, "verdict": v, "cap_mass": solved.cap_mass.total})
         ev.append(solved.evidence(f"processes 1, 2, 3 at cap {cap}", v))
         last = (solved, cfgs)
-    verdict = combine([r["verdict"] for r in per_cap])
+    basis = cap_basis(ev)
+    verdict = basis["verdict"]
     solved, cfgs = last
     cap = prof.caps_3p[-1]
     panels = [(solved, v["config"], {"axes": (1, 2)}) for v in cfgs.values() if v.get("reachable")]
@@ -456,31 +536,37 @@ def claim_c5(ctx: Context) -> ClaimResult:
                                        f"{name.split(':')[0]} {v['busy_process_also_sent']['total']} of {v['states']} "
                                        "states" if v.get("reachable") else f"{name.split(':')[0]} unreachable"
                                        for name, v in r["cases"].items()) for r in per_cap) + ". " + CONFIGURATION_NOTE,
-                       basis=cap_basis(ev, verdict), shown=shown + actions,
+                       basis=basis, shown=shown + actions,
                        captions={figs[0]: f"The optimal action of the free server over (tau_1, tau_2) at cap {cap}, "
                                           "with tau_3 at its most frequent value."})
 
 
 def _c5_summary(per_cap: list[dict]) -> str:
-    """One sentence per configuration: in how many states (and of what weight) the free server is
-    also sent the busy process, over the caps."""
-    names = list(per_cap[0]["cases"]) if per_cap else []
+    """One sentence: at the deciding (largest) cap, in how many states (and of what weight) the free
+    server is also sent the busy process in each configuration; the smaller caps beside."""
+    dec = per_cap[-1]
     parts = []
-    for name in names:
-        cases = [(r["cap"], r["cases"][name]) for r in per_cap if r["cases"][name].get("reachable")]
-        counts = [v["busy_process_also_sent"] for _, v in cases]
+    for name, v in dec["cases"].items():
         fig, what = name.split(": ", 1)
-        if not cases:
-            parts.append(f"{fig}'s configuration ({what}) is never reachable")
-        elif not any(c["total"] for c in counts):
-            parts.append(f"never in {fig}'s configuration ({what}), at any cap")
+        if not v.get("reachable"):
+            parts.append(f"{fig}'s configuration ({what}) is not reachable")
+            continue
+        c = v["busy_process_also_sent"]
+        if not c["total"]:
+            parts.append(f"never in {fig}'s configuration ({what})")
         else:
-            rbc = sum(c["recurrent_below_cap"] for c in counts)
-            parts.append(f"in {fig}'s ({what}) in " + " / ".join(str(c["total"]) for c in counts)
-                         + " states at caps " + " / ".join(str(cap) for cap, _ in cases)
-                         + f", {rbc or 'none'} of them recurrent and below the cap ("
-                         + _mass_at_most(max(c["stationary_mass"] for c in counts)) + ")")
-    return "The free server is also sent the busy process: " + "; ".join(parts) + "."
+            parts.append(f"in {c['total']} of {v['states']} states of {fig}'s ({what}), {c['observable_below_cap'] or 'none'} "
+                         f"of them recurrent, of weight and below the cap (stationary mass "
+                         f"{mass_words(c['stationary_mass'])}; shown: {shown_words(c)})")
+    text = (f"At cap {dec['cap']}, the least truncated ({pct(dec['cap_mass'], 2)} of the time at the cap), which "
+            "decides, the free server is also sent the busy process " + "; ".join(parts))
+    rest = []
+    for r in per_cap[:-1]:
+        counts = [f"{v['busy_process_also_sent']['total']} ({name.split(':')[0]})" for name, v in r["cases"].items()
+                  if v.get("reachable")]
+        rest.append(f"cap {r['cap']}: {', '.join(counts)} states, {r['verdict']}"
+                    + (" (a caveat: it disagrees with the deciding cap)" if r["verdict"] != dec["verdict"] else ""))
+    return text + (("; " + "; ".join(rest)) if rest else "") + "."
 
 
 # ============================================================================ C7-C10: theorems
@@ -514,10 +600,12 @@ def _check_instances(ctx: Context, cid: str, check, instances: list[tuple[str, l
             "recurrent_violations": rep["recurrent_violations"],
             "at_cap_violations": rep["at_cap_violations"],
             "recurrent_below_cap": rep["split"].get("recurrent_below_cap", 0),
+            "observable_below_cap": rep["split"].get("observable_below_cap", rep["split"].get("recurrent_below_cap", 0)),
             "ties": rep.get("ties", 0),
             "worst_size": worst.get("size") if rep["violations"] else None,  # empty, never "nan", without a violation
             "violating_mass": weight.get("mass"),
             "violating_mass_recurrent_below_cap": weight.get("mass_recurrent_below_cap"),
+            "violating_mass_observable_below_cap": weight.get("mass_observable_below_cap"),
             "cap_mass": solved.cap_mass.total,
         })
     return reports, rows, solves
@@ -533,11 +621,12 @@ def _counterexample(example: dict | None) -> str:
     stat = example.get("stationary")
     info = example.get("info", {})
     kind = example.get("kind", "") + (f" along the {info['direction']}" if info.get("direction") else "")
+    far = example.get("cap_distance")
     text = (f"Counterexample ({kind}): " + " vs ".join(f"`{lab}`" for lab in example["labels"])
             + f" (size {example['size']:.4g}, {'recurrent' if example['recurrent'] else 'transient'}, "
-            f"{'at' if example['at_cap'] else 'below'} the cap"
-            + (f"; stationary probability of its states {mass_words(sum(stat))}" if stat else "") + ")"
-            + (f"; that is, {info['meaning']}" if info.get("meaning") else "") + ".")
+            f"{'at' if example['at_cap'] else 'below'} the cap" + (f", {far} from it" if far else "")
+            + (f"; stationary probability of its states {' / '.join(mass_words(x) for x in stat)}" if stat else "")
+            + ")" + (f"; that is, {info['meaning']}" if info.get("meaning") else "") + ".")
     traj = example.get("info", {}).get("trajectory")
     if traj:
         text += "\n\nTrajectory:\n\n" + "\n".join(
@@ -546,42 +635,71 @@ def _counterexample(example: dict | None) -> str:
     return text
 
 
+def best_example(examples: list[dict]) -> dict | None:
+    """The witness to show: observable (or recurrent) and below the cap first, then the farthest
+    from the cap, then the heaviest (the smallest stationary probability of its states)."""
+    def key(e: dict):
+        rec, cap = bool(e["recurrent"]), bool(e["at_cap"])
+        obs = e.get("observable")
+        obs = rec if obs is None else bool(obs)
+        rank = int(witness_rank(np.array([rec]), np.array([cap]), np.array([obs]))[0])
+        stat = e.get("stationary") or [0.0]
+        return rank, -(e.get("cap_distance") or 0), -min(stat)
+
+    return min(examples, key=key) if examples else None
+
+
 def _theorem(ctx: Context, cid: str, paper: str, check, instances: list[tuple[str, list[str]]],
              unit_note: str = "", **kw) -> tuple[ClaimResult, list[dict], list[Solved]]:
-    """The claim of one structural check over several instances, with the reports and solves."""
+    """The claim of one structural check over several instances, with the reports and solves: the
+    largest cap of each scenario decides (:func:`~wncs_lp.reproduce.context.cap_basis`)."""
     reports, rows, solves = _check_instances(ctx, cid, check, instances, **kw)
-    verdict = combine([r["verdict"] for r in rows])
     ev = [s.evidence(f"{NAMES.get(r['scenario'], r['scenario'])} at cap {r['cap']}", r["verdict"])
           for r, s in zip(rows, solves)]
+    basis = cap_basis(ev)
+    verdict = basis["verdict"]
+    deciding = _deciding_rows(rows)
+    for r in rows:
+        r["decides"] = r in deciding
     tab = ctx.save_table(rows, f"{cid.lower()}_verifier")
-    shown = [Table(f"The check per scenario and cap{unit_note}; stationary mass: the stationary probability of the "
+    shown = [Table(f"The check per scenario and cap{unit_note}; the largest cap of each scenario decides. Of weight: "
+                   f"the violations recurrent and below the cap whose witness states are each visited at least "
+                   f"{NEGLIGIBLE:g} of the time (these decide FAILS); stationary mass: the stationary probability of the "
                    "states of the violations' witnesses (all of them / those recurrent and below the cap).",
                    ["scenario", "cap", "checked", "violations", "recurrent", "at the cap", "recurrent below the cap",
-                    "worst size", "stationary mass", "verdict", "mass at the cap"],
+                    "of weight", "worst size", "stationary mass", "verdict", "decides", "mass at the cap"],
                    [[NAMES.get(r["scenario"], r["scenario"]), r["cap"], r["checked"], r["violations"],
                      r["recurrent_violations"], r["at_cap_violations"], r["recurrent_below_cap"],
-                     r["worst_size"] if r["violations"] else "",
+                     r["observable_below_cap"], r["worst_size"] if r["violations"] else "",
                      f"{mass_words(r['violating_mass'])} / {mass_words(r['violating_mass_recurrent_below_cap'])}"
-                     if r["violations"] else "", r["verdict"], pct(r["cap_mass"])] for r in rows])]
+                     if r["violations"] else "", r["verdict"], "yes" if r["decides"] else "", pct(r["cap_mass"])]
+                    for r in rows])]
     summary = _theorem_summary(rows)
-    # the counterexample: recurrent and below the cap first, then from the least-truncated instance
-    ex = [(not e["recurrent"] or e["at_cap"], r["cap_mass"], k, e) for k, (rep, r) in enumerate(zip(reports, rows))
-          for e in rep.get("examples", [])]
-    example = min(ex, key=lambda t: t[:3])[3] if ex else None
-    where = rows[min(ex, key=lambda t: t[:3])[2]] if ex else None
+    # the counterexample: from the deciding instances, the best witness (observable, below and far from the cap)
+    pool = [(e, r) for rep, r in zip(reports, rows) if r["decides"] for e in rep.get("examples", [])]
+    example = best_example([e for e, _ in pool])
+    where = next(r for e, r in pool if e is example) if example else None
     numbers = {"instances": rows,
                "tolerance": {k: reports[0].get(k) for k in ("atol", "rtol")} if reports else {},
                "notes": reports[0].get("notes") if reports else ""}
     details = (f"In {NAMES.get(where['scenario'], where['scenario'])} at cap {where['cap']}: "
                + _counterexample(example)) if example else ""
-    res = ClaimResult(cid, paper, "", verdict, summary, numbers, [], [tab], details=details,
-                      basis=cap_basis(ev, verdict), shown=shown)
+    res = ClaimResult(cid, paper, "", verdict, summary, numbers, [], [tab], details=details, basis=basis, shown=shown)
     return res, reports, solves
 
 
+def _deciding_rows(rows: list[dict]) -> list[dict]:
+    """The row of the largest cap of each scenario."""
+    best: dict[str, dict] = {}
+    for r in rows:
+        if r["scenario"] not in best or r["cap"] > best[r["scenario"]]["cap"]:
+            best[r["scenario"]] = r
+    return list(best.values())
+
+
 def _theorem_summary(rows: list[dict]) -> str:
-    """One sentence: the deciding instance with its counts and the weight of its counterexamples,
-    then the totals."""
+    """One sentence: the deciding instances (the largest cap of each scenario) with their counts and
+    the weight of their counterexamples, then the more truncated instances that disagree (caveats)."""
     def name(r: dict) -> str:
         return f"{NAMES.get(r['scenario'], r['scenario'])} at cap {r['cap']}"
 
@@ -589,19 +707,30 @@ def _theorem_summary(rows: list[dict]) -> str:
     cases = f"{sum(r['checked'] for r in rows):,} cases over {len(rows)} instances"
     if not total:
         return f"No violation in {cases}."
-    fails = [r for r in rows if r["verdict"] == "FAILS"]
-    if fails:
-        d = min(fails, key=lambda r: (r["cap_mass"], -r["cap"]))
-        others = [f"{name(r)} ({r['recurrent_below_cap']:,})" for r in fails if r is not d]
-        return (f"{d['recurrent_below_cap']:,} violation(s) recurrent and below the cap in {name(d)} (of "
-                f"{d['violations']:,} there; stationary mass of their states "
-                f"{mass_words(d['violating_mass_recurrent_below_cap'])}, {pct(d['cap_mass'], 3)} of the time at the "
-                "cap)" + (f", and in {', '.join(others)}" if others else "")
-                + f"; {total:,} violation(s) in all in {cases}.")
-    at_cap = sum(r["at_cap_violations"] for r in rows)
-    masses = [r["violating_mass"] for r in rows if r["violations"] and r["violating_mass"] is not None]
-    return (f"{total:,} violation(s) in {cases}, none recurrent and below the cap ({at_cap:,} at the cap, the others "
-            f"transient; {_mass_at_most(max(masses) if masses else None)} for their states).")
+    deciding = _deciding_rows(rows)
+    parts = []
+    for r in deciding:
+        if r["verdict"] == "FAILS":
+            parts.append(f"{name(r)}: {r['observable_below_cap']:,} violation(s) recurrent, of weight and below the cap "
+                         f"(of {r['violations']:,}; stationary mass of their states "
+                         f"{mass_words(r['violating_mass_observable_below_cap'])}; {pct(r['cap_mass'], 3)} of the time "
+                         "at the cap)")
+        elif r["violations"]:
+            light = r["recurrent_below_cap"] - r["observable_below_cap"]
+            parts.append(f"{name(r)}: {r['violations']:,} violation(s), none recurrent, of weight and below the cap "
+                         f"({r['at_cap_violations']:,} at the cap" + (f", {light:,} of negligible weight (stationary "
+                         f"mass {mass_words(r['violating_mass_recurrent_below_cap'])})" if light else "")
+                         + ", the others transient)")
+        else:
+            parts.append(f"{name(r)}: no violation")
+    text = "Deciding (the largest cap of each scenario): " + "; ".join(parts)
+    caveats = [r for r in rows if r not in deciding
+               and r["verdict"] != next(d for d in deciding if d["scenario"] == r["scenario"])["verdict"]]
+    if caveats:
+        text += "; caveat, at more truncated caps: " + "; ".join(
+            f"{name(r)} {r['verdict']} ({r['observable_below_cap']:,} of weight below the cap of {r['violations']:,})"
+            for r in caveats)
+    return text + f"; {total:,} violation(s) in all in {cases}."
 
 
 def _two_and_three(ctx: Context) -> list[tuple[str, list[str]]]:
@@ -639,29 +768,30 @@ def claim_c10(ctx: Context) -> ClaimResult:
         by = rep["details"]["by_start_type"]
         for start, words in START_TYPES.items():
             b = by.get(start, {})
-            v = structural_verdict(b.get("violations", 0) == 0, b.get("recurrent_below_cap", 0))
+            obc = b.get("observable_below_cap", b.get("recurrent_below_cap", 0))
+            v = structural_verdict(b.get("violations", 0) == 0, b.get("recurrent_below_cap", 0), obc)
             rows.append([inst["cap"], words, b.get("checked", 0), b.get("violations", 0),
                          b.get("recurrent_violations", 0), b.get("at_cap_violations", 0),
-                         b.get("recurrent_below_cap", 0), v + (" (the claim)" if start == "preempting" else "")])
+                         b.get("recurrent_below_cap", 0), obc, v + (" (the claim)" if start == "preempting" else "")])
             split_json.append({"cap": inst["cap"], "start": start, **{k: b.get(k, 0) for k in (
-                "checked", "violations", "recurrent_violations", "at_cap_violations", "recurrent_below_cap")}})
+                "checked", "violations", "recurrent_violations", "at_cap_violations", "recurrent_below_cap")},
+                "observable_below_cap": obc})
     res.shown.append(Table("Every start of a job, split by how it starts: Theorem 3 speaks of jobs started by "
                            "preempting; the other kinds are shown for comparison and do not enter the verdict.",
                            ["cap", "job started", "starts", "later preempted or cancelled", "recurrent", "at the cap",
-                            "recurrent below the cap", "by the structural rule"], rows))
+                            "recurrent below the cap", "of weight", "by the structural rule"], rows))
     res.numbers["by_start_type"] = split_json
     res.tables.append(ctx.save_table(split_json, "c10_by_start_type"))
-    # the counterexample: a preempting start, recurrent and below the cap where one exists
-    ex = [(not e["recurrent"] or e["at_cap"], inst["cap_mass"], inst["cap"], e)
-          for rep, inst in zip(reports, res.numbers["instances"]) for e in rep.get("examples", [])]
-    if ex:
-        best = min(ex, key=lambda t: t[:3])
-        res.details = (f"At cap {best[2]}, a job started by preempting is itself preempted or cancelled before it "
-                       "completes. " + _counterexample(best[3]))
+    # the counterexample: a preempting start at the deciding cap, observable, below and far from the cap
+    dec = max(zip(reports, res.numbers["instances"]), key=lambda t: t[1]["cap"]) if reports else None
+    best = best_example(dec[0].get("examples", [])) if dec else None
+    if best:
+        res.details = (f"At cap {dec[1]['cap']}, a job started by preempting is itself preempted or cancelled before "
+                       "it completes. " + _counterexample(best))
     idle = [r for r in split_json if r["start"] == "idle_server"]
     res.details += ("\n\n" if res.details else "") + ("Jobs started on an idle server (not the theorem's case): "
-                    + ", ".join(f"{r['recurrent_below_cap']} recurrent below the cap at cap {r['cap']}" for r in idle)
-                    + ".")
+                    + ", ".join(f"{r['observable_below_cap']} recurrent, of weight and below the cap at cap {r['cap']}"
+                                for r in idle) + ".")
     return res
 
 
@@ -670,18 +800,34 @@ def claim_c9(ctx: Context) -> ClaimResult:
     res, reports, solves = _theorem(ctx, "C9", "Figs. 11-12", check_threshold, _preemption(ctx),
                                     " (the switching-curve property along each axis: one case = an axis-parallel "
                                     "line and an action, or a line ordering two actions)")
-    rows = []
+    rows, apart = [], []
     for rep, inst in zip(reports, res.numbers["instances"]):
         d = rep["details"]
-        kinds = d.get("by_configuration_kind", {})
-        rows.append([inst["cap"], d.get("gaps", {}).get("count", 0), d.get("reversals", {}).get("count", 0),
-                     kinds.get("serving_a_job", {}).get("violations", 0), kinds.get("server_free", {}).get("violations", 0),
-                     d.get("diagonal_gaps", {}).get("count", 0)])
-    res.shown.append(Table("The violations by kind: gaps (an action's region not an interval along an axis), order "
-                           "reversals (two lines of one axis switching between two actions in opposite orders), by "
-                           "configuration kind; and, outside the verdict, the gaps along the diagonals.",
-                           ["cap", "axis gaps", "order reversals", "while serving a job", "server free",
-                            "diagonal gaps (not violations)"], rows))
+        for name, b in d.get("by_situation", {}).items():
+            sp = b.get("split", {})
+            w = b.get("weight", {})
+            rows.append([inst["cap"], SITUATION_WORDS.get(name, name), b.get("configurations", 0), b.get("checked", 0),
+                         b.get("gaps", {}).get("count", 0), b.get("reversals", {}).get("count", 0),
+                         sp.get("recurrent_below_cap", 0), sp.get("observable_below_cap", 0),
+                         mass_words(w.get("mass_recurrent_below_cap")) if b.get("violations") else "",
+                         "yes" if name == "preemption" else "no"])
+            if name != "preemption" and inst is res.numbers["instances"][-1] and b.get("violations"):
+                ex = best_example(b.get("examples", []))
+                apart.append(f"{SITUATION_WORDS.get(name, name)}: {b['violations']} violation(s) at cap {inst['cap']}, "
+                             f"{sp.get('recurrent_below_cap', 0)} recurrent below the cap, "
+                             f"{sp.get('observable_below_cap', 0)} of them of weight (stationary mass of their states "
+                             f"{mass_words(w.get('mass_recurrent_below_cap'))})" + (". " + _counterexample(ex) if ex else ""))
+        rows.append([inst["cap"], "diagonal lines, every configuration (described, not violations)", "", "",
+                     d.get("diagonal_gaps", {}).get("count", 0), "", "", "", "", "no"])
+    res.shown.append(Table("The violations by situation: the figures' own (a job in service, another process's update "
+                           "arrived and not its own: keep going or preempt) decides; the configurations where the "
+                           "job's own process arrived too (cancelling it is an option) and those with a free server "
+                           "are checked the same way and reported apart. Gaps: an action's region not an interval "
+                           "along an axis; order reversals: two lines of one axis switching between two actions in "
+                           "opposite orders.",
+                           ["cap", "situation", "configurations", "cases", "axis gaps", "order reversals",
+                            "recurrent below the cap", "of weight", "their stationary mass", "in the verdict"], rows))
+    res.numbers["apart"] = apart
     # the maps of Figs. 11 (process 2 in service, process 1 arrived) and 12 (the converse), at the largest cap
     solved = solves[-1]
     cap = prof.caps_pre[-1]
@@ -706,9 +852,17 @@ def claim_c9(ctx: Context) -> ClaimResult:
                            ["map", "action", "cells", "components", "holes", "simply connected"],
                            [[m, a, v["cells"], v["components"], v["holes"], v["simply_connected"]]
                             for m, acts in regions.items() for a, v in acts.items()]))
-    diag = sum(r[5] for r in rows)
-    res.details += ("\n\n" if res.details else "") + (f"Along the diagonal direction e_1 + e_2 (tau_1 - tau_2 = const) the regions are not intervals "
-                    f"in {diag} line(s) in all; a monotone switching curve may do that, so they are described, not "
-                    "counted. A line-gap is judged by its witnesses (two states choosing the action around one that "
-                    "strictly prefers another): it is at the cap only when every witness touches the cap.")
+    diag = sum(rep["details"].get("diagonal_gaps", {}).get("count", 0) for rep in reports)
+    res.details += ("\n\n" if res.details else "") + (
+        "Reported apart, outside the verdict (the figures show the decision to keep going or preempt by the other "
+        "process): " + ("; ".join(apart) if apart else "no violation").rstrip(".") + ".\n\n"
+        f"Along the diagonal direction e_1 + e_2 (tau_1 - tau_2 = const) the regions are not intervals in {diag} "
+        "line(s) in all; a monotone switching curve may do that, so they are described, not counted. A line-gap is "
+        "judged by its witnesses (two states choosing the action around one that strictly prefers another): it is at "
+        "the cap only when every witness touches the cap.")
     return res
+
+
+#: The situations of the switching-curve check (:data:`wncs_lp.verify.threshold.SITUATIONS`) in the report's words.
+SITUATION_WORDS = {"preemption": "keep going or preempt (Figs. 11-12)", "cancel_option": "own process arrived too (cancel option)",
+                   "server_free": "server free (which job to start)"}

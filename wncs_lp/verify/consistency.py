@@ -9,8 +9,9 @@ from ..errors import ModelError
 from ..mdp import MDP
 from ..models import model_type
 from ..solvers.result import Solution
-from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, require_space, use_context
+from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, require_space, use_context, witness_flags
 from .report import CheckReport, Tolerance, Violation, pick_examples
+from .verdict import witness_rank
 
 __all__ = ["check_consistency"]
 
@@ -83,7 +84,9 @@ def check_consistency(
     in_scope = st["type"] == 1 if starts == "preempting" else np.ones(st["states"].size, bool)
     vidx = np.flatnonzero(st["violating"] & in_scope)  # the headline's violations (indices into the starts)
     rec, cap, size = st["recurrent"][vidx], st["at_cap"][vidx], st["probability"][vidx]
-    ex = [trees.violation(st, int(vidx[i])) for i in pick_examples(rec, cap, size, examples)]
+    W = st["states"][vidx, None]
+    obs, dist = witness_flags(ctx, W, rec)
+    ex = [trees.violation(st, int(vidx[i])) for i in pick_examples(rec, cap, size, examples, obs, dist)]
     worst = trees.violation(st, int(vidx[np.argmax(size)])) if size.size else None
     details = _details(trees, st, starts, ex)
     return make_report(
@@ -93,7 +96,7 @@ def check_consistency(
         ctx, holds=vidx.size == 0, checked=int(np.count_nonzero(in_scope)), violations=int(vidx.size), rec=rec,
         cap=cap, ties=details["tie_nodes"],
         unit="preempting start states" if starts == "preempting" else "start states", worst=worst, examples=ex,
-        details=details, notes=_notes(starts), t0=t0, witnesses=st["states"][vidx, None],
+        details=details, notes=_notes(starts), t0=t0, witnesses=W, obs=obs,
     )
 
 
@@ -265,17 +268,21 @@ def _by_start_type(trees: _JobTrees, st: dict[str, np.ndarray]) -> dict[str, dic
     selections["other_update_available"] = other
     selections["preempting_with_other_available"] = (st["type"] == 1) & other
     selections["all"] = np.ones(states.size, bool)
+    obs = st["recurrent"] & trees.ctx.observable[states]
+    dist = trees.ctx.cap_distance[states]
     out = {}
     for name, sel in selections.items():
         v = sel & viol
         out[name] = {"checked": int(np.count_nonzero(sel)), "violations": int(np.count_nonzero(v)),
                      "recurrent_violations": int(np.count_nonzero(v & st["recurrent"])),
                      "at_cap_violations": int(np.count_nonzero(v & st["at_cap"])),
-                     "recurrent_below_cap": int(np.count_nonzero(v & st["recurrent"] & ~st["at_cap"]))}
-    for name, sel in selections.items():  # one counterexample per kind of start
+                     "recurrent_below_cap": int(np.count_nonzero(v & st["recurrent"] & ~st["at_cap"])),
+                     "observable_below_cap": int(np.count_nonzero(v & obs & ~st["at_cap"]))}
+    for name, sel in selections.items():  # one counterexample per kind of start: the best witness, far from the cap
         cand = np.flatnonzero(sel & viol)
         if cand.size:
-            best = cand[np.lexsort((-st["probability"][cand], st["at_cap"][cand], ~st["recurrent"][cand]))[0]]
+            rank = witness_rank(st["recurrent"][cand], st["at_cap"][cand], obs[cand])
+            best = cand[np.lexsort((-st["probability"][cand], -dist[cand], rank))[0]]
             out[name]["counterexample"] = trees.violation(st, int(best)).to_json()
     return out
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Iterable, Sequence
 
 import numpy as np
@@ -15,6 +16,7 @@ from ..solvers.certify import q_values
 from ..solvers.dp import evaluate_policy
 from ..solvers.result import Solution
 from .report import CheckReport, Tolerance, Violation, split_counts
+from .verdict import NEGLIGIBLE, cap_distance
 
 __all__ = [
     "DEFAULT_EXAMPLES",
@@ -26,6 +28,7 @@ __all__ = [
     "idle_configs",
     "make_report",
     "violation_weight",
+    "witness_flags",
 ]
 
 #: Default number of example violations kept in a report.
@@ -67,6 +70,11 @@ class PolicyContext:
         configuration ``c`` (-1 if infeasible there); the pair of (s, a) is
         ``pair_ptr[s] + offsets[config[s], a]``.
     recurrence_rule : str
+    observable : (n,) bool array (property)
+        Recurrent and visited at least :data:`~wncs_lp.verify.verdict.NEGLIGIBLE` of the time
+        (recurrent, when the stationary law is not known).
+    cap_distance : (n,) int array (property)
+        ``min_k (tau_hat_k - tau_k)``: 0 at the cap.
     """
 
     mdp: MDP
@@ -82,6 +90,16 @@ class PolicyContext:
     at_cap: np.ndarray
     offsets: np.ndarray
     recurrence_rule: str
+
+    @cached_property
+    def observable(self) -> np.ndarray:
+        if self.stationary is None:
+            return np.asarray(self.recurrent, bool)
+        return np.asarray(self.recurrent, bool) & (np.asarray(self.stationary) >= NEGLIGIBLE)
+
+    @cached_property
+    def cap_distance(self) -> np.ndarray:
+        return cap_distance(self.mdp.states.tau, self.mdp.states.caps)
 
     def q_of(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """``Q(s, a)`` for arrays of states and action indices (NaN where a is infeasible)."""
@@ -104,8 +122,10 @@ class PolicyContext:
                   info: dict | None = None) -> Violation:
         st = tuple(int(s) for s in states)
         stat = None if self.stationary is None else tuple(float(self.stationary[s]) for s in st)
+        idx = np.asarray(st, np.int64)
+        obs = None if self.stationary is None else bool(recurrent and self.observable[idx].all())
         return Violation(kind, float(size), st, tuple(self.label(s) for s in st), bool(recurrent), bool(at_cap),
-                         stat, dict(info or {}))
+                         stat, dict(info or {}), int(self.cap_distance[idx].min()) if st else None, obs)
 
 
 def require_space(mdp: MDP) -> Any:
@@ -274,25 +294,48 @@ def use_context(mdp: MDP, solution: Solution, tolerance: Tolerance | None, stati
 
 
 def violation_weight(ctx: PolicyContext, witnesses: Sequence[Sequence[int]], rec: np.ndarray,
-                     cap: np.ndarray) -> dict[str, Any]:
-    """The stationary probability of the states of the violations' witnesses (all of them, and
-    those of the violations recurrent and below the cap); masses None without a stationary law."""
+                     cap: np.ndarray, obs: np.ndarray | None = None) -> dict[str, Any]:
+    """The stationary probability of the states of the violations' witnesses (all of them, those
+    of the violations recurrent and below the cap, and those observable and below the cap); masses
+    None without a stationary law."""
     def mass(sel: list[Sequence[int]]) -> tuple[int, float | None]:
         states = np.unique(np.concatenate([np.asarray(w, np.int64) for w in sel])) if sel else np.zeros(0, np.int64)
         return int(states.size), (None if ctx.stationary is None else float(ctx.stationary[states].sum()))
 
     n_all, m_all = mass(list(witnesses))
     n_rbc, m_rbc = mass([w for w, r, c in zip(witnesses, rec, cap) if r and not c])
-    return {"states": n_all, "mass": m_all, "states_recurrent_below_cap": n_rbc, "mass_recurrent_below_cap": m_rbc}
+    out = {"states": n_all, "mass": m_all, "states_recurrent_below_cap": n_rbc, "mass_recurrent_below_cap": m_rbc}
+    if obs is not None:
+        n_obc, m_obc = mass([w for w, o, c in zip(witnesses, obs, cap) if o and not c])
+        out.update(states_observable_below_cap=n_obc, mass_observable_below_cap=m_obc)
+    return out
+
+
+def witness_flags(ctx: PolicyContext, witnesses: Sequence[Sequence[int]], rec: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Per violation ``(observable, distance to the cap)`` of its witness: every state recurrent
+    (``rec``) and visited at least :data:`~wncs_lp.verify.verdict.NEGLIGIBLE` of the time; the
+    smallest ``tau_hat_k - tau_k`` over its states."""
+    n = len(witnesses)
+    obs = np.zeros(n, bool)
+    dist = np.zeros(n, np.int64)
+    if n:
+        W = [np.asarray(w, np.int64) for w in witnesses]
+        obs = np.asarray(rec, bool) & np.array([bool(ctx.observable[w].all()) for w in W])
+        dist = np.array([int(ctx.cap_distance[w].min()) for w in W], np.int64)
+    return obs, dist
 
 
 def make_report(name: str, claim: str, ctx: PolicyContext, *, holds: bool, checked: int, violations: int,
                 rec: np.ndarray, cap: np.ndarray, ties: int, unit: str, worst: Violation | None,
                 examples: Iterable[Violation], details: dict, notes: str, t0: float,
-                witnesses: Sequence[Sequence[int]] = ()) -> CheckReport:
+                witnesses: Sequence[Sequence[int]] = (), obs: np.ndarray | None = None) -> CheckReport:
     """A :class:`CheckReport` with the tolerance, recurrence rule and model of ``ctx`` (``rec``,
-    ``cap``, ``witnesses``: per violation, the witness's flags and states; ``t0``: the check's
-    start, from :func:`time.perf_counter`)."""
+    ``cap``, ``witnesses``: per violation, the witness's flags and states; ``obs``: its
+    observability, default :func:`witness_flags` of the witnesses; ``t0``: the check's start,
+    from :func:`time.perf_counter`)."""
+    if obs is None:
+        obs = witness_flags(ctx, witnesses, rec)[0] if len(witnesses) == len(rec) else np.asarray(rec, bool)
     return CheckReport(
         name=name,
         claim=claim,
@@ -302,7 +345,7 @@ def make_report(name: str, claim: str, ctx: PolicyContext, *, holds: bool, check
         recurrent_violations=int(np.count_nonzero(rec)),
         at_cap_violations=int(np.count_nonzero(cap)),
         ties=int(ties),
-        split=split_counts(rec, cap),
+        split=split_counts(rec, cap, obs),
         tol=ctx.tol,
         atol=ctx.tolerance.atol,
         rtol=ctx.tolerance.rtol,
@@ -315,5 +358,5 @@ def make_report(name: str, claim: str, ctx: PolicyContext, *, holds: bool, check
         notes=notes,
         model=ctx.mdp.name,
         seconds=time.perf_counter() - t0,
-        weight=violation_weight(ctx, witnesses, rec, cap),
+        weight=violation_weight(ctx, witnesses, rec, cap, obs),
     )

@@ -71,8 +71,8 @@ def line_structure(ctx: PolicyContext, configs: Sequence[int], directions: Seque
     ``|Q(x, a) - Q(x, pi(x))| <= tol``. A line has a gap for action a when two states with
     pi = a enclose a reachable state not compatible with a. Every such triple is a *witness*
     of the gap; the one reported is the best by :func:`~wncs_lp.verify.verdict.witness_class`
-    (all three states recurrent and below the cap if there is one, ...), its outer states the
-    nearest ones choosing a on either side of its middle state.
+    (all three states observable and below the cap if there is one, then recurrent and below the
+    cap, ...), its outer states the nearest ones choosing a on either side of its middle state.
 
     Returns (summary per direction, list of gaps (direction, config, action, first, gap, last,
     size)).
@@ -97,7 +97,7 @@ def line_structure(ctx: PolicyContext, configs: Sequence[int], directions: Seque
                 continue
             L = S.shape[1]
             idx = np.arange(L)[None, :]
-            classes = [valid & m[Ssafe] for m in witness_class(ctx.recurrent, ctx.at_cap)]
+            classes = [valid & m[Ssafe] for m in witness_class(ctx.recurrent, ctx.at_cap, ctx.observable)]
             for a in feas:
                 isA = A == a
                 has = isA.any(axis=1)
@@ -218,7 +218,7 @@ class _LinesOfConfig:
         self.A = np.where(self.valid, ctx.act[Ssafe], -1)
         self.Q = {int(a): np.where(self.valid, ctx.q_of(Ssafe.ravel(), np.full(Ssafe.size, a)).reshape(S.shape),
                                    np.nan) for a in feas}
-        self.classes = [self.valid & m[Ssafe] for m in witness_class(ctx.recurrent, ctx.at_cap)]
+        self.classes = [self.valid & m[Ssafe] for m in witness_class(ctx.recurrent, ctx.at_cap, ctx.observable)]
 
     def reversals(self, a: int, b: int) -> tuple[list[tuple[tuple[int, ...], float]], int]:
         """The lines of the minority order of (a, b), each with its best witness (its own switch

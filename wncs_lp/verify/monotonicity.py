@@ -8,7 +8,7 @@ import numpy as np
 
 from ..mdp import MDP
 from ..solvers.result import Solution
-from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, use_context
+from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, use_context, witness_flags
 from .report import CheckReport, Tolerance, Violation, pick_examples
 
 __all__ = ["check_monotonicity"]
@@ -79,7 +79,9 @@ def check_monotonicity(
              "recurrent_each": [bool(ctx.recurrent[a]), bool(ctx.recurrent[b])]},
         )
 
-    ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples)]
+    W = np.stack([s1, s2], axis=1)
+    obs, dist = witness_flags(ctx, W, rec)
+    ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples, obs, dist)]
     worst = make(int(np.argmax(size))) if size.size else None
     dom = _dominance(ctx, V, grids)
     details = {"per_axis": pairs["per_axis"], "dominance": dom, "configurations": len(space.configs),
@@ -93,7 +95,7 @@ def check_monotonicity(
         "monotonicity", "Theorem 1 (C7): V nondecreasing in each tau_k, configuration fixed", ctx,
         holds=(size.size == 0 and dom["violating_states"] == 0), checked=pairs["checked"], violations=size.size,
         rec=rec, cap=cap, ties=0, unit="adjacent comparable pairs", worst=worst, examples=ex, details=details,
-        notes=notes, t0=t0, witnesses=np.stack([s1, s2], axis=1),
+        notes=notes, t0=t0, witnesses=W, obs=obs,
     )
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..files import json_ready
-from .verdict import structural_verdict
+from .verdict import structural_verdict, witness_rank
 
 
 __all__ = ["Tolerance", "Violation", "CheckReport", "split_counts", "pick_examples"]
@@ -65,6 +65,12 @@ class Violation:
         Stationary probability of each state under the solution's policy, when available.
     info : dict
         Check-specific data (axis, actions, z, trajectory...), JSON-ready.
+    cap_distance : int or None
+        How far the witness lies from the cap: the smallest ``tau_hat_k - tau_k`` over its states
+        (0: it touches the cap; :func:`~wncs_lp.verify.verdict.cap_distance`).
+    observable : bool or None
+        Every state recurrent and visited at least :data:`~wncs_lp.verify.verdict.NEGLIGIBLE`
+        of the time (None: no stationary law).
     """
 
     kind: str
@@ -75,6 +81,8 @@ class Violation:
     at_cap: bool
     stationary: tuple[float, ...] | None = None
     info: dict = field(default_factory=dict)
+    cap_distance: int | None = None
+    observable: bool | None = None
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict."""
@@ -87,6 +95,8 @@ class Violation:
             "at_cap": bool(self.at_cap),
             "stationary": None if self.stationary is None else [float(x) for x in self.stationary],
             "info": json_ready(self.info),
+            "cap_distance": None if self.cap_distance is None else int(self.cap_distance),
+            "observable": None if self.observable is None else bool(self.observable),
         }
 
 
@@ -114,7 +124,9 @@ class CheckReport:
     ties : int
         Cases that differ from the claim only within the tolerance (not violations).
     split : dict
-        The violations by (recurrent | transient) x (at cap | below cap).
+        The violations by (recurrent | transient) x (at cap | below cap), and ``observable_below_cap``
+        (recurrent, every witness state of weight at least
+        :data:`~wncs_lp.verify.verdict.NEGLIGIBLE`, below the cap: these decide FAILS).
     tol, atol, rtol, value_scale : float
         The resolved tolerance ``tol = atol + rtol * value_scale``.
     recurrence_rule : str
@@ -163,7 +175,8 @@ class CheckReport:
     def verdict(self) -> str:
         """HOLDS, FAILS or DEPENDS by the one rule shared with the reproduction
         (:func:`wncs_lp.verify.verdict.structural_verdict`)."""
-        return structural_verdict(self.holds, self.split.get("recurrent_below_cap", 0))
+        obs = self.split.get("observable_below_cap")
+        return structural_verdict(self.holds, self.split.get("recurrent_below_cap", 0), obs)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (strict JSON once NaN/inf are mapped to null by the caller)."""
@@ -206,21 +219,31 @@ class CheckReport:
 
 
 
-def split_counts(rec: np.ndarray, cap: np.ndarray) -> dict[str, int]:
-    """The violations by (recurrent | transient) x (at cap | below cap)."""
+def split_counts(rec: np.ndarray, cap: np.ndarray, obs: np.ndarray | None = None) -> dict[str, int]:
+    """The violations by (recurrent | transient) x (at cap | below cap); with ``obs`` (per
+    violation: its witness observable, every state of weight) also ``observable_below_cap``, the
+    violations that decide FAILS (:func:`~wncs_lp.verify.verdict.structural_verdict`)."""
     rec = np.asarray(rec, bool)
     cap = np.asarray(cap, bool)
-    return {
+    out = {
         "recurrent_below_cap": int(np.count_nonzero(rec & ~cap)),
         "recurrent_at_cap": int(np.count_nonzero(rec & cap)),
         "transient_below_cap": int(np.count_nonzero(~rec & ~cap)),
         "transient_at_cap": int(np.count_nonzero(~rec & cap)),
     }
+    if obs is not None:
+        out["observable_below_cap"] = int(np.count_nonzero(np.asarray(obs, bool) & rec & ~cap))
+    return out
 
 
-def pick_examples(rec: np.ndarray, cap: np.ndarray, size: np.ndarray, k: int) -> np.ndarray:
-    """Indices of up to k violations: recurrent first, then below the cap, then by |size|."""
+def pick_examples(rec: np.ndarray, cap: np.ndarray, size: np.ndarray, k: int, obs: np.ndarray | None = None,
+                  dist: np.ndarray | None = None) -> np.ndarray:
+    """Indices of up to k violations: by the class of their witness
+    (:func:`~wncs_lp.verify.verdict.witness_rank`: observable and below the cap first, then
+    recurrent and below the cap, then below the cap, ...), then farthest from the cap (``dist``,
+    per violation the smallest ``tau_hat_k - tau_k`` over its witness), then by |size|."""
     if size.size == 0 or k <= 0:
         return np.zeros(0, np.int64)
-    order = np.lexsort((-np.abs(size), cap.astype(int), (~rec).astype(int)))
+    far = np.zeros(size.size, np.int64) if dist is None else -np.asarray(dist, np.int64)
+    order = np.lexsort((-np.abs(size), far, witness_rank(rec, cap, obs)))
     return order[:k]

@@ -10,12 +10,13 @@ from ..errors import ModelError
 from ..mdp import MDP
 from ..models import model_type
 from ..solvers.result import Solution
-from .context import DEFAULT_EXAMPLES, PolicyContext, make_report, idle_configs, use_context
+from .context import (DEFAULT_EXAMPLES, PolicyContext, idle_configs, make_report, use_context, violation_weight,
+                      witness_flags)
 from .lines import (box_lines, gap_violation, gap_violations, line_structure, order_violation, order_violations,
                     states_on_lines, switching_orders, theorem2_direction)
 from .report import CheckReport, Tolerance, Violation, pick_examples, split_counts
 
-__all__ = ["check_threshold"]
+__all__ = ["check_threshold", "SITUATIONS", "situations"]
 
 
 def check_threshold(
@@ -60,10 +61,14 @@ def check_threshold(
       actions in the same order (one case = one line on which both actions occur in order; a
       violation = a line of the minority order, see :func:`~wncs_lp.verify.lines.switching_orders`).
 
-    A monotone switching curve may cross a diagonal line several times, so gaps along the
-    diagonals e_i + e_j are counted in ``details["diagonal_gaps"]`` only, outside the verdict;
-    ``details["by_configuration_kind"]`` splits the violations between configurations serving
-    a job (the preemption decisions of the figures) and those with a free server.
+    The configurations are split by the decision they pose (:data:`SITUATIONS`): the figures'
+    own, a job of process j in service and another process's update arrived but not j's (keep
+    going or preempt, Figs. 11-12), decides ``holds`` and the counts; the configurations where
+    j's own update arrived too (cancelling the job is an option) and those with a free server
+    (which job to start) are checked the same way and reported apart in
+    ``details["by_situation"]``, outside the verdict. A monotone switching curve may cross a
+    diagonal line several times, so gaps along the diagonals e_i + e_j (every configuration) are
+    counted in ``details["diagonal_gaps"]`` only, outside the verdict.
 
     Parameters
     ----------
@@ -113,20 +118,85 @@ def _configurations(mdp: MDP, ctx: PolicyContext, configs: str | Sequence[int]) 
     raise ModelError(f"configs must be 'idle', 'all' or a list of configuration ids, got {configs!r}")
 
 
+#: The decisions of the preemption model's configurations (:func:`situations`); the first is the
+#: figures' (Figs. 11-12) and decides the switching-curve check.
+SITUATIONS = {
+    "preemption": "a job in service, another process's update arrived (keep going or preempt: Figs. 11-12)",
+    "cancel_option": "a job in service and its own process's update arrived (cancelling it is an option)",
+    "server_free": "no job in service (which update to start)",
+}
+
+
+def situations(model, space, cfg_ids: Sequence[int]) -> dict[str, list[int]]:
+    """The configuration ids split by the decision they pose (:data:`SITUATIONS`)."""
+    out: dict[str, list[int]] = {k: [] for k in SITUATIONS}
+    for c in cfg_ids:
+        conf = space.configs[c]
+        job = model.job_in_service(conf)
+        if job is None:
+            out["server_free"].append(c)
+        elif model.arrived(conf)[job[0] - 1]:
+            out["cancel_option"].append(c)
+        else:
+            out["preemption"].append(c)
+    return out
+
+
 def _switching_curve(ctx: PolicyContext, model, cfg_ids: list[int], axes_d: list[tuple[int, ...]],
                      diagonals: list[tuple[int, ...]], examples: int, t0: float) -> CheckReport:
     """The C9 reading (preemption model): every action region an interval on every axis-parallel
     line (one switch per pair of actions), and the switches in one order on all parallel lines (a
-    monotone curve); diagonal gaps are a described statistic only."""
-    space = ctx.mdp.states
+    monotone curve), decided on the figures' situation (preemption decisions); the other
+    situations apart; diagonal gaps are a described statistic only."""
+    by = {name: _curve_in(ctx, ids, axes_d, examples) for name, ids in situations(model, ctx.mdp.states, cfg_ids).items()}
+    head = by["preemption"]
+    diag_summary, dgaps = line_structure(ctx, cfg_ids, diagonals)
+    drec, dcap, _ = gap_violations(ctx, dgaps)
+    details = {
+        "axis_lines": head["axis_lines"],
+        "axis_orders": head["axis_orders"],
+        "gaps": head["gaps"],
+        "reversals": head["reversals"],
+        "by_situation": {name: {"meaning": SITUATIONS[name], **{k: v for k, v in r.items()
+                                                               if k not in ("rec", "cap", "obs", "witnesses",
+                                                                            "examples_v", "worst_v")},
+                                "examples": [v.to_json() for v in r["examples_v"][:3]]}
+                         for name, r in by.items()},
+        "diagonal_gaps": {"count": len(dgaps), "split": split_counts(drec, dcap), "lines": diag_summary,
+                          "note": "not violations: a monotone switching curve may cross a diagonal "
+                                  "tau_i + tau_j = const several times"},
+        "configurations": len(cfg_ids),
+        "configurations_in_scope": head["configurations"],
+    }
+    notes = ("Preemption model: Theorem 2 is stated for the Section II model; here the C9 reading is checked, the "
+             "switching-curve (threshold) property along each axis, decided in the figures' situation (a job in "
+             "service and another process's update arrived, not its own: keep going or preempt): each action's region "
+             "is an interval on every axis-parallel line ('line-gap' violations, one case per (line, action) pair), "
+             "and the policy switches between two actions in the same order on all parallel lines ('order-reversal' "
+             "violations, one case per line ordering a pair of actions). Tie-robust. The configurations where the "
+             "job's own process arrived too (cancelling is an option) and those with a free server are checked the "
+             "same way and reported in details.by_situation, outside the verdict; gaps along the diagonals in "
+             "details.diagonal_gaps.")
+    return make_report("threshold", "C9 (Figs. 11-12): preemption policy of threshold (switching-curve) type", ctx,
+                       holds=head["violations"] == 0, checked=head["checked"], violations=head["violations"],
+                       rec=head["rec"], cap=head["cap"], ties=0,
+                       unit="(line, action) pairs and ordered (line, action pair)s", worst=head["worst_v"],
+                       examples=head["examples_v"], details=details, notes=notes, t0=t0,
+                       witnesses=head["witnesses"], obs=head["obs"])
+
+
+def _curve_in(ctx: PolicyContext, cfg_ids: list[int], axes_d: list[tuple[int, ...]], examples: int) -> dict:
+    """The switching-curve check along the axes in some configurations: the counts, the split, the
+    per-violation flags and witnesses, the examples (best witness class first, farthest from the cap)."""
     axis_summary, gaps = line_structure(ctx, cfg_ids, axes_d)
     order_summary, revs = switching_orders(ctx, cfg_ids, axes_d)
-    diag_summary, dgaps = line_structure(ctx, cfg_ids, diagonals)
     grec, gcap, gsize = gap_violations(ctx, gaps)
     orec, ocap, osize = order_violations(ctx, revs)
     rec = np.concatenate([grec, orec])
     cap = np.concatenate([gcap, ocap])
     size = np.concatenate([gsize, osize])
+    witnesses = [g[3:6] for g in gaps] + [r[4] for r in revs]
+    obs, dist = witness_flags(ctx, witnesses, rec)
 
     def make(i: int) -> Violation:
         if i < len(gaps):
@@ -134,42 +204,22 @@ def _switching_curve(ctx: PolicyContext, model, cfg_ids: list[int], axes_d: list
         j = i - len(gaps)
         return order_violation(ctx, revs[j], orec[j], ocap[j])
 
-    ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples)]
-    worst = make(int(np.argmax(np.abs(size)))) if size.size else None
-    serving = {c for c in cfg_ids if model.job_in_service(space.configs[c]) is not None}
-    g_serv = np.array([g[1] in serving for g in gaps] + [r[1] in serving for r in revs], dtype=bool)
-    drec, dcap, _ = gap_violations(ctx, dgaps)
-    checked = (sum(v["checked"] for v in axis_summary.values())
-               + sum(v["ordered_line_pairs"] for v in order_summary.values()))
-    details = {
+    gobs, oobs = obs[:len(gaps)], obs[len(gaps):]
+    return {
+        "configurations": len(cfg_ids),
+        "checked": (sum(v["checked"] for v in axis_summary.values())
+                    + sum(v["ordered_line_pairs"] for v in order_summary.values())),
+        "violations": len(gaps) + len(revs),
+        "split": split_counts(rec, cap, obs),
+        "weight": violation_weight(ctx, witnesses, rec, cap, obs),
+        "gaps": {"count": len(gaps), "split": split_counts(grec, gcap, gobs)},
+        "reversals": {"count": len(revs), "split": split_counts(orec, ocap, oobs)},
         "axis_lines": axis_summary,
         "axis_orders": order_summary,
-        "gaps": {"count": len(gaps), "split": split_counts(grec, gcap)},
-        "reversals": {"count": len(revs), "split": split_counts(orec, ocap)},
-        "by_configuration_kind": {
-            "serving_a_job": {"configurations": len(serving), "violations": int(np.count_nonzero(g_serv)),
-                              "split": split_counts(rec[g_serv], cap[g_serv])},
-            "server_free": {"configurations": len(cfg_ids) - len(serving),
-                            "violations": int(np.count_nonzero(~g_serv)),
-                            "split": split_counts(rec[~g_serv], cap[~g_serv])},
-        },
-        "diagonal_gaps": {"count": len(dgaps), "split": split_counts(drec, dcap), "lines": diag_summary,
-                          "note": "not violations: a monotone switching curve may cross a diagonal "
-                                  "tau_i + tau_j = const several times"},
-        "configurations": len(cfg_ids),
-        "configurations_serving": len(serving),
+        "rec": rec, "cap": cap, "obs": obs, "witnesses": witnesses,
+        "examples_v": [make(int(i)) for i in pick_examples(rec, cap, size, examples, obs, dist)],
+        "worst_v": make(int(np.argmax(np.abs(size)))) if size.size else None,
     }
-    notes = ("Preemption model: Theorem 2 is stated for the Section II model; here the C9 reading is checked, the "
-             "switching-curve (threshold) property along each axis in every configuration with >= 2 feasible "
-             "actions: each action's region is an interval on every axis-parallel line ('line-gap' violations, "
-             "one case per (line, action) pair), and the policy switches between two actions in the same order "
-             "on all parallel lines ('order-reversal' violations, one case per line ordering a pair of actions). "
-             "Tie-robust. Gaps along the diagonals are counted in details.diagonal_gaps, outside the verdict.")
-    return make_report("threshold", "C9 (Figs. 11-12): preemption policy of threshold (switching-curve) type", ctx,
-                       holds=(len(gaps) + len(revs) == 0), checked=checked, violations=len(gaps) + len(revs),
-                       rec=rec, cap=cap, ties=0, unit="(line, action) pairs and ordered (line, action pair)s",
-                       worst=worst, examples=ex, details=details, notes=notes, t0=t0,
-                       witnesses=[g[3:6] for g in gaps] + [r[4] for r in revs])
 
 
 def _rays(ctx: PolicyContext, cfg_ids: list[int], directions: list[tuple[int, ...]], examples: int,
@@ -194,7 +244,8 @@ def _rays(ctx: PolicyContext, cfg_ids: list[int], directions: list[tuple[int, ..
              "meaning": "pi(s) = action_at_s but at s' = s + z(e_k1 + e_k2) the claimed action is worse by size"},
         )
 
-    ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples)]
+    obs, dist = witness_flags(ctx, R[:, :2], rec)
+    ex = [make(int(i)) for i in pick_examples(rec, cap, size, examples, obs, dist)]
     worst = make(int(np.argmax(np.abs(size)))) if size.size else None
     targets = np.unique(R[:, 1]) if R.size else np.zeros(0, np.int64)
     details = {
@@ -209,7 +260,8 @@ def _rays(ctx: PolicyContext, cfg_ids: list[int], directions: list[tuple[int, ..
         "lines": line_summary,
         "line_gaps": {"count": len(gaps), "split": split_counts(grec, gcap),
                       "examples": [gap_violation(ctx, gaps[int(i)], grec[i], gcap[i]).to_json()
-                                   for i in pick_examples(grec, gcap, gsize, examples)]},
+                                   for i in pick_examples(grec, gcap, gsize, examples,
+                                                          *witness_flags(ctx, [g[3:6] for g in gaps], grec))]},
     }
     notes = ("Theorem 2 in the idle-server configuration: one case per (s, z); ties (claimed action optimal at s' "
              "within tol) are not violations. 'details.lines' reports, separately and outside the verdict, whether "
@@ -218,7 +270,7 @@ def _rays(ctx: PolicyContext, cfg_ids: list[int], directions: list[tuple[int, ..
         "threshold", "Theorem 2 (C8): pi(s) = (k1, k2) => pi(s + z(e_k1 + e_k2)) = (k1, k2) in idle states",
         ctx, holds=(R.shape[0] == 0), checked=found["checked"], violations=R.shape[0], rec=rec, cap=cap,
         ties=found["ties"], unit="(state, z) pairs", worst=worst, examples=ex, details=details, notes=notes, t0=t0,
-        witnesses=R[:, :2],
+        witnesses=R[:, :2], obs=obs,
     )
 
 
