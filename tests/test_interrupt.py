@@ -91,5 +91,8 @@ def test_interrupted_reproduction_resumes(quick_reproduction):
     for text in run.kept.values():
         json.loads(text)  # every cache entry complete
     assert run.code == 0, run.stderr[-2000:]
-    assert len(run.report["claims"]) == 13
+    from wncs_lp.reproduce import CLAIMS
+
+    assert [c["id"] for c in run.report["claims"]] == list(CLAIMS)  # every claim, none lost to the interrupt
+    assert len(CLAIMS) == 16
     assert run.report["provenance"]["cache"]["hits"] >= 1  # the steps finished before Ctrl-C were reused
