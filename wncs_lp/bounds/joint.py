@@ -84,7 +84,7 @@ from .joint_symmetry import ProcessSymmetry, process_symmetry, symmetric_lp_shap
 from .private import private_bound
 from .result import BoundResult, ValueTables
 
-__all__ = ["joint_bound", "ipm_fits", "ipm_plan", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS",
+__all__ = ["joint_bound", "joint_bound_from_tables", "ipm_fits", "ipm_plan", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS",
            "REACH_MAX_NNZ", "REACH_MAX_BYTES", "IPM_BUDGET", "IPM_GUARD"]
 
 #: ``method`` values of :func:`joint_bound`.
@@ -493,6 +493,44 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     return _result(run, status, it, stats, time.monotonic() - t0)
 
 
+def joint_bound_from_tables(system: System, tables, *, source: str = "tables given", chains: bool = True,
+                            tol: float = 1e-4, kernel: str = "auto") -> BoundResult:
+    """Relaxation 2's certified bound from tables found elsewhere (an earlier run, a file).
+
+    Parameters
+    ----------
+    system : System
+    tables : sequence of (|C|, tau_hat_k) arrays
+        Any tables h_k(tau, C): the bound is :func:`~wncs_lp.bounds.joint_chains.certify_tables`'s
+        check of them on ``system``, so tables of another system (or wrong ones) only certify
+        less, never something false; tables of the wrong shape are refused.
+    source : str
+        Where the tables came from (said in ``certified_by`` and ``stats["found_in"]``).
+    chains : bool
+        Also solve the priced chains at the prices of these tables and keep their tables when
+        they certify within ``tol`` as much (as after the interior point: their greedy policy
+        acts on every state, see :func:`joint_bound`).
+    tol : float
+    kernel : {"auto", "numba", "numpy"}
+
+    Returns
+    -------
+    BoundResult
+        ``status`` ``"optimal"`` (the check is complete whatever the tables).
+    """
+    t0 = time.monotonic()
+    data = JointData.from_system(system)
+    run = _Run(system=system, data=data, kern=Kernels(kernel, 1), prog=as_progress(False), tol=float(tol),
+               deadline=np.inf, t0=t0)
+    tables = [np.asarray(h, dtype=float) for h in tables]
+    _offer(run, tables, None, source)
+    stats: dict = {"method": "tables", "kernel": run.kern.name, "threads": 1, "source": source}
+    if chains:
+        _chains_at_ipm_prices(run, tables, stats, label=f"the priced chains at the prices of {source}")
+        stats["tables_bound"], stats["chains_bound"] = stats.pop("ipm_tables_bound"), stats.pop("ipm_chains_bound")
+    return _result(run, OPTIMAL, 0, stats, time.monotonic() - t0)
+
+
 def _warm_start(system: System, run: _Run, stats: dict) -> tuple | None:
     """Relaxation 1 solved, its tables and prices carried over (:func:`relaxation1_start`)."""
     t = time.monotonic()
@@ -573,7 +611,8 @@ def _ipm_phase(run: _Run, stats: dict, tol: float, sym: ProcessSymmetry, plan: d
     return ipm.tables is not None
 
 
-def _chains_at_ipm_prices(run: _Run, tables: list, stats: dict) -> None:
+def _chains_at_ipm_prices(run: _Run, tables: list, stats: dict,
+                          label: str = "the priced chains at the interior point's prices") -> None:
     """Replace the interior point's duals by the priced chains' bias tables at their prices when
     these certify as much (within ``tol``).
 
@@ -585,8 +624,7 @@ def _chains_at_ipm_prices(run: _Run, tables: list, stats: dict) -> None:
     """
     ipm_bound = run.best.lower_bound
     # kept even when the duals certified a hair more (within tol): the chains' tables are kept for their policy
-    _evaluate(run, _prices_from_tables(run.data, tables), "the priced chains at the interior point's prices",
-              slack=run.tol * max(abs(ipm_bound), 1.0))
+    _evaluate(run, _prices_from_tables(run.data, tables), label, slack=run.tol * max(abs(ipm_bound), 1.0))
     stats.update(ipm_tables_bound=ipm_bound, ipm_chains_bound=run.history[-1][2])
 
 

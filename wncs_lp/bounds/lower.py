@@ -18,7 +18,8 @@ from .grouped import grouped_bound
 from .private import private_bound
 from .result import BoundResult
 
-__all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "lower_bound", "parse_relaxation"]
+__all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "lower_bound", "parse_relaxation", "auto_pick",
+           "runs_grouped"]
 
 #: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
 RELAXATIONS = ("auto", "private-servers", "joint-configuration", "grouped-private-servers")
@@ -122,7 +123,7 @@ def _auto(system: System, joint: Any, why_not: str, options: dict) -> BoundResul
     else:
         notes.append(why_not)
     res1 = _try(private_bound, system, _private_options(options))
-    if res1 is not None and system.n_processes >= 3 and (res2 is None or res2.stats.get("ipm_tables") is not True):
+    if res1 is not None and runs_grouped(system, res2):
         limit = options.get("time_limit")
         res3 = _try(grouped_bound, system, {**_private_options(options), "relaxation_1": res1,
                                             "time_limit": AUTO_GROUPED_TIME_LIMIT if limit is None else limit})
@@ -132,10 +133,22 @@ def _auto(system: System, joint: Any, why_not: str, options: dict) -> BoundResul
         found.append(res1)
     if not found:
         return private_bound(system, **_private_options(options))  # raises the model's reason
+    return auto_pick(found, notes)
+
+
+def runs_grouped(system: System, joint_result: BoundResult | None) -> bool:
+    """``"auto"``'s rule for relaxation 3: from three processes on, where relaxation 2 was not
+    solved by its interior point (where it was, it was the tighter)."""
+    return system.n_processes >= 3 and (joint_result is None or joint_result.stats.get("ipm_tables") is not True)
+
+
+def auto_pick(found: list[BoundResult], notes: list[str] = ()) -> BoundResult:
+    """``"auto"``'s choice among certified bounds listed in the order 2, 3, 1: the largest (the
+    first of equals), with ``stats["auto_choice"]``, ``"auto_reason"`` and ``"auto_bounds"``."""
     best = max(found, key=lambda r: r.lower_bound)  # max keeps the first of equals: 2, 3, 1
     bounds = {r.relaxation: r.lower_bound for r in found}
     reason = "; ".join([f"the largest certified bound of {', '.join(f'{k} {v:.10g}' for k, v in bounds.items())}"]
-                       + notes)
+                       + list(notes))
     return replace(best, stats={**best.stats, "auto_choice": best.relaxation, "auto_reason": reason,
                                 "auto_bounds": bounds})
 
