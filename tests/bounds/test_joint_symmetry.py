@@ -104,3 +104,14 @@ def test_joint_bound_uses_the_symmetry_and_stays_below_g_star(twice):
     plain = joint_bound(system, method="ipm", max_iter=0, ipm_tol=1e-8, symmetry=False)
     assert plain.stats["ipm_plan"]["classes"] == []
     assert res.lower_bound == pytest.approx(plain.lower_bound, rel=1e-6)
+
+
+def test_orbit_tables_round_trip(twice):
+    """The compact form of symmetric tables (the representatives' on their orbits) gives them back."""
+    from wncs_lp.bounds.joint_symmetry import orbit_tables, spread_orbit_tables
+
+    _, data, sym, _ = twice
+    tables = ipm_tables(data, symmetry=sym, tol=1e-8).tables
+    back = spread_orbit_tables(sym, data, orbit_tables(sym, data, tables))
+    for h, b in zip(tables, back):
+        np.testing.assert_allclose(b, h, rtol=0, atol=1e-9 * np.abs(h).max())

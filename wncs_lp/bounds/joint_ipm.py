@@ -64,11 +64,14 @@ class IpmRun:
     shape: tuple
 
 
-#: IPX's CPU seconds on one core of this machine as a power of the LP's nonzeros and the mean cap,
-#: ``coef * (nnz / 1e6) ** a * (cap / 10) ** b``, fitted to the runs of
-#: ``python benchmarks/bounds.py --ipm-scan`` (CPU time, so the load of the machine does not enter;
-#: IPX is serial): see :func:`ipm_seconds`.
-IPM_TIME_MODEL = {"coef": 60.0, "a": 1.5, "b": 1.0}
+#: IPX's CPU seconds on one core of this machine as a power of the LP's nonzeros (the count of
+#: :func:`~wncs_lp.bounds.joint_symmetry.symmetric_lp_shape`, before duplicates merge) and the mean
+#: cap: ``coef * (nnz / 1e6) ** a * (cap / 10) ** b``, least squares in logs on the runs of
+#: ``python benchmarks/bounds.py --ipm-scan`` (14 LPs of 0.24M-1.4M nonzeros, processes 1-4 at caps
+#: 8-30, the 5- and 6-process shapes at caps 4-10, eight processes reduced at caps 3-8, IPX
+#: tolerance 1e-4: every one within a factor 1.32 of the model). CPU time, so the load of the
+#: machine does not enter (IPX is serial): on the shared machine the wall clock was 5-16 times it.
+IPM_TIME_MODEL = {"coef": 63.0, "a": 1.71, "b": 1.18}
 
 
 def ipm_seconds(lp_nnz: int, mean_cap: float) -> float:

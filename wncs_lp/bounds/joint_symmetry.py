@@ -59,7 +59,8 @@ from scipy.sparse.csgraph import connected_components
 from ..models.system import System
 from .joint_chains import JointData
 
-__all__ = ["ProcessSymmetry", "process_symmetry", "symmetric_lp", "symmetric_lp_shape", "spread_tables"]
+__all__ = ["ProcessSymmetry", "process_symmetry", "symmetric_lp", "symmetric_lp_shape", "spread_tables",
+           "orbit_tables", "spread_orbit_tables"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -352,13 +353,35 @@ def spread_tables(sym: ProcessSymmetry, data: JointData, lp: SymmetricLP, lam: n
     """Every process's table h_k(tau, C) from the reduced LP's balance duals ``lam`` (full rows, 0 on
     the dropped ones): the representative's on its orbits, moved by the transposition (r k) for
     the other members of its class."""
+    # the representative's column costs weight * q_r: its duals are weight times one process's table
+    per_orbit = [lam[sl].reshape(o.n_configs, -1) / o.weight for sl, o in zip(lp.table_rows, lp.orbits)]
+    return spread_orbit_tables(sym, data, per_orbit)
+
+
+def spread_orbit_tables(sym: ProcessSymmetry, data: JointData, per_orbit: list) -> list[np.ndarray]:
+    """Every process's table from its class representative's table on the representative's orbits
+    of configurations (one (orbits, tau_hat) array per class, in ``sym.classes`` order): the
+    inverse of :func:`orbit_tables`."""
     tables: list = [None] * data.n_processes
-    for sl, o, cl in zip(lp.table_rows, lp.orbits, sym.classes):
-        # the representative's column costs weight * q_r: its duals are weight times one process's table
-        h_r = (lam[sl].reshape(o.n_configs, -1) / o.weight)[o.config_orbit]
-        tables[o.rep] = np.ascontiguousarray(h_r)
+    for h_orb, cl in zip(per_orbit, sym.classes):
+        o = _rep_orbits(sym, data, cl)
+        h_r = np.asarray(h_orb, dtype=float)[o.config_orbit]
+        tables[cl[0]] = np.ascontiguousarray(h_r)
         for k in cl[1:]:
-            cmap, _ = sym.transposition(o.rep, k)  # stored for every member: it joined the class by it
+            cmap, _ = sym.transposition(cl[0], k)  # stored for every member: it joined the class by it
             tables[k] = np.ascontiguousarray(h_r[cmap])
     return tables
 
+
+def orbit_tables(sym: ProcessSymmetry, data: JointData, tables) -> list[np.ndarray]:
+    """Each class representative's table averaged on its orbits of configurations: a compact form of
+    symmetric tables (the twins' are the representative's moved by the swaps), read back by
+    :func:`spread_orbit_tables`. Tables that are not symmetric lose their asymmetry."""
+    out = []
+    for cl in sym.classes:
+        o = _rep_orbits(sym, data, cl)
+        h = np.asarray(tables[cl[0]], dtype=float)
+        m = np.zeros((o.n_configs, h.shape[1]))
+        np.add.at(m, o.config_orbit, h)
+        out.append(m / np.bincount(o.config_orbit, minlength=o.n_configs)[:, None])
+    return out
