@@ -78,24 +78,27 @@ from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
 from .joint_bundle import PriceBundle
 from .joint_chains import (Certificate, ChainSolution, JointData, Kernels, certify_tables, column,
                            kernels_available, policy_weights, solve_chain, stationary)
-from .joint_ipm import ipm_bytes, ipm_tables
+from .joint_ipm import ipm_bytes, ipm_seconds, ipm_tables
 from .joint_lp import HalpernPDHG, JointLP, lp_shape, pin_tables
 from .inputs import bound_system
+from .joint_symmetry import ProcessSymmetry, process_symmetry, symmetric_lp_shape
 from .private import private_bound
 from .result import BoundResult, ValueTables
 
-__all__ = ["joint_bound", "ipm_fits", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS", "REACH_MAX_NNZ",
-           "REACH_MAX_BYTES", "IPM_MAX_NNZ"]
+__all__ = ["joint_bound", "joint_bound_from_tables", "ipm_fits", "ipm_plan", "joint_size", "joint_reach", "relaxation1_start", "JOINT_METHODS",
+           "REACH_MAX_NNZ", "REACH_MAX_BYTES", "IPM_BUDGET", "IPM_GUARD"]
 
 #: ``method`` values of :func:`joint_bound`.
 JOINT_METHODS = ("auto", "ipm", "bundle", "pdhg", "pdhg+bundle")
-#: ``method="auto"`` solves the LP by the interior point when it has at most this many nonzeros
-#: (:func:`~wncs_lp.bounds.joint_lp.lp_shape`'s count, before duplicates merge; and its memory
-#: estimate fits :data:`REACH_MAX_BYTES`); beyond, the bundle alone. IPX's time grows faster than
-#: the LP (processes 1-4 on 2 shared cores at load 3-4: 0.36M nonzeros at cap 12 in 29 s, 0.59M
-#: at cap 20 in 104 s, 0.89M at cap 30 in 276 s; 2-4 times that at load 9), so the 6-process mix
-#: at cap 20 (3.4M) and 8 processes (12.5M) are left to the bundle.
-IPM_MAX_NNZ = 1_500_000
+#: ``method="auto"`` solves the LP by the interior point when its predicted CPU time
+#: (:func:`~wncs_lp.bounds.joint_ipm.ipm_seconds`, a model measured on this machine's runs) is at
+#: most this many seconds and its memory estimate fits :data:`REACH_MAX_BYTES`; beyond, the bundle.
+IPM_BUDGET = 600.0
+#: The interior point's guard: ``factor`` times its predicted CPU seconds plus ``slack`` seconds, of
+#: CPU time (HiGHS's interrupt callback checks it), so that a loaded machine -- wall time up to
+#: 16 times the CPU time measured here -- does not cut a solve that would finish; only a run far
+#: beyond its prediction is stopped (it then leaves no tables, and the bundle takes over).
+IPM_GUARD = {"factor": 10.0, "slack": 120.0}
 #: The bundle stops after this many null steps in a row (its model no longer finds ascent).
 STALL = 50
 #: :func:`joint_size`'s reach rule: at most this many nonzeros in the LP ...
@@ -174,6 +177,7 @@ class _Best:
 
 @dataclass
 class _Run:
+    system: System
     data: JointData
     kern: Kernels
     prog: Progress
@@ -187,6 +191,7 @@ class _Run:
     chain_sweeps: int = 0
     history: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
+    symmetry: bool = True
 
     def clock(self, name: str, since: float) -> None:
         self.seconds[name] = self.seconds.get(name, 0.0) + time.monotonic() - since
@@ -400,7 +405,7 @@ def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int,
 # ---------------------------------------------------------------------------- entry point
 def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = 600.0, max_iter: int = 1000,
                 pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "auto", ipm_tol: float | None = None,
-                warm_start: bool = True,
+                warm_start: bool = True, symmetry: bool = True,
                 kernel: str = "auto", threads: int = 1,
                 progress: bool | Progress | None = None) -> BoundResult:
     """A certified lower bound on g* from relaxation 2 (joint configuration, per-process AoI).
@@ -415,8 +420,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         than ``tol * |L|`` more; the PDHG hands over when two repairs gained less than that.
     time_limit : float or None
         Seconds (default 10 minutes, so that ``wncs-lp bound`` with ``auto`` ends; None: no
-        limit); the interior point gets 80% of what is left after the start, the PDHG at most
-        60% of it. The bound returned is certified whatever stops the run (an interior point
+        limit); the interior point gets 80% of what is left after the start and at most
+        :data:`IPM_GUARD` (a multiple of its predicted time), the PDHG at most 60% of it. The bound returned is certified whatever stops the run (an interior point
         stopped by it leaves no tables: the bound is then the start's or the bundle's).
     max_iter : int
         Bundle steps (each one certified evaluation: N priced chains and the separable check);
@@ -426,8 +431,9 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     pdhg_patience : int
         The PDHG hands over after this many repairs in a row that did not raise the bound.
     method : {"auto", "ipm", "bundle", "pdhg", "pdhg+bundle"}
-        ``"auto"`` (default): ``"ipm"`` when :func:`ipm_fits` (at most :data:`IPM_MAX_NNZ` LP
-        nonzeros), else ``"bundle"`` (``stats["auto_method"]`` says which); ``"ipm"``: the LP by
+        ``"auto"`` (default): ``"ipm"`` when :func:`ipm_fits` (predicted within :data:`IPM_BUDGET`
+        seconds of CPU and the memory), else ``"bundle"`` (``stats["auto_method"]`` says which,
+        ``stats["ipm_plan"]`` why); ``"ipm"``: the LP by
         IPX (the bundle only if IPX returned no tables, stopped by ``time_limit``); ``"bundle"``:
         the bundle from the start; ``"pdhg"``: PDHG with repairs only; ``"pdhg+bundle"``: PDHG
         then bundle. From relaxation
@@ -440,6 +446,11 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     warm_start : bool
         Solve relaxation 1 first and start from its tables and prices (:func:`relaxation1_start`);
         where its claims sum to 1 this makes relaxation 2's bound at least relaxation 1's.
+    symmetry : bool
+        Reduce the interior point's LP by the symmetry of interchangeable processes
+        (:mod:`~wncs_lp.bounds.joint_symmetry`; checked on the automaton, found in a few seconds;
+        the paper's four process types twice at cap 20: 12.5M -> 1.3M nonzeros). The reduced LP
+        has the same optimum; its tables are certified on the whole system like any others.
     kernel : {"auto", "numba", "numpy"}
     threads : int
         numba threads (default 1: numba's OpenMP layer does not survive a fork).
@@ -465,8 +476,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     prog = as_progress(progress)
     system = bound_system(system)  # a System checked, its own cost tables honoured
     data = JointData.from_system(system)
-    run = _Run(data=data, kern=Kernels(kernel, threads), prog=prog, tol=float(tol),
-               deadline=t0 + (float(time_limit) if time_limit is not None else np.inf), t0=t0)
+    run = _Run(system=system, data=data, kern=Kernels(kernel, threads), prog=prog, tol=float(tol),
+               deadline=t0 + (float(time_limit) if time_limit is not None else np.inf), t0=t0, symmetry=bool(symmetry))
     prog.phase(f"relaxation 2: {data.n_processes} processes, {data.n_configs:,} configurations, "
                f"{data.n_pairs:,} pairs, caps {tuple(int(c) for c in data.caps)}")
     stats: dict = {"method": method, "kernel": run.kern.name, "threads": run.kern.threads}
@@ -484,6 +495,44 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     return _result(run, status, it, stats, time.monotonic() - t0)
 
 
+def joint_bound_from_tables(system: System, tables, *, source: str = "tables given", chains: bool = True,
+                            tol: float = 1e-4, kernel: str = "auto") -> BoundResult:
+    """Relaxation 2's certified bound from tables found elsewhere (an earlier run, a file).
+
+    Parameters
+    ----------
+    system : System
+    tables : sequence of (|C|, tau_hat_k) arrays
+        Any tables h_k(tau, C): the bound is :func:`~wncs_lp.bounds.joint_chains.certify_tables`'s
+        check of them on ``system``, so tables of another system (or wrong ones) only certify
+        less, never something false; tables of the wrong shape are refused.
+    source : str
+        Where the tables came from (said in ``certified_by`` and ``stats["found_in"]``).
+    chains : bool
+        Also solve the priced chains at the prices of these tables and keep their tables when
+        they certify within ``tol`` as much (as after the interior point: their greedy policy
+        acts on every state, see :func:`joint_bound`).
+    tol : float
+    kernel : {"auto", "numba", "numpy"}
+
+    Returns
+    -------
+    BoundResult
+        ``status`` ``"optimal"`` (the check is complete whatever the tables).
+    """
+    t0 = time.monotonic()
+    data = JointData.from_system(system)
+    run = _Run(system=system, data=data, kern=Kernels(kernel, 1), prog=as_progress(False), tol=float(tol),
+               deadline=np.inf, t0=t0)
+    tables = [np.asarray(h, dtype=float) for h in tables]
+    _offer(run, tables, None, source)
+    stats: dict = {"method": "tables", "kernel": run.kern.name, "threads": 1, "source": source}
+    if chains:
+        _chains_at_ipm_prices(run, tables, stats, label=f"the priced chains at the prices of {source}")
+        stats["tables_bound"], stats["chains_bound"] = stats.pop("ipm_tables_bound"), stats.pop("ipm_chains_bound")
+    return _result(run, OPTIMAL, 0, stats, time.monotonic() - t0)
+
+
 def _warm_start(system: System, run: _Run, stats: dict) -> tuple | None:
     """Relaxation 1 solved, its tables and prices carried over (:func:`relaxation1_start`)."""
     t = time.monotonic()
@@ -499,14 +548,41 @@ def _warm_start(system: System, run: _Run, stats: dict) -> tuple | None:
     return warm
 
 
-def ipm_fits(data: JointData) -> bool:
-    """``method="auto"``'s rule: the interior point when the LP has at most :data:`IPM_MAX_NNZ`
-    nonzeros and its memory estimate is at most :data:`REACH_MAX_BYTES`."""
-    shape = lp_shape(data.caps, data.n_configs, data.n_pairs, data.n_outcomes)
-    return shape["nnz"] <= IPM_MAX_NNZ and ipm_bytes(shape["nnz"], shape["rows"], shape["cols"]) <= REACH_MAX_BYTES
+def ipm_plan(data: JointData, symmetry: ProcessSymmetry | None = None) -> dict:
+    """What the interior point would cost on relaxation 2's LP (reduced by ``symmetry`` when given),
+    and whether ``method="auto"`` takes it.
+
+    Returns
+    -------
+    dict
+        ``lp_rows`` / ``lp_cols`` / ``lp_nnz`` (the LP handed to IPX, before its presolve),
+        ``classes`` (the classes of interchangeable processes used), ``predicted_seconds`` (CPU,
+        :func:`~wncs_lp.bounds.joint_ipm.ipm_seconds`), ``memory_bytes``
+        (:func:`~wncs_lp.bounds.joint_ipm.ipm_bytes`), ``fits`` (predicted at most
+        :data:`IPM_BUDGET` seconds and memory at most :data:`REACH_MAX_BYTES`) and ``rule`` (the
+        rule in words).
+    """
+    sym = symmetry if symmetry is not None else ProcessSymmetry.none(data.n_processes)
+    shape = symmetric_lp_shape(sym, data)
+    seconds = ipm_seconds(shape["nnz"], float(np.mean(data.caps)))
+    mem = ipm_bytes(shape["nnz"], shape["rows"], shape["cols"])
+    fits = seconds <= IPM_BUDGET and mem <= REACH_MAX_BYTES
+    classes = [list(c) for c in sym.classes if len(c) > 1]
+    rule = (f"interior point predicted {seconds:.0f} s of CPU ({'<=' if seconds <= IPM_BUDGET else '>'} "
+            f"{IPM_BUDGET:.0f} s) and {mem / 2**30:.2f} GiB ({'<=' if mem <= REACH_MAX_BYTES else '>'} "
+            f"{REACH_MAX_BYTES / 2**30:.0f} GiB) on an LP of {shape['nnz']:,} nonzeros"
+            + (f" (reduced by interchangeable processes {classes})" if classes else ""))
+    return {"lp_rows": shape["rows"], "lp_cols": shape["cols"], "lp_nnz": shape["nnz"], "classes": classes,
+            "predicted_seconds": seconds, "memory_bytes": mem, "fits": bool(fits), "rule": rule}
 
 
-def _ipm_phase(run: _Run, stats: dict, tol: float) -> bool:
+def ipm_fits(data: JointData, symmetry: ProcessSymmetry | None = None) -> bool:
+    """``method="auto"``'s rule (:func:`ipm_plan`): the interior point when it is predicted to take
+    at most :data:`IPM_BUDGET` seconds of CPU and its memory estimate is at most :data:`REACH_MAX_BYTES`."""
+    return ipm_plan(data, symmetry)["fits"]
+
+
+def _ipm_phase(run: _Run, stats: dict, tol: float, sym: ProcessSymmetry, plan: dict) -> bool:
     """The LP solved whole by IPX; its duals' tables offered to the certificate. True when IPX
     returned tables (then the bundle is not needed: they are at the relaxation's optimum up to
     IPX's tolerance)."""
@@ -515,13 +591,19 @@ def _ipm_phase(run: _Run, stats: dict, tol: float) -> bool:
         stats.update(ipm_status="not run: out of time", ipm_tables=False)
         return False
     run.prog.phase(f"relaxation 2: the start gives {run.best.lower_bound:.8g}; the LP by the interior point "
-                   "(HiGHS IPX, no crossover)")
+                   f"(HiGHS IPX, no crossover; {plan['lp_nnz']:,} nonzeros, predicted {plan['predicted_seconds']:.0f} "
+                   "s of CPU)")
     t = time.monotonic()
-    # 80% of the time left: a run stopped by its limit leaves no tables, and the bundle the rest
-    ipm = ipm_tables(run.data, tol=tol, time_limit=0.8 * left if np.isfinite(left) else None)
+    # 80% of the time left (a run stopped by its limit leaves no tables, and the bundle the rest),
+    # and a CPU guard: a multiple of the prediction, which a solve that would finish stays within
+    # however loaded the machine is
+    guard = IPM_GUARD["factor"] * plan["predicted_seconds"] + IPM_GUARD["slack"]
+    limit = 0.8 * left if np.isfinite(left) else None
+    ipm = ipm_tables(run.data, symmetry=sym, tol=tol, time_limit=limit, cpu_limit=guard)
     run.clock("ipm", t)
     stats.update(ipm_status=ipm.status, ipm_iterations=ipm.iterations, ipm_objective=ipm.objective,
-                 ipm_seconds=round(ipm.seconds, 3), lp_shape=ipm.shape[:2], lp_nnz=ipm.shape[2],
+                 ipm_seconds=round(ipm.seconds, 3), ipm_cpu_seconds=round(ipm.cpu_seconds, 3),
+                 ipm_time_limit=limit, ipm_cpu_limit=round(guard, 3), lp_shape=ipm.shape[:2], lp_nnz=ipm.shape[2],
                  ipm_tables=ipm.tables is not None)
     if ipm.tables is not None:
         _offer(run, ipm.tables, None, "the interior point's duals")
@@ -531,7 +613,8 @@ def _ipm_phase(run: _Run, stats: dict, tol: float) -> bool:
     return ipm.tables is not None
 
 
-def _chains_at_ipm_prices(run: _Run, tables: list, stats: dict) -> None:
+def _chains_at_ipm_prices(run: _Run, tables: list, stats: dict,
+                          label: str = "the priced chains at the interior point's prices") -> None:
     """Replace the interior point's duals by the priced chains' bias tables at their prices when
     these certify as much (within ``tol``).
 
@@ -543,8 +626,7 @@ def _chains_at_ipm_prices(run: _Run, tables: list, stats: dict) -> None:
     """
     ipm_bound = run.best.lower_bound
     # kept even when the duals certified a hair more (within tol): the chains' tables are kept for their policy
-    _evaluate(run, _prices_from_tables(run.data, tables), "the priced chains at the interior point's prices",
-              slack=run.tol * max(abs(ipm_bound), 1.0))
+    _evaluate(run, _prices_from_tables(run.data, tables), label, slack=run.tol * max(abs(ipm_bound), 1.0))
     stats.update(ipm_tables_bound=ipm_bound, ipm_chains_bound=run.history[-1][2])
 
 
@@ -552,10 +634,14 @@ def _phases(run: _Run, start: tuple, method: str, stats: dict, pdhg_iter: int, p
             max_iter: int, ipm_tol: float) -> tuple[bool, int]:
     """The phases of ``method``: (the bundle's stopping test met, its steps)."""
     seed = []
-    if method == "auto":
-        method = "ipm" if ipm_fits(run.data) else "bundle"
-        stats["auto_method"] = method
-    if method == "ipm" and _ipm_phase(run, stats, ipm_tol):
+    if method in ("auto", "ipm"):
+        sym = process_symmetry(run.system, run.data) if run.symmetry else ProcessSymmetry.none(run.data.n_processes)
+        plan = ipm_plan(run.data, sym)
+        stats.update(ipm_plan={k: plan[k] for k in ("lp_nnz", "classes", "predicted_seconds", "memory_bytes", "rule")})
+        if method == "auto":
+            method = "ipm" if plan["fits"] else "bundle"
+            stats["auto_method"] = method
+    if method == "ipm" and _ipm_phase(run, stats, ipm_tol, sym, plan):
         # a stopping rule, not a certificate (like the bundle's): IPX finished (kOptimal, or
         # kUnknown when HiGHS's stricter re-check at 1e-7 disagrees) with its primal objective
         # within tol of the duals' own certificate (the chains' tables kept may certify up to tol less)

@@ -36,7 +36,7 @@ import scipy.sparse as sp
 
 from .joint_chains import JointData, Kernels
 
-__all__ = ["JointLP", "HalpernPDHG", "lp_shape", "pin_tables", "sparse_lp"]
+__all__ = ["JointLP", "HalpernPDHG", "lp_shape", "pin_tables"]
 
 
 def lp_shape(caps: np.ndarray, n_configs: int, n_pairs: int, n_outcomes: int) -> dict:
@@ -191,32 +191,9 @@ class JointLP:
         return lam * self.free
 
 
-def sparse_lp(data: JointData) -> tuple[sp.csc_matrix, np.ndarray, np.ndarray, np.ndarray, list[slice]]:
-    """The LP as an explicit matrix for a general LP solver, its dropped rows removed.
-
-    Returns
-    -------
-    (A, b, c, keep, table_rows)
-        min c^T z s.t. A z = b, z >= 0 (CSC, unscaled, duplicates summed), ``keep`` the mask of
-        the full rows kept (:class:`JointLP`'s ``free``); ``table_rows[k]`` the
-        slice of the full row vector holding process k's balance rows: with ``lam`` the row duals
-        scattered back to the full rows (0 on the dropped ones), ``lam[table_rows[k]]`` reshaped
-        to (|C|, tau_hat_k) is h_k.
-    """
-    N, nC, P = data.n_processes, data.n_configs, data.n_pairs
-    caps = data.caps
-    y_off, b_off, c_off, n_rows, n_cols = _offsets(data)
-    keep = _kept_rows(data)
-    A = _assemble(data, y_off, b_off, c_off, n_rows, n_cols)
-    A.sum_duplicates()
-    c = np.concatenate([np.tile(data.q[k], P) for k in range(N)] + [np.zeros(P)])
-    b = np.zeros(n_rows)
-    b[-1] = 1.0
-    return A[keep].tocsc(), b[keep], c, keep, [slice(int(b_off[k]), int(b_off[k + 1])) for k in range(N)]
-
-
 def _assemble(data: JointData, y_off, b_off, c_off, n_rows, n_cols) -> sp.csr_matrix:
-    """The unscaled A as a scipy CSR matrix (the numpy path's operator)."""
+    """The unscaled A as a scipy CSR matrix (the numpy path's operator; the interior point's matrix
+    is :func:`~wncs_lp.bounds.joint_symmetry.symmetric_lp`, equal to it without symmetry)."""
     N, P = data.n_processes, data.n_pairs
     rows, cols, vals = [], [], []
     lens = np.diff(data.out_ptr)

@@ -19,22 +19,26 @@ from .inputs import bound_system
 from .private import private_bound
 from .result import BoundResult
 
-__all__ = ["RELAXATIONS", "AUTO_SEARCH", "lower_bound", "parse_relaxation"]
+__all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "lower_bound", "parse_relaxation", "auto_pick",
+           "runs_grouped"]
 
 #: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
 RELAXATIONS = ("auto", "private-servers", "joint-configuration", "grouped-private-servers")
 _SHORT = {"1": "private-servers", "2": "joint-configuration", "3": "grouped-private-servers"}
 
 
-#: Relaxation 2's search under ``"auto"`` unless given: ``time_limit`` seconds as a guard and
-#: ``max_iter`` bundle steps (a count, so the bound and its policy are the same on every machine).
-#: Where its LP is small enough (``joint.IPM_MAX_NNZ``: processes 1-4 up to cap 30) relaxation 2
-#: solves it by the interior point and needs no bundle steps unless the guard stops the interior
-#: point (it gets 80% of the time; stopped, it leaves no tables and the bundle takes the rest).
-#: Its bound is certified whatever stops the search, and it starts at relaxation 1's, so a short
-#: search is still at least as tight (``lower_bound(x, 2)`` keeps its own defaults, 1000 steps
-#: and 10 minutes).
-AUTO_SEARCH = {"max_iter": 30, "time_limit": 300.0}
+#: Relaxation 2's search under ``"auto"`` unless given: ``max_iter`` bundle steps (a count, so the
+#: bound and its policy are the same on every machine) and no wall-clock limit. Relaxation 2 takes
+#: its interior point only where that is predicted to fit (``joint.IPM_BUDGET`` seconds of CPU, a
+#: measured model), guarded by a multiple of the prediction in CPU time (``joint.IPM_GUARD``), so a
+#: loaded machine does not cut a solve that would finish (the 6-process mix at cap 10: 318 s under
+#: load 4-8, beyond the 240 s a 300 s wall-clock guard had left it). Its bound is certified
+#: whatever stops the search, and it starts at relaxation 1's (``lower_bound(x, 2)`` keeps its own
+#: defaults, 1000 steps and 10 minutes).
+AUTO_SEARCH = {"max_iter": 30, "time_limit": None}
+#: Relaxation 3's guard under ``"auto"`` unless ``time_limit`` is given: seconds after which no
+#: more candidate pairs are measured (its bound is certified whatever stops it).
+AUTO_GROUPED_TIME_LIMIT = 300.0
 
 
 def parse_relaxation(name: str | int) -> str:
@@ -78,7 +82,7 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     **options
         Keyword arguments of the relaxation's function (e.g. ``tol``, ``progress``). Under
         ``"auto"`` relaxations 1 and 3 take only ``tol`` and ``progress`` (and relaxation 3 the
-        same ``time_limit`` as relaxation 2's search, :data:`AUTO_SEARCH`); the others go to
+        ``time_limit`` given, else :data:`AUTO_GROUPED_TIME_LIMIT`); the others go to
         relaxation 2.
 
     Returns
@@ -120,19 +124,32 @@ def _auto(system: System, joint: Any, why_not: str, options: dict) -> BoundResul
     else:
         notes.append(why_not)
     res1 = _try(private_bound, system, _private_options(options))
-    if res1 is not None and system.n_processes >= 3 and (res2 is None or res2.stats.get("ipm_tables") is not True):
+    if res1 is not None and runs_grouped(system, res2):
+        limit = options.get("time_limit")
         res3 = _try(grouped_bound, system, {**_private_options(options), "relaxation_1": res1,
-                                            "time_limit": options.get("time_limit")})
+                                            "time_limit": AUTO_GROUPED_TIME_LIMIT if limit is None else limit})
         if res3 is not None:
             found.append(res3)
     if res1 is not None:
         found.append(res1)
     if not found:
         return private_bound(system, **_private_options(options))  # raises the model's reason
+    return auto_pick(found, notes)
+
+
+def runs_grouped(system: System, joint_result: BoundResult | None) -> bool:
+    """``"auto"``'s rule for relaxation 3: from three processes on, where relaxation 2 was not
+    solved by its interior point (where it was, it was the tighter)."""
+    return system.n_processes >= 3 and (joint_result is None or joint_result.stats.get("ipm_tables") is not True)
+
+
+def auto_pick(found: list[BoundResult], notes: list[str] = ()) -> BoundResult:
+    """``"auto"``'s choice among certified bounds listed in the order 2, 3, 1: the largest (the
+    first of equals), with ``stats["auto_choice"]``, ``"auto_reason"`` and ``"auto_bounds"``."""
     best = max(found, key=lambda r: r.lower_bound)  # max keeps the first of equals: 2, 3, 1
     bounds = {r.relaxation: r.lower_bound for r in found}
     reason = "; ".join([f"the largest certified bound of {', '.join(f'{k} {v:.10g}' for k, v in bounds.items())}"]
-                       + notes)
+                       + list(notes))
     return replace(best, stats={**best.stats, "auto_choice": best.relaxation, "auto_reason": reason,
                                 "auto_bounds": bounds})
 

@@ -131,7 +131,9 @@ def _configure(p: argparse.ArgumentParser) -> None:
                    help="bundle steps of relaxation 2's search (default: 30 under auto, 1000 for --relaxation 2); "
                         "the bound is certified whatever stops it")
     p.add_argument("--time-limit", type=float, default=None, metavar="SECONDS",
-                   help="seconds of relaxation 2's search at most (default: 300 under auto, 600 for --relaxation 2)")
+                   help="seconds of relaxation 2's search at most (default: none under auto, whose interior point "
+                        "runs only where predicted to fit and stops at a multiple of that prediction in CPU time; "
+                        "600 for --relaxation 2)")
     p.add_argument("--policy", action="store_true",
                    help="also evaluate the bound's greedy policy and the --compare policies, with the certified "
                         "optimality gap of each")

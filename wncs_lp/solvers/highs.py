@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -121,7 +121,7 @@ def new_highs(verbose: bool = False):
 
 
 def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_iter: int, verbose: bool,
-                settings: dict | None, prog: Progress | None = None):
+                settings: dict | None, prog: Progress | None = None, interrupt: Callable[[], bool] | None = None):
     """Solve ``min q^T y  s.t.  A y = b, y >= 0`` with HiGHS.
 
     Parameters
@@ -141,6 +141,9 @@ def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_
         ``{"time_limit": 60, "presolve": "off"}``; an unknown option raises :class:`SolverError`.
     prog : Progress, optional
         Only the phase is shown (highspy offers no cheap per-iteration hook here).
+    interrupt : callable, optional
+        Polled through HiGHS's interior-point interrupt callback (many times an iteration); a
+        true answer stops the run (status ``kInterrupt``: HiGHS then holds no solution).
 
     Returns
     -------
@@ -163,6 +166,15 @@ def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_
     h.setOptionValue("output_flag", bool(verbose))
     _set_options(h, tol, max_iter, variant, opts)
     _pass_model(h, A, b, q)
+    if interrupt is not None:
+        import highspy
+
+        def _poll(_type, _message, _data_out, data_in, _user):
+            if interrupt():
+                data_in.user_interrupt = True
+
+        h.setCallback(_poll, None)
+        h.startCallback(highspy.cb.HighsCallbackType.kCallbackIpmInterrupt)
     if prog is not None and prog.enabled:
         prog.tick(f"[lp] HiGHS ({variant}) running on {m:,} rows x {L:,} columns")
     h.run()
