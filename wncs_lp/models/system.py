@@ -11,14 +11,20 @@ from functools import cached_property
 
 import numpy as np
 
-from ..errors import PolicyError
+from ..errors import PolicyError, SizeLimitError
 from ..mdp import MDP
 from ..scenario import Scenario
 from .automaton import ConfigAutomaton
 from .base import Model
 from .cost import cost_tables
 
-__all__ = ["System", "OutcomeTables"]
+__all__ = ["System", "OutcomeTables", "PairTables", "OUTCOME_TABLES_MAX_BYTES"]
+
+#: Largest padded (configuration, action, outcome) table :attr:`System.outcome_tables` builds
+#: (its delivery array alone has |C| A_max O_max N entries: 4.6 GB for the paper's four processes
+#: four times); past it the pair-indexed :attr:`System.pairs` (one row per feasible action) is
+#: the only form, and the message says so.
+OUTCOME_TABLES_MAX_BYTES = 1 << 30
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,26 +147,40 @@ class System:
         return np.arange(self.max_actions)[None, :] < self.n_actions[:, None]
 
     @cached_property
+    def pairs(self) -> "PairTables":
+        """The automaton's feasible (configuration, action) pairs and their outcomes, one row per
+        pair (see :class:`PairTables`): what simulations and lookahead policies read."""
+        return PairTables.from_automaton(self.automaton, self.n_processes, self.model)
+
+    @cached_property
     def outcome_tables(self) -> "OutcomeTables":
-        """Padded per-(configuration, action) outcome tables (see :class:`OutcomeTables`)."""
-        auto = self.automaton
-        nC, A, N = self.n_configs, self.max_actions, self.n_processes
-        O = max(len(outs) for per_c in auto.outcomes for outs in per_c)
+        """Padded per-(configuration, action) outcome tables (see :class:`OutcomeTables`).
+
+        Raises
+        ------
+        SizeLimitError
+            The padded tables would take more than :data:`OUTCOME_TABLES_MAX_BYTES` (most of it
+            padding once many configurations have few actions): use :attr:`pairs`.
+        """
+        pt = self.pairs
+        nC, A, N, O = self.n_configs, self.max_actions, self.n_processes, pt.n_outcomes
+        need = nC * A * O * (3 * 8 + 8 * N)
+        if need > OUTCOME_TABLES_MAX_BYTES:
+            raise SizeLimitError(
+                f"the padded outcome tables of {self.scenario.source} would take {need / 2**30:.1f} GiB "
+                f"({nC:,} configurations x {A:,} actions x {O} outcomes x {N} processes' delivery ages), over "
+                f"{OUTCOME_TABLES_MAX_BYTES / 2**30:.1f} GiB; read the pair-indexed System.pairs instead "
+                f"({pt.n_pairs:,} feasible pairs, {pt.nbytes / 2**20:.1f} MiB)")
+        c = pt.config_of
+        j = np.arange(pt.n_pairs) - pt.first[c]
         nxt = np.zeros((nC, A, O), dtype=np.int64)
         delta = np.zeros((nC, A, O, N), dtype=np.int64)
         prob = np.zeros((nC, A, O))
         cum = np.full((nC, A, O), np.inf)
-        for c, per_c in enumerate(auto.outcomes):
-            for j, outs in enumerate(per_c):
-                n_o = len(outs)
-                nxt[c, j, :n_o] = [o[0] for o in outs]
-                delta[c, j, :n_o] = [o[1] for o in outs]
-                p = np.array([o[2] for o in outs], dtype=float)
-                prob[c, j, :n_o] = p
-                cs = np.cumsum(p)
-                cs[-1] = np.inf  # u < 1 always lands on a real outcome, whatever the round-off
-                cum[c, j, :n_o] = cs
-                nxt[c, j, n_o:] = nxt[c, j, 0]
+        nxt[c, j] = pt.nxt
+        delta[c, j] = pt.deltas[pt.delta]
+        prob[c, j] = pt.prob
+        cum[c, j] = pt.cum
         return OutcomeTables(nxt=nxt, delta=delta, prob=prob, cum=cum)
 
     @cached_property
@@ -182,6 +202,113 @@ class System:
         """tau'_k = min(tau_k + 1, delta_k if delta_k > 0, tau_hat_k), elementwise (broadcasts)."""
         t = np.minimum(tau + 1, self.caps)
         return np.where(delta > 0, np.minimum(t, delta), t)
+
+
+@dataclass(frozen=True, eq=False)
+class PairTables:
+    """The feasible (configuration, action) pairs of a :class:`System`, one row each, and their
+    outcomes padded to the most outcomes of any pair (a few: two or three per server).
+
+    Pair ``p = first[c] + j`` is local action j of configuration c (the automaton's action
+    order), j < ``count[c]``: a configuration's pairs are contiguous. Unlike the padded
+    :class:`OutcomeTables` nothing is stored for the actions a configuration lacks: the paper's
+    four processes four times have 137,288 pairs against 19,845 x 240 padded slots.
+
+    Attributes
+    ----------
+    first : (|C|,) int array
+        The first pair of each configuration (-1 for one not expanded yet: :meth:`System.expand`).
+    count : (|C|,) int array
+        Its number of feasible actions (0 when not expanded yet).
+    config_of : (P,) int array
+        The configuration of each pair.
+    labels : (P, M) int array
+        Action label of each pair.
+    nxt : (P, O) int array
+        Next configuration of each outcome (padding: the first outcome's).
+    delta : (P, O) int array
+        Row of ``deltas`` of each outcome's delivery vector (padding: the first outcome's).
+    deltas : (D, N) int array
+        The distinct delivery vectors (delivery ages per process, 0 = none).
+    prob : (P, O) float array
+        Outcome probabilities (0 on padding).
+    cum : (P, O) float array
+        Cumulative probabilities, the last real entry and the padding +inf: the outcome a
+        uniform u in [0, 1) draws is ``sum(u >= cum[p])``.
+    busy : (P, M) float array
+        Probability that server m performs a service step in the slot (:meth:`Model.busy`).
+    """
+
+    first: np.ndarray
+    count: np.ndarray
+    config_of: np.ndarray
+    labels: np.ndarray
+    nxt: np.ndarray
+    delta: np.ndarray
+    deltas: np.ndarray
+    prob: np.ndarray
+    cum: np.ndarray
+    busy: np.ndarray
+
+    @property
+    def n_pairs(self) -> int:
+        return int(self.prob.shape[0])
+
+    @property
+    def n_outcomes(self) -> int:
+        """The most outcomes of any pair (the padded width O)."""
+        return int(self.prob.shape[1])
+
+    @property
+    def nbytes(self) -> int:
+        return sum(int(a.nbytes) for a in (self.first, self.count, self.config_of, self.labels, self.nxt, self.delta, self.deltas, self.prob,
+                                           self.cum, self.busy))
+
+    def of(self, config_ids: np.ndarray, local: np.ndarray) -> np.ndarray:
+        """Pair indices of local actions ``local`` in configurations ``config_ids`` (broadcasting)."""
+        return self.first[np.asarray(config_ids, dtype=np.int64)] + np.asarray(local, dtype=np.int64)
+
+    def padded(self, config_ids: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+        """(R, width) pair indices of local actions 0..width-1 in each configuration (clipped to its
+        last pair where it has fewer) and the (R, width) mask of the real ones."""
+        c = np.asarray(config_ids, dtype=np.int64)
+        lo, n = self.first[c][:, None], self.count[c][:, None]
+        j = np.arange(width)[None, :]
+        valid = j < n
+        return lo + np.minimum(j, n - 1), valid
+
+    def delivery(self, k: int) -> np.ndarray:
+        """(P, O) delivery ages of process k (0 = none) of every outcome."""
+        return self.deltas[:, k][self.delta]
+
+    @classmethod
+    def from_automaton(cls, auto, n_processes: int, model: Model) -> "PairTables":
+        """From a :class:`ConfigAutomaton` (its flat edge arrays, :meth:`ConfigAutomaton.flat`)."""
+        flat = auto.flat(n_processes)
+        start = np.asarray(flat.act_ptr, dtype=np.int64)
+        count = np.diff(start)
+        n_out = np.diff(flat.out_ptr)
+        P, O = int(n_out.size), int(n_out.max(initial=1))
+        pair_of = np.repeat(np.arange(P), n_out)
+        slot = np.arange(flat.n_edges) - flat.out_ptr[pair_of]
+        first = flat.out_ptr[:-1]
+        nxt = np.repeat(flat.out_nxt[first][:, None], O, axis=1)
+        delta = np.repeat(flat.out_delta[first][:, None], O, axis=1).astype(np.int32)
+        prob = np.zeros((P, O))
+        nxt[pair_of, slot] = flat.out_nxt
+        delta[pair_of, slot] = flat.out_delta
+        prob[pair_of, slot] = flat.out_prob
+        cum = np.cumsum(prob, axis=1)
+        cum[np.arange(P), n_out - 1] = np.inf  # u < 1 always lands on a real outcome, whatever the round-off
+        cum[np.arange(O)[None, :] >= n_out[:, None]] = np.inf
+        labels = np.array([a for acts in auto.actions for a in acts], dtype=np.int64).reshape(P, -1)
+        busy = np.zeros(labels.shape)
+        for c, cfg in enumerate(auto.configs):
+            if start[c + 1] > start[c]:
+                busy[start[c]:start[c + 1]] = model.busy(cfg, labels[start[c]:start[c + 1]])
+        return cls(first=start[:-1].copy(), count=count, config_of=np.repeat(np.arange(count.size), count),
+                   labels=labels, nxt=nxt, delta=delta, deltas=np.asarray(flat.deltas, np.int64),
+                   prob=prob, cum=cum, busy=busy)
 
 
 @dataclass(frozen=True, eq=False)
