@@ -474,6 +474,7 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
     """The slot loop, all replications at once (module docstring), into ``acc``."""
     sysm = policy.system
     pt, caps, q, n_act = sysm.pairs, sysm.caps, sysm.q, sysm.n_actions  # pair-indexed: no padding to A_max
+    lazy = sysm.is_lazy
     reps, N = tau.shape
     rows = np.arange(reps)
     c = np.full(reps, sysm.initial_config, dtype=np.int64)
@@ -492,6 +493,8 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
             acc.cost_b[:, b] += cost
             seen = tau if acc.aoi_clip is None else np.minimum(tau, acc.aoi_clip)
             acc.aoi_counts[acc.aoi_base + seen] += 1  # one bin per (replication, process): no index repeats
+        if lazy and sysm.expand(c):  # a lazily explored automaton: configurations met for the first time
+            pt, n_act = sysm.pairs, sysm.n_actions
         j = policy.act(tau, c, prng) if mem is None else policy.act_memory(tau, c, mem, prng)
         if t == 0 or t % 997 == 0:  # cheap periodic sanity check of the policy's output
             if j.shape != (reps,) or np.any(j < 0) or np.any(j >= n_act[c]):

@@ -27,6 +27,7 @@ numbers).
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Sequence
@@ -143,9 +144,13 @@ def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Po
 
 def _exact_route(system: System, exact: bool | None, exact_max_states: int) -> tuple[bool, int]:
     """(evaluate exactly?, states of the matrix-free layout)."""
-    from ..solvers.matrix_free import BoxLayout
+    from ..solvers.matrix_free.layout import layout_states
 
-    n = int(BoxLayout.from_system(system, "hull").n_states)
+    if system.is_lazy:  # explored lazily: no layout; one configuration's AoI box says the scale
+        if exact:
+            layout_states(system)  # refuses with the reason
+        return False, math.prod(int(c) for c in system.caps)
+    n = layout_states(system, "hull")  # a Python integer: 40^16 states do not wrap around
     return (n <= exact_max_states if exact is None else bool(exact)), n
 
 

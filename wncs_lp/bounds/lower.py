@@ -37,6 +37,11 @@ _SHORT = {"1": "private-servers", "2": "joint-configuration", "3": "grouped-priv
 AUTO_SEARCH = {"max_iter": 30, "time_limit": 300.0}
 
 
+#: Why relaxation 2 does not run on a lazily explored system.
+LAZY_NOTE = ("the system's configuration automaton is explored lazily (too large to enumerate), and relaxation 2's "
+             "tables live on every joint configuration; relaxations 1 and 3 need only the private ones")
+
+
 def parse_relaxation(name: str | int) -> str:
     """``1`` / ``"1"`` / ``"private-servers"`` -> ``"private-servers"`` (likewise 2, 3 and auto).
 
@@ -102,7 +107,10 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     if name == "joint-configuration":
         if joint is None:
             raise WncsError(f"relaxation joint-configuration asked for, but {why_not}")
-        return joint.joint_bound(_as_system(scenario_or_system), **options)
+        system = _as_system(scenario_or_system)
+        if system.is_lazy:
+            raise WncsError(f"relaxation joint-configuration asked for, but {LAZY_NOTE}")
+        return joint.joint_bound(system, **options)
     return _auto(_as_system(scenario_or_system), joint, why_not, {**AUTO_SEARCH, **options})
 
 
@@ -153,6 +161,8 @@ def _try(relaxation: Any, system: System, options: dict) -> BoundResult | None:
 
 def _try_joint(joint: Any, system: System, options: dict) -> tuple[BoundResult | None, str]:
     """Relaxation 2 when the instance is within its reach: (its result, "") or (None, why not)."""
+    if system.is_lazy:
+        return None, f"beyond relaxation 2's reach: {LAZY_NOTE}"
     reach = getattr(joint, "joint_reach", None)
     why_not = reach(system) if reach is not None else None
     if why_not is not None:

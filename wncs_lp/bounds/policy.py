@@ -24,6 +24,7 @@ from ..errors import PolicyError
 from ..models.system import System
 from ..policies.base import Policy
 from ..policies.suboptimal import SeparableGreedyPolicy
+from .projected import ProjectedBoundPolicy, lookahead_table, projected_tables
 from .result import BoundResult, GroupTables
 
 __all__ = ["BoundPolicy", "GroupBoundPolicy", "bound_policy", "group_lookahead"]
@@ -110,7 +111,7 @@ class GroupBoundPolicy(Policy):
         #: (C, a) -> its row in the W tables (-1: not a feasible action)
         self.pair_row = np.full(valid.shape, -1, dtype=np.int64)
         self.pair_row[valid] = np.arange(int(valid.sum()))
-        self.lookahead = tuple(group_lookahead(system, g, h, col)
+        self.lookahead = tuple(group_lookahead(system, g, h, col, TABLE_MAX_BYTES)
                                for g, h, col in zip(tables.groups, tables.h, tables.column))
         self.build_seconds = time.perf_counter() - t0
 
@@ -159,35 +160,25 @@ class GroupBoundPolicy(Policy):
                 "groups": [list(g) for g in self.tables.groups], "build_seconds": self.build_seconds}
 
 
-def group_lookahead(system: System, group: tuple, h: np.ndarray, column: np.ndarray) -> np.ndarray | None:
+def group_lookahead(system: System, group: tuple, h: np.ndarray, column: np.ndarray,
+                    max_bytes: int | None = TABLE_MAX_BYTES) -> np.ndarray | None:
     """W[p, t] = sum_o P(o | pair p) h(column(C'_o), tau'_G) for every feasible pair p (of
     :attr:`System.pairs`) and every AoI vector of the group
     (t the flat index of tau_G - 1), tau'_k = min(tau_k + 1, delta_k if > 0, tau_hat_k); None when it
-    would exceed :data:`TABLE_MAX_BYTES`."""
-    pt = system.pairs
-    caps = tuple(int(system.caps[k]) for k in group)
-    n_t = math.prod(caps)
-    if pt.n_pairs * n_t * 8 > TABLE_MAX_BYTES:
+    would exceed ``max_bytes`` (default :data:`TABLE_MAX_BYTES`; None: no limit)."""
+    n_t = math.prod(int(system.caps[k]) for k in group)
+    if max_bytes is not None and system.pairs.n_pairs * n_t * 8 > max_bytes:
         return None
-    grid = np.stack(np.unravel_index(np.arange(n_t), caps), axis=1) + 1  # (T, |G|) AoI vectors
-    step = np.minimum(grid + 1, np.asarray(caps))
-    W = np.zeros((pt.n_pairs, n_t))
-    block = max(1, ACT_BLOCK_ENTRIES // (n_t * len(group)))
-    for o in range(pt.n_outcomes):
-        prob = pt.prob[:, o]
-        real = np.flatnonzero(prob > 0)
-        for b in range(0, real.size, block):
-            idx = real[b:b + block]
-            d = pt.deltas[pt.delta[idx, o]][:, list(group)][:, None, :]  # (E, 1, |G|)
-            tn = np.where(d > 0, np.minimum(step[None], d), step[None])  # (E, T, |G|)
-            nxt = column[pt.nxt[idx, o]][:, None]
-            W[idx] += prob[idx, None] * h[(nxt,) + tuple(tn[..., i] - 1 for i in range(len(group)))]
-    return W
+    return lookahead_table(system, group, h, column)
 
 
 def bound_policy(result: BoundResult, system: System) -> Policy:
-    """The greedy policy of a bound on its system: :class:`BoundPolicy` on per-process tables,
-    :class:`GroupBoundPolicy` on a grouped bound's group tables."""
+    """The greedy policy of a bound on its system: for relaxations 1 and 3 (tables over private
+    configurations) :class:`~wncs_lp.bounds.projected.ProjectedBoundPolicy`, the same lookahead
+    read through the projections in memory linear in N; else :class:`BoundPolicy` on per-process
+    tables, :class:`GroupBoundPolicy` on group tables."""
+    if projected_tables(result) is not None:
+        return ProjectedBoundPolicy(result, system)
     if isinstance(result.tables, GroupTables):
         return GroupBoundPolicy(result, system)
     return BoundPolicy(result, system)

@@ -214,11 +214,17 @@ def capacity_sense(system: System, chains: list[PrivateChain], which: np.ndarray
     """``"equality"`` when the claims of all processes on every server sum to 1 in every
     state-action pair of the joint system, ``"inequality"`` when they sum to at most 1.
 
+    On a lazily explored system (:attr:`System.is_lazy`) the pairs are not all known, so the
+    sense is not read off: ``"inequality"``, which holds on every pair of every system (a server
+    holds one job at a time, so the claims on it sum to at most 1), at the price of lambda >= 0.
+
     Raises
     ------
     SolverError
         Some pair has claims summing above 1 (the relaxation would not be valid).
     """
+    if system.is_lazy:
+        return "inequality"
     total = np.zeros(system.labels.shape, float)
     for k in range(system.n_processes):
         ch = chains[which[k]]

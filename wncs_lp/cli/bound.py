@@ -78,6 +78,8 @@ def _parse_groups(text: str) -> list[tuple[int, ...]]:
 
 
 def _print(scenario, res, report) -> None:
+    from ..models.automaton import approx_count
+
     print(scenario.describe())
     why = f" (auto: {res.stats['auto_reason']})" if res.stats.get("auto_reason") else ""
     print(f"relaxation {res.relaxation}{why}: status {res.status}, {res.iterations} iterations, {res.seconds:.2f} s")
@@ -93,13 +95,15 @@ def _print(scenario, res, report) -> None:
     if report is None:
         return
     if report.how == "exact":
-        print(f"policies, evaluated exactly (matrix-free, {report.states:,} states); upper = certified upper end:")
+        print(f"policies, evaluated exactly (matrix-free, {approx_count(report.states)} states); upper = certified "
+              "upper end:")
     else:
         r0 = report.rows[0].detail
         ctl = f", control variate: {r0['control']}" if r0.get("control") else ""
         print(f"policies, by Monte Carlo ({r0.get('reps')} x {r0.get('slots')} slots, seed {r0.get('seed')}{ctl}); "
               f"upper = one-sided {100 * r0.get('confidence', 0.95):g}% upper confidence limit, Student t over the "
-              f"independent replications (the AoI box has {report.states:,} states, above --exact-max-states):")
+              f"independent replications (the AoI box has {approx_count(report.states)} states, above "
+              "--exact-max-states):")
     w = max(len("policy"), *(len(r.policy) for r in report.rows))
     print(f"  {'policy':<{w}} {'gain':>16} {'upper':>16} {'gap <=':>9}")
     for r in report.rows:

@@ -11,10 +11,10 @@ from functools import cached_property
 
 import numpy as np
 
-from ..errors import PolicyError, SizeLimitError
+from ..errors import ModelError, PolicyError, SizeLimitError
 from ..mdp import MDP
 from ..scenario import Scenario
-from .automaton import ConfigAutomaton
+from .automaton import ConfigAutomaton, ExplorationLimitError
 from .base import Model
 from .cost import cost_tables
 
@@ -25,6 +25,10 @@ __all__ = ["System", "OutcomeTables", "PairTables", "OUTCOME_TABLES_MAX_BYTES"]
 #: four times); past it the pair-indexed :attr:`System.pairs` (one row per feasible action) is
 #: the only form, and the message says so.
 OUTCOME_TABLES_MAX_BYTES = 1 << 30
+#: ``explore="auto"`` explores lazily when the model's bound on the configurations times the actions
+#: of the idle configuration exceeds this (the paper's four processes four times: 56,457 x 240 =
+#: 13.5 million, enumerated: 652,056 edges; three times on three servers: 762,073 x 1,320, lazy).
+LAZY_EDGES = 50_000_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,12 +63,86 @@ class System:
 
     # ---------------------------------------------------------------- construction
     @classmethod
-    def from_scenario(cls, scenario: Scenario, model: Model | None = None) -> "System":
-        """Explore the scenario's configuration automaton (through its :class:`Model`)."""
+    def from_scenario(cls, scenario: Scenario, model: Model | None = None, *, explore: str = "full") -> "System":
+        """The scenario's system (through its :class:`Model`).
+
+        Parameters
+        ----------
+        scenario : Scenario
+        model : Model, optional
+        explore : {"full", "lazy", "auto"}
+            ``"full"`` explores the whole configuration automaton now (within the exploration
+            budget of :mod:`wncs_lp.models.automaton`: an :class:`ExplorationLimitError` past it);
+            ``"lazy"`` explores nothing but the initial configurations and expands the others as
+            they are met (:meth:`expand`: simulations and the policies that support it,
+            :attr:`Policy.explores_lazily`); ``"auto"`` is lazy when the model's bounds on the
+            automaton (configurations x actions of the idle one, :data:`LAZY_EDGES`) or the
+            exploration budget say it is too large to enumerate, full otherwise.
+        """
         from . import model_for
 
+        if explore not in ("full", "lazy", "auto"):
+            raise ModelError(f"explore must be 'full', 'lazy' or 'auto', got {explore!r}")
         model = model if model is not None else model_for(scenario)
+        if explore == "auto":
+            b = model.automaton_bounds()
+            explore = "lazy" if b.configs is not None and b.configs * b.edges_initial > LAZY_EDGES else "full"
+            if explore == "full":
+                try:
+                    return cls.from_automaton(scenario, model.automaton, model)
+                except ExplorationLimitError:
+                    explore = "lazy"
+        if explore == "lazy":
+            return cls._lazy(scenario, model)
         return cls.from_automaton(scenario, model.automaton, model)
+
+    @classmethod
+    def _lazy(cls, scenario: Scenario, model: Model) -> "System":
+        auto = model.lazy_automaton()
+        caps = np.array(scenario.tau_caps, dtype=np.int64)
+        q = tuple(np.asarray(t, dtype=float) for t in cost_tables(scenario))
+        system = cls(scenario, auto, caps, q, np.zeros(len(auto.configs), np.int64), model)
+        object.__setattr__(system, "_store", _PairStore(scenario.n_processes, scenario.n_servers))
+        system.expand(auto.initial)
+        return system
+
+    @property
+    def is_lazy(self) -> bool:
+        """Whether the automaton is explored on demand (:meth:`expand`) rather than whole."""
+        return "_store" in self.__dict__
+
+    @property
+    def n_expanded(self) -> int:
+        """Configurations whose actions are known (all of them unless :attr:`is_lazy`)."""
+        return int(self.automaton.n_expanded) if self.is_lazy else self.n_configs
+
+    def expand(self, config_ids) -> int:
+        """Expand the configurations ``config_ids`` not expanded yet (a lazily explored system; a no-op
+        otherwise): their actions and outcomes join :attr:`pairs`, and the configurations their
+        outcomes lead to get ids. Returns the number expanded.
+
+        Raises
+        ------
+        SizeLimitError
+            The pairs would outgrow the memory budget (:func:`wncs_lp.models.guard.require_memory`)."""
+        store = self.__dict__.get("_store")
+        if store is None:
+            return 0
+        c = np.asarray(config_ids, dtype=np.int64).ravel()
+        if store.count.size < len(self.automaton.configs):
+            store.reserve(len(self.automaton.configs))
+        todo = c[store.count[c] == 0] if c.size else c
+        if todo.size == 0:
+            return 0
+        new = self.automaton.expand(np.unique(todo).tolist())
+        store.add(new, self.automaton, self.model)
+        object.__setattr__(self, "n_actions", store.count)
+        self.__dict__["pairs"] = store.tables()
+        self.__dict__["label_index"] = store.label_index
+        self.__dict__["accepts"] = store.accepts[:len(self.automaton.configs)]
+        for key in ("max_actions", "action_valid", "busy", "labels", "outcome_tables"):
+            self.__dict__.pop(key, None)
+        return len(new)
 
     @classmethod
     def from_automaton(cls, scenario: Scenario, auto: ConfigAutomaton, model: Model | None = None) -> "System":
@@ -130,10 +208,9 @@ class System:
     @cached_property
     def labels(self) -> np.ndarray:
         """(|C|, A_max, M) int array of action labels (padding: -1)."""
-        M = len(self.automaton.actions[0][0])
-        out = np.full((self.n_configs, self.max_actions, M), -1, dtype=np.int64)
-        for c, acts in enumerate(self.automaton.actions):
-            out[c, : len(acts)] = np.array(acts, dtype=np.int64)
+        pt = self.pairs
+        out = np.full((self.n_configs, self.max_actions, pt.labels.shape[1]), -1, dtype=np.int64)
+        out[pt.config_of, np.arange(pt.n_pairs) - pt.first[pt.config_of]] = pt.labels
         return out
 
     @cached_property
@@ -192,16 +269,110 @@ class System:
     def busy(self) -> np.ndarray:
         """(|C|, A_max, M): probability that server m performs a service step in the slot
         (:meth:`Model.busy`; 0 on padding)."""
+        pt = self.pairs
         out = np.zeros((self.n_configs, self.max_actions, self.n_servers))
-        for c, cfg in enumerate(self.automaton.configs):
-            out[c] = self.model.busy(cfg, self.labels[c])
-        out[~self.action_valid] = 0.0
+        out[pt.config_of, np.arange(pt.n_pairs) - pt.first[pt.config_of]] = pt.busy
         return out
 
     def next_tau(self, tau: np.ndarray, delta: np.ndarray) -> np.ndarray:
         """tau'_k = min(tau_k + 1, delta_k if delta_k > 0, tau_hat_k), elementwise (broadcasts)."""
         t = np.minimum(tau + 1, self.caps)
         return np.where(delta > 0, np.minimum(t, delta), t)
+
+
+class _PairStore:
+    """The growing arrays of a lazily explored system (capacity doubling: amortised O(1) a pair)."""
+
+    def __init__(self, n_processes: int, n_servers: int):
+        self.N, self.M = n_processes, n_servers
+        self.n_pairs = 0
+        self.O = 1
+        self.first = np.full(0, -1, np.int64)
+        self.count = np.zeros(0, np.int64)
+        self.accepts = np.zeros((0, n_servers), bool)
+        self.label_index: list[dict[tuple, int]] = []
+        self.deltas = np.zeros((0, n_processes), np.int64)
+        self.cols = {"config_of": np.zeros(0, np.int64), "labels": np.zeros((0, n_servers), np.int64),
+                     "nxt": np.zeros((0, 1), np.int64), "delta": np.zeros((0, 1), np.int32),
+                     "prob": np.zeros((0, 1)), "busy": np.zeros((0, n_servers))}
+
+    def reserve(self, n_configs: int) -> None:
+        self._room(n_configs, self.n_pairs, self.O)
+
+    def _room(self, n_configs: int, n_pairs: int, width: int) -> None:
+        from .guard import require_memory
+
+        if n_configs > self.count.size:
+            cap = max(n_configs, 2 * self.count.size, 1024)
+            self.first = np.r_[self.first, np.full(cap - self.first.size, -1, np.int64)]
+            self.count = np.r_[self.count, np.zeros(cap - self.count.size, np.int64)]
+            self.accepts = np.r_[self.accepts, np.zeros((cap - self.accepts.shape[0], self.M), bool)]
+        rows = self.cols["prob"].shape[0]
+        if n_pairs > rows or width > self.O:
+            cap = max(n_pairs, 2 * rows if n_pairs > rows else rows, 4096)
+            O = max(width, self.O)
+            require_memory(cap * (O * 20 + self.M * 16 + 8), f"the pairs of the {n_configs:,} configurations met so "
+                           f"far ({n_pairs:,} pairs of up to {O} outcomes)",
+                           ["fewer processes or servers", "a shorter simulation (--slots, --reps)"])
+            out = {}
+            for key, a in self.cols.items():
+                shape = (cap,) + a.shape[1:]
+                if key in ("nxt", "delta", "prob"):
+                    shape = (cap, O)
+                b = np.zeros(shape, a.dtype)
+                if a.ndim == 2:
+                    b[:self.n_pairs, :a.shape[1]] = a[:self.n_pairs]
+                    if key in ("nxt", "delta") and O > a.shape[1]:  # padding repeats the first outcome
+                        b[:self.n_pairs, a.shape[1]:] = a[:self.n_pairs, :1]
+                else:
+                    b[:self.n_pairs] = a[:self.n_pairs]
+                out[key] = b
+            self.cols, self.O = out, O
+
+    def add(self, new: list, auto, model: Model) -> None:
+        """Append the pairs of newly expanded configurations (:meth:`LazyAutomaton.expand`)."""
+        n_configs = len(auto.configs)
+        n_new = sum(len(labels) for _, labels, _ in new)
+        width = max((len(o) for _, _, outs in new for o in outs), default=1)
+        self._room(n_configs, self.n_pairs + n_new, width)
+        for c in range(len(self.label_index), n_configs):  # configurations met for the first time
+            self.label_index.append({})
+            self.accepts[c] = model.accepts(auto.configs[c])
+        if len(auto.deltas) > self.deltas.shape[0]:
+            d = np.zeros((len(auto.deltas), self.N), np.int64)
+            for vec, i in auto.deltas.items():
+                d[i] = vec
+            self.deltas = d
+        cols, p = self.cols, self.n_pairs
+        for c, labels, outs in new:
+            n = len(labels)
+            self.first[c], self.count[c] = p, n
+            self.label_index[c] = {lab: j for j, lab in enumerate(labels)}
+            lab = np.array(labels, dtype=np.int64).reshape(n, self.M)
+            cols["config_of"][p:p + n] = c
+            cols["labels"][p:p + n] = lab
+            cols["busy"][p:p + n] = model.busy(auto.configs[c], lab)
+            for j, o in enumerate(outs):
+                arr = np.array(o, dtype=float)  # (outcomes, 3): next id, delivery id, probability
+                cols["nxt"][p + j] = arr[0, 0]
+                cols["delta"][p + j] = arr[0, 1]
+                cols["nxt"][p + j, :len(o)] = arr[:, 0]
+                cols["delta"][p + j, :len(o)] = arr[:, 1]
+                cols["prob"][p + j, :len(o)] = arr[:, 2]
+            p += n
+        self.n_pairs = p
+
+    def tables(self) -> "PairTables":
+        n, c = self.n_pairs, self.cols
+        prob = c["prob"][:n]
+        n_out = np.count_nonzero(prob > 0, axis=1)
+        cum = np.cumsum(prob, axis=1)
+        cum[np.arange(n), n_out - 1] = np.inf
+        cum[np.arange(prob.shape[1])[None, :] >= n_out[:, None]] = np.inf
+        nc = len(self.label_index)
+        return PairTables(first=self.first[:nc], count=self.count[:nc], config_of=c["config_of"][:n],
+                          labels=c["labels"][:n], nxt=c["nxt"][:n], delta=c["delta"][:n], deltas=self.deltas,
+                          prob=prob, cum=cum, busy=c["busy"][:n])
 
 
 @dataclass(frozen=True, eq=False)

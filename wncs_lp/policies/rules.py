@@ -76,6 +76,7 @@ class RandomPolicy(TauIndependentPolicy):
     """Uniformly random over the feasible actions of the configuration (the paper's random policy)."""
 
     def __init__(self, system: System):
+        self.refuse_lazy(system)
         super().__init__(system, [np.full(n, 1.0 / n) for n in system.n_actions], name="random")
         self.randomised = True
 
@@ -91,10 +92,12 @@ class RankRulePolicy(Policy):
     """A deterministic policy whose action depends on C and on the ranking of the processes.
 
     The ranking is by current cost q_k(tau_k), descending, ties towards the lower index. The
-    action of each (C, ranking) met is computed once by :meth:`rule` and cached.
+    action of each (C, ranking) met is computed once by :meth:`rule` and cached. It works on a
+    lazily explored system (it reads only the configurations it is shown).
     """
 
     aoi_free = True
+    explores_lazily = True
 
     def __init__(self, system: System):
         super().__init__(system)
@@ -124,6 +127,7 @@ class RankRulePolicy(Policy):
 
     def act(self, tau, config_ids, rng=None):
         tau, c = self._check_inputs(tau, config_ids)
+        self.system.expand(c)
         order = self.ranking(tau)
         keys = c.astype(object if self._pow.dtype == object else np.int64) * self._base + order @ self._pow
         uniq, first, inv = np.unique(keys, return_index=True, return_inverse=True)  # first: a row of each key

@@ -287,6 +287,7 @@ class SuboptimalPolicy(SeparableGreedyPolicy):
 
     def __init__(self, system: System, base: TauIndependentPolicy | None = None):
         t0 = time.perf_counter()
+        self.refuse_lazy(system)
         base = base if base is not None else RandomPolicy(system)
         if base.system is not system:
             raise PolicyError("the base policy belongs to another system")
