@@ -394,6 +394,7 @@ def simulate(
     value = _control_value(control)
     if not (control_coef == "fit" or isinstance(control_coef, (int, float))):
         raise PolicyError(f"control_coef must be 'fit' or a number, got {control_coef!r}")
+    _check_memory(policy.system, int(reps))
     t0 = time.perf_counter()
     chan_ss, pol_ss = np.random.SeedSequence(seed).spawn(2)
     tau = _initial_tau(policy.system, reps, initial_tau)
@@ -424,6 +425,18 @@ def _control_name(control: Any) -> str | None:
     if control is None:
         return None
     return str(getattr(control, "name", None) or type(control).__name__)
+
+
+def _check_memory(sysm, reps: int) -> None:
+    """Refuse, before allocating, a run whose per-slot arrays would not fit: per replication the AoI
+    and cost sums (4 N numbers), the outcome draw (a few O) and a policy's lookahead over the
+    actions of its state (about 10 arrays of A_max numbers)."""
+    from .models.guard import require_memory
+
+    width = max(int(sysm.n_actions.max(initial=1)), 1)  # lazily explored: the idle configuration's, the most
+    per_rep = 8 * (4 * sysm.n_processes + 4 * sysm.pairs.n_outcomes + 10 * width)
+    require_memory(reps * per_rep, f"simulating {reps:,} replications side by side ({per_rep:,} bytes each a slot)",
+                   ["fewer replications (--reps) with more slots each (--slots)"])
 
 
 def _initial_tau(sysm, reps: int, initial_tau: np.ndarray | None) -> np.ndarray:

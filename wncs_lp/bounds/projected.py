@@ -188,9 +188,9 @@ class ProjectedLookahead:
         self._touch = np.zeros((0, M), np.int64)
         self._tpair = np.zeros((0, M), np.int64)
         self._column = None if column is None else tuple(np.asarray(c, np.int64) for c in column)
-        self.prepare()
         if column is not None:
             self._check_columns(column)
+        self.prepare()
 
     @property
     def nbytes(self) -> int:

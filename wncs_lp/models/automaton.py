@@ -47,6 +47,7 @@ MAX_EDGES = 10_000_000
 MAX_WORK = 40_000_000
 
 _LIMIT: ContextVar[int | None] = ContextVar("wncs_lp_exploration_limit", default=-1)
+_EDGE_LIMIT: ContextVar[int | None] = ContextVar("wncs_lp_exploration_edge_limit", default=None)
 
 
 @dataclass(frozen=True)
@@ -69,14 +70,16 @@ class AutomatonBounds:
 
 
 @contextmanager
-def exploration_limit(max_configs: int | None) -> Iterator[None]:
+def exploration_limit(max_configs: int | None, max_edges: int | None = None) -> Iterator[None]:
     """Within the block, :func:`explore_configs` stops past ``max_configs`` configurations
     (``None``: no budget at all; outside any block: :data:`MAX_CONFIGS`, :data:`MAX_EDGES`
-    and :data:`MAX_WORK`)."""
+    and :data:`MAX_WORK`) and, when given, past ``max_edges`` edges instead of :data:`MAX_EDGES`."""
     token = _LIMIT.set(max_configs)
+    token_e = _EDGE_LIMIT.set(max_edges)
     try:
         yield
     finally:
+        _EDGE_LIMIT.reset(token_e)
         _LIMIT.reset(token)
 
 
@@ -126,7 +129,8 @@ class _Budget:
         limit = _LIMIT.get()
         self.on = limit is not None
         self.max_configs = MAX_CONFIGS if limit in (-1, None) else int(limit)
-        self.max_edges = MAX_EDGES if self.on else float("inf")
+        edges = _EDGE_LIMIT.get()
+        self.max_edges = (MAX_EDGES if edges is None else int(edges)) if self.on else float("inf")
         self.places = max((_places(c) for c in initial[:1000]), default=1)
         self.work = 0
 

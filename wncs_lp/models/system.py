@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import ModelError, PolicyError, SizeLimitError
 from ..mdp import MDP
 from ..scenario import Scenario
-from .automaton import ConfigAutomaton, ExplorationLimitError
+from .automaton import ConfigAutomaton, ExplorationLimitError, exploration_limit
 from .base import Model
 from .cost import cost_tables
 
@@ -29,6 +29,10 @@ OUTCOME_TABLES_MAX_BYTES = 1 << 30
 #: of the idle configuration exceeds this (the paper's four processes four times: 56,457 x 240 =
 #: 13.5 million, enumerated: 652,056 edges; three times on three servers: 762,073 x 1,320, lazy).
 LAZY_EDGES = 50_000_000
+#: ``explore="auto"`` below :data:`LAZY_EDGES` explores the whole automaton within this many edges
+#: (about 1.7 GB of Python objects at the ~870 bytes an edge measured at 20 sensors, and 30-60 s),
+#: lazily past it: 16 processes pass (652,056 and 1,071,040 edges), 20 sensors do not (2.6 million).
+AUTO_EDGES = 2_000_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,11 +91,14 @@ class System:
         if explore == "auto":
             b = model.automaton_bounds()
             explore = "lazy" if b.configs is not None and b.configs * b.edges_initial > LAZY_EDGES else "full"
-            if explore == "full":
+            if explore == "full" and "automaton" not in model.__dict__:
                 try:
-                    return cls.from_automaton(scenario, model.automaton, model)
+                    with exploration_limit(-1, AUTO_EDGES):
+                        auto = model.automaton
                 except ExplorationLimitError:
                     explore = "lazy"
+                else:
+                    return cls.from_automaton(scenario, auto, model)
         if explore == "lazy":
             return cls._lazy(scenario, model)
         return cls.from_automaton(scenario, model.automaton, model)
