@@ -12,6 +12,7 @@ from dataclasses import replace
 from typing import Any
 
 from ..errors import WncsError
+from ..models.guard import require_memory
 from ..models.system import System
 from ..scenario import Scenario
 from .grouped import grouped_bound
@@ -110,6 +111,13 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         system = _as_system(scenario_or_system)
         if system.is_lazy:
             raise WncsError(f"relaxation joint-configuration asked for, but {LAZY_NOTE}")
+        size = getattr(joint, "joint_size", None)
+        if size is not None:  # estimate first: refuse, with the cheaper routes, what would not fit
+            s = size(system)
+            require_memory(s["memory_bytes"], f"relaxation 2 on {system.n_processes} processes ({s['lp_nnz']:,} LP "
+                           f"nonzeros, {s['configurations']:,} joint configurations)",
+                           ["relaxation 3 (--relaxation 3: pairs sharing private servers)",
+                            "relaxation 1 (--relaxation 1: seconds at any size)"])
         return joint.joint_bound(system, **options)
     return _auto(_as_system(scenario_or_system), joint, why_not, {**AUTO_SEARCH, **options})
 

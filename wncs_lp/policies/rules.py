@@ -26,6 +26,10 @@ __all__ = [
 ]
 
 
+#: Most (configuration, ranking) actions a rank rule keeps cached (about 200 bytes each).
+CACHE_MAX = 1_000_000
+
+
 class TauIndependentPolicy(Policy):
     """A policy whose action distribution depends on the configuration C only.
 
@@ -135,6 +139,8 @@ class RankRulePolicy(Policy):
         for i, key in enumerate(uniq.tolist()):
             j = self._cache.get(key)
             if j is None:
+                if len(self._cache) >= CACHE_MAX:  # tens of processes: rankings rarely repeat; memory stays bounded
+                    self._cache.clear()
                 r = int(first[i])
                 j = self._cache[key] = self._local(int(c[r]), tuple(int(x) for x in order[r]))
             out[i] = j

@@ -18,7 +18,7 @@ from .base import Policy
 from .rules import RandomPolicy, TauIndependentPolicy
 
 __all__ = ["ProcessPoisson", "SeparableGreedyPolicy", "SuboptimalPolicy", "separable_table", "table_bytes",
-           "pair_values"]
+           "pair_values", "chain_bytes"]
 
 #: Elements of the (configurations, actions, outcomes, tau) block one step of a table builds.
 TABLE_BLOCK = 1 << 22
@@ -227,6 +227,21 @@ class SeparableGreedyPolicy(Policy):
         return {**super().describe(), "lookahead": self.lookahead}
 
 
+#: Bytes a transition of a process chain (tau_k, C) costs at the peak of its Poisson solve: its
+#: triplets, the CSR matrix, the chain's copy, I - P with a column replaced and the solver's copy
+#: (measured: 16 sensors at cap 20, 21 million transitions a chain, ~1.2 GB above the system's own
+#: 0.9 GB with the tables; BiCGSTAB answered, no LU).
+CHAIN_BYTES_PER_NNZ = 64
+
+
+def chain_bytes(system: System) -> int:
+    """Peak bytes of :class:`SuboptimalPolicy`'s construction: the largest process chain's Poisson
+    solve (one at a time; :data:`CHAIN_BYTES_PER_NNZ` a transition, |C| tau_hat_k rows of
+    (pairs x outcomes) transitions) plus the greedy tables kept (:func:`table_bytes`)."""
+    nnz = int(np.count_nonzero(system.pairs.prob)) * int(system.caps.max())
+    return CHAIN_BYTES_PER_NNZ * nnz + table_bytes(system)
+
+
 def _solve_process(system: System, k: int, w: np.ndarray) -> ProcessPoisson:
     """The Poisson equation of (tau_k, C) under pair-outcome weights w[p, o] (pairs of :attr:`System.pairs`)."""
     pt = system.pairs
@@ -288,6 +303,12 @@ class SuboptimalPolicy(SeparableGreedyPolicy):
     def __init__(self, system: System, base: TauIndependentPolicy | None = None):
         t0 = time.perf_counter()
         self.refuse_lazy(system)
+        K, nnz = int(system.caps.max()), int(np.count_nonzero(system.pairs.prob))
+        require_memory(chain_bytes(system), f"the suboptimal policy's Poisson chains (tau_k, C) over the "
+                       f"{system.n_configs:,} joint configurations (up to {K * system.n_configs:,} unknowns and "
+                       f"{K * nnz:,} transitions each)",
+                       ["the bound's policy (wncs-lp bound --policy; its lookahead lives on private "
+                        "configurations)", "a smaller cap (--set tau_cap=...)"])
         base = base if base is not None else RandomPolicy(system)
         if base.system is not system:
             raise PolicyError("the base policy belongs to another system")
