@@ -100,6 +100,17 @@ def projected_tables(result: BoundResult) -> tuple[tuple, tuple, tuple] | None:
     return tuple((k,) for k in range(len(t.h))), tuple(t.h), tuple(t.column)
 
 
+def _grown(a: np.ndarray, size: int, axis: int) -> np.ndarray:
+    """``a`` with room for ``size`` entries along ``axis`` (at least twice its length on a lazily
+    explored system; exactly ``size`` the first time), its content kept."""
+    n = a.shape[axis]
+    shape = list(a.shape)
+    shape[axis] = size if n == 0 else max(size, 2 * n)
+    out = np.zeros(shape, a.dtype)
+    out[(slice(None),) * axis + (slice(0, n),)] = a
+    return out
+
+
 class ProjectedLookahead:
     """The lookahead sum_G W_G(C, a, tau_G) of value tables over private configurations, read
     through projections (module docstring).
@@ -182,7 +193,8 @@ class ProjectedLookahead:
         self._lut_flat = np.concatenate([lut.ravel() for lut in luts])
         self._lut_off = np.array([starts[next(j for j, q in enumerate(order) if q is ps)] for ps in self.private],
                                  np.int64)
-        # per joint configuration and per pair: filled by prepare()
+        # per joint configuration and per pair: filled by prepare() (capacity doubling on a lazy system)
+        self._n_configs = self._n_pairs = 0
         self._col = np.zeros((len(self.groups), 0), np.int64)
         self._idle = np.zeros((len(self.groups), 0), np.int64)
         self._touch = np.zeros((0, M), np.int64)
@@ -231,22 +243,25 @@ class ProjectedLookahead:
         lookahead does not yet (all of them for an enumerated system; the new ones after
         :meth:`System.expand` on a lazily explored one)."""
         s = self.system
-        n_old, n_new = self._col.shape[1], s.n_configs
+        n_old, n_new = self._n_configs, s.n_configs
         if n_new > n_old:
             new = np.arange(n_old, n_new)
             col = np.empty((len(self.groups), new.size), np.int64)
             for i in range(len(self.groups)):
                 known = self._column[i] if self._column is not None and self._column[i].shape == (n_new,) else None
                 col[i] = known[new] if known is not None else self._project(i, new)
-            self._col = np.concatenate([self._col, col], axis=1)
-            idle = self._lut_flat[self._lut_off[:, None] + col * self._codes]
-            self._idle = np.concatenate([self._idle, idle], axis=1)
+            if n_new > self._col.shape[1]:
+                self._col, self._idle = (_grown(a, n_new, axis=1) for a in (self._col, self._idle))
+            self._col[:, n_old:n_new] = col
+            self._idle[:, n_old:n_new] = self._lut_flat[self._lut_off[:, None] + col * self._codes]
+            self._n_configs = n_new
         pt = s.pairs
-        p_old = self._touch.shape[0]
+        p_old = self._n_pairs
         if pt.n_pairs > p_old:
-            touch, tpair = self._pair_maps(pt, p_old)
-            self._touch = np.concatenate([self._touch, touch])
-            self._tpair = np.concatenate([self._tpair, tpair])
+            if pt.n_pairs > self._touch.shape[0]:
+                self._touch, self._tpair = (_grown(a, pt.n_pairs, axis=0) for a in (self._touch, self._tpair))
+            self._touch[p_old:pt.n_pairs], self._tpair[p_old:pt.n_pairs] = self._pair_maps(pt, p_old)
+            self._n_pairs = pt.n_pairs
 
     def _pair_maps(self, pt, p0: int) -> tuple[np.ndarray, np.ndarray]:
         """For pairs p0.. of the joint system: the member each server's entry sends to (-1: none, or

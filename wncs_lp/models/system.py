@@ -301,7 +301,7 @@ class _PairStore:
         self.deltas = np.zeros((0, n_processes), np.int64)
         self.cols = {"config_of": np.zeros(0, np.int64), "labels": np.zeros((0, n_servers), np.int64),
                      "nxt": np.zeros((0, 1), np.int64), "delta": np.zeros((0, 1), np.int32),
-                     "prob": np.zeros((0, 1)), "busy": np.zeros((0, n_servers))}
+                     "prob": np.zeros((0, 1)), "cum": np.zeros((0, 1)), "busy": np.zeros((0, n_servers))}
 
     def reserve(self, n_configs: int) -> None:
         self._room(n_configs, self.n_pairs, self.O)
@@ -318,19 +318,21 @@ class _PairStore:
         if n_pairs > rows or width > self.O:
             cap = max(n_pairs, 2 * rows if n_pairs > rows else rows, 4096)
             O = max(width, self.O)
-            require_memory(cap * (O * 20 + self.M * 16 + 8), f"the pairs of the {n_configs:,} configurations met so "
+            require_memory(cap * (O * 28 + self.M * 16 + 8), f"the pairs of the {n_configs:,} configurations met so "
                            f"far ({n_pairs:,} pairs of up to {O} outcomes)",
                            ["fewer processes or servers", "a shorter simulation (--slots, --reps)"])
             out = {}
             for key, a in self.cols.items():
                 shape = (cap,) + a.shape[1:]
-                if key in ("nxt", "delta", "prob"):
+                if key in ("nxt", "delta", "prob", "cum"):
                     shape = (cap, O)
                 b = np.zeros(shape, a.dtype)
                 if a.ndim == 2:
                     b[:self.n_pairs, :a.shape[1]] = a[:self.n_pairs]
                     if key in ("nxt", "delta") and O > a.shape[1]:  # padding repeats the first outcome
                         b[:self.n_pairs, a.shape[1]:] = a[:self.n_pairs, :1]
+                    if key == "cum" and O > a.shape[1]:
+                        b[:self.n_pairs, a.shape[1]:] = np.inf
                 else:
                     b[:self.n_pairs] = a[:self.n_pairs]
                 out[key] = b
@@ -366,20 +368,19 @@ class _PairStore:
                 cols["nxt"][p + j, :len(o)] = arr[:, 0]
                 cols["delta"][p + j, :len(o)] = arr[:, 1]
                 cols["prob"][p + j, :len(o)] = arr[:, 2]
+                cum = np.cumsum(arr[:, 2])
+                cum[-1] = np.inf  # u < 1 always lands on a real outcome, whatever the round-off
+                cols["cum"][p + j] = np.inf
+                cols["cum"][p + j, :len(o)] = cum
             p += n
         self.n_pairs = p
 
     def tables(self) -> "PairTables":
         n, c = self.n_pairs, self.cols
-        prob = c["prob"][:n]
-        n_out = np.count_nonzero(prob > 0, axis=1)
-        cum = np.cumsum(prob, axis=1)
-        cum[np.arange(n), n_out - 1] = np.inf
-        cum[np.arange(prob.shape[1])[None, :] >= n_out[:, None]] = np.inf
         nc = len(self.label_index)
         return PairTables(first=self.first[:nc], count=self.count[:nc], config_of=c["config_of"][:n],
                           labels=c["labels"][:n], nxt=c["nxt"][:n], delta=c["delta"][:n], deltas=self.deltas,
-                          prob=prob, cum=cum, busy=c["busy"][:n])
+                          prob=c["prob"][:n], cum=c["cum"][:n], busy=c["busy"][:n])
 
 
 @dataclass(frozen=True, eq=False)
