@@ -53,6 +53,7 @@ from ..chain import PolicyChain
 from ..errors import SolverError
 from ..mdp import MDP
 from ..models import Model, model_for
+from ..models.guard import check_size
 from ..models.system import System
 from ..progress import as_progress
 from ..scenario import Scenario
@@ -140,6 +141,7 @@ def build_private_chain(processes: tuple, sc: Scenario) -> PrivateChain:
     """The enumerated private MDP of ``sc`` (one process, or a group of them: the claims of its
     processes on each server are summed), with its AoI cost and claims per pair."""
     model = model_for(sc)
+    check_size(sc, model=model)  # a large group's chain is an MDP like any other: refused before it is built
     mdp = model.build()
     auto = model.automaton
     M = sc.n_servers
