@@ -293,9 +293,16 @@ class SuboptimalPolicy(SeparableGreedyPolicy):
     poisson : tuple of ProcessPoisson
     base_gain : float
         sum_k g_k, the exact gain of the base policy (Lemma 2).
-    tables : tuple of arrays
-        W_k, shape (|C|, A_max, tau_hat_k); +inf on infeasible actions.
+    tables : tuple of arrays or None
+        W_k, shape (P, tau_hat_k) over the feasible pairs (None when computed per state).
     build_seconds : float
+
+    Raises
+    ------
+    PolicyError
+        A lazily explored system (the chains need every configuration).
+    SizeLimitError
+        The chains would not fit the memory budget (:func:`chain_bytes`).
     """
 
     name = "suboptimal"
