@@ -142,3 +142,31 @@ sys.exit(main(["bound", "lab32.toml", "--relaxation", "1", "--policy", "--compar
     assert "explored lazily" in text and "Traceback" not in out.stderr
     assert f"{math.prod([3] * 32) / 10**15:.2f}e15 states" in text  # 3^32, not a wrapped int64
     assert "suboptimal: not evaluated" in text and "bound[private-servers]" in text
+
+
+def test_every_guard_refuses_before_it_allocates_and_names_a_cheaper_route(three, monkeypatch):
+    """With (almost) no memory left, each large allocation is refused in one sentence naming a cheaper
+    route, and the greedy tables give way to the same lookahead computed state by state."""
+    from wncs_lp.bounds import lower_bound
+    from wncs_lp.models import guard
+    from wncs_lp.policies.suboptimal import SeparableGreedyPolicy, SuboptimalPolicy
+    from wncs_lp.simulate import simulate
+
+    system, mdp = three
+    res = private_bound(system)
+    full = SeparableGreedyPolicy(system, res.tables)  # built with the memory there is
+    monkeypatch.setattr(guard, "available_memory", lambda: 0)
+    per_state = SeparableGreedyPolicy(system, res.tables)
+    assert full.lookahead == "tables" and per_state.lookahead == "per-state" and per_state.tables is None
+    tau, cfg = np.asarray(mdp.states.tau)[::7], np.asarray(mdp.states.config)[::7]
+    a, b = full.values(tau, cfg), per_state.values(tau, cfg)
+    np.testing.assert_array_equal(np.isfinite(a), np.isfinite(b))
+    np.testing.assert_allclose(a[np.isfinite(a)], b[np.isfinite(b)], rtol=1e-12)
+    cases = [(lambda: SeparableGreedyPolicy(system, res.tables, lookahead="tables"), "per-state"),
+             (lambda: SuboptimalPolicy(system), "bound's policy"),
+             (lambda: lower_bound(system, 2), "relaxation 3"),
+             (lambda: simulate(full, slots=10, reps=1000, progress=False), "fewer replications"),
+             (lambda: bound_policy(res, system), "relaxation 1")]
+    for make, route in cases:
+        with pytest.raises(SizeLimitError, match=f"would need about .* over the limit .*Cheaper routes: .*{route}"):
+            make()
