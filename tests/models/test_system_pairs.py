@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from wncs_lp import scenario_path
-from wncs_lp.errors import PolicyError, SizeLimitError
+from wncs_lp.errors import ModelError, PolicyError, SizeLimitError
 from wncs_lp.models import system as system_module
 from wncs_lp.models.system import System
 from wncs_lp.policies import make_policy
@@ -110,3 +110,13 @@ def test_auto_explores_lazily_what_is_too_large_to_enumerate():
     sc = load_scenario(scenario_path("bounds_fog12"))
     s = System.from_scenario(sc, explore="auto")  # 762,073 x 1,320 by the model's bounds: at once, unexplored
     assert s.is_lazy and s.n_expanded == 1 and s.max_actions == 12 * 11 * 10
+
+
+def test_auto_explores_lazily_past_its_edge_budget(monkeypatch):
+    sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=4"])
+    assert not System.from_scenario(sc, explore="auto").is_lazy
+    monkeypatch.setattr(system_module, "AUTO_EDGES", 10)  # the exploration stops; the system is lazy instead
+    s = System.from_scenario(sc, explore="auto")
+    assert s.is_lazy and s.n_expanded == 1
+    with pytest.raises(ModelError, match="explore must be"):
+        System.from_scenario(sc, explore="some")
