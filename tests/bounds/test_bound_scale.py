@@ -30,8 +30,8 @@ pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning"
 
 @pytest.fixture(scope="module")
 def three():
-    """Three processes on three servers with U = 0, 1, 2 (the reference shape "3x3"), enumerated."""
-    sc = shape("3x3")
+    """Three processes on three servers with U = 0, 1, 2 (the reference shape "3x3", cap 4), enumerated."""
+    sc = shape("3x3").with_overrides(["tau_cap=4"])
     system = System.from_scenario(sc)
     return system, build(sc)
 
