@@ -143,7 +143,7 @@ class System:
             return 0
         new = self.automaton.expand(np.unique(todo).tolist())
         store.add(new, self.automaton, self.model)
-        object.__setattr__(self, "n_actions", store.count)
+        object.__setattr__(self, "n_actions", store.count[:store.n_known])
         self.__dict__["pairs"] = store.tables()
         self.__dict__["label_index"] = store.label_index
         self.__dict__["accepts"] = store.accepts[:len(self.automaton.configs)]
@@ -287,6 +287,28 @@ class System:
         return np.where(delta > 0, np.minimum(t, delta), t)
 
 
+class _LabelIndex:
+    """Per configuration of a lazily explored automaton, action label -> local index, each dict made
+    when first asked for (the bound's policy never asks: at a dozen processes on three servers the
+    dicts of every configuration met would take about as much as the pairs themselves)."""
+
+    def __init__(self):
+        self.actions: list = []
+        self._made: dict[int, dict[tuple, int]] = {}
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+    def __getitem__(self, c: int) -> dict[tuple, int]:
+        c = int(c)
+        got = self._made.get(c)
+        if got is None:
+            got = {lab: j for j, lab in enumerate(self.actions[c])}
+            if got:  # an unexpanded configuration has no actions yet: nothing to keep
+                self._made[c] = got
+        return got
+
+
 class _PairStore:
     """The growing arrays of a lazily explored system (capacity doubling: amortised O(1) a pair)."""
 
@@ -297,7 +319,8 @@ class _PairStore:
         self.first = np.full(0, -1, np.int64)
         self.count = np.zeros(0, np.int64)
         self.accepts = np.zeros((0, n_servers), bool)
-        self.label_index: list[dict[tuple, int]] = []
+        self.label_index = _LabelIndex()
+        self.n_known = 0
         self.deltas = np.zeros((0, n_processes), np.int64)
         self.cols = {"config_of": np.zeros(0, np.int64), "labels": np.zeros((0, n_servers), np.int64),
                      "nxt": np.zeros((0, 1), np.int64), "delta": np.zeros((0, 1), np.int32),
@@ -344,9 +367,10 @@ class _PairStore:
         n_new = sum(len(labels) for _, labels, _ in new)
         width = max((len(o) for _, _, outs in new for o in outs), default=1)
         self._room(n_configs, self.n_pairs + n_new, width)
-        for c in range(len(self.label_index), n_configs):  # configurations met for the first time
-            self.label_index.append({})
+        for c in range(self.n_known, n_configs):  # configurations met for the first time
             self.accepts[c] = model.accepts(auto.configs[c])
+        self.n_known = n_configs
+        self.label_index.actions = auto.actions
         if len(auto.deltas) > self.deltas.shape[0]:
             d = np.zeros((len(auto.deltas), self.N), np.int64)
             for vec, i in auto.deltas.items():
@@ -356,7 +380,6 @@ class _PairStore:
         for c, labels, outs in new:
             n = len(labels)
             self.first[c], self.count[c] = p, n
-            self.label_index[c] = {lab: j for j, lab in enumerate(labels)}
             lab = np.array(labels, dtype=np.int64).reshape(n, self.M)
             cols["config_of"][p:p + n] = c
             cols["labels"][p:p + n] = lab
@@ -377,7 +400,7 @@ class _PairStore:
 
     def tables(self) -> "PairTables":
         n, c = self.n_pairs, self.cols
-        nc = len(self.label_index)
+        nc = self.n_known
         return PairTables(first=self.first[:nc], count=self.count[:nc], config_of=c["config_of"][:n],
                           labels=c["labels"][:n], nxt=c["nxt"][:n], delta=c["delta"][:n], deltas=self.deltas,
                           prob=c["prob"][:n], cum=c["cum"][:n], busy=c["busy"][:n])
