@@ -185,6 +185,10 @@ class ProjectedLookahead:
         for i, g in enumerate(self.groups):
             self._member_of[list(g)] = i
             self._rank[list(g)] = np.arange(1, len(g) + 1)
+        self._strides = np.zeros((N, len(self.groups)), np.int64)  # C order within each group
+        for i, g in enumerate(self.groups):
+            for j, k in enumerate(g):
+                self._strides[k, i] = math.prod(int(system.caps[kk]) for kk in g[j + 1:])
         self._base = max(len(g) for g in self.groups) + 1
         self._codes = self._base ** M
         order = list({id(ps): ps for ps in self.private}.values())  # the distinct private systems
@@ -288,15 +292,8 @@ class ProjectedLookahead:
         return touch, tpair
 
     def _tau_index(self, tau: np.ndarray) -> np.ndarray:
-        """(R, members) flat C-order index of each member's AoI vector."""
-        caps = self.system.caps
-        out = np.empty((tau.shape[0], len(self.groups)), np.int64)
-        for i, g in enumerate(self.groups):
-            t = np.zeros(tau.shape[0], np.int64)
-            for k in g:
-                t = t * int(caps[k]) + (tau[:, k] - 1)
-            out[:, i] = t
-        return out
+        """(R, members) flat C-order index of each member's AoI vector: (tau - 1) @ strides."""
+        return (tau - 1) @ self._strides
 
     def values(self, tau: np.ndarray, c: np.ndarray, *, base: bool = True) -> np.ndarray:
         """(R, A_max) sum_G W_G(C, a, tau_G) over the local actions of each state (+inf on actions a
