@@ -54,6 +54,7 @@ MODULES = [
     ("wncs_lp.bounds", "Certified lower bounds on g* and their policies (any number of processes)"),
     ("wncs_lp.bounds.gaps", "Certified optimality gaps"),
     ("wncs_lp.bounds.inputs", "What enters the bounds: a System checked, the private chains checked"),
+    ("wncs_lp.bounds.projected", "The greedy policy of a private-servers bound, read through projections"),
     ("wncs_lp.truncation", "Mass at the cap"),
     ("wncs_lp.simulate", "Monte Carlo"),
     ("wncs_lp.intervals", "Confidence intervals for simulated averages"),

@@ -123,7 +123,7 @@ class WncsEnv(gym.Env):
         self.invalid_action = invalid_action
         self.render_mode = render_mode
         sysm = self.system
-        self._tables = sysm.outcome_tables
+        self._tables = sysm.pairs  # one row per feasible (configuration, action) pair
         self.observation_space = spaces.Dict({
             "tau": spaces.MultiDiscrete(sysm.caps, start=np.ones(sysm.n_processes, dtype=np.int64)),
             "config": spaces.Discrete(sysm.n_configs),
@@ -147,10 +147,11 @@ class WncsEnv(gym.Env):
         """One slot: reward ``-c(s_t)``, then the transition of (s_t, action)."""
         j, invalid = self._local_action(action)
         cost = self.cost()
-        c, t = self._config, self._tables
-        o = int(np.count_nonzero(self.np_random.random() >= t.cum[c, j]))
-        self._config = int(t.nxt[c, j, o])
-        self._tau = self.system.next_tau(self._tau, t.delta[c, j, o])
+        t = self._tables
+        p = int(t.first[self._config]) + j
+        o = int(np.count_nonzero(self.np_random.random() >= t.cum[p]))
+        self._config = int(t.nxt[p, o])
+        self._tau = self.system.next_tau(self._tau, t.deltas[t.delta[p, o]])
         self._steps += 1
         truncated = self.max_steps is not None and self._steps >= self.max_steps
         info = {"action_mask": self.action_masks(), "cost": cost, "invalid_action": invalid}

@@ -2,10 +2,11 @@ r"""Monte Carlo simulation straight from the configuration automaton (no tau enu
 
 R independent replications run side by side as numpy arrays. In slot t every replication r
 is in a state (tau_r, C_r); the policy picks local actions ``j = policy.act(tau, C, rng)``,
-one uniform u_r in [0, 1) per replication selects the outcome o of (C_r, j_r) from the padded
-cumulative-probability table (``o = #{i : u_r >= cum[C_r, j_r, i]}``), and
+one uniform u_r in [0, 1) per replication selects the outcome o of the pair p = (C_r, j_r) from
+the pair-indexed cumulative-probability table of :attr:`System.pairs`
+(``o = #{i : u_r >= cum[p, i]}``), and
 
-    C_r <- nxt[C_r, j_r, o],   tau_{r,k} <- min(tau_{r,k} + 1, delta_k if delta_k > 0, tau_hat_k).
+    C_r <- nxt[p, o],   tau_{r,k} <- min(tau_{r,k} + 1, delta_k if delta_k > 0, tau_hat_k).
 
 The cost of slot t is c(s_t) = sum_k q_k(tau_k(t)). After ``burn_in`` slots the next ``slots``
 slot costs are averaged per replication: Y_r = (1/T) sum_t c(s_t), and the estimate is the mean
@@ -393,6 +394,7 @@ def simulate(
     value = _control_value(control)
     if not (control_coef == "fit" or isinstance(control_coef, (int, float))):
         raise PolicyError(f"control_coef must be 'fit' or a number, got {control_coef!r}")
+    _check_memory(policy.system, int(reps))
     t0 = time.perf_counter()
     chan_ss, pol_ss = np.random.SeedSequence(seed).spawn(2)
     tau = _initial_tau(policy.system, reps, initial_tau)
@@ -423,6 +425,18 @@ def _control_name(control: Any) -> str | None:
     if control is None:
         return None
     return str(getattr(control, "name", None) or type(control).__name__)
+
+
+def _check_memory(sysm, reps: int) -> None:
+    """Refuse, before allocating, a run whose per-slot arrays would not fit: per replication the AoI
+    and cost sums (4 N numbers), the outcome draw (a few O) and a policy's lookahead over the
+    actions of its state (about 10 arrays of A_max numbers)."""
+    from .models.guard import require_memory
+
+    width = max(int(sysm.n_actions.max(initial=1)), 1)  # lazily explored: the idle configuration's, the most
+    per_rep = 8 * (4 * sysm.n_processes + 4 * sysm.pairs.n_outcomes + 10 * width)
+    require_memory(reps * per_rep, f"simulating {reps:,} replications side by side ({per_rep:,} bytes each a slot)",
+                   ["fewer replications (--reps) with more slots each (--slots)"])
 
 
 def _initial_tau(sysm, reps: int, initial_tau: np.ndarray | None) -> np.ndarray:
@@ -472,7 +486,8 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
                prng: np.random.Generator, value: Callable | None, acc: _Accumulators, bar) -> None:
     """The slot loop, all replications at once (module docstring), into ``acc``."""
     sysm = policy.system
-    ot, caps, q, busy, n_act = sysm.outcome_tables, sysm.caps, sysm.q, sysm.busy, sysm.n_actions
+    pt, caps, q, n_act = sysm.pairs, sysm.caps, sysm.q, sysm.n_actions  # pair-indexed: no padding to A_max
+    lazy = sysm.is_lazy
     reps, N = tau.shape
     rows = np.arange(reps)
     c = np.full(reps, sysm.initial_config, dtype=np.int64)
@@ -491,26 +506,28 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
             acc.cost_b[:, b] += cost
             seen = tau if acc.aoi_clip is None else np.minimum(tau, acc.aoi_clip)
             acc.aoi_counts[acc.aoi_base + seen] += 1  # one bin per (replication, process): no index repeats
+        if lazy and sysm.expand(c):  # a lazily explored automaton: configurations met for the first time
+            pt, n_act = sysm.pairs, sysm.n_actions
         j = policy.act(tau, c, prng) if mem is None else policy.act_memory(tau, c, mem, prng)
         if t == 0 or t % 997 == 0:  # cheap periodic sanity check of the policy's output
             if j.shape != (reps,) or np.any(j < 0) or np.any(j >= n_act[c]):
                 raise PolicyError(f"policy {policy.name} returned action indices out of range")
+        p = pt.first[c] + j
         if after:
-            acc.busy_sum += busy[c, j].sum(axis=0)
+            acc.busy_sum += pt.busy[p].sum(axis=0)
             if t - burn_in < n_path:
                 i = t - burn_in
                 acc.path[0][i], acc.path[1][i], acc.path[2][i], acc.path[3][i] = tau[0], c[0], j[0], cost[0]
         if mem is not None:
             mem = policy.next_memory(mem, c, j)
-        o = (chan.random(reps)[:, None] >= ot.cum[c, j]).sum(axis=1)
+        o = (chan.random(reps)[:, None] >= pt.cum[p]).sum(axis=1)
         if value is not None and after:
             if t == burn_in:
                 h_now = _values(value, tau, c)
-                nxt_real = np.where(ot.prob > 0, ot.nxt, sysm.initial_config)  # padded outcomes: any real config
-            tau, c, h_now = _controlled_step(ot, nxt_real, caps, value, tau, c, j, o, rows, h_now, acc, b)
+            tau, c, h_now = _controlled_step(pt, caps, value, tau, p, o, rows, h_now, acc, b)
         else:
-            d = ot.delta[c, j, o]
-            c = ot.nxt[c, j, o]
+            d = pt.deltas[pt.delta[p, o]]
+            c = pt.nxt[p, o]
             tnew = np.minimum(tau + 1, caps)
             tau = np.where(d > 0, np.minimum(tnew, d), tnew)
         if bar is not None and (t + 1) % chunk == 0:
@@ -527,17 +544,18 @@ def _values(value: Callable, tau: np.ndarray, c: np.ndarray) -> np.ndarray:
     return v
 
 
-def _controlled_step(ot, nxt_real, caps, value: Callable, tau, c, j, o, rows, h_now, acc: _Accumulators, b: int):
-    """One transition with the control variate: the next state under every outcome of (C, a), h
-    there, E[h(s') | s, a] - h(s) into batch b; returns the realised next state and h there.
-    Padded outcomes (probability 0) read h at some real configuration and weigh nothing."""
+def _controlled_step(pt, caps, value: Callable, tau, p, o, rows, h_now, acc: _Accumulators, b: int):
+    """One transition with the control variate: the next state under every outcome of the pairs
+    ``p`` (:attr:`System.pairs`), h there, E[h(s') | s, a] - h(s) into batch b; returns the
+    realised next state and h there. Padded outcomes (probability 0) repeat a real one and weigh
+    nothing."""
     reps, N = tau.shape
-    nx = nxt_real[c, j]  # (R, O)
-    dl = ot.delta[c, j]  # (R, O, N)
+    nx = pt.nxt[p]  # (R, O)
+    dl = pt.deltas[pt.delta[p]]  # (R, O, N)
     tnew = np.minimum(tau + 1, caps)[:, None, :]
     tau_o = np.where(dl > 0, np.minimum(tnew, dl), tnew)
     hv = _values(value, tau_o.reshape(-1, N), nx.reshape(-1)).reshape(nx.shape)
-    acc.ctrl_b[:, b] += (ot.prob[c, j] * hv).sum(axis=1) - h_now
+    acc.ctrl_b[:, b] += (pt.prob[p] * hv).sum(axis=1) - h_now
     return tau_o[rows, o], nx[rows, o], hv[rows, o]
 
 

@@ -16,6 +16,7 @@ from wncs_lp import scenario_path
 from wncs_lp.bounds import bound_policy, lower_bound, private_bound
 from wncs_lp.bounds.grouped import _best_matching, _greedy_matching, grouped_bound
 from wncs_lp.bounds.policy import GroupBoundPolicy
+from wncs_lp.bounds.projected import ProjectedBoundPolicy
 from wncs_lp.cli import main
 from wncs_lp.errors import WncsError
 from wncs_lp.evaluate import evaluate
@@ -62,7 +63,7 @@ def test_never_looser_than_relaxation_1(case):
 def test_policy_is_at_least_the_optimum_and_its_action_the_argmin(case):
     system, mdp, res, opt = case
     pol = bound_policy(res, system)
-    assert isinstance(pol, GroupBoundPolicy)
+    assert isinstance(pol, ProjectedBoundPolicy)
     assert evaluate(mdp, pol).gain >= opt.gain_lower * (1 - 1e-9)
     st = mdp.states
     rng = np.random.default_rng(2)
@@ -80,9 +81,9 @@ def test_precomputed_lookahead_equals_the_per_state_one(case, monkeypatch):
     from wncs_lp.bounds import policy as bound_policy_module
 
     system, mdp, res, _ = case
-    fast = bound_policy(res, system)
+    fast = GroupBoundPolicy(res, system)
     monkeypatch.setattr(bound_policy_module, "TABLE_MAX_BYTES", 0)
-    slow = bound_policy(res, system)
+    slow = GroupBoundPolicy(res, system)
     assert all(w is not None for w in fast.lookahead) and all(w is None for w in slow.lookahead)
     tau, cfg = np.asarray(mdp.states.tau), np.asarray(mdp.states.config)
     a, b = fast.values(tau, cfg), slow.values(tau, cfg)

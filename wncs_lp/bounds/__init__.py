@@ -15,7 +15,9 @@ the enumerated MDP).
   ``auto`` fall back to relaxation 1) and optionally ``joint_reach(system)``, ``None`` when the
   instance is within its reach, else the reason in words;
 * :func:`bound_policy` / :class:`BoundPolicy` / :class:`GroupBoundPolicy` -- the greedy policy on a
-  bound's value tables;
+  bound's value tables; for relaxations 1 and 3 :class:`ProjectedBoundPolicy`, the same lookahead
+  read through the projections on the private systems (:mod:`wncs_lp.bounds.projected`: memory
+  linear in the number of processes);
 * :class:`LookaheadPolicy` -- the two-step lookahead on a greedy policy's tables (greedy on T h);
 * :func:`whittle_indices` / :class:`IndexPolicy` -- Whittle-type indices of relaxation 1's priced
   chains and the index policy;
@@ -36,8 +38,10 @@ from .index import IndexPolicy, IndexTables, whittle_indices
 from .lookahead import LookaheadPolicy
 from .policy import BoundPolicy, GroupBoundPolicy, bound_policy
 from .private import private_bound
+from .projected import ProjectedBoundPolicy
 from .result import BoundResult, GroupTables, ValueTables
 
-__all__ = ["BoundResult", "ValueTables", "GroupTables", "BoundPolicy", "GroupBoundPolicy", "GapReport", "PolicyGap",
+__all__ = ["BoundResult", "ValueTables", "GroupTables", "BoundPolicy", "GroupBoundPolicy", "ProjectedBoundPolicy",
+           "GapReport", "PolicyGap",
            "RELAXATIONS", "lower_bound", "bound_policy", "policy_gaps", "private_bound", "grouped_bound",
            "parse_relaxation", "AUTO_SEARCH", "LookaheadPolicy", "IndexPolicy", "IndexTables", "whittle_indices"]

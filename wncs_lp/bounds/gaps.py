@@ -27,6 +27,7 @@ numbers).
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Sequence
@@ -34,7 +35,7 @@ from typing import Any, Sequence
 import numpy as np
 from scipy import stats as sps
 
-from ..errors import SolverError
+from ..errors import PolicyError, SizeLimitError, SolverError
 from ..models.system import System
 from ..policies import Policy, make_policy
 from ..progress import as_progress
@@ -97,11 +98,15 @@ class GapReport:
     how: str
     states: int
     seconds: float
+    #: (policy name, reason) of each comparator that could not run on this system (it needs the
+    #: whole automaton of a lazily explored system, or more memory than there is).
+    skipped: tuple = ()
 
     def __repr__(self) -> str:
         lines = [f"GapReport({self.relaxation}, LB = {self.lower_bound:.10g}, {self.how}, {self.states:,} states)"]
         lines += [f"  {r.policy:<28} gain {r.gain:.10g}  upper {r.gain_upper:.10g}  gap <= {100 * r.gap:.3f}%"
                   for r in self.rows]
+        lines += [f"  {name:<28} not evaluated: {why}" for name, why in self.skipped]
         if self.rows:
             lines.append(f"  best: {self.best.policy}")
         return "\n".join(lines)
@@ -122,7 +127,8 @@ class GapReport:
     def summary(self) -> dict[str, Any]:
         return {"lower_bound": self.lower_bound, "relaxation": self.relaxation, "how": self.how,
                 "states": self.states, "policies": [r.summary() for r in self.rows],
-                "best": self.best.policy if self.rows else None, "seconds": self.seconds}
+                "best": self.best.policy if self.rows else None, "seconds": self.seconds,
+                "skipped": [{"policy": name, "reason": why} for name, why in self.skipped]}
 
 
 def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Policy:
@@ -143,9 +149,13 @@ def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Po
 
 def _exact_route(system: System, exact: bool | None, exact_max_states: int) -> tuple[bool, int]:
     """(evaluate exactly?, states of the matrix-free layout)."""
-    from ..solvers.matrix_free import BoxLayout
+    from ..solvers.matrix_free.layout import layout_states
 
-    n = int(BoxLayout.from_system(system, "hull").n_states)
+    if system.is_lazy:  # explored lazily: no layout; one configuration's AoI box says the scale
+        if exact:
+            layout_states(system)  # refuses with the reason
+        return False, math.prod(int(c) for c in system.caps)
+    n = layout_states(system, "hull")  # a Python integer: 40^16 states do not wrap around
     return (n <= exact_max_states if exact is None else bool(exact)), n
 
 
@@ -238,9 +248,15 @@ def policy_gaps(
     t0 = time.perf_counter()
     prog = as_progress(progress)
     use_exact, n = _exact_route(system, exact, exact_max_states)
-    rows = []
+    rows, skipped = [], []
     for name in policies:
-        pol = policy_by_name(name, bound, system)
+        try:
+            pol = policy_by_name(name, bound, system)
+        except (PolicyError, SizeLimitError) as exc:  # a comparator that does not fit this system: say so, go on
+            if not isinstance(name, str) or name == "bound":
+                raise
+            skipped.append((name, str(exc)))
+            continue
         prog.phase(f"evaluating the {pol.name} policy " + ("exactly (matrix-free)" if use_exact else
                                                            f"by Monte Carlo ({reps} x {slots} slots)"))
         if use_exact:
@@ -255,4 +271,4 @@ def policy_gaps(
                                  _TablesControl(bound) if control else None))
     how = sorted({r.how for r in rows})
     return GapReport(float(bound.lower_bound), bound.relaxation, tuple(rows), "+".join(how), n,
-                     time.perf_counter() - t0)
+                     time.perf_counter() - t0, tuple(skipped))

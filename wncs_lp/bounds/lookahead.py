@@ -101,8 +101,11 @@ class LookaheadPolicy(Policy):
         count = np.asarray(s.n_actions, np.int64)
         first = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
         if isinstance(base, SeparableGreedyPolicy):
+            if base.tables is None:
+                raise PolicyError("the lookahead policy needs the greedy policy's tables, which did not fit the "
+                                  "memory budget (it computes its lookahead state by state)")
             blocks = [(k,) for k in range(s.n_processes)]
-            rows = [t[c_of, j_of] for t in base.tables]  # (P, tau_hat_k)
+            rows = list(base.tables)  # (P, tau_hat_k), one row per feasible pair, configuration-major
         else:
             blocks = [tuple(g) for g in base.tables.groups]
             if any(t is None for t in base.lookahead):
@@ -119,16 +122,14 @@ class LookaheadPolicy(Policy):
         mptr = np.concatenate([[0], np.cumsum([len(g) for g in blocks])]).astype(np.int64)
         stride = np.array([math.prod(int(caps[k]) for k in g[i + 1:]) for g in blocks for i in range(len(g))],
                           np.int64)
-        ot = s.outcome_tables
-        O = ot.nxt.shape[2]
-        deltas, delta = np.unique(ot.delta[c_of, j_of].reshape(-1, s.n_processes), axis=0, return_inverse=True)
+        pt = s.pairs  # one row per feasible pair, configuration-major (the rows c_of, j_of above)
         q = np.zeros((s.n_processes, int(caps.max())))
         for k, qk in enumerate(s.q):
             q[k, : qk.size] = qk
         self._caps = caps
-        self._args = (first, count, np.ascontiguousarray(ot.nxt[c_of, j_of]),
-                      np.asarray(delta, np.int64).reshape(-1, O), np.ascontiguousarray(deltas, dtype=np.int64),
-                      np.ascontiguousarray(ot.prob[c_of, j_of]), caps, q, W, off, width, mptr, members, stride,
+        self._args = (first, count, np.ascontiguousarray(pt.nxt, dtype=np.int64),
+                      np.ascontiguousarray(pt.delta, dtype=np.int64), np.ascontiguousarray(pt.deltas, dtype=np.int64),
+                      np.ascontiguousarray(pt.prob), caps, q, W, off, width, mptr, members, stride,
                       *_NONE, -1 if self.candidates is None else self.candidates, self.depth, self.middle,
                       int(s.max_actions))
         self.build_seconds = time.perf_counter() - t0 + getattr(base, "build_seconds", 0.0)

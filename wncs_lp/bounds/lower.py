@@ -12,6 +12,7 @@ from dataclasses import replace
 from typing import Any
 
 from ..errors import WncsError
+from ..models.guard import require_memory
 from ..models.system import System
 from ..scenario import Scenario
 from .grouped import grouped_bound
@@ -39,6 +40,11 @@ AUTO_SEARCH = {"max_iter": 30, "time_limit": None}
 #: Relaxation 3's guard under ``"auto"`` unless ``time_limit`` is given: seconds after which no
 #: more candidate pairs are measured (its bound is certified whatever stops it).
 AUTO_GROUPED_TIME_LIMIT = 300.0
+
+
+#: Why relaxation 2 does not run on a lazily explored system.
+LAZY_NOTE = ("the system's configuration automaton is explored lazily (too large to enumerate), and relaxation 2's "
+             "tables live on every joint configuration; relaxations 1 and 3 need only the private ones")
 
 
 def parse_relaxation(name: str | int) -> str:
@@ -106,7 +112,17 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     if name == "joint-configuration":
         if joint is None:
             raise WncsError(f"relaxation joint-configuration asked for, but {why_not}")
-        return joint.joint_bound(_as_system(scenario_or_system), **options)
+        system = _as_system(scenario_or_system)
+        if system.is_lazy:
+            raise WncsError(f"relaxation joint-configuration asked for, but {LAZY_NOTE}")
+        size = getattr(joint, "joint_size", None)
+        if size is not None:  # estimate first: refuse, with the cheaper routes, what would not fit
+            s = size(system)
+            require_memory(s["memory_bytes"], f"relaxation 2 on {system.n_processes} processes ({s['lp_nnz']:,} LP "
+                           f"nonzeros, {s['configurations']:,} joint configurations)",
+                           ["relaxation 3 (--relaxation 3: pairs sharing private servers)",
+                            "relaxation 1 (--relaxation 1: seconds at any size)"])
+        return joint.joint_bound(system, **options)
     return _auto(_as_system(scenario_or_system), joint, why_not, {**AUTO_SEARCH, **options})
 
 
@@ -170,6 +186,8 @@ def _try(relaxation: Any, system: System, options: dict) -> BoundResult | None:
 
 def _try_joint(joint: Any, system: System, options: dict) -> tuple[BoundResult | None, str]:
     """Relaxation 2 when the instance is within its reach: (its result, "") or (None, why not)."""
+    if system.is_lazy:
+        return None, f"beyond relaxation 2's reach: {LAZY_NOTE}"
     reach = getattr(joint, "joint_reach", None)
     why_not = reach(system) if reach is not None else None
     if why_not is not None:

@@ -14,6 +14,7 @@ box is formed: it works with :func:`wncs_lp.evaluate`, the matrix-free evaluatio
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -23,6 +24,7 @@ from ..errors import PolicyError
 from ..models.system import System
 from ..policies.base import Policy
 from ..policies.suboptimal import SeparableGreedyPolicy
+from .projected import ProjectedBoundPolicy, lookahead_table, projected_tables
 from .result import BoundResult, GroupTables
 
 __all__ = ["BoundPolicy", "GroupBoundPolicy", "bound_policy", "group_lookahead"]
@@ -109,7 +111,7 @@ class GroupBoundPolicy(Policy):
         #: (C, a) -> its row in the W tables (-1: not a feasible action)
         self.pair_row = np.full(valid.shape, -1, dtype=np.int64)
         self.pair_row[valid] = np.arange(int(valid.sum()))
-        self.lookahead = tuple(group_lookahead(system, g, h, col)
+        self.lookahead = tuple(group_lookahead(system, g, h, col, TABLE_MAX_BYTES)
                                for g, h, col in zip(tables.groups, tables.h, tables.column))
         self.build_seconds = time.perf_counter() - t0
 
@@ -117,7 +119,7 @@ class GroupBoundPolicy(Policy):
         """(R, A_max) lookahead values (+inf on infeasible actions)."""
         tau, c = self._check_inputs(tau, config_ids)
         s = self.system
-        rows = np.maximum(self.pair_row[c], 0)
+        rows, valid = s.pairs.padded(c, s.max_actions)  # (C, a) -> its row in the W tables: the pair
         out = np.zeros(rows.shape)
         lazy = []
         for g, W, i in zip(self.tables.groups, self.lookahead, range(len(self.lookahead))):
@@ -127,26 +129,28 @@ class GroupBoundPolicy(Policy):
             t = np.ravel_multi_index(tuple(tau[:, k] - 1 for k in g), tuple(int(s.caps[k]) for k in g))
             out += W[rows, t[:, None]]
         if lazy:
-            ot = s.outcome_tables
-            nxt, prob = ot.nxt[c], ot.prob[c]
+            pt = s.pairs
+            nxt, prob = pt.nxt[rows], pt.prob[rows]
             v = np.zeros(prob.shape)
             for i in lazy:
                 g, h, col = self.tables.groups[i], self.tables.h[i], self.tables.column[i]
-                v += h[(col[nxt],) + tuple(self._next_tau(tau, c, k) - 1 for k in g)]
+                v += h[(col[nxt],) + tuple(self._next_tau(tau, rows, k) - 1 for k in g)]
             out += np.where(prob > 0, prob * v, 0.0).sum(axis=-1)
-        out[~s.action_valid[c]] = np.inf
+        out[~valid] = np.inf
         return out
 
-    def _next_tau(self, tau: np.ndarray, c: np.ndarray, k: int) -> np.ndarray:
-        """(R, A_max, O_max) AoI of process k after each outcome: min(tau_k + 1, delta_k if > 0, tau_hat_k)."""
-        dk = self.system.outcome_tables.delta[c, :, :, k]
+    def _next_tau(self, tau: np.ndarray, rows: np.ndarray, k: int) -> np.ndarray:
+        """(R, A_max, O_max) AoI of process k after each outcome of the pairs ``rows``:
+        min(tau_k + 1, delta_k if > 0, tau_hat_k)."""
+        pt = self.system.pairs
+        dk = pt.deltas[pt.delta[rows], k]
         t = np.minimum(tau[:, k] + 1, int(self.system.caps[k]))[:, None, None]
         return np.where(dk > 0, np.minimum(t, dk), t)
 
     def act(self, tau, config_ids, rng=None):
         tau, c = self._check_inputs(tau, config_ids)
         out = np.empty(c.size, dtype=np.int64)
-        block = max(1, ACT_BLOCK_ENTRIES // int(np.prod(self.system.outcome_tables.nxt.shape[1:])))
+        block = max(1, ACT_BLOCK_ENTRIES // (self.system.max_actions * self.system.pairs.n_outcomes))
         for i in range(0, c.size, block):
             out[i:i + block] = np.argmin(self.values(tau[i:i + block], c[i:i + block]), axis=1)
         return out
@@ -156,36 +160,25 @@ class GroupBoundPolicy(Policy):
                 "groups": [list(g) for g in self.tables.groups], "build_seconds": self.build_seconds}
 
 
-def group_lookahead(system: System, group: tuple, h: np.ndarray, column: np.ndarray) -> np.ndarray | None:
-    """W[p, t] = sum_o P(o | pair p) h(column(C'_o), tau'_G) for every valid pair p (the
-    automaton's (C, a) in row-major order of ``action_valid``) and every AoI vector of the group
+def group_lookahead(system: System, group: tuple, h: np.ndarray, column: np.ndarray,
+                    max_bytes: int | None = TABLE_MAX_BYTES) -> np.ndarray | None:
+    """W[p, t] = sum_o P(o | pair p) h(column(C'_o), tau'_G) for every feasible pair p (of
+    :attr:`System.pairs`) and every AoI vector of the group
     (t the flat index of tau_G - 1), tau'_k = min(tau_k + 1, delta_k if > 0, tau_hat_k); None when it
-    would exceed :data:`TABLE_MAX_BYTES`."""
-    ot = system.outcome_tables
-    caps = tuple(int(system.caps[k]) for k in group)
-    cs, js = np.nonzero(system.action_valid)
-    n_t = int(np.prod(caps))
-    if cs.size * n_t * 8 > TABLE_MAX_BYTES:
+    would exceed ``max_bytes`` (default :data:`TABLE_MAX_BYTES`; None: no limit)."""
+    n_t = math.prod(int(system.caps[k]) for k in group)
+    if max_bytes is not None and system.pairs.n_pairs * n_t * 8 > max_bytes:
         return None
-    grid = np.stack(np.unravel_index(np.arange(n_t), caps), axis=1) + 1  # (T, |G|) AoI vectors
-    step = np.minimum(grid + 1, np.asarray(caps))
-    W = np.zeros((cs.size, n_t))
-    block = max(1, ACT_BLOCK_ENTRIES // (n_t * len(group)))
-    for o in range(ot.nxt.shape[2]):
-        prob = ot.prob[cs, js, o]
-        real = np.flatnonzero(prob > 0)
-        for b in range(0, real.size, block):
-            idx = real[b:b + block]
-            d = ot.delta[cs[idx], js[idx], o][:, list(group)][:, None, :]  # (E, 1, |G|)
-            tn = np.where(d > 0, np.minimum(step[None], d), step[None])  # (E, T, |G|)
-            nxt = column[ot.nxt[cs[idx], js[idx], o]][:, None]
-            W[idx] += prob[idx, None] * h[(nxt,) + tuple(tn[..., i] - 1 for i in range(len(group)))]
-    return W
+    return lookahead_table(system, group, h, column)
 
 
 def bound_policy(result: BoundResult, system: System) -> Policy:
-    """The greedy policy of a bound on its system: :class:`BoundPolicy` on per-process tables,
-    :class:`GroupBoundPolicy` on a grouped bound's group tables."""
+    """The greedy policy of a bound on its system: for relaxations 1 and 3 (tables over private
+    configurations) :class:`~wncs_lp.bounds.projected.ProjectedBoundPolicy`, the same lookahead
+    read through the projections in memory linear in N; else :class:`BoundPolicy` on per-process
+    tables, :class:`GroupBoundPolicy` on group tables."""
+    if projected_tables(result) is not None:
+        return ProjectedBoundPolicy(result, system)
     if isinstance(result.tables, GroupTables):
         return GroupBoundPolicy(result, system)
     return BoundPolicy(result, system)

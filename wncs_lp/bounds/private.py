@@ -53,6 +53,7 @@ from ..chain import PolicyChain
 from ..errors import SolverError
 from ..mdp import MDP
 from ..models import Model, model_for
+from ..models.guard import check_size
 from ..models.system import System
 from ..progress import as_progress
 from ..scenario import Scenario
@@ -140,6 +141,7 @@ def build_private_chain(processes: tuple, sc: Scenario) -> PrivateChain:
     """The enumerated private MDP of ``sc`` (one process, or a group of them: the claims of its
     processes on each server are summed), with its AoI cost and claims per pair."""
     model = model_for(sc)
+    check_size(sc, model=model)  # a large group's chain is an MDP like any other: refused before it is built
     mdp = model.build()
     auto = model.automaton
     M = sc.n_servers
@@ -214,11 +216,17 @@ def capacity_sense(system: System, chains: list[PrivateChain], which: np.ndarray
     """``"equality"`` when the claims of all processes on every server sum to 1 in every
     state-action pair of the joint system, ``"inequality"`` when they sum to at most 1.
 
+    On a lazily explored system (:attr:`System.is_lazy`) the pairs are not all known, so the
+    sense is not read off: ``"inequality"``, which holds on every pair of every system (a server
+    holds one job at a time, so the claims on it sum to at most 1), at the price of lambda >= 0.
+
     Raises
     ------
     SolverError
         Some pair has claims summing above 1 (the relaxation would not be valid).
     """
+    if system.is_lazy:
+        return "inequality"
     total = np.zeros(system.labels.shape, float)
     for k in range(system.n_processes):
         ch = chains[which[k]]

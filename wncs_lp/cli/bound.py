@@ -20,7 +20,7 @@ def cmd_bound(args: argparse.Namespace) -> int:
     scenario = load(args)
     prog = progress_for(args)
     t0 = time.perf_counter()
-    system = System.from_scenario(scenario)
+    system = System.from_scenario(scenario, explore="auto")  # lazily where the automaton is too large to enumerate
     prog.phase(f"computing the {relaxation} lower bound")
     # the search options are relaxation 2's; relaxation 1's own max_iter counts other steps
     limit = {} if relaxation in ("private-servers", "grouped-private-servers") else {
@@ -38,11 +38,11 @@ def cmd_bound(args: argparse.Namespace) -> int:
                              progress=prog)
     interval = _untruncated(args, res, system, report, compare, prog)
     if args.json:
-        emit_json({**head(args, scenario), "bound": res.summary(),
+        emit_json({**head(args, scenario), "bound": res.summary(), "explored": "lazily" if system.is_lazy else "whole",
                    "policies": None if report is None else report.summary(), "untruncated": interval.to_dict(),
                    "seconds": time.perf_counter() - t0})
     else:
-        _print(scenario, res, report)
+        _print(scenario, res, report, system.is_lazy)
         tail = "" if interval.candidates or interval.note else " (--untruncated simulates the policies without the cap for one)"
         print(interval.message() + tail)
     return 0 if res.ok else 1
@@ -77,10 +77,15 @@ def _parse_groups(text: str) -> list[tuple[int, ...]]:
     return groups
 
 
-def _print(scenario, res, report) -> None:
+def _print(scenario, res, report, lazy: bool = False) -> None:
+    from ..models.automaton import approx_count
+
     print(scenario.describe())
     why = f" (auto: {res.stats['auto_reason']})" if res.stats.get("auto_reason") else ""
     print(f"relaxation {res.relaxation}{why}: status {res.status}, {res.iterations} iterations, {res.seconds:.2f} s")
+    if lazy:
+        print("  the configuration automaton is too large to enumerate: explored lazily (relaxations 1 and 3 only; "
+              "the capacity taken as an inequality)")
     print(f"certified lower bound: g* >= {res.lower_bound:.10g}")
     print(f"  certified by: {res.certified_by}")
     if res.relaxation == "grouped-private-servers":
@@ -93,17 +98,21 @@ def _print(scenario, res, report) -> None:
     if report is None:
         return
     if report.how == "exact":
-        print(f"policies, evaluated exactly (matrix-free, {report.states:,} states); upper = certified upper end:")
+        print(f"policies, evaluated exactly (matrix-free, {approx_count(report.states)} states); upper = certified "
+              "upper end:")
     else:
         r0 = report.rows[0].detail
         ctl = f", control variate: {r0['control']}" if r0.get("control") else ""
         print(f"policies, by Monte Carlo ({r0.get('reps')} x {r0.get('slots')} slots, seed {r0.get('seed')}{ctl}); "
               f"upper = one-sided {100 * r0.get('confidence', 0.95):g}% upper confidence limit, Student t over the "
-              f"independent replications (the AoI box has {report.states:,} states, above --exact-max-states):")
+              f"independent replications (the AoI box has {approx_count(report.states)} states, above "
+              "--exact-max-states):")
     w = max(len("policy"), *(len(r.policy) for r in report.rows))
     print(f"  {'policy':<{w}} {'gain':>16} {'upper':>16} {'gap <=':>9}")
     for r in report.rows:
         print(f"  {r.policy:<{w}} {r.gain:>16.10g} {r.gain_upper:>16.10g} {100 * r.gap:>8.3f}%")
+    for name, why in report.skipped:
+        print(f"  {name}: not evaluated: {why}")
     print("  gap = (upper - lower bound) / lower bound, an upper bound on (g_pi - g*) / g*")
     print(f"  best: {report.best.policy} (the least upper value)")
     from ..intervals import AGREEMENT_LEVEL

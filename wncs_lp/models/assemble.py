@@ -10,15 +10,16 @@ reference (``tests/reference/loop_builder.py``); both must give the identical MD
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Any, Callable, Sequence
 
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import ModelError
+from ..errors import ModelError, SizeLimitError
 from ..mdp import MDP
-from .automaton import ConfigAutomaton, FlatAutomaton
+from .automaton import ConfigAutomaton, FlatAutomaton, approx_count
 from .statespace import StateSpace
 
 __all__ = ["build_aoi_mdp"]
@@ -30,7 +31,7 @@ def _flat_maps(caps: tuple[int, ...], deltas: np.ndarray) -> np.ndarray:
     Box index f = ravel(tau - 1) goes to ravel(min(tau + 1, delta_k if > 0, tau_hat) - 1).
     """
     N = len(caps)
-    box = int(np.prod(caps))
+    box = math.prod(caps)
     grid = np.unravel_index(np.arange(box, dtype=np.int64), caps)
     out = np.empty((deltas.shape[0], box), dtype=np.int64)
     for i, d in enumerate(deltas):
@@ -185,7 +186,10 @@ def build_aoi_mdp(
     t0 = time.perf_counter()
     caps = tuple(int(c) for c in caps)
     N = len(caps)
-    box = int(np.prod(caps))
+    box = math.prod(caps)  # a Python integer: 40^16 does not wrap around
+    if box * len(auto.configs) >= 2**62:
+        raise SizeLimitError(f"the AoI box has {approx_count(box)} vectors per configuration, beyond what int64 indices "
+                             "address (and any memory), even with force: bounds and simulation need no enumeration")
     nC = len(auto.configs)
     flat = auto.flat(N)
     deltas = flat.deltas if flat.deltas.shape[0] else np.zeros((1, N), np.int64)
@@ -208,7 +212,7 @@ def build_aoi_mdp(
     tau = np.empty((n, N), dtype=np.int32)
     state_cost = np.zeros(n)
     for k in range(N):  # C order of the box: axis k of f is (f // prod(caps[k+1:])) % caps[k]
-        tk = (flat_of_state // int(np.prod(caps[k + 1:], dtype=np.int64))) % caps[k]
+        tk = (flat_of_state // math.prod(caps[k + 1:])) % caps[k]
         state_cost += np.asarray(q_tables[k], dtype=float)[tk]  # summed in process order, as always
         tau[:, k] = tk + 1
         del tk

@@ -23,7 +23,8 @@ import numpy as np
 
 from ..errors import ModelError, SizeLimitError
 
-__all__ = ["Outcome", "SharedOutcomes", "ConfigAutomaton", "FlatAutomaton", "AutomatonBounds", "explore_configs",
+__all__ = ["Outcome", "SharedOutcomes", "ConfigAutomaton", "FlatAutomaton", "LazyAutomaton", "AutomatonBounds",
+           "explore_configs",
            "ExplorationLimitError", "exploration_limit", "approx_count", "MAX_CONFIGS", "MAX_EDGES", "MAX_WORK"]
 
 #: The most configurations :func:`explore_configs` explores (about 45 s and 1 GB of Python
@@ -46,6 +47,7 @@ MAX_EDGES = 10_000_000
 MAX_WORK = 40_000_000
 
 _LIMIT: ContextVar[int | None] = ContextVar("wncs_lp_exploration_limit", default=-1)
+_EDGE_LIMIT: ContextVar[int | None] = ContextVar("wncs_lp_exploration_edge_limit", default=None)
 
 
 @dataclass(frozen=True)
@@ -68,14 +70,16 @@ class AutomatonBounds:
 
 
 @contextmanager
-def exploration_limit(max_configs: int | None) -> Iterator[None]:
+def exploration_limit(max_configs: int | None, max_edges: int | None = None) -> Iterator[None]:
     """Within the block, :func:`explore_configs` stops past ``max_configs`` configurations
     (``None``: no budget at all; outside any block: :data:`MAX_CONFIGS`, :data:`MAX_EDGES`
-    and :data:`MAX_WORK`)."""
+    and :data:`MAX_WORK`) and, when given, past ``max_edges`` edges instead of :data:`MAX_EDGES`."""
     token = _LIMIT.set(max_configs)
+    token_e = _EDGE_LIMIT.set(max_edges)
     try:
         yield
     finally:
+        _EDGE_LIMIT.reset(token_e)
         _LIMIT.reset(token)
 
 
@@ -125,7 +129,8 @@ class _Budget:
         limit = _LIMIT.get()
         self.on = limit is not None
         self.max_configs = MAX_CONFIGS if limit in (-1, None) else int(limit)
-        self.max_edges = MAX_EDGES if self.on else float("inf")
+        edges = _EDGE_LIMIT.get()
+        self.max_edges = (MAX_EDGES if edges is None else int(edges)) if self.on else float("inf")
         self.places = max((_places(c) for c in initial[:1000]), default=1)
         self.work = 0
 
@@ -344,3 +349,72 @@ def explore_configs(
     n_proc = len(next(iter(delta_id))) if delta_id else 0
     flat = FlatAutomaton._make(f_nact, f_nout, f_nxt, f_did, f_prob, delta_id, n_proc)
     return ConfigAutomaton(configs, init_ids, actions, outcomes, index, flat)
+
+
+class LazyAutomaton:
+    """The configuration automaton explored on demand, for systems whose automaton is too large to
+    enumerate (a dozen processes on three servers; thirty-two on two).
+
+    Configurations are numbered as they are first seen -- the initial ones, then each outcome of a
+    configuration being expanded -- and a configuration is *expanded* (its actions and their merged
+    outcomes listed by the model's ``step``, as :func:`explore_configs` does) only when
+    :meth:`expand` is asked for it, e.g. when a simulation first visits it. Nothing is kept per
+    edge but four numbers in the caller's arrays (:meth:`wncs_lp.models.system.System.expand`).
+
+    Attributes
+    ----------
+    configs : list
+        The configurations seen so far; index = id.
+    index : dict
+        Configuration -> id.
+    initial : list[int]
+    actions : list[list[tuple]]
+        Per configuration its feasible action labels (empty until it is expanded).
+    deltas : dict
+        Delivery vector -> its id (the row of the system's ``pairs.deltas``).
+    """
+
+    def __init__(self, initial: Sequence[Hashable], step: Callable[[Hashable], Iterable[tuple[tuple, list[Outcome]]]]):
+        self.configs: list = []
+        self.index: dict = {}
+        self.actions: list[list[tuple]] = []
+        self.deltas: dict[tuple[int, ...], int] = {}
+        self._step = step
+        self.initial = [self._intern(c) for c in initial]
+        self.n_expanded = 0
+        self.n_edges = 0
+
+    def _intern(self, cfg: Hashable) -> int:
+        i = self.index.get(cfg)
+        if i is None:
+            i = self.index[cfg] = len(self.configs)
+            self.configs.append(cfg)
+            self.actions.append([])
+        return i
+
+    def expand(self, config_ids: Iterable[int]) -> list[tuple[int, list[tuple], list[list[tuple[int, int, float]]]]]:
+        """Expand the configurations ``config_ids`` not yet expanded: per configuration (its id, its
+        action labels, per action its merged outcomes ``(next id, delivery-vector id, prob)``)."""
+        out = []
+        for c in config_ids:
+            c = int(c)
+            if self.actions[c]:
+                continue
+            labels, outs = [], []
+            for label, outs_raw in self._step(self.configs[c]):
+                merged: dict[tuple[int, tuple[int, ...]], float] = {}
+                for nxt, delta, prob in outs_raw:
+                    if prob > 0.0:
+                        key = (self._intern(nxt), tuple(int(x) for x in delta))
+                        merged[key] = merged.get(key, 0.0) + float(prob)
+                if not merged:
+                    raise ModelError(f"configuration {self.configs[c]!r}, action {label}: no outcome of positive probability")
+                labels.append(tuple(label))
+                outs.append([(n, self.deltas.setdefault(d, len(self.deltas)), p) for (n, d), p in merged.items()])
+                self.n_edges += len(merged)
+            if not labels:
+                raise ModelError(f"configuration {self.configs[c]!r} has no feasible action")
+            self.actions[c] = labels
+            self.n_expanded += 1
+            out.append((c, labels, outs))
+        return out

@@ -28,7 +28,7 @@ from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario
 from .assemble import build_aoi_mdp
-from .automaton import AutomatonBounds, ConfigAutomaton, ExplorationLimitError, approx_count
+from .automaton import AutomatonBounds, ConfigAutomaton, ExplorationLimitError, LazyAutomaton, approx_count
 from .cost import cost_tables
 
 __all__ = ["Model"]
@@ -100,6 +100,11 @@ class Model(ABC):
     @abstractmethod
     def explore(self) -> ConfigAutomaton:
         """Explore the configuration automaton (see :func:`~wncs_lp.models.automaton.explore_configs`)."""
+
+    def lazy_automaton(self) -> LazyAutomaton:
+        """The automaton unexplored, to be expanded configuration by configuration as they are met
+        (:class:`~wncs_lp.models.automaton.LazyAutomaton`; :meth:`System.lazy`)."""
+        raise ModelError(f"{self.scenario.source}: a {self.kind!r} model has no lazily explored automaton")
 
     @abstractmethod
     def initial_config(self) -> Hashable:
@@ -181,6 +186,11 @@ class Model(ABC):
         """The action labels (an (..., M) int array) as seen by process ``k`` alone: what it sends
         where, as labels of :meth:`private_scenario` (``k``)."""
         raise ModelError(f"{self.scenario.source}: a {self.kind!r} action has no per-process projection")
+
+    def project_group_labels(self, labels: np.ndarray, group: Sequence[int]) -> np.ndarray:
+        """The action labels (an (..., M) int array) as seen by the processes of ``group`` alone:
+        labels of :meth:`group_scenario` (``group``)."""
+        raise ModelError(f"{self.scenario.source}: a {self.kind!r} action has no per-group projection")
 
     def claims(self, config: Hashable, labels: np.ndarray) -> np.ndarray:
         """(A, M, N) 0/1 array: whether process k holds server m's resource under each action

@@ -46,7 +46,7 @@ from ..scenario import Scenario
 from .automaton import MAX_CONFIGS, MAX_EDGES, MAX_WORK, approx_count as _count, exploration_limit
 
 __all__ = ["SizeEstimate", "SizeLimitError", "estimate_size", "check_size", "build_checked", "available_memory",
-           "memory_limits", "matrix_free_fit"]
+           "memory_budget", "require_memory", "memory_limits", "matrix_free_fit"]
 
 #: Bytes per stored transition nonzero at the peak of a build followed by a stored-matrix value
 #: iteration: P's float64 data and int32 indices (12) and the sweeps' uint8 probability code (1),
@@ -461,3 +461,27 @@ def build_checked(scenario: Scenario, *, force: bool = False, need_lp: bool = Fa
     model = model_for(scenario)
     check_size(scenario, force=force, need_lp=need_lp, limit_bytes=limit_bytes, model=model, offer=offer)
     return model.build()
+
+
+def memory_budget(fraction: float = MEMORY_FRACTION) -> int:
+    """Bytes one large allocation may take now: ``fraction`` of :func:`available_memory` (the
+    smallest of the limits that apply to this process)."""
+    return int(fraction * available_memory())
+
+
+def require_memory(need: int, what: str, routes: list[str] | tuple[str, ...] = (), *,
+                   fraction: float = MEMORY_FRACTION, limit_bytes: int | None = None) -> None:
+    """Raise :class:`SizeLimitError` when ``need`` bytes (a Python integer: no overflow) exceed the
+    budget (``limit_bytes``, else ``fraction`` of the memory this process may still use), before
+    anything is allocated: one sentence naming ``what``, the need, the limit and the cheaper
+    ``routes``."""
+    need = int(need)
+    if limit_bytes is not None:
+        limit, words = int(limit_bytes), "the limit given"
+    else:
+        avail = available_memory()
+        limit, words = int(fraction * avail), f"{fraction:.0%} of {_limit_words(avail)}"
+    if need <= limit:
+        return
+    tail = f" Cheaper routes: {'; '.join(routes)}." if routes else ""
+    raise SizeLimitError(f"{what} would need about {_gib(need)}, over the limit of {_gib(limit)} ({words})." + tail)

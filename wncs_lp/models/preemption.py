@@ -92,7 +92,7 @@ import numpy as np
 from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario
-from .automaton import AutomatonBounds, ConfigAutomaton, SharedOutcomes, explore_configs
+from .automaton import AutomatonBounds, ConfigAutomaton, LazyAutomaton, SharedOutcomes, explore_configs
 from .base import Model
 
 __all__ = [
@@ -226,6 +226,11 @@ def preemption_automaton(scenario: Scenario) -> ConfigAutomaton:
     The slot dynamics after the action depend only on (job, stack, down) after the action is
     applied, so those are cached across configurations that share them.
     """
+    return explore_configs(initial_preemption_configs(scenario), preemption_step_function(scenario))
+
+
+def preemption_step_function(scenario: Scenario):
+    """The automaton's step: ``step(config)`` lists ``(action, [(next_config, delta, prob), ...])``."""
     _check_scenario(scenario)
     cache: dict[tuple, list] = {}
 
@@ -242,7 +247,7 @@ def preemption_automaton(scenario: Scenario) -> ConfigAutomaton:
             result.append((label, outs))
         return result
 
-    return explore_configs(initial_preemption_configs(scenario), step)
+    return step
 
 
 def _fmt_job(j: tuple) -> str:
@@ -293,6 +298,9 @@ class PreemptionModel(Model):
 
     def explore(self) -> ConfigAutomaton:
         return preemption_automaton(self.scenario)
+
+    def lazy_automaton(self) -> LazyAutomaton:
+        return LazyAutomaton(initial_preemption_configs(self.scenario), preemption_step_function(self.scenario))
 
     def automaton_bounds(self) -> AutomatonBounds:
         """b is one of 2^N arrival vectors; the job in service is none or (k, d <= T_k, g <= tau_hat_k)

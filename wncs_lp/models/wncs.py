@@ -36,7 +36,7 @@ import numpy as np
 from ..errors import ModelError
 from ..mdp import MDP
 from ..scenario import Scenario, ServerSpec, scenario_from_dict
-from .automaton import AutomatonBounds, ConfigAutomaton, explore_configs
+from .automaton import AutomatonBounds, ConfigAutomaton, LazyAutomaton, explore_configs
 from .base import Model
 
 __all__ = [
@@ -208,10 +208,21 @@ def feasible_actions(scenario: Scenario, config: tuple) -> list[tuple[int, ...]]
 def wncs_automaton(scenario: Scenario) -> ConfigAutomaton:
     """Explore the joint server configurations reachable from the all-idle one (with random
     arrivals: the :class:`ArrivalConfig` reachable from all-idle servers and fresh updates)."""
+    return explore_configs(wncs_initial(scenario), wncs_step(scenario))
+
+
+def wncs_initial(scenario: Scenario) -> list:
+    """The initial configuration: every server idle (with arrivals, and fresh updates)."""
+    return [initial_arrival_config(scenario) if scenario.has_arrivals else idle_config(scenario)]
+
+
+def wncs_step(scenario: Scenario):
+    """The automaton's step: ``step(config)`` yields ``(action, [(next_config, delta, prob), ...])``
+    for every feasible action (a generator: explore_configs' edge budget can stop a huge action set)."""
     if scenario.model.kind != "wncs":
         raise ModelError(f"{scenario.source}: build_wncs needs kind = \"wncs\", found {scenario.model.kind!r}")
     if scenario.has_arrivals:
-        return _arrival_automaton(scenario)
+        return _arrival_step(scenario)
     servers = scenario.servers
     N = scenario.n_processes
     steps = [lru_cache(maxsize=None)(lambda st, a, s=s: server_step(s, st, a)) for s in servers]
@@ -232,7 +243,7 @@ def wncs_automaton(scenario: Scenario) -> ConfigAutomaton:
                 outs.append((tuple(c[0] for c in combo), tuple(delta), prob))
             yield action, outs
 
-    return explore_configs([idle_config(scenario)], step)
+    return step
 
 
 def _generations(scenario: Scenario, sensor_cap: tuple[int, ...]):
@@ -255,9 +266,9 @@ def _generations(scenario: Scenario, sensor_cap: tuple[int, ...]):
     return draws
 
 
-def _arrival_automaton(scenario: Scenario) -> ConfigAutomaton:
-    """The automaton over :class:`ArrivalConfig`: the servers' slot with the jobs' ages, then the
-    sensors' generations (independent of the action and the channels)."""
+def _arrival_step(scenario: Scenario):
+    """The step of the automaton over :class:`ArrivalConfig`: the servers' slot with the jobs' ages,
+    then the sensors' generations (independent of the action and the channels)."""
     servers = scenario.servers
     N = scenario.n_processes
     sensor_cap, job_cap = useful_ages(scenario)
@@ -285,7 +296,7 @@ def _arrival_automaton(scenario: Scenario) -> ConfigAutomaton:
                 outs.extend((ArrivalConfig(nsrv, nages, nalpha), delta, prob * pa) for nalpha, pa in nexts)
             yield action, outs
 
-    return explore_configs([initial_arrival_config(scenario)], step)
+    return step
 
 
 def initial_arrival_config(scenario: Scenario) -> ArrivalConfig:
@@ -368,6 +379,9 @@ class WncsModel(Model):
 
     def explore(self) -> ConfigAutomaton:
         return wncs_automaton(self.scenario)
+
+    def lazy_automaton(self) -> LazyAutomaton:
+        return LazyAutomaton(wncs_initial(self.scenario), wncs_step(self.scenario))
 
     def automaton_bounds(self) -> AutomatonBounds:
         """A server's configuration holds U - 1 uplink places and D downlink places (each empty or
@@ -490,6 +504,14 @@ class WncsModel(Model):
     def project_labels(self, labels: np.ndarray, k: int) -> np.ndarray:
         """a^k_m = 1 where a_m = k + 1 (process k sent to server m), else 0."""
         return (np.asarray(labels) == k + 1).astype(np.int64)
+
+    def project_group_labels(self, labels: np.ndarray, group: Sequence[int]) -> np.ndarray:
+        """a^G_m = i + 1 where a_m = group[i] + 1 (a process of the group sent to server m, renamed
+        as in :meth:`project_group`), else 0."""
+        group = _checked_group(group, self.scenario.n_processes)
+        rename = np.zeros(self.scenario.n_processes + 1, dtype=np.int64)
+        rename[[k + 1 for k in group]] = np.arange(1, len(group) + 1)
+        return rename[np.asarray(labels, dtype=np.int64)]
 
     def claims(self, config: tuple, labels: np.ndarray) -> np.ndarray:
         """Who takes slot t + U_m of server m's timeline: process k claims it when

@@ -48,8 +48,12 @@ class Policy(ABC):
     #: The rule reads the AoI only through the system's cost tables (or not at all), so it is
     #: defined for any AoI, also past the cap: :meth:`on_system` moves it to another system.
     aoi_free: bool = False
+    #: Whether the policy works on a lazily explored system (:meth:`System.expand`): it asks for
+    #: nothing but the configurations it is shown. Others need the whole automaton and refuse one.
+    explores_lazily: bool = False
 
     def __init__(self, system: System):
+        self.refuse_lazy(system)
         self.system = system
 
     def on_system(self, system: System) -> "Policy":
@@ -72,6 +76,16 @@ class Policy(ABC):
         if isinstance(getattr(other, "_cache", None), dict):
             other._cache = {}
         return other
+
+    @classmethod
+    def refuse_lazy(cls, system: System) -> None:
+        """Raise :class:`PolicyError` when ``system`` is explored lazily and this policy needs its
+        whole automaton (:attr:`explores_lazily` false), naming the policies that run there."""
+        if getattr(system, "is_lazy", False) and not cls.explores_lazily:
+            raise PolicyError(
+                f"{cls.__name__} needs the whole configuration automaton, which {system.scenario.source} has too many "
+                "configurations to enumerate (it is explored lazily, configuration by configuration as a simulation "
+                "meets them); policies that run there: the bound's policy (relaxations 1 and 3), greedy, static")
 
     @abstractmethod
     def act(self, tau: np.ndarray, config_ids: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:

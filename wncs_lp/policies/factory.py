@@ -217,7 +217,9 @@ def policy_for(
     t0 = time.perf_counter()
     if isinstance(assignment, str):
         assignment = parse_assignment(assignment, scenario)
-    system = System.from_scenario(scenario)
+    # a policy that needs no MDP runs on a lazily explored system where the automaton is too large to enumerate
+    lean = name not in NEED_MDP and name != OPTIMAL and not need_mdp
+    system = System.from_scenario(scenario, explore="auto" if lean else "full")
     mdp = solution = None
     if name == OPTIMAL:
         run = solve_scenario(scenario, method, constrained=False, force=force, threads=threads, progress=prog,

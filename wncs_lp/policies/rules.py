@@ -26,6 +26,10 @@ __all__ = [
 ]
 
 
+#: Most (configuration, ranking) actions a rank rule keeps cached (about 200 bytes each).
+CACHE_MAX = 1_000_000
+
+
 class TauIndependentPolicy(Policy):
     """A policy whose action distribution depends on the configuration C only.
 
@@ -76,6 +80,7 @@ class RandomPolicy(TauIndependentPolicy):
     """Uniformly random over the feasible actions of the configuration (the paper's random policy)."""
 
     def __init__(self, system: System):
+        self.refuse_lazy(system)
         super().__init__(system, [np.full(n, 1.0 / n) for n in system.n_actions], name="random")
         self.randomised = True
 
@@ -91,10 +96,12 @@ class RankRulePolicy(Policy):
     """A deterministic policy whose action depends on C and on the ranking of the processes.
 
     The ranking is by current cost q_k(tau_k), descending, ties towards the lower index. The
-    action of each (C, ranking) met is computed once by :meth:`rule` and cached.
+    action of each (C, ranking) met is computed once by :meth:`rule` and cached. It works on a
+    lazily explored system (it reads only the configurations it is shown).
     """
 
     aoi_free = True
+    explores_lazily = True
 
     def __init__(self, system: System):
         super().__init__(system)
@@ -124,6 +131,7 @@ class RankRulePolicy(Policy):
 
     def act(self, tau, config_ids, rng=None):
         tau, c = self._check_inputs(tau, config_ids)
+        self.system.expand(c)
         order = self.ranking(tau)
         keys = c.astype(object if self._pow.dtype == object else np.int64) * self._base + order @ self._pow
         uniq, first, inv = np.unique(keys, return_index=True, return_inverse=True)  # first: a row of each key
@@ -131,6 +139,8 @@ class RankRulePolicy(Policy):
         for i, key in enumerate(uniq.tolist()):
             j = self._cache.get(key)
             if j is None:
+                if len(self._cache) >= CACHE_MAX:  # tens of processes: rankings rarely repeat; memory stays bounded
+                    self._cache.clear()
                 r = int(first[i])
                 j = self._cache[key] = self._local(int(c[r]), tuple(int(x) for x in order[r]))
             out[i] = j

@@ -4,21 +4,26 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import PolicyError
 from ..mdp import MDP
+from ..models.guard import memory_budget, require_memory
 from ..models.system import System
 from ..solvers.dp import evaluate_policy
 from .base import Policy
 from .rules import RandomPolicy, TauIndependentPolicy
 
-__all__ = ["ProcessPoisson", "SeparableGreedyPolicy", "SuboptimalPolicy", "separable_table"]
+__all__ = ["ProcessPoisson", "SeparableGreedyPolicy", "SuboptimalPolicy", "separable_table", "table_bytes",
+           "pair_values", "chain_bytes"]
 
 #: Elements of the (configurations, actions, outcomes, tau) block one step of a table builds.
 TABLE_BLOCK = 1 << 22
+#: Entries (states x actions x outcomes x processes) of one block of the per-state lookahead.
+STATE_BLOCK = 1 << 22
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,8 +51,9 @@ class ProcessPoisson:
 
 
 def separable_table(system: System, k: int, h: np.ndarray, column: np.ndarray | None = None) -> np.ndarray:
-    """W_k[C, a, tau_k] = sum_o P(o | C, a) h_k(tau'_k, column_k(C'_o)), tau'_k the AoI after
-    outcome o (:meth:`System.next_tau`); +inf on infeasible actions.
+    """W_k[p, tau_k] = sum_o P(o | p) h_k(tau'_k, column_k(C'_o)) for every feasible pair p of
+    :attr:`System.pairs` (local action j of configuration c is pair ``pairs.first[c] + j``),
+    tau'_k the AoI after outcome o (:meth:`System.next_tau`).
 
     Parameters
     ----------
@@ -59,29 +65,58 @@ def separable_table(system: System, k: int, h: np.ndarray, column: np.ndarray | 
     column : (|C|,) int array, optional
         The column of ``h`` each configuration reads (default: the identity, n_cols = |C|).
 
+    Returns
+    -------
+    (P, tau_hat_k) float array
+        One row per feasible pair (no padding to the largest action set: :func:`table_bytes`).
+
     Only the outcomes of positive probability are visited, in blocks of at most
-    :data:`TABLE_BLOCK` (outcome, tau) entries, so the memory is the table itself,
-    |C| * A_max * tau_hat_k floats.
+    :data:`TABLE_BLOCK` (outcome, tau) entries, so the memory is the table itself.
     """
-    ot = system.outcome_tables
+    pt = system.pairs
     K = int(system.caps[k])
-    nC, A, O = ot.nxt.shape
-    col = np.arange(nC) if column is None else np.asarray(column, dtype=np.int64)
+    P, O = pt.prob.shape
+    col = np.arange(system.n_configs) if column is None else np.asarray(column, dtype=np.int64)
     t_next0 = np.minimum(np.arange(1, K + 1) + 1, K)
-    real = np.flatnonzero(ot.prob.reshape(-1) > 0)  # sorted: (C, a) rows stay contiguous
-    W = np.zeros((nC * A, K))
+    real = np.flatnonzero(pt.prob.reshape(-1) > 0)  # sorted: a pair's outcomes stay contiguous
+    dk_all = pt.deltas[:, k]
+    W = np.zeros((P, K))
     step = max(1, TABLE_BLOCK // K)
     for i0 in range(0, real.size, step):
         idx = real[i0:i0 + step]
-        dk = ot.delta.reshape(-1, ot.delta.shape[-1])[idx, k][:, None]
+        dk = dk_all[pt.delta.reshape(-1)[idx]][:, None]
         t_next = np.where(dk > 0, np.minimum(t_next0, dk), t_next0)
-        vals = h[col[ot.nxt.reshape(-1)[idx]][:, None], t_next - 1] * ot.prob.reshape(-1)[idx][:, None]
+        vals = h[col[pt.nxt.reshape(-1)[idx]][:, None], t_next - 1] * pt.prob.reshape(-1)[idx][:, None]
         rows = idx // O
         starts = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
         W[rows[starts]] += np.add.reduceat(vals, starts, axis=0)
-    W = W.reshape(nC, A, K)
-    W[~system.action_valid] = np.inf
     return W
+
+
+def table_bytes(system: System, processes: Sequence[int] | None = None) -> int:
+    """Bytes of the tables :func:`separable_table` builds for ``processes`` (default all):
+    8 P tau_hat_k each, P the feasible pairs (no padding). Python integers: no overflow."""
+    ks = range(system.n_processes) if processes is None else processes
+    return 8 * int(system.pairs.n_pairs) * sum(int(system.caps[k]) for k in ks)
+
+
+def pair_values(system: System, tables: Sequence[np.ndarray], tau: np.ndarray, c: np.ndarray,
+                members: Sequence[Sequence[int]] | None = None) -> np.ndarray:
+    """(R, A_max) sum_i tables[i][p, tau_{G_i}] over the pairs p of each state's configuration
+    (+inf on actions a configuration lacks); ``members[i]`` the processes table i is indexed by
+    (default: table k by process k alone, flat AoI index of the group otherwise)."""
+    pt = system.pairs
+    p, valid = pt.padded(c, system.max_actions)
+    v = np.zeros(p.shape)
+    for i, W in enumerate(tables):
+        g = (i,) if members is None else tuple(members[i])
+        if len(g) == 1:
+            t = tau[:, g[0]] - 1
+        else:
+            t = np.ravel_multi_index(tuple(tau[:, k] - 1 for k in g), tuple(int(system.caps[k]) for k in g))
+        v += W[p, t[:, None]]
+    v[~valid] = np.inf
+    return v
 
 
 class SeparableGreedyPolicy(Policy):
@@ -94,9 +129,15 @@ class SeparableGreedyPolicy(Policy):
         \\tau'_k = \\min(\\tau_k + 1, \\delta_k \\text{ if } \\delta_k > 0, \\hat\\tau_k),
 
     ties to the first action of the configuration (exact comparison). The expectation is
-    separable, so it is precomputed as tables W_k[C, a, tau_k] (:func:`separable_table`) and the
-    value of action a in state (tau, C) is ``sum_k W_k[C, a, tau_k]``: nothing proportional to
-    the tau box is ever formed.
+    separable, so it is precomputed as tables W_k[p, tau_k] over the feasible pairs p
+    (:func:`separable_table`) and the value of action a in state (tau, C) is
+    ``sum_k W_k[p(C, a), tau_k]``: nothing proportional to the tau box is ever formed.
+
+    The tables take 8 P sum_k tau_hat_k bytes (:func:`table_bytes`; P the feasible pairs: 700
+    MB for the paper's four processes four times at cap 40). When that exceeds the memory budget
+    (:func:`wncs_lp.models.guard.memory_budget`) the policy computes the same expectation state
+    by state instead (``lookahead == "per-state"``: R x A_max x O_max x N lookups a call, in
+    blocks of :data:`STATE_BLOCK` entries; slower, nothing stored).
 
     Parameters
     ----------
@@ -107,16 +148,21 @@ class SeparableGreedyPolicy(Policy):
         ``column[k]``, shape (|C|,): the column of ``h[k]`` each configuration reads (default:
         the identity). Anything with attributes ``h`` and ``column`` (a
         :class:`wncs_lp.bounds.ValueTables`) may be passed as ``h`` alone.
+    lookahead : {"auto", "tables", "per-state"}
+        ``"auto"``: the tables when they fit the budget, else per state; ``"tables"`` refuses
+        (:class:`~wncs_lp.errors.SizeLimitError`) when they do not fit.
 
     Attributes
     ----------
-    tables : tuple of arrays
-        W_k, shape (|C|, A_max, tau_hat_k); +inf on infeasible actions.
+    tables : tuple of arrays or None
+        W_k, shape (P, tau_hat_k) (None per state).
+    lookahead : str
+        ``"tables"`` or ``"per-state"``.
     """
 
     name = "separable-greedy"
 
-    def __init__(self, system: System, h, column=None):
+    def __init__(self, system: System, h, column=None, *, lookahead: str = "auto"):
         super().__init__(system)
         if hasattr(h, "h") and hasattr(h, "column") and column is None:
             h, column = h.h, h.column
@@ -125,9 +171,21 @@ class SeparableGreedyPolicy(Policy):
         if len(h) != N or len(cols) != N:
             raise PolicyError(f"expected one value table and one column map per process ({N}), "
                               f"found {len(h)} and {len(cols)}")
+        if lookahead not in ("auto", "tables", "per-state"):
+            raise PolicyError(f"lookahead must be 'auto', 'tables' or 'per-state', got {lookahead!r}")
         for k in range(N):
             self._check_table(k, np.asarray(h[k]), cols[k])
-        self.tables = tuple(separable_table(system, k, np.asarray(h[k], float), cols[k]) for k in range(N))
+        self._h = tuple(np.asarray(hk, float) for hk in h)
+        self._cols = tuple(np.arange(system.n_configs) if c is None else np.asarray(c, np.int64) for c in cols)
+        need = table_bytes(system)
+        if lookahead == "tables":
+            require_memory(need, f"the greedy policy's lookahead tables ({N} processes x {system.pairs.n_pairs:,} "
+                           "feasible pairs x tau_hat)", ["lookahead='per-state' (nothing stored, slower)"])
+        elif lookahead == "auto":
+            lookahead = "tables" if need <= memory_budget() else "per-state"
+        self.lookahead = lookahead
+        self.tables = (tuple(separable_table(system, k, self._h[k], self._cols[k]) for k in range(N))
+                       if lookahead == "tables" else None)
 
     def _check_table(self, k: int, h: np.ndarray, col) -> None:
         n_cols = self.system.n_configs if col is None else int(np.max(col)) + 1
@@ -141,26 +199,59 @@ class SeparableGreedyPolicy(Policy):
             raise PolicyError(f"process {k + 1}: the value table has non-finite entries")
 
     def values(self, tau: np.ndarray, config_ids: np.ndarray) -> np.ndarray:
-        """(R, A_max) greedy values sum_k W_k[C, a, tau_k] (+inf on infeasible actions)."""
+        """(R, A_max) greedy values sum_k W_k[p(C, a), tau_k] (+inf on infeasible actions)."""
         tau, c = self._check_inputs(tau, config_ids)
-        v = self.tables[0][c, :, tau[:, 0] - 1].copy()
-        for k in range(1, self.system.n_processes):
-            v += self.tables[k][c, :, tau[:, k] - 1]
-        return v
+        if self.tables is not None:
+            return pair_values(self.system, self.tables, tau, c)
+        s = self.system
+        pt = s.pairs
+        out = np.empty((c.size, s.max_actions))
+        block = max(1, STATE_BLOCK // (s.max_actions * pt.n_outcomes * s.n_processes))
+        for i in range(0, c.size, block):
+            p, valid = pt.padded(c[i:i + block], s.max_actions)
+            prob, nxt, did = pt.prob[p], pt.nxt[p], pt.delta[p]  # (R, A, O)
+            v = np.zeros(prob.shape)
+            for k in range(s.n_processes):
+                dk = pt.deltas[did, k]
+                t = np.minimum(tau[i:i + block, k] + 1, int(s.caps[k]))[:, None, None]
+                v += self._h[k][self._cols[k][nxt], np.where(dk > 0, np.minimum(t, dk), t) - 1]
+            w = (prob * v).sum(axis=-1)
+            w[~valid] = np.inf
+            out[i:i + block] = w
+        return out
 
     def act(self, tau, config_ids, rng=None):
         return np.argmin(self.values(tau, config_ids), axis=1).astype(np.int64)
 
+    def describe(self):
+        return {**super().describe(), "lookahead": self.lookahead}
+
+
+#: Bytes a transition of a process chain (tau_k, C) costs at the peak of its Poisson solve: its
+#: triplets, the CSR matrix, the chain's copy, I - P with a column replaced and the solver's copy
+#: (measured: 16 sensors at cap 20, 21 million transitions a chain, ~1.2 GB above the system's own
+#: 0.9 GB with the tables; BiCGSTAB answered, no LU).
+CHAIN_BYTES_PER_NNZ = 64
+
+
+def chain_bytes(system: System) -> int:
+    """Peak bytes of :class:`SuboptimalPolicy`'s construction: the largest process chain's Poisson
+    solve (one at a time; :data:`CHAIN_BYTES_PER_NNZ` a transition, |C| tau_hat_k rows of
+    (pairs x outcomes) transitions) plus the greedy tables kept (:func:`table_bytes`)."""
+    nnz = int(np.count_nonzero(system.pairs.prob)) * int(system.caps.max())
+    return CHAIN_BYTES_PER_NNZ * nnz + table_bytes(system)
+
 
 def _solve_process(system: System, k: int, w: np.ndarray) -> ProcessPoisson:
-    """The Poisson equation of (tau_k, C) under action-outcome weights w[C, a, o]."""
-    ot = system.outcome_tables
+    """The Poisson equation of (tau_k, C) under pair-outcome weights w[p, o] (pairs of :attr:`System.pairs`)."""
+    pt = system.pairs
     K = int(system.caps[k])
     nC = system.n_configs
-    c_idx, j_idx, o_idx = np.nonzero(w > 0)
-    wt = w[c_idx, j_idx, o_idx]
-    nxt = ot.nxt[c_idx, j_idx, o_idx]
-    dk = ot.delta[c_idx, j_idx, o_idx, k]
+    p_idx, o_idx = np.nonzero(w > 0)
+    c_idx = pt.config_of[p_idx]
+    wt = w[p_idx, o_idx]
+    nxt = pt.nxt[p_idx, o_idx]
+    dk = pt.deltas[pt.delta[p_idx, o_idx], k]
     t = np.arange(1, K + 1)
     t_next = np.minimum(t[None, :] + 1, K)
     t_next = np.where(dk[:, None] > 0, np.minimum(t_next, dk[:, None]), t_next)
@@ -202,19 +293,35 @@ class SuboptimalPolicy(SeparableGreedyPolicy):
     poisson : tuple of ProcessPoisson
     base_gain : float
         sum_k g_k, the exact gain of the base policy (Lemma 2).
-    tables : tuple of arrays
-        W_k, shape (|C|, A_max, tau_hat_k); +inf on infeasible actions.
+    tables : tuple of arrays or None
+        W_k, shape (P, tau_hat_k) over the feasible pairs (None when computed per state).
     build_seconds : float
+
+    Raises
+    ------
+    PolicyError
+        A lazily explored system (the chains need every configuration).
+    SizeLimitError
+        The chains would not fit the memory budget (:func:`chain_bytes`).
     """
 
     name = "suboptimal"
 
     def __init__(self, system: System, base: TauIndependentPolicy | None = None):
         t0 = time.perf_counter()
+        self.refuse_lazy(system)
+        K, nnz = int(system.caps.max()), int(np.count_nonzero(system.pairs.prob))
+        require_memory(chain_bytes(system), f"the suboptimal policy's Poisson chains (tau_k, C) over the "
+                       f"{system.n_configs:,} joint configurations (up to {K * system.n_configs:,} unknowns and "
+                       f"{K * nnz:,} transitions each)",
+                       ["the bound's policy (wncs-lp bound --policy; its lookahead lives on private "
+                        "configurations)", "a smaller cap (--set tau_cap=...)"])
         base = base if base is not None else RandomPolicy(system)
         if base.system is not system:
             raise PolicyError("the base policy belongs to another system")
-        w = base.probs[:, :, None] * system.outcome_tables.prob  # (C, A, O) probability of (action, outcome)
+        pt = system.pairs
+        c_of = pt.config_of
+        w = base.probs[c_of, np.arange(pt.n_pairs) - pt.first[c_of]][:, None] * pt.prob  # (P, O): action and outcome
         poisson = tuple(_solve_process(system, k, w) for k in range(system.n_processes))
         super().__init__(system, [p.h for p in poisson])
         self.base = base

@@ -3,15 +3,17 @@ the per-axis interval hull that bounds the reachable set, and the test on the au
 whether the hull's certificate closes on the reachable MDP's gain (:func:`drains_to_initial`)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ...errors import PolicyError, SolverError
+from ...errors import PolicyError, SizeLimitError, SolverError
+from ...models.automaton import approx_count
 from ...models.system import System
 
-__all__ = ["BoxLayout", "drains_to_initial", "resolve_domain", "saturation", "check_local_actions", "DOMAINS",
+__all__ = ["BoxLayout", "box_count", "layout_states", "drains_to_initial", "resolve_domain", "saturation", "check_local_actions", "DOMAINS",
            "DOMAINS_OF_LAYOUT"]
 
 #: ``domain`` values of the solvers (see :mod:`wncs_lp.solvers.matrix_free`).
@@ -83,6 +85,8 @@ class BoxLayout:
     @classmethod
     def from_system(cls, system: System, domain: str = "hull") -> "BoxLayout":
         """The per-axis interval hull of the reachable set (``domain="hull"``) or the full box."""
+        if system.is_lazy:
+            layout_states(system)  # refuses with the reason
         caps = np.asarray(system.caps, dtype=np.int64)
         N, nC = caps.size, system.n_configs
         if domain == "box":
@@ -93,6 +97,10 @@ class BoxLayout:
         else:
             raise SolverError(f"unknown layout domain {domain!r}; expected 'hull' or 'box'")
         dims = hi - lo + 1
+        n = box_count(dims)
+        if n >= 2**62:  # int64 offsets would wrap (the paper's four processes four times at cap 40: 10^24 states)
+            raise SizeLimitError(f"the matrix-free layout would have {approx_count(n)} states, beyond what int64 indices "
+                                 "address (and any memory); simulate instead (Monte Carlo)")
         strides = np.ones((nC, N), np.int64)
         for k in range(N - 2, -1, -1):
             strides[:, k] = strides[:, k + 1] * dims[:, k + 1]
@@ -134,6 +142,28 @@ class BoxLayout:
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {"caps": self.caps, "lo": self.lo, "dims": self.dims}
+
+
+def box_count(dims: np.ndarray) -> int:
+    """sum over configurations of prod_k dims[c, k] as a Python integer (no int64 overflow)."""
+    return sum(math.prod(int(d) for d in row) for row in np.asarray(dims).tolist())
+
+
+def layout_states(system: System, domain: str = "hull") -> int:
+    """The number of states of :meth:`BoxLayout.from_system` (a Python integer, however large),
+    without building the layout.
+
+    Raises
+    ------
+    SizeLimitError
+        A lazily explored system (:attr:`System.is_lazy`): its configurations are not all known."""
+    if system.is_lazy:
+        raise SizeLimitError(f"{system.scenario.source}: the configuration automaton is explored lazily (too large "
+                             "to enumerate), so no matrix-free layout exists; simulate instead (Monte Carlo)")
+    if domain == "box":
+        return system.n_configs * math.prod(int(c) for c in system.caps)
+    lo, hi = interval_hull(system)
+    return box_count(hi - lo + 1)
 
 
 def interval_hull(system: System) -> tuple[np.ndarray, np.ndarray]:

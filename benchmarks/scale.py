@@ -1,0 +1,122 @@
+"""Issue 33 item 5 and issue 39: bounds and policies at 12-32 processes, their time and peak memory.
+
+    python benchmarks/scale.py --out benchmarks/scale.csv                       # the shipped instances
+    python benchmarks/scale.py --instances bounds_lab16 --relaxation 1 --out /tmp/s.csv
+    python benchmarks/scale.py --instances lab:32,p1234:8 --compare greedy --out /tmp/s.csv
+
+Every instance runs as ``wncs-lp bound INSTANCE --policy --json`` in its own process (so its peak
+resident memory is its own: ``ru_maxrss`` of the child), with the command's defaults unless told:
+relaxation ``auto``, the bound's policy and the comparators simulated 20 x 40,000 slots (seed 0),
+the gap against the one-sided 95% upper confidence limit. Instances: the shipped scenarios
+``bounds_p1234_x4`` (16 processes, cap 40), ``bounds_lab16`` (16 sensors), ``bounds_fog12`` (12
+processes on three servers, explored lazily), and generated ones: ``lab:N`` (N sensors of the lab
+shape, cap 20) and ``p1234:R`` (the paper's four processes R times, cap 40), written to a
+temporary folder.
+
+One CSV row per policy (and one for the bound) with the seconds of the whole command, its CPU
+seconds, its peak memory and the 1-minute load average when it started: the machine is shared
+(2 cores), so the wall time is worth only as much as the load says; the CPU time is the cost.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from wncs_lp import load_scenario, scenario_path  # noqa: E402
+from wncs_lp.files import atomic_write_text  # noqa: E402
+
+COLUMNS = ["instance", "processes", "explored", "relaxation", "row", "gain", "upper", "gap", "lower_bound",
+           "seconds", "cpu_seconds", "peak_gib", "load1", "note"]
+DEFAULT = ["bounds_p1234_x4", "bounds_lab16", "bounds_fog12"]
+A_LAB = [1.05, 1.1, 1.15, 1.2, 1.3]
+TYPES = ["[[1.02, 1, 0, 1], [0, 1, 0.2, 0], [0, 0, 1, 0], [0, 0, 0, 1.01]]", "[[1, 1, 0], [0, 1.02, 0], [0, 0, 1]]",
+         "[[1.02, 1], [0, 1]]", "[[1.02]]"]
+
+
+def _generated(spec: str, folder: Path) -> Path:
+    """``lab:N`` or ``p1234:R`` as a TOML file in ``folder`` (the servers of the shipped lab16 / x4)."""
+    kind, _, n = spec.partition(":")
+    n = int(n)
+    base = scenario_path("bounds_lab16" if kind == "lab" else "bounds_p1234_x4").read_text()
+    head, _, rest = base.partition("[[process]]")
+    servers = rest[rest.index("[[server]]"):]
+    if kind == "lab":
+        procs = [(f"sensor-{i + 1:02d}", f"[[{A_LAB[i % 5]}]]") for i in range(n)]
+    elif kind == "p1234":
+        procs = [(f"process-{t + 1}{chr(97 + r)}", TYPES[t]) for r in range(n) for t in range(4)]
+    else:
+        raise SystemExit(f"unknown instance {spec!r}: expected a shipped name, lab:N or p1234:R")
+    text = head + "".join(f'[[process]]\nname = "{a}"\nA = {b}\nR = "identity"\n\n' for a, b in procs) + servers
+    path = folder / f"{kind}{n}.toml"
+    path.write_text(text)
+    return path
+
+
+def run(instance: str, args, folder: Path) -> list[dict]:
+    path = _generated(instance, folder) if ":" in instance else scenario_path(instance)
+    cmd = [sys.executable, "-m", "wncs_lp", "bound", str(path), "--policy", "--json", "--relaxation", args.relaxation,
+           "--compare", args.compare, "--slots", str(args.slots), "--reps", str(args.reps)]
+    load = round(os.getloadavg()[0], 2)
+    t0 = time.perf_counter()
+    with tempfile.TemporaryFile("w+") as fo, tempfile.TemporaryFile("w+") as fe:
+        child = subprocess.Popen(cmd, stdout=fo, stderr=fe, text=True)
+        _, status, usage = os.wait4(child.pid, 0)  # this child's own CPU time and peak resident memory
+        child.returncode = os.waitstatus_to_exitcode(status)
+        fo.seek(0)
+        fe.seek(0)
+        stdout, stderr = fo.read(), fe.read()
+    seconds = time.perf_counter() - t0
+    common = {"instance": instance, "seconds": round(seconds, 1), "cpu_seconds": round(usage.ru_utime + usage.ru_stime, 1),
+              "peak_gib": round(usage.ru_maxrss / 2**20, 2), "load1": load}
+    if child.returncode not in (0, 1):
+        return [{**common, "row": "error", "note": (stderr.strip().splitlines() or ["?"])[-1][:300]}]
+    data = json.loads(stdout)
+    b = data["bound"]
+    rows = [{**common, "processes": load_scenario(path).n_processes, "explored":
+             data.get("explored", ""), "relaxation": b["relaxation"], "row": "bound", "lower_bound": b["lower_bound"],
+             "note": b["status"]}]
+    for p in data["policies"]["policies"]:
+        rows.append({**common, "explored": data.get("explored", ""), "relaxation": b["relaxation"], "row": p["policy"],
+                     "gain": p["gain"], "upper": p["gain_upper"], "gap": p["gap"], "lower_bound": b["lower_bound"]})
+    for s in data["policies"].get("skipped", []):
+        rows.append({**common, "row": s["policy"], "note": "not evaluated: " + s["reason"][:200]})
+    return rows
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--instances", default=",".join(DEFAULT))
+    ap.add_argument("--relaxation", default="auto")
+    ap.add_argument("--compare", default="suboptimal,static,greedy")
+    ap.add_argument("--slots", type=int, default=40_000)
+    ap.add_argument("--reps", type=int, default=20)
+    ap.add_argument("--out", type=Path, required=True)
+    args = ap.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for inst in args.instances.split(","):
+            got = run(inst.strip(), args, Path(tmp))
+            rows += got
+            for r in got:
+                print("  ".join(f"{k}={r[k]}" for k in COLUMNS if r.get(k) not in (None, "")), flush=True)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore")
+    w.writeheader()
+    w.writerows(rows)
+    atomic_write_text(args.out, buf.getvalue())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
