@@ -56,3 +56,31 @@ def test_size_decides_the_route(p12):
     summary = policy_gaps(res, system, ["greedy"]).summary()
     assert summary["how"] == "exact" and summary["policies"][0]["policy"] == "greedy"
     assert np.isfinite(summary["policies"][0]["gap"])
+
+
+def test_projected_value_on_a_lazy_system_is_the_enumerated_tables_value():
+    """The control variate's h(tau, C) on a lazily explored system (columns of configurations met
+    after the bound found by projection) equals the bound's own tables on the enumerated system."""
+    import numpy as np
+
+    import wncs_lp
+    from wncs_lp.bounds import lower_bound
+    from wncs_lp.bounds.projected import ProjectedValue
+    from wncs_lp.models.system import System
+
+    sc = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p1234"), ["tau_cap=5"])
+    full = System.from_scenario(sc)
+    lazy = System.from_scenario(sc, explore="lazy")
+    res_full, res_lazy = lower_bound(full, 1), lower_bound(lazy, 1)
+    known = len(lazy.automaton.configs)
+    lazy.expand(np.arange(known))  # configurations the bound's columns never saw
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        lazy.expand(np.arange(len(lazy.automaton.configs)))
+    c_lazy = np.arange(len(lazy.automaton.configs))
+    assert c_lazy.size > known  # the check reaches past the bound's columns
+    c_full = np.array([full.automaton.index[lazy.automaton.configs[c]] for c in c_lazy])
+    tau = rng.integers(1, 6, size=(c_lazy.size, sc.n_processes))
+    got = ProjectedValue(res_lazy, lazy)(tau, c_lazy)
+    want = res_full.tables.value(tau, c_full)
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())

@@ -43,6 +43,7 @@ from ..simulate import simulate
 from .index import IndexPolicy, whittle_indices
 from .lookahead import LookaheadPolicy
 from .policy import bound_policy
+from .projected import PROJECTED, ProjectedValue
 from .result import BoundResult
 
 __all__ = ["PolicyGap", "GapReport", "policy_gaps", "policy_by_name", "DEFAULT_POLICIES", "EXACT_MAX_STATES"]
@@ -176,8 +177,10 @@ def _exact(policy: Policy, system: System, lb: float, progress: bool) -> PolicyG
 class _TablesControl:
     """A bound's tables as the simulator's control variate, named after the relaxation."""
 
-    def __init__(self, bound: BoundResult):
-        self.value = bound.tables.value
+    def __init__(self, bound: BoundResult, system: System):
+        # on a lazily explored system the simulation meets configurations the bound's columns do not cover
+        lazy = system.is_lazy and bound.relaxation in PROJECTED
+        self.value = ProjectedValue(bound, system) if lazy else bound.tables.value
         self.name = f"the {bound.relaxation} tables"
 
 
@@ -268,7 +271,7 @@ def policy_gaps(
                     raise
                 use_exact = False
         rows.append(_monte_carlo(pol, bound.lower_bound, slots, reps, seed, burn_in, confidence,
-                                 _TablesControl(bound) if control else None))
+                                 _TablesControl(bound, system) if control else None))
     how = sorted({r.how for r in rows})
     return GapReport(float(bound.lower_bound), bound.relaxation, tuple(rows), "+".join(how), n,
                      time.perf_counter() - t0, tuple(skipped))

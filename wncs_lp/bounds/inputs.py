@@ -94,6 +94,8 @@ def bound_system(obj: Any) -> System:
 
 
 def _check_automaton(system: System) -> None:
+    if system.is_lazy:  # expanded on demand by its own model's step (checked above): no stored tables to audit
+        return
     auto = system.automaton
     nC = len(auto.configs)
     if len(auto.actions) != nC or len(auto.outcomes) != nC:
@@ -133,6 +135,8 @@ def _with_costs(system: System) -> System:
                       f"the bounds honour cost tables of one's own as the processes' cost field "
                       f"(docs/scenarios.md), which this one is not: {exc.expected}") from None
     model = model_for(new)
+    if system.is_lazy:  # explored again on demand from the edited scenario (costs do not change the moves)
+        return System.from_scenario(new, model, explore="lazy")
     model.__dict__["automaton"] = system.automaton  # Model.automaton is a cached property
     return System.from_automaton(new, system.automaton, model)
 
@@ -168,6 +172,8 @@ def check_private_chains(system: System, groups: Sequence[Sequence[int]], chains
         A group whose private chain does not reproduce its joint transitions (the message names
         the process(es), a configuration and an action, and why that can happen).
     """
+    if system.is_lazy:  # its own model's moves, expanded on demand: the private chains are built from the same model
+        return
     fl = system.automaton.flat(system.n_processes)
     n_pairs = int(fl.act_ptr[-1])
     pair_c = np.repeat(np.arange(system.n_configs), np.diff(fl.act_ptr))

@@ -30,6 +30,7 @@ from ..models.system import System
 from ..policies.base import Policy
 from ..policies.suboptimal import SeparableGreedyPolicy
 from .policy import TABLE_MAX_BYTES, GroupBoundPolicy
+from .projected import ProjectedBoundPolicy
 
 __all__ = ["LookaheadPolicy", "lookahead_policy"]
 
@@ -55,7 +56,9 @@ class LookaheadPolicy(Policy):
         paper's :class:`~wncs_lp.policies.suboptimal.SuboptimalPolicy`, ...) or on a grouped
         bound's group tables (:class:`~wncs_lp.bounds.GroupBoundPolicy`, every group's lookahead
         table precomputed). Its tables are copied into one flat array, each configuration's
-        entries AoI-major (the values of its actions at one AoI vector contiguous).
+        entries AoI-major (the values of its actions at one AoI vector contiguous). The greedy
+        policy of relaxations 1 and 3 (:class:`~wncs_lp.bounds.projected.ProjectedBoundPolicy`)
+        is read as it is, through its tables over the members' private pairs.
     candidates : int, optional
         Evaluate the lookahead value only for the ``candidates`` actions of least greedy value in
         each state (ties: the first); default every action (the exact two-step lookahead).
@@ -78,9 +81,9 @@ class LookaheadPolicy(Policy):
 
     def __init__(self, base: SeparableGreedyPolicy | GroupBoundPolicy, candidates: int | None = None,
                  threads: int | None = None, *, depth: int = 2, middle: int = 3):
-        if not isinstance(base, (SeparableGreedyPolicy, GroupBoundPolicy)):
+        if not isinstance(base, (SeparableGreedyPolicy, GroupBoundPolicy, ProjectedBoundPolicy)):
             raise PolicyError(f"the lookahead policy works on a greedy policy of separable or group tables "
-                              f"(SeparableGreedyPolicy, GroupBoundPolicy), got {type(base).__name__}")
+                              f"(SeparableGreedyPolicy, GroupBoundPolicy, ProjectedBoundPolicy), got {type(base).__name__}")
         if candidates is not None and not (isinstance(candidates, (int, np.integer)) and candidates >= 1):
             raise PolicyError(f"candidates must be a whole number >= 1 (or None: every action), got {candidates!r}")
         if depth not in (2, 3) or not (isinstance(middle, (int, np.integer)) and middle >= 1):
@@ -100,7 +103,12 @@ class LookaheadPolicy(Policy):
         c_of, j_of = np.nonzero(valid)  # the feasible pairs, configuration-major: p = first[c] + j
         count = np.asarray(s.n_actions, np.int64)
         first = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
-        if isinstance(base, SeparableGreedyPolicy):
+        projected = _NONE
+        if isinstance(base, ProjectedBoundPolicy):  # tables over the members' private pairs, as they are
+            blocks = [tuple(g) for g in base.lookahead.groups]
+            W, off, width, *arrays = base.lookahead.kernel_arrays()
+            projected = tuple(np.asarray(a, np.int64) for a in arrays)
+        elif isinstance(base, SeparableGreedyPolicy):
             if base.tables is None:
                 raise PolicyError("the lookahead policy needs the greedy policy's tables, which did not fit the "
                                   "memory budget (it computes its lookahead state by state)")
@@ -112,12 +120,14 @@ class LookaheadPolicy(Policy):
                 raise PolicyError("the lookahead policy needs every group's lookahead table; a group of this bound "
                                   f"is too large for one (over {TABLE_MAX_BYTES:,} bytes)")
             rows = [t[base.pair_row[c_of, j_of]] for t in base.lookahead]  # (P, prod tau_hat_G)
-        width = np.array([math.prod(int(caps[k]) for k in g) for g in blocks], np.int64)
-        off = np.concatenate([[0], np.cumsum(width * c_of.size)[:-1]]).astype(np.int64)
-        W = np.empty(int(np.sum(width)) * c_of.size)
-        for b, (r, w) in enumerate(zip(rows, width)):  # AoI-major within each configuration
-            dst = off[b] + (first[c_of] * w)[:, None] + np.arange(w)[None, :] * count[c_of][:, None] + j_of[:, None]
-            W[dst] = r
+        if projected is _NONE:
+            width = np.array([math.prod(int(caps[k]) for k in g) for g in blocks], np.int64)
+            off = np.concatenate([[0], np.cumsum(width * c_of.size)[:-1]]).astype(np.int64)
+            W = np.empty(int(np.sum(width)) * c_of.size)
+            for b, (r, w) in enumerate(zip(rows, width)):  # AoI-major within each configuration
+                dst = (off[b] + (first[c_of] * w)[:, None] + np.arange(w)[None, :] * count[c_of][:, None]
+                       + j_of[:, None])
+                W[dst] = r
         members = np.array([k for g in blocks for k in g], np.int64)
         mptr = np.concatenate([[0], np.cumsum([len(g) for g in blocks])]).astype(np.int64)
         stride = np.array([math.prod(int(caps[k]) for k in g[i + 1:]) for g in blocks for i in range(len(g))],
@@ -130,7 +140,7 @@ class LookaheadPolicy(Policy):
         self._args = (first, count, np.ascontiguousarray(pt.nxt, dtype=np.int64),
                       np.ascontiguousarray(pt.delta, dtype=np.int64), np.ascontiguousarray(pt.deltas, dtype=np.int64),
                       np.ascontiguousarray(pt.prob), caps, q, W, off, width, mptr, members, stride,
-                      *_NONE, -1 if self.candidates is None else self.candidates, self.depth, self.middle,
+                      *projected, -1 if self.candidates is None else self.candidates, self.depth, self.middle,
                       int(s.max_actions))
         self.build_seconds = time.perf_counter() - t0 + getattr(base, "build_seconds", 0.0)
 

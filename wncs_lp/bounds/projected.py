@@ -47,7 +47,8 @@ from ..policies.suboptimal import separable_table
 from .private import chain_key
 from .result import BoundResult, GroupTables
 
-__all__ = ["ProjectedLookahead", "ProjectedBoundPolicy", "lookahead_table", "projected_tables", "PROJECTED"]
+__all__ = ["ProjectedLookahead", "ProjectedBoundPolicy", "ProjectedValue", "lookahead_table", "projected_tables",
+           "PROJECTED"]
 
 #: The relaxations whose tables are read on private configurations (their greedy policy is projected).
 PROJECTED = ("private-servers", "grouped-private-servers")
@@ -207,6 +208,18 @@ class ProjectedLookahead:
         if column is not None:
             self._check_columns(column)
         self.prepare()
+
+    def kernel_arrays(self) -> tuple[np.ndarray, ...]:
+        """The lookahead's arrays as a kernel reads them, for the configurations and pairs known
+        (:meth:`prepare`): ``(W, off, width, idle, touch, tpair)`` with member i's value at private
+        pair r and AoI index t in ``W[off[i] + r * width[i] + t]``, ``idle[i, c]`` its "send
+        nothing" pair in joint configuration c, and ``touch[p, m]`` / ``tpair[p, m]`` the member
+        server m's entry of joint pair p sends to (-1: none or listed already) and its private pair
+        (:mod:`wncs_lp.bounds.lookahead_kernels`)."""
+        self.prepare()
+        n, p = self._n_configs, self._n_pairs
+        return (self._W, self._off, self._T, np.ascontiguousarray(self._idle[:, :n]),
+                np.ascontiguousarray(self._touch[:p]), np.ascontiguousarray(self._tpair[:p]))
 
     @property
     def nbytes(self) -> int:
@@ -378,3 +391,46 @@ class ProjectedBoundPolicy(Policy):
         return {**super().describe(), "relaxation": self.result.relaxation, "lower_bound": self.result.lower_bound,
                 "lookahead": "projected", "lookahead_bytes": self.lookahead.nbytes,
                 "build_seconds": self.build_seconds}
+
+
+class ProjectedValue:
+    """h(tau, C) = sum_G h_G(tau_G, column_G(C)) of a bound over private configurations, on a
+    system that may be explored lazily: the column of a joint configuration met after the bound
+    was computed is its projection on the group's private system, found when first asked for
+    (the bound's own column maps cover the configurations known then). The simulator's control
+    variate (:func:`wncs_lp.bounds.policy_gaps`) reads a bound's tables through it.
+    """
+
+    def __init__(self, result: BoundResult, system: System):
+        parts = projected_tables(result)
+        if parts is None:
+            raise PolicyError(f"the {result.relaxation} bound's tables are not over private configurations")
+        groups, h, column = parts
+        self.system = system
+        self.groups = groups
+        self.h = tuple(np.asarray(x, float) for x in h)
+        by_key: dict[str, Any] = {}
+        self._index = []
+        for g in groups:
+            sc = system.model.group_scenario(g)
+            by_key.setdefault(chain_key(sc), System.from_scenario(sc).automaton.index)
+            self._index.append(by_key[chain_key(sc)])
+        self._col = [np.asarray(c, np.int64) for c in column]
+
+    def _grow(self, n: int) -> None:
+        joint, model = self.system.automaton.configs, self.system.model
+        for i, g in enumerate(self.groups):
+            have = self._col[i].size
+            if have < n:
+                new = [self._index[i][model.project_group(joint[c], g)] for c in range(have, n)]
+                self._col[i] = np.concatenate([self._col[i], np.asarray(new, np.int64)])
+
+    def __call__(self, tau: np.ndarray, config_ids: np.ndarray) -> np.ndarray:
+        tau = np.asarray(tau, np.int64)
+        c = np.asarray(config_ids, np.int64)
+        if c.size:
+            self._grow(int(c.max()) + 1)
+        out = np.zeros(tau.shape[0])
+        for i, (g, hg) in enumerate(zip(self.groups, self.h)):
+            out += hg[(self._col[i][c], *(tau[:, k] - 1 for k in g))]
+        return out

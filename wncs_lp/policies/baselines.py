@@ -165,21 +165,22 @@ class RoundRobinPolicy(MemoryPolicy):
         from ..evaluate import Evaluation
 
         t0 = time.perf_counter()
-        sysm, ot = self.system, self.system.outcome_tables
+        sysm, pt = self.system, self.system.pairs  # one row per feasible (configuration, action) pair
         N, nC = sysm.n_processes, sysm.n_configs
         c_idx = np.repeat(np.arange(nC), N)
         r_idx = np.tile(np.arange(N), nC)
         j_idx = self.table[c_idx, r_idx]
         src = r_idx * nC + c_idx  # the (C, r) node, r-major
-        prob = ot.prob[c_idx, j_idx]  # (nC N, O)
-        dst = self.moves[c_idx, r_idx][:, None] * nC + ot.nxt[c_idx, j_idx]
+        pair = pt.first[c_idx] + j_idx
+        prob = pt.prob[pair]  # (nC N, O)
+        dst = self.moves[c_idx, r_idx][:, None] * nC + pt.nxt[pair]
         real = prob > 0
         mse, residual, size = [], 0.0, 0
         for k in range(N):
             K = int(sysm.caps[k])
             t = np.arange(1, K + 1)
             t1 = np.minimum(t + 1, K)
-            dk = ot.delta[c_idx, j_idx, :, k]
+            dk = pt.deltas[pt.delta[pair], k]
             rows = (src[:, None, None] * K + t[None, None, :] - 1)
             t_next = np.where(dk[..., None] > 0, np.minimum(t1[None, None, :], dk[..., None]), t1[None, None, :])
             cols = dst[..., None] * K + t_next - 1
