@@ -73,7 +73,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             code = int(args.func(args) or 0)
         if terminated:
             raise KeyboardInterrupt
+        sys.stdout.flush()  # a reader that went away (``| head``) is found here, not at exit
         return code
+    except BrokenPipeError:
+        return _reader_gone()
     except OSError as exc:  # a write that failed mid-run (disk full, folder removed): one line
         text = f"{str(exc.filename) + ': ' if exc.filename else ''}{exc.strerror or exc}"
         print(f"error: {text}", file=sys.stderr)
@@ -103,3 +106,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+#: The exit status when the reader of stdout closed it early: 128 + SIGPIPE, as a shell reports
+#: a command ended by that signal.
+EXIT_PIPE = 141
+
+
+def _reader_gone() -> int:
+    """stdout's reader closed the pipe (``wncs-lp ... --json | head -c 10``): nothing more can be
+    shown, so stop quietly; stdout is pointed at /dev/null so that the interpreter's own flush at
+    exit finds no broken pipe either."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # stdout is not a file descriptor (an embedding caller)
+        pass
+    return EXIT_PIPE

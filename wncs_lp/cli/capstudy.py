@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import Command, add_method_arg, add_scenario_args, add_threads_arg, emit_json, head, load
+from .common import (Command, add_method_arg, add_scenario_args, add_threads_arg, emit_json, head, load,
+                     real_option)
 
 
 def cmd_capstudy(args: argparse.Namespace) -> int:
@@ -46,9 +47,9 @@ def cmd_capstudy(args: argparse.Namespace) -> int:
 def _configure(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
     p.add_argument("--caps", default="12:40:4", help="caps to try, START:STOP:STEP or a comma list (default 12:40:4)")
-    p.add_argument("--mass-tol", type=float, default=0.01,
+    p.add_argument("--mass-tol", type=real_option(0.0, 1.0), default=0.01,
                    help="stop when the optimal policy's mass at the cap is at most this (default 0.01)")
-    p.add_argument("--gain-rtol", type=float, default=1e-3,
+    p.add_argument("--gain-rtol", type=real_option(0.0), default=1e-3,
                    help="... and the relative change of the gain from the previous cap at most this (default 1e-3)")
     add_method_arg(p, "solver of each cap")
     add_threads_arg(p)

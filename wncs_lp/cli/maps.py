@@ -5,7 +5,10 @@ import argparse
 from typing import Sequence
 
 from .common import (MATRIX_FREE_METHODS, Command, add_method_arg, add_progress_arg, add_scenario_args,
-                     add_threads_arg, emit_json, load, output_file, progress_for)
+                     add_threads_arg, emit_json, load, output_file, progress_for, whole_option)
+
+#: The largest ``--dpi``: a figure of the default size at 1200 dpi is already 7,680 x 5,760 pixels.
+MAX_DPI = 1200
 
 
 def _parse_axes(text: str) -> tuple[int, ...]:
@@ -143,7 +146,7 @@ def _configure_map(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fix", action="append", default=[], metavar="K=TAU",
                    help="AoI of a process not on the axes, e.g. 3=5 (repeatable; default: the value with the "
                         "most reachable states)")
-    p.add_argument("--slice", type=int, default=None, metavar="TOTAL",
+    p.add_argument("--slice", type=whole_option(1, what="total AoI"), default=None, metavar="TOTAL",
                    help="draw the plane tau_i + tau_j + tau_k = TOTAL as a triangle (three processes)")
     add_method_arg(p, "solver of the optimal policy (constrained scenarios: auto, lp or lp-cvxpy)", MATRIX_FREE_METHODS,
                    "matrix-free: certified value iteration without building the MDP, for models too large to "
@@ -152,7 +155,8 @@ def _configure_map(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ignore-constraints", action="store_true",
                    help="map the unconstrained optimum even if the scenario has [[constraint]] tables (by default "
                         "the constrained optimum is drawn, with its randomised states starred)")
-    p.add_argument("--dpi", type=int, default=120, help="resolution of raster output (default 120)")
+    p.add_argument("--dpi", type=whole_option(10, MAX_DPI, what="resolution"), default=120,
+                   help=f"resolution of raster output, 10 to {MAX_DPI} dots per inch (default 120)")
     add_threads_arg(p)
     add_progress_arg(p)
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import (Command, add_method_arg, add_parallel_args, add_progress_arg, add_scenario_args,
-                     add_threads_arg, emit_json, executor_of, head, load, output_folder, progress_for)
+from .common import (COUNT, NONNEGATIVE, SEED, SLOTS, Command, add_method_arg, add_parallel_args, add_progress_arg,
+                     add_scenario_args, add_threads_arg, emit_json, executor_of, head, load, output_folder, progress_for)
 
 
 def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
@@ -189,7 +189,7 @@ def _configure_evaluate(p: argparse.ArgumentParser) -> None:
                         "for recurrent classes under 1,000 states, BiCGSTAB above (benchmarks/evaluation.py)")
     p.add_argument("--certify", action="store_true",
                    help="also bracket the gain by the certified value iteration of the policy's chain")
-    p.add_argument("--horizon", type=int, default=None, metavar="T",
+    p.add_argument("--horizon", type=COUNT, default=None, metavar="T",
                    help="also the expected cost over the first T slots (the policy's, and the finite-horizon "
                         "optimum's), by exact recursion on the enumerated MDP")
     p.add_argument("--start", default=None, metavar="TAU",
@@ -228,10 +228,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def _configure_simulate(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
     _add_policy_args(p)
-    p.add_argument("--slots", type=int, default=40_000, help="slots averaged per replication (default 40000)")
-    p.add_argument("--reps", type=int, default=20, help="independent replications (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--burn-in", type=int, default=1000, help="slots discarded first (default 1000)")
+    p.add_argument("--slots", type=SLOTS, default=40_000, help="slots averaged per replication (default 40000)")
+    p.add_argument("--reps", type=COUNT, default=20, help="independent replications (default 20)")
+    p.add_argument("--seed", type=SEED, default=0, help="random seed, a whole number >= 0 (default 0)")
+    p.add_argument("--burn-in", type=NONNEGATIVE, default=1000, help="slots discarded first (default 1000)")
 
 
 # ----------------------------------------------------------------------------- sweep
@@ -300,10 +300,11 @@ def _configure_sweep(p: argparse.ArgumentParser) -> None:
                         "max_weight,round_robin (docs/policies.md)")
     p.add_argument("--out", required=True, help="output folder (resumed when it holds rows)")
     add_method_arg(p, "solver of the optimal policy at every grid value")
-    p.add_argument("--simulate-slots", type=int, default=0, help="also simulate each policy for this many slots")
-    p.add_argument("--reps", type=int, default=20, help="replications when simulating (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="simulation seed (default 0)")
-    p.add_argument("--burn-in", type=int, default=1000, help="simulation burn-in (default 1000)")
+    p.add_argument("--simulate-slots", type=NONNEGATIVE, default=0,
+                   help="also simulate each policy for this many slots (default 0: no simulation)")
+    p.add_argument("--reps", type=COUNT, default=20, help="replications when simulating (default 20)")
+    p.add_argument("--seed", type=SEED, default=0, help="simulation seed, a whole number >= 0 (default 0)")
+    p.add_argument("--burn-in", type=NONNEGATIVE, default=1000, help="simulation burn-in (default 1000)")
     p.add_argument("--no-exact", action="store_true", help="no exact evaluation (simulate only; needs --simulate-slots)")
     add_parallel_args(p, "grid values")
     add_threads_arg(p)
