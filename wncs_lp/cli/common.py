@@ -39,7 +39,9 @@ def emit_json(payload: dict) -> None:
     import wncs_lp
 
     from ..files import dumps
+    from ..stopping import check
 
+    check()  # a command stopped by a signal prints the interrupted object instead, and only that
     print(dumps({"schema_version": JSON_SCHEMA_VERSION, "version": wncs_lp.__version__, **payload}, indent=2))
 
 
