@@ -126,9 +126,9 @@ def simulate(
         Bad sizes, a policy in no documented form (an array without its MDP, a malformed array:
         the message says what was expected), or an action index out of range returned by the policy.
     """
+    slots, reps, burn_in, seed = checked_run(slots, reps, burn_in, seed)
     policy = as_policy(policy, mdp, sigma=sigma)
-    if slots < 1 or reps < 1 or burn_in < 0:
-        raise PolicyError(f"need slots >= 1, reps >= 1 and burn_in >= 0; got {slots}, {reps}, {burn_in}")
+    check_run_memory(reps, policy.system.n_processes)
     t0 = time.perf_counter()
     chan_ss, pol_ss = np.random.SeedSequence(seed).spawn(2)
     tau = _initial_tau(policy.system, reps, initial_tau)
@@ -142,14 +142,50 @@ def simulate(
     return _result(policy, proc_sum, busy_sum, slots, reps, burn_in, seed, time.perf_counter() - t0)
 
 
+#: The longest run simulated, burn-in included (months at the few thousand slots a second of the
+#: vectorised loop): a longer one is refused before it starts, as it would not end.
+MAX_SLOTS = 10**10
+#: Bytes a replication holds in the vectorised loop, per process and fixed (measured: ~100 (N + 1)
+#: for the suboptimal policy on four processes), with a margin.
+REP_BYTES_PER_PROCESS = 256
+
+
+def checked_run(slots: Any, reps: Any, burn_in: Any, seed: Any) -> tuple[int, int, int, int | None]:
+    """The run's sizes as whole numbers in range, and the seed (None or a whole number >= 0);
+    one :class:`~wncs_lp.errors.ArgumentError` naming the argument otherwise."""
+    from .arguments import seed as check_seed
+    from .arguments import whole
+
+    slots = whole(slots, "slots", lo=1, hi=MAX_SLOTS)
+    burn_in = whole(burn_in, "burn_in", lo=0, hi=MAX_SLOTS - slots)
+    return slots, whole(reps, "reps", lo=1), burn_in, check_seed(seed)
+
+
+def check_run_memory(reps: int, n_processes: int) -> None:
+    """Refuse (:class:`~wncs_lp.errors.ArgumentError` naming ``reps``) replications whose state
+    would not fit in half of the memory available, before anything is allocated."""
+    from .errors import ArgumentError
+    from .models.guard import MEMORY_FRACTION, available_memory
+
+    need = reps * REP_BYTES_PER_PROCESS * (n_processes + 2)
+    room = int(MEMORY_FRACTION * available_memory())
+    if need > room:
+        raise ArgumentError("reps", f"{reps:,} replications of {n_processes} processes would hold about "
+                                    f"{need / 2**30:,.1f} GiB, over {room / 2**30:.1f} GiB ({MEMORY_FRACTION:.0%} of "
+                                    "the memory available); run fewer replications at a time")
+
+
 def _initial_tau(sysm, reps: int, initial_tau: np.ndarray | None) -> np.ndarray:
     """(R, N) starting AoI: every tau_k at its cap, or ``initial_tau`` in every replication."""
     caps = sysm.caps
     if initial_tau is None:
         return np.tile(caps, (reps, 1)).astype(np.int64)
-    t_init = np.asarray(initial_tau, dtype=np.int64)
+    try:
+        t_init = np.asarray(initial_tau, dtype=np.int64)
+    except (TypeError, ValueError, OverflowError):
+        t_init = None
     N = sysm.n_processes
-    if t_init.shape != (N,) or np.any(t_init < 1) or np.any(t_init > caps):
+    if t_init is None or t_init.shape != (N,) or np.any(t_init < 1) or np.any(t_init > caps):
         raise PolicyError(f"initial_tau must be {N} integers in 1..tau_hat = {caps.tolist()}")
     return np.tile(t_init, (reps, 1))
 

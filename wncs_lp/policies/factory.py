@@ -5,7 +5,8 @@ import time
 from dataclasses import dataclass
 from typing import Any, Sequence
 
-from ..errors import PolicyError
+from ..arguments import shown
+from ..errors import ArgumentError, PolicyError
 from ..mdp import MDP
 from ..methods import DEFAULT_METHOD
 from ..models.system import System
@@ -69,8 +70,12 @@ def make_policy(
     PolicyError
         Unknown name (the message lists the allowed ones), or a needed MDP missing.
     """
-    if name not in POLICY_NAMES:
-        raise PolicyError(f"unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
+    if not isinstance(name, str) or name not in POLICY_NAMES:
+        raise PolicyError(f"name: unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
+    if not isinstance(system, System):
+        raise ArgumentError("system", f"expected the System of a scenario (System.from_scenario, from "
+                                      "wncs_lp.models.system), "
+                                      f"got {shown(system)}")
     if name in NEED_MDP and mdp is None:
         raise PolicyError(f"policy {name!r} needs the enumerated MDP")
     if name == OPTIMAL:

@@ -32,7 +32,8 @@ from dataclasses import asdict, dataclass
 from functools import partial
 from typing import Any, Callable, Sequence
 
-from ..errors import WncsError
+from ..arguments import real, shown, whole
+from ..errors import ArgumentError, WncsError
 from ..methods import DEFAULT_METHOD
 from ..scenario import Scenario
 from .runner import run_grid
@@ -203,7 +204,11 @@ def cap_study(
     """
     from ..methods import check_method
 
-    caps = [int(c) for c in caps]
+    mass_tol = real(mass_tol, "mass_tol", lo=0.0, hi=1.0)
+    gain_rtol = real(gain_rtol, "gain_rtol", lo=0.0)
+    if isinstance(caps, (str, bytes)) or not hasattr(caps, "__iter__"):
+        raise ArgumentError("caps", f"expected a sequence of whole numbers, got {shown(caps)}")
+    caps = [whole(c, "caps", lo=1) for c in caps]
     if not caps or any(b <= a for a, b in zip(caps, caps[1:])):
         raise WncsError(f"cap study: expected increasing caps, got {caps}")
     longest = max(max(s.loop) for s in scenario.servers)
