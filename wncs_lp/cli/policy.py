@@ -57,6 +57,21 @@ def _policy_file(args: argparse.Namespace, scenario, prog):
     return PolicySetup(system=policy.system, mdp=mdp, policy=policy, seconds=time.perf_counter() - t0)
 
 
+def _solve_label(made) -> tuple[dict, str | None]:
+    """The status of the solve an ``optimal`` policy comes from, for the payload, and the line
+    saying it is not certified (None when it is, or when no solve made the policy): the label
+    "optimal" is earned only where the certificate closed, as for ``wncs-lp solve``."""
+    status = getattr(made, "status", None)
+    if status is None:
+        return {}, None
+    from ..status import as_status
+
+    st = as_status(status)
+    line = None if st.ok else (f"note: the solve of the {made.policy.name} policy is not certified (status {st}: "
+                               f"{st.message}); the numbers below are this policy's, not a certified optimum's")
+    return {"policy_status": str(st), "policy_certified": bool(st.ok)}, line
+
+
 # ----------------------------------------------------------------------------- evaluate
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..errors import PolicyError
@@ -72,6 +87,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             raise
         return _evaluate_matrix_free(args, scenario, prog, refused)
     mdp, policy = made.mdp, made.policy
+    label, note = _solve_label(made)
     prog.phase(f"evaluating the {policy.name} policy exactly (its chain's stationary law)")
     try:
         ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error", method=args.stationary,
@@ -83,6 +99,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         **head(args, scenario, mdp),
         **ev.to_dict(),
         "policy_info": policy.describe(),
+        **label,
         "setup_seconds": made.seconds,
     }
     if transient is not None:
@@ -92,6 +109,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     else:
         print(scenario.describe())
         print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs")
+        if note:
+            print(note)
         print(f"policy {ev.policy}: average cost (gain) {ev.gain:.10g}")
         if args.certify:
             print(f"certificate: {ev.gain_lower:.12g} <= g_pi <= {ev.gain_upper:.12g} (certified value iteration of "
@@ -110,7 +129,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             tr, best = transient
             print(f"first {tr.horizon} slots from {tr.start}: expected cost {tr.total:.10g} (average "
                   f"{tr.average:.8g} a slot) under {tr.policy}; the finite-horizon optimum {best.total:.10g} (average {best.average:.8g})")
-    return 0
+    return 0 if note is None else 1
 
 
 def _transient(args: argparse.Namespace, mdp, policy, prog):
@@ -143,6 +162,7 @@ def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> 
     prog.phase(f"{why}: evaluating without it")
     made = _policy(args, scenario, need_mdp=False, prog=prog)
     policy, system = made.policy, made.system
+    label, note = _solve_label(made)
     if hasattr(policy, "separable_evaluation"):
         prog.phase(f"evaluating the {policy.name} policy exactly on its per-process chains")
         ev = policy.separable_evaluation()
@@ -157,13 +177,16 @@ def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> 
         prog.phase(f"measuring the {policy.name} policy's time at the AoI cap (certified matrix-free evaluation)")
         cap = CapCount.of(matrix_free_cap_mass(system, policy, threads=args.threads, progress=prog), system)
     payload = {**head(args, scenario), "policy": policy.name, "route": why, **out,
-               "cap_mass": None if cap is None else cap.to_dict(), "policy_info": policy.describe(),
+               "cap_mass": None if cap is None else cap.to_dict(), "policy_info": policy.describe(), **label,
                "setup_seconds": made.seconds}
+    code = 0 if out["status"] == "optimal" and note is None else 1
     if args.json:
         emit_json(payload)
-        return 0 if out["status"] == "optimal" else 1
+        return code
     print(scenario.describe())
     print(f"no MDP built ({why}); {out['how']} evaluation over {out['states']:,} states")
+    if note:
+        print(note)
     print(f"policy {policy.name}: average cost (gain) {out['gain']:.10g}")
     if out["how"] == "separable":
         for name, v in zip([p.name for p in scenario.processes], out["mse"]):
@@ -173,7 +196,7 @@ def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> 
     else:
         print(f"certificate: {out['gain_lower']:.12g} <= g_pi <= {out['gain_upper']:.12g} (status {out['status']})")
         print(f"truncation: under the {policy.name} policy {cap.message()}")
-    return 0 if out["status"] == "optimal" else 1
+    return code
 
 
 def _configure_evaluate(p: argparse.ArgumentParser) -> None:
@@ -205,6 +228,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     prog = progress_for(args)
     made = _policy(args, scenario, need_mdp=False, prog=prog)
     policy = made.policy
+    label, note = _solve_label(made)
     res = simulate(policy, slots=args.slots, reps=args.reps, seed=args.seed, burn_in=args.burn_in,
                    progress=prog.enabled)
     payload = {
@@ -212,17 +236,20 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "configs": made.system.n_configs,
         **res.to_dict(),
         "policy_info": policy.describe(),
+        **label,
         "setup_seconds": made.seconds,
     }
     if args.json:
         emit_json(payload)
     else:
         print(scenario.describe())
+        if note:
+            print(note)
         print(f"policy {res.policy}: {res.reps} replications x {res.slots} slots (burn-in {res.burn_in}, seed {res.seed})")
         print(f"average cost {res.mean:.8g} +- {res.stderr:.3g} (standard error), {res.seconds:.2f} s")
         for name, v in zip([p.name for p in scenario.processes], res.process_means):
             print(f"  {name}: average MSE {v:.8g}")
-    return 0
+    return 0 if note is None else 1
 
 
 def _configure_simulate(p: argparse.ArgumentParser) -> None:
