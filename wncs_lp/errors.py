@@ -5,9 +5,18 @@ caller can catch one class and always get a message naming what was wrong.
 """
 from __future__ import annotations
 
-__all__ = ["WncsError", "ArgumentError", "ScenarioError", "ModelError", "SolverError", "PolicyError",
+__all__ = ["printable", "WncsError", "ArgumentError", "ScenarioError", "ModelError", "SolverError", "PolicyError",
            "InfeasibleConstraintsError",
            "ScenarioWarning", "SizeLimitError"]
+
+
+def printable(text: object) -> str:
+    """``str(text)`` with its control characters escaped (``\\n``, ``\\x1b``): one line, and no
+    escape sequence reaches a terminal (a name read from a file may hold any character)."""
+    s = str(text)
+    if s.isprintable():
+        return s
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in s)
 
 
 class WncsError(ValueError):
@@ -45,7 +54,7 @@ class ScenarioError(WncsError):
         self.field = field
         self.expected = expected
         # one line always: control characters in a field name (e.g. from --set) are escaped
-        shown = field if field.isprintable() else field.encode("unicode_escape").decode("ascii")
+        shown = printable(field)
         super().__init__(f"{source}: {what} '{shown}': {expected}")
 
 

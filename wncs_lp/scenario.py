@@ -28,7 +28,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from .errors import ScenarioError
+from .errors import ScenarioError, printable
 from .files import read_regular
 
 if sys.version_info >= (3, 11):
@@ -426,10 +426,10 @@ class Scenario:
             text = f", cost={pr.cost}" if pr.cost != MSE_COST else ""
             return text + (f", lambda={pr.arrival_probability:g}" if pr.has_arrivals else "")
 
-        procs = ", ".join(f"{pr.name} (n={pr.dim}, cap={pr.tau_cap}, w={pr.weight:g}{extra(pr)})"
+        procs = ", ".join(f"{printable(pr.name)} (n={pr.dim}, cap={pr.tau_cap}, w={pr.weight:g}{extra(pr)})"
                           for pr in self.processes)
         servs = ", ".join(
-            f"{s.name} (U={s.uplink_delay}, D={s.downlink_delay}, T={list(s.processing_time)}, "
+            f"{printable(s.name)} (U={s.uplink_delay}, D={s.downlink_delay}, T={list(s.processing_time)}, "
             f"pu={_show_links(s.p_up)}, pd={_show_links(s.p_down)})"
             for s in self.servers
         )

@@ -153,7 +153,7 @@ def _check_options(name: str, options: dict, joint: Any) -> None:
     if "tol" in options:
         real(options["tol"], "tol", lo=0.0, lo_open=True, hi=1.0, hi_open=True)
     if options.get("time_limit") is not None:
-        real(options["time_limit"], "time_limit", lo=0.0, lo_open=True)
+        real(options["time_limit"], "time_limit", lo=0.0)
     if "max_iter" in options:
         whole(options["max_iter"], "max_iter", lo=1)
 

@@ -20,7 +20,7 @@ import argparse
 import sys
 from typing import Sequence
 
-from ..errors import WncsError
+from ..errors import WncsError, printable
 from . import bound, capstudy, export, maps, policy, reproduce, solve, tradeoff, validate, verify
 from .common import Command
 
@@ -105,7 +105,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _report(args, line: str, payload: dict, code: int) -> int:
     """``line`` on stderr and, under ``--json``, ``payload`` as the one JSON object; ``code``."""
     try:
-        print(line, file=sys.stderr, flush=True)
+        print(printable(line), file=sys.stderr, flush=True)  # one line, whatever a name holds
         if getattr(args, "json", False):
             from .common import emit_json
 

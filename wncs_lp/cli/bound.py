@@ -122,7 +122,7 @@ def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-steps", type=COUNT, default=None, metavar="N",
                    help="bundle steps of relaxation 2's search (default: 30 under auto, 1000 for --relaxation 2); "
                         "the bound is certified whatever stops it")
-    p.add_argument("--time-limit", type=real_option(0.0, lo_open=True), default=None, metavar="SECONDS",
+    p.add_argument("--time-limit", type=real_option(0.0), default=None, metavar="SECONDS",
                    help="seconds of relaxation 2's search at most (default: 300 under auto, 600 for --relaxation 2)")
     p.add_argument("--policy", action="store_true",
                    help="also evaluate the bound's greedy policy and the --compare policies, with the certified "

@@ -63,7 +63,9 @@ _TOP_KEYS = ("method", "status", "status_code", "message", "gain", "gain_lower",
 
 def warn(text: str) -> None:
     """One ``warning: ...`` line on stderr (never on stdout, so ``--json`` stays clean)."""
-    print(f"warning: {text}", file=sys.stderr, flush=True)
+    from ..errors import printable
+
+    print(f"warning: {printable(text)}", file=sys.stderr, flush=True)
 
 
 def add_scenario_args(p: argparse.ArgumentParser) -> None:
