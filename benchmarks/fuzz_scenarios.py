@@ -22,16 +22,31 @@ which hypothesis shrinks):
   an exit status and at most one ``error:`` line, never a traceback. Rows whose gain is not the
   true one (trusted from a damaged or foreign folder: the resume logic of ``wncs_lp.sweep``) are
   counted and reported.
+
+The hostile families of issue 39 (``tests/fuzz_reliability.py``: special files, memory limits,
+signals during every long command, the JSON contract, CLI options, API arguments, edited files,
+edited systems, labels, caches, messages) are fixed lists of cases, each run whole in a child
+process under a memory limit and a timeout. Each case ends in one of: ok, clear error,
+traceback, hang, kill (a signal it did not handle: the OOM killer, an abort), wrong (the
+contract broken without a crash). They are counted, never re-raised::
+
+    python benchmarks/fuzz_scenarios.py --families hostile [--record counts.json]
+
+``WNCS_FUZZ_CODE=/path/to/another/checkout`` runs the children on that checkout's code (a
+"before" measurement).
 """
 from __future__ import annotations
 
 import argparse
 import collections
+import os
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+if os.environ.get("WNCS_FUZZ_CODE"):  # measure another checkout's code (a "before"): its package first
+    sys.path.insert(0, os.environ["WNCS_FUZZ_CODE"])
 
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
@@ -112,8 +127,51 @@ def families(tmp: Path, args) -> dict:
     }, sweep
 
 
+def run_hostile(names: list[str], record: str | None, verbose: bool) -> int:
+    """The hostile families: every case run, its outcome counted by family."""
+    import json
+    import tempfile
+
+    from fuzz_reliability import FAMILIES, OUTCOMES
+
+    tmp = Path(tempfile.mkdtemp(prefix="wncs_lp-hostile-"))
+    results = []
+    t0 = time.perf_counter()
+    for family in names:
+        for case in FAMILIES[family]():
+            t1 = time.perf_counter()
+            try:
+                label, detail = case.run(tmp)
+            except Exception as exc:  # noqa: BLE001 - a harness failure is reported as such
+                label, detail = "harness error", f"{type(exc).__name__}: {exc}"
+            results.append({"family": family, "case": case.name, "outcome": label, "detail": detail,
+                            "seconds": round(time.perf_counter() - t1, 1)})
+            if verbose:
+                print(f"  [{family}] {case.name}: {label} ({detail}) {results[-1]['seconds']} s", flush=True)
+    cols = ["cases", *OUTCOMES]
+    print(f"{'family':<16} " + " ".join(f"{c:>11}" for c in cols) + f" {'seconds':>8}")
+    for family in names:
+        rows = [r for r in results if r["family"] == family]
+        n = collections.Counter(r["outcome"] for r in rows)
+        secs = sum(r["seconds"] for r in rows)
+        print(f"{family:<16} {len(rows):>11} " + " ".join(f"{n.get(o, 0):>11}" for o in OUTCOMES)
+              + f" {secs:>8.0f}" + (f"  harness errors {n['harness error']}" if n.get("harness error") else ""))
+    bad = [r for r in results if r["outcome"] not in ("ok", "clear error")]
+    print(f"total: {len(results)} cases in {time.perf_counter() - t0:.0f} s; {len(bad)} not ok or a clear error")
+    for r in bad:
+        print(f"  [{r['family']}] {r['case']}: {r['outcome']}: {r['detail']}")
+    if record:
+        Path(record).write_text(json.dumps(results, indent=1))
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--families", default="all",
+                    help="comma list of families, 'scenarios' (the hypothesis families), 'hostile' (issue 39's) or "
+                         "'all' (default)")
+    ap.add_argument("--record", default=None, metavar="FILE.json", help="write every hostile case's outcome here")
+    ap.add_argument("--verbose", action="store_true", help="one line per hostile case as it ends")
     ap.add_argument("--cases", type=int, default=2000, help="examples per scenario family (default 2000; 7 families)")
     ap.add_argument("--npz-cases", type=int, default=400, help="mutated .npz files (default 400; each MDP is solved twice)")
     ap.add_argument("--cache-cases", type=int, default=2000, help="mutated cache entries (default 2000)")
@@ -121,6 +179,17 @@ def main() -> int:
                     help="Systems edited by hand, given to the bounds (default 120; each computes a bound)")
     ap.add_argument("--sweep-cases", type=int, default=60, help="mutated sweep folders (default 60; each reruns a sweep)")
     args = ap.parse_args()
+    from fuzz_reliability import FAMILIES
+
+    wanted = [w.strip() for w in args.families.split(",") if w.strip()]
+    hostile = [f for f in FAMILIES if "all" in wanted or "hostile" in wanted or f in wanted]
+    unknown = [w for w in wanted if w not in ("all", "hostile", "scenarios") and w not in FAMILIES]
+    if unknown:
+        ap.error(f"unknown families {unknown}; expected 'all', 'hostile', 'scenarios' or some of {list(FAMILIES)}")
+    if hostile:
+        run_hostile(hostile, args.record, args.verbose)
+    if not ("all" in wanted or "scenarios" in wanted):
+        return 0
     tmp = scratch_dir()
     counts: collections.Counter = collections.Counter()
     fams, sweep = families(tmp, args)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wncs_lp.errors import PolicyError
+from wncs_lp.errors import ArgumentError, PolicyError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
 from wncs_lp.policies import System, make_policy
@@ -94,7 +94,7 @@ def test_four_processes_large_caps_runs():
 def test_bad_arguments():
     sc = load_scenario(FORMULATIONS / "paper_p12.toml", ["tau_cap=5"])
     pol = make_policy("random", System.from_scenario(sc))
-    with pytest.raises(PolicyError):
+    with pytest.raises(ArgumentError, match="^slots: "):  # the argument named first
         simulate(pol, slots=0, progress=False)
     with pytest.raises(PolicyError, match="initial_tau"):
         simulate(pol, slots=10, reps=2, initial_tau=[9, 1], progress=False)

@@ -5,12 +5,42 @@ caller can catch one class and always get a message naming what was wrong.
 """
 from __future__ import annotations
 
-__all__ = ["WncsError", "ScenarioError", "ModelError", "SolverError", "PolicyError", "InfeasibleConstraintsError",
+__all__ = ["printable", "WncsError", "ArgumentError", "ScenarioError", "ModelError", "SolverError", "PolicyError",
+           "InfeasibleConstraintsError",
            "ScenarioWarning", "SizeLimitError"]
+
+
+def printable(text: object) -> str:
+    """``str(text)`` with its control characters escaped (``\\n``, ``\\x1b``): one line, and no
+    escape sequence reaches a terminal (a name read from a file may hold any character)."""
+    s = str(text)
+    if s.isprintable():
+        return s
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in s)
 
 
 class WncsError(ValueError):
     """Base class of every error raised by wncs_lp on bad input or a failed computation."""
+
+
+class ArgumentError(WncsError, TypeError):
+    """An argument of a public function of the wrong type, out of its range or not finite.
+
+    The message starts with the argument's name. Also a ``TypeError``, so code that catches
+    Python's own error for a wrong type still catches it.
+
+    Attributes
+    ----------
+    argument : str
+        The name of the argument.
+    detail : str
+        The message without the name (what was expected, what was given).
+    """
+
+    def __init__(self, argument: str, message: str):
+        self.argument = argument
+        self.detail = message
+        super().__init__(f"{argument}: {message}")
 
 
 class ScenarioError(WncsError):
@@ -24,7 +54,7 @@ class ScenarioError(WncsError):
         self.field = field
         self.expected = expected
         # one line always: control characters in a field name (e.g. from --set) are escaped
-        shown = field if field.isprintable() else field.encode("unicode_escape").decode("ascii")
+        shown = printable(field)
         super().__init__(f"{source}: {what} '{shown}': {expected}")
 
 

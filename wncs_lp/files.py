@@ -12,12 +12,18 @@ its temporary behind, and the next write of the same target removes it (its proc
 :func:`check_output_file` and :func:`check_output_folder` look at an output path *before* any
 work (writable, of the right type), and :func:`read_npz` reads an ``.npz`` file whole, turning
 every way it can be damaged into one :class:`~wncs_lp.errors.WncsError` naming the file.
+
+Input files are opened by :func:`open_regular` (and read whole by :func:`read_regular`): a
+named pipe, a device, a socket or a folder is refused at once, before a byte is read (a pipe
+without a writer would block the open, ``/dev/zero`` would never end), and a file larger than
+the reader's limit is refused by its size.
 """
 from __future__ import annotations
 
 import json
 import math
 import os
+import stat
 import tempfile
 import time
 import zipfile
@@ -30,7 +36,8 @@ import numpy as np
 from .errors import WncsError
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "json_ready", "dumps", "csv_records", "scalars",
-           "check_output_file", "check_output_folder", "read_npz", "npz_array", "npz_json", "STALE_TMP_SECONDS"]
+           "check_output_file", "check_output_folder", "read_npz", "npz_array", "npz_json", "open_regular",
+           "read_regular", "STALE_TMP_SECONDS"]
 
 #: A temporary without a process id in its name (or on another machine's file system) is stale
 #: after this long.
@@ -242,6 +249,59 @@ def check_output_folder(path: str | Path, option: str = "output folder") -> Path
     return out
 
 
+# ----------------------------------------------------------------------------- reading input files
+#: What each kind of file that is not a regular one is called in messages.
+_KINDS = ((stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder"))
+
+
+class NotRegularFile(OSError):
+    """An input path that is not a regular file, or one over its reader's size limit. An
+    ``OSError`` (its ``strerror`` says what it is), so every reader's ``except OSError`` turns it
+    into that reader's one-line error."""
+
+
+def open_regular(path: str | Path, *, max_bytes: int | None = None):
+    """Open ``path`` for reading in binary mode, only if it is a regular file of at most
+    ``max_bytes`` (any size with None).
+
+    The file is opened without blocking (a FIFO without a writer would otherwise block the open
+    forever) and checked on the open descriptor (no race with a rename).
+
+    Raises
+    ------
+    NotRegularFile
+        ``strerror``: "a named pipe (FIFO), not a regular file", "... bytes, over the limit of ...".
+    OSError
+        The file cannot be opened (missing, no permission).
+    """
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = next((name for test, name in _KINDS if test(st.st_mode)), "a special file")
+            raise NotRegularFile(0, f"{kind}, not a regular file", str(path))
+        if max_bytes is not None and st.st_size > max_bytes:
+            raise NotRegularFile(0, f"{st.st_size:,} bytes, over the limit of {max_bytes:,} bytes for this file",
+                                 str(path))
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_regular(path: str | Path, max_bytes: int) -> bytes:
+    """The bytes of a regular file of at most ``max_bytes`` (:func:`open_regular`); a file that
+    grows past the limit while it is read is refused too."""
+    with open_regular(path, max_bytes=max_bytes) as f:
+        data = f.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise NotRegularFile(0, f"over the limit of {max_bytes:,} bytes for this file", str(path))
+    return data
+
+
 # ----------------------------------------------------------------------------- reading .npz
 #: What a damaged .npz file raises inside numpy / zipfile / zlib.
 _NPZ_ERRORS = (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile, zlib.error, RuntimeError,
@@ -267,13 +327,12 @@ def read_npz(path: str | Path, *, required: Iterable[str] = (), what: str = "an 
     """
     path = Path(path)
     try:
-        z = np.load(path, allow_pickle=False)
-        if not hasattr(z, "files"):  # a lone .npy array
-            raise error(f"{path}: a single .npy array, not an .npz archive: expected {what}")
-        with z:
-            arrays = {k: z[k] for k in z.files}
+        with open_regular(path) as f:
+            arrays = _npz_arrays(f, path, what, error)
     except FileNotFoundError:
         raise error(f"{path}: no such file") from None
+    except NotRegularFile as exc:
+        raise error(f"{path}: {exc.strerror}: expected {what}") from None
     except _NPZ_ERRORS as exc:
         size = path.stat().st_size if path.is_file() else 0
         detail = "empty" if size == 0 else f"{type(exc).__name__}: {str(exc)[:120]}"
@@ -283,6 +342,14 @@ def read_npz(path: str | Path, *, required: Iterable[str] = (), what: str = "an 
         raise error(f"{path}: expected {what}, missing the entr{'ies' if len(missing) > 1 else 'y'} "
                     f"{', '.join(missing)} (found {', '.join(sorted(arrays)[:12]) or 'none'})")
     return arrays
+
+
+def _npz_arrays(f, path: Path, what: str, error: type[WncsError]) -> dict[str, np.ndarray]:
+    z = np.load(f, allow_pickle=False)
+    if not hasattr(z, "files"):  # a lone .npy array
+        raise error(f"{path}: a single .npy array, not an .npz archive: expected {what}")
+    with z:
+        return {k: z[k] for k in z.files}
 
 
 def npz_array(arrays: Mapping[str, np.ndarray], key: str, path: str | Path, *, expect: str,

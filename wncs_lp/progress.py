@@ -17,6 +17,8 @@ import sys
 import time
 from typing import Any, Sequence, TextIO
 
+from .stopping import check as check_stop
+
 __all__ = ["Progress", "as_progress", "wanted", "eta", "duration", "convergence_eta"]
 
 
@@ -101,7 +103,10 @@ class Progress:
             self._open = False
 
     def phase(self, text: str) -> None:
-        """A new phase (always shown, on its own line)."""
+        """A new phase (always shown, on its own line). A stop requested by a signal
+        (:func:`wncs_lp.stopping.check`) raises ``KeyboardInterrupt`` here: a new phase is not
+        started after Ctrl-C / SIGTERM."""
+        check_stop()
         if not self.enabled:
             return
         self._close_line()
@@ -114,7 +119,9 @@ class Progress:
         return self.enabled and time.monotonic() - self._last >= self.every
 
     def tick(self, text: str, force: bool = False) -> None:
-        """A step within a phase: shown when ``every`` seconds passed since the last one (or ``force``)."""
+        """A step within a phase: shown when ``every`` seconds passed since the last one (or ``force``);
+        raises ``KeyboardInterrupt`` after a stop request, as :meth:`phase`."""
+        check_stop()
         if not self.enabled:
             return
         now = time.monotonic()

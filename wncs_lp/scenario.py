@@ -28,7 +28,8 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from .errors import ScenarioError
+from .errors import ScenarioError, printable
+from .files import read_regular
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -74,6 +75,9 @@ MAX_TAU_CAP = 100_000
 #: Deepest nesting of lists and tables accepted (a scenario needs 5: top table, [[process]] list,
 #: its table, the matrix A, a row); deeper input is refused before anything recurses into it.
 MAX_DEPTH = 16
+#: Largest scenario file read (bytes): a scenario is a few kilobytes, explicit cost tables up to
+#: the largest cap a few megabytes; a larger file is refused by its size before it is read.
+MAX_SCENARIO_BYTES = 64 << 20
 #: A process or server selector of an override made of ASCII digits only is a 1-based index.
 _INDEX = re.compile(r"[0-9]+")
 #: One part of an override key: a "quoted" literal or bare text up to the next dot.
@@ -422,10 +426,10 @@ class Scenario:
             text = f", cost={pr.cost}" if pr.cost != MSE_COST else ""
             return text + (f", lambda={pr.arrival_probability:g}" if pr.has_arrivals else "")
 
-        procs = ", ".join(f"{pr.name} (n={pr.dim}, cap={pr.tau_cap}, w={pr.weight:g}{extra(pr)})"
+        procs = ", ".join(f"{printable(pr.name)} (n={pr.dim}, cap={pr.tau_cap}, w={pr.weight:g}{extra(pr)})"
                           for pr in self.processes)
         servs = ", ".join(
-            f"{s.name} (U={s.uplink_delay}, D={s.downlink_delay}, T={list(s.processing_time)}, "
+            f"{printable(s.name)} (U={s.uplink_delay}, D={s.downlink_delay}, T={list(s.processing_time)}, "
             f"pu={_show_links(s.p_up)}, pd={_show_links(s.p_down)})"
             for s in self.servers
         )
@@ -481,7 +485,7 @@ def load_scenario(path: str | Path, overrides: Mapping[str, Any] | Iterable[str]
     path = Path(path)
     source = str(path)
     try:
-        text = path.read_bytes()
+        text = read_regular(path, MAX_SCENARIO_BYTES)  # a pipe, a device, a folder: refused at once
     except OSError as exc:
         raise ScenarioError(source, "<file>", f"cannot be read ({exc.strerror or exc})") from None
     raw = _parse_toml(text, source)

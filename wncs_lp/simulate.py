@@ -387,10 +387,10 @@ def simulate(
         the message says what was expected), an action index out of range returned by the policy,
         or a control whose values are not finite.
     """
+    slots, reps, burn_in, seed = checked_run(slots, reps, burn_in, seed)
     policy = as_policy(policy, mdp, sigma=sigma)
-    if slots < 1 or reps < 1 or burn_in < 0 or batches < 1 or path < 0:
-        raise PolicyError(f"need slots >= 1, reps >= 1, burn_in >= 0, batches >= 1 and path >= 0; got {slots}, "
-                          f"{reps}, {burn_in}, {batches}, {path}")
+    if batches < 1 or path < 0:
+        raise PolicyError(f"need batches >= 1 and path >= 0; got {batches}, {path}")
     value = _control_value(control)
     if not (control_coef == "fit" or isinstance(control_coef, (int, float))):
         raise PolicyError(f"control_coef must be 'fit' or a number, got {control_coef!r}")
@@ -439,14 +439,33 @@ def _check_memory(sysm, reps: int) -> None:
                    ["fewer replications (--reps) with more slots each (--slots)"])
 
 
+#: The longest run simulated, burn-in included (months at the few thousand slots a second of the
+#: vectorised loop): a longer one is refused before it starts, as it would not end.
+MAX_SLOTS = 10**10
+
+
+def checked_run(slots: Any, reps: Any, burn_in: Any, seed: Any) -> tuple[int, int, int, int | None]:
+    """The run's sizes as whole numbers in range, and the seed (None or a whole number >= 0);
+    one :class:`~wncs_lp.errors.ArgumentError` naming the argument otherwise."""
+    from .arguments import seed as check_seed
+    from .arguments import whole
+
+    slots = whole(slots, "slots", lo=1, hi=MAX_SLOTS)
+    burn_in = whole(burn_in, "burn_in", lo=0, hi=MAX_SLOTS - slots)
+    return slots, whole(reps, "reps", lo=1), burn_in, check_seed(seed)
+
+
 def _initial_tau(sysm, reps: int, initial_tau: np.ndarray | None) -> np.ndarray:
     """(R, N) starting AoI: every tau_k at its cap, or ``initial_tau`` in every replication."""
     caps = sysm.caps
     if initial_tau is None:
         return np.tile(caps, (reps, 1)).astype(np.int64)
-    t_init = np.asarray(initial_tau, dtype=np.int64)
+    try:
+        t_init = np.asarray(initial_tau, dtype=np.int64)
+    except (TypeError, ValueError, OverflowError):
+        t_init = None
     N = sysm.n_processes
-    if t_init.shape != (N,) or np.any(t_init < 1) or np.any(t_init > caps):
+    if t_init is None or t_init.shape != (N,) or np.any(t_init < 1) or np.any(t_init > caps):
         raise PolicyError(f"initial_tau must be {N} integers in 1..tau_hat = {caps.tolist()}")
     return np.tile(t_init, (reps, 1))
 

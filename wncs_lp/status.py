@@ -52,7 +52,7 @@ from enum import Enum
 from typing import Any, Iterable, Mapping
 
 __all__ = ["Code", "Status", "OPTIMAL", "INACCURATE", "MAX_ITER", "INTERRUPTED", "INFEASIBLE", "FAILED",
-           "STATUS_CODES", "REASONS", "CERTIFICATE", "PRECISION", "START_DEPENDENT", "POLISH_MAX_ITER", "CROSS_CHECK",
+           "STATUS_CODES", "REASONS", "CERTIFICATE", "PRECISION", "START_DEPENDENT", "UNVERIFIED", "POLISH_MAX_ITER", "CROSS_CHECK",
            "INFEASIBLE_POLICY", "MULTICHAIN", "OBJECTIVE_NOT_EVALUATED", "of", "error", "parse", "as_status",
            "from_backend", "status_from", "polish_reason", "status_code", "status_reason", "status_message"]
 
@@ -87,6 +87,8 @@ STATUS_CODES = tuple(Code)
 CERTIFICATE = "certificate"
 PRECISION = "precision"
 START_DEPENDENT = "start_dependent"
+#: A saved certificate that nothing binds to the policy saved with it (a file without its digest).
+UNVERIFIED = "unverified"
 POLISH_MAX_ITER = "polish_max_iter"
 CROSS_CHECK = "cross_check"
 INFEASIBLE_POLICY = "infeasible_policy"
@@ -111,6 +113,8 @@ REASONS: dict[str, str] = {
     MULTICHAIN: "the returned policy's chain has several recurrent classes: its averages depend on the start",
     OBJECTIVE_NOT_EVALUATED: "the objective could not be evaluated exactly at the returned policy (its auxiliary "
                              "variables did not re-solve); the solver's value stands",
+    UNVERIFIED: "a saved solution without the digest that binds its certificate to its policy (saved before "
+                "it was written, or edited): its numbers are shown, never trusted as a certificate",
     PRECISION: "tolerance below attainable precision: value iteration reached the round-off floor of its "
                "sweeps (stats['stop'] says the width reached and the floor) and stopped; the bracket, widened "
                "by the round-off bound, still holds",

@@ -41,7 +41,7 @@ from .errors import ModelError, SolverError
 from .mdp import MAX_COST
 from .models.cost import process_cost
 from .policies import ClippedPolicy, Policy, as_policy
-from .simulate import SimulationResult, simulate
+from .simulate import SimulationResult, checked_run, simulate
 
 __all__ = ["UntruncatedInterval", "Candidate", "UncappedPolicy", "UnboundedCost", "simulate_uncapped",
            "untruncated_interval", "uncapped_refusal"]
@@ -153,6 +153,7 @@ def simulate_uncapped(policy: Any, mdp: Any = None, *, slots: int = 40_000, reps
     (SimulationResult, max_tau)
         The estimate, and the largest AoI of each process the run reached.
     """
+    slots, reps, burn_in, seed = checked_run(slots, reps, burn_in, seed)  # before anything is built
     pol = as_policy(policy, mdp)
     start = pol.system.caps if initial_tau is None else initial_tau
     wrapped = UncappedPolicy(pol, int(np.max(start)) + burn_in + slots + 1)

@@ -144,8 +144,10 @@ def joint_size(system: System) -> dict:
         "alp_variables": int(caps.sum()) * n_c + n * n_p + 1, "alp_constraints": int(caps.sum()) * n_p,
         "lp_rows": shape["rows"], "lp_cols": shape["cols"], "lp_nnz": shape["nnz"], "memory_bytes": mem,
         "numba": numba, "within_reach": bool(ok),
-        "rule": (f"LP nonzeros {shape['nnz']:,} <= {REACH_MAX_NNZ:,}, estimated memory {mem / 2**30:.2f} GiB "
-                 f"<= {REACH_MAX_BYTES / 2**30:.0f} GiB, numba {'available' if numba else 'missing'}"),
+        "rule": (f"LP nonzeros {shape['nnz']:,} {'<=' if shape['nnz'] <= REACH_MAX_NNZ else '>'} "
+                 f"{REACH_MAX_NNZ:,}, estimated memory {mem / 2**30:.2f} GiB "
+                 f"{'<=' if mem <= REACH_MAX_BYTES else '>'} {REACH_MAX_BYTES / 2**30:.0f} GiB, "
+                 f"numba {'available' if numba else 'missing'}"),
     }
 
 

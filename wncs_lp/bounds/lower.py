@@ -11,7 +11,8 @@ import importlib
 from dataclasses import replace
 from typing import Any
 
-from ..errors import WncsError
+from ..arguments import keywords, real, shown, whole
+from ..errors import ArgumentError, WncsError
 from ..models.guard import require_memory
 from ..models.system import System
 from ..scenario import Scenario
@@ -103,12 +104,13 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     """
     name = parse_relaxation(relaxation)
     if not isinstance(scenario_or_system, (Scenario, System)):
-        raise WncsError(f"expected a Scenario or a System, got {type(scenario_or_system).__name__}")
+        raise ArgumentError("scenario_or_system", f"expected a Scenario or a System, got {shown(scenario_or_system)}")
+    joint, why_not = _joint_module()
+    _check_options(name, options, joint)
     if name == "private-servers":
         return private_bound(scenario_or_system, **options)
     if name == "grouped-private-servers":
         return grouped_bound(scenario_or_system, **options)
-    joint, why_not = _joint_module()
     if name == "joint-configuration":
         if joint is None:
             raise WncsError(f"relaxation joint-configuration asked for, but {why_not}")
@@ -168,6 +170,25 @@ def auto_pick(found: list[BoundResult], notes: list[str] = ()) -> BoundResult:
                        + list(notes))
     return replace(best, stats={**best.stats, "auto_choice": best.relaxation, "auto_reason": reason,
                                 "auto_bounds": bounds})
+
+
+def _check_options(name: str, options: dict, joint: Any) -> None:
+    """Refuse, naming it, a keyword the relaxation does not take (under ``"auto"``: none of them
+    does), and a ``tol``, ``time_limit`` or ``max_iter`` out of range, before any work."""
+    fns = {"private-servers": [private_bound], "grouped-private-servers": [grouped_bound],
+           "joint-configuration": [joint.joint_bound] if joint is not None else [],
+           "auto": [private_bound, grouped_bound] + ([joint.joint_bound] if joint is not None else [])}[name]
+    import inspect
+
+    takes = {p for fn in fns for p, v in inspect.signature(fn).parameters.items() if v.kind is v.KEYWORD_ONLY
+             or (v.kind is v.POSITIONAL_OR_KEYWORD and p != "scenario_or_system" and p != "system")}
+    keywords(options, sorted(takes), f"lower_bound(relaxation={name!r})")
+    if "tol" in options:
+        real(options["tol"], "tol", lo=0.0, lo_open=True, hi=1.0, hi_open=True)
+    if options.get("time_limit") is not None:
+        real(options["time_limit"], "time_limit", lo=0.0)
+    if "max_iter" in options:
+        whole(options["max_iter"], "max_iter", lo=1)
 
 
 def _private_options(options: dict) -> dict:

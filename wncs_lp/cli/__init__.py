@@ -20,7 +20,7 @@ import argparse
 import sys
 from typing import Sequence
 
-from ..errors import WncsError
+from ..errors import WncsError, printable
 from . import bound, capstudy, export, maps, policy, reproduce, solve, tradeoff, validate, verify
 from .common import Command
 
@@ -53,53 +53,84 @@ def main(argv: Sequence[str] | None = None) -> int:
     import signal
     import warnings
 
+    from .. import stopping
     from ..errors import ScenarioWarning
 
     args = build_parser().parse_args(argv)
-    terminated: list[int] = []
 
-    def on_sigterm(signum, frame):  # stop like Ctrl-C (files are written atomically), then say so
-        terminated.append(signum)
+    def on_signal(signum, frame):  # stop the whole command (files are written atomically), then say so
+        stopping.request(signum)
         raise KeyboardInterrupt
 
-    try:
-        previous = signal.signal(signal.SIGTERM, on_sigterm)
-    except ValueError:  # not the main thread: leave SIGTERM alone
-        previous = None
+    previous = {}
+    for s in stopping.STOP_SIGNALS:
+        try:  # a Ctrl-C ignored by the caller (a background job) stays ignored
+            if s != signal.SIGINT or signal.getsignal(s) != signal.SIG_IGN:
+                previous[s] = signal.signal(s, on_signal)
+        except ValueError:  # not the main thread: leave the signals alone
+            break
+    stopping.clear()
     try:
         with warnings.catch_warnings():
             # the commands print a degenerate scenario's warnings themselves, in words (common.load)
             warnings.filterwarnings("ignore", category=ScenarioWarning)
             code = int(args.func(args) or 0)
-        if terminated:
-            raise KeyboardInterrupt
+        stopping.check()  # a step returned what it had after a signal: the command stopped, say so
+        sys.stdout.flush()  # a reader that went away (``| head``) is found here, not at exit
         return code
+    except KeyboardInterrupt:
+        for s in previous:  # a second signal while this is said is not a traceback
+            signal.signal(s, signal.SIG_IGN)
+        term = stopping.requested() == signal.SIGTERM
+        stopping.clear()
+        name, code = ("SIGTERM", 143) if term else ("SIGINT", 130)
+        text = f"{'terminated (SIGTERM)' if term else 'interrupted'}: results already written are kept"
+        return _report(args, text, {"interrupted": True, "signal": name, "exit_status": code, "error": text,
+                                    "type": "KeyboardInterrupt", "command": args.command}, code)
+    except BrokenPipeError:
+        return _reader_gone()
     except OSError as exc:  # a write that failed mid-run (disk full, folder removed): one line
         text = f"{str(exc.filename) + ': ' if exc.filename else ''}{exc.strerror or exc}"
-        print(f"error: {text}", file=sys.stderr)
+        return _report(args, f"error: {text}", {"error": text, "type": type(exc).__name__}, 2)
+    except WncsError as exc:  # --json promises one JSON object on stdout, errors included
+        return _report(args, f"error: {exc}", {"error": str(exc), "type": type(exc).__name__,
+                                               **{k: getattr(exc, k) for k in ("source", "field")
+                                                  if hasattr(exc, k)}}, 2)
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+        stopping.clear()
+
+
+def _report(args, line: str, payload: dict, code: int) -> int:
+    """``line`` on stderr and, under ``--json``, ``payload`` as the one JSON object; ``code``."""
+    try:
+        print(printable(line), file=sys.stderr, flush=True)  # one line, whatever a name holds
         if getattr(args, "json", False):
             from .common import emit_json
 
-            emit_json({"error": text, "type": type(exc).__name__})
-        return 2
-    except WncsError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        if getattr(args, "json", False):  # --json promises one JSON object on stdout, errors included
-            from .common import emit_json
+            emit_json(payload)
+            sys.stdout.flush()
+    except BrokenPipeError:
+        _reader_gone()
+    return code
 
-            emit_json({"error": str(exc), "type": type(exc).__name__,
-                       **{k: getattr(exc, k) for k in ("source", "field") if hasattr(exc, k)}})
-        return 2
-    except KeyboardInterrupt:
-        name, code = ("SIGTERM", 143) if terminated else ("SIGINT", 130)
-        text = f"{'terminated (SIGTERM)' if terminated else 'interrupted'}: results already written are kept"
-        print(text, file=sys.stderr)
-        if getattr(args, "json", False):  # --json still prints its one object, saying so
-            from .common import emit_json
 
-            emit_json({"interrupted": True, "signal": name, "exit_status": code, "error": text,
-                       "type": "KeyboardInterrupt", "command": args.command})
-        return code
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+#: The exit status when the reader of stdout closed it early: 128 + SIGPIPE, as a shell reports
+#: a command ended by that signal.
+EXIT_PIPE = 141
+
+
+def _reader_gone() -> int:
+    """stdout's reader closed the pipe (``wncs-lp ... --json | head -c 10``): nothing more can be
+    shown, so stop quietly; stdout is pointed at /dev/null so that the interpreter's own flush at
+    exit finds no broken pipe either."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # stdout is not a file descriptor (an embedding caller)
+        pass
+    return EXIT_PIPE

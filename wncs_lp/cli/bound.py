@@ -6,8 +6,8 @@ import argparse
 import time
 
 from ..errors import WncsError
-from .common import (Command, add_progress_arg, add_scenario_args, add_simulation_args, emit_json, head, load,
-                     progress_for)
+from .common import (COUNT, NONNEGATIVE, Command, add_progress_arg, add_scenario_args, add_simulation_args, emit_json,
+                     head, load, progress_for, real_option)
 
 
 def cmd_bound(args: argparse.Namespace) -> int:
@@ -133,13 +133,13 @@ def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--groups", default=None, metavar="1,5;2,6;...",
                    help="--relaxation 3: the groups of processes (1-based, ';' between groups; default: the "
                         "pairs that interact most at relaxation 1's multipliers)")
-    p.add_argument("--tol", type=float, default=1e-6,
+    p.add_argument("--tol", type=real_option(0.0, 1.0, lo_open=True, hi_open=True), default=1e-6,
                    help="relative tolerance of the multiplier search (default 1e-6); the bound is certified "
                         "whatever it is")
-    p.add_argument("--max-steps", type=int, default=None, metavar="N",
+    p.add_argument("--max-steps", type=COUNT, default=None, metavar="N",
                    help="bundle steps of relaxation 2's search (default: 30 under auto, 1000 for --relaxation 2); "
                         "the bound is certified whatever stops it")
-    p.add_argument("--time-limit", type=float, default=None, metavar="SECONDS",
+    p.add_argument("--time-limit", type=real_option(0.0), default=None, metavar="SECONDS",
                    help="seconds of relaxation 2's search at most (default: none under auto, whose interior point "
                         "runs only where predicted to fit and stops at a multiple of that prediction in CPU time; "
                         "600 for --relaxation 2)")
@@ -150,7 +150,7 @@ def _configure(p: argparse.ArgumentParser) -> None:
                    help="policies evaluated with --policy besides the bound's greedy one (default "
                         "lookahead,suboptimal,static,greedy; lookahead: the two-step lookahead on the bound's tables, "
                         "index: the Whittle-type index policy of relaxation 1's chains; '' for none)")
-    p.add_argument("--exact-max-states", type=int, default=50_000_000, metavar="N",
+    p.add_argument("--exact-max-states", type=NONNEGATIVE, default=50_000_000, metavar="N",
                    help="evaluate exactly (certified matrix-free evaluation) when the AoI box has at most N states, "
                         "else by Monte Carlo (default 50000000; 0: always Monte Carlo)")
     p.add_argument("--untruncated", action="store_true",

@@ -8,7 +8,8 @@ from typing import Callable, NamedTuple, Sequence
 
 from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD, METHOD_HELP, METHODS, SCENARIO_METHODS
 
-__all__ = ["Command", "add_scenario_args", "add_method_arg", "add_progress_arg", "add_threads_arg",
+__all__ = ["Command", "whole_option", "real_option", "add_scenario_args", "add_method_arg", "add_progress_arg",
+           "add_threads_arg",
            "add_parallel_args", "executor_of", "progress_for", "load", "emit_json", "head", "output_file",
            "output_folder", "write_after_work", "warn", "solution_json", "scenario_file", "JSON_SCHEMA_VERSION", "SOLVE_METHODS",
            "MATRIX_FREE_METHODS"]
@@ -38,7 +39,9 @@ def emit_json(payload: dict) -> None:
     import wncs_lp
 
     from ..files import dumps
+    from ..stopping import check
 
+    check()  # a command stopped by a signal prints the interrupted object instead, and only that
     print(dumps({"schema_version": JSON_SCHEMA_VERSION, "version": wncs_lp.__version__, **payload}, indent=2))
 
 
@@ -60,7 +63,9 @@ _TOP_KEYS = ("method", "status", "status_code", "message", "gain", "gain_lower",
 
 def warn(text: str) -> None:
     """One ``warning: ...`` line on stderr (never on stdout, so ``--json`` stays clean)."""
-    print(f"warning: {text}", file=sys.stderr, flush=True)
+    from ..errors import printable
+
+    print(f"warning: {printable(text)}", file=sys.stderr, flush=True)
 
 
 def add_scenario_args(p: argparse.ArgumentParser) -> None:
@@ -87,25 +92,64 @@ def add_method_arg(p: argparse.ArgumentParser, what: str = "", extra: tuple[str,
                    help=(f"{what}: " if what else "") + METHOD_HELP + (f"; {extra_help}" if extra_help else ""))
 
 
-def _threads(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number of threads >= 1, got {text!r}")
-    return n
+def whole_option(lo: int | None = None, hi: int | None = None, what: str = "whole number") -> Callable[[str], int]:
+    """An argparse ``type``: a whole number in ``[lo, hi]`` (the checks of :mod:`wncs_lp.arguments`),
+    else the parser's usage error saying what was expected."""
+    from ..arguments import whole
+    from ..errors import ArgumentError
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text.strip())
+        except ValueError:
+            value = text
+        try:
+            return whole(value, what, lo=lo, hi=hi)
+        except ArgumentError as exc:
+            expected = exc.detail.split(", got ", 1)[0].replace("a whole number", f"a {what}")
+            raise argparse.ArgumentTypeError(f"{expected}, got {text!r}") from None
+
+    parse.__name__ = what
+    return parse
+
+
+def real_option(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+                hi_open: bool = False) -> Callable[[str], float]:
+    """An argparse ``type``: a finite number in the range (``lo_open`` / ``hi_open``: the end
+    excluded), else the parser's usage error; ``nan`` and ``inf`` are refused."""
+    from ..arguments import real
+    from ..errors import ArgumentError
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = text
+        try:
+            return real(value, "number", lo=lo, hi=hi, lo_open=lo_open, hi_open=hi_open)
+        except ArgumentError as exc:
+            raise argparse.ArgumentTypeError(exc.detail.split(", got ", 1)[0] + f", got {text!r}") from None
+
+    parse.__name__ = "number"
+    return parse
+
+
+#: The options every command shares, checked by the parser.
+COUNT = whole_option(1)  # replications, workers, steps: at least one
+SLOTS = whole_option(1, what="number of slots")
+NONNEGATIVE = whole_option(0)
+SEED = whole_option(0, what="seed")
 
 
 def add_threads_arg(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--threads", type=_threads, default=None, metavar="N",
+    p.add_argument("--threads", type=whole_option(1, what="number of threads"), default=None, metavar="N",
                    help="threads of the solvers' compiled kernels (value iteration, the matrix-free solver; default: "
                         "the machine's cores)")
 
 
 def add_parallel_args(p: argparse.ArgumentParser, what: str, executor: bool = True) -> None:
     """``--max-workers`` (and ``--executor``) and ``--scheduler``: where a study's points run."""
-    p.add_argument("--max-workers", type=int, default=1,
+    p.add_argument("--max-workers", type=COUNT, default=1,
                    help=f"{what} in parallel worker processes (default 1: in order, with warm start)")
     if executor:
         p.add_argument("--executor", default="process", choices=["process", "dask"],
@@ -131,10 +175,10 @@ def executor_of(args: argparse.Namespace):
 def add_simulation_args(p: argparse.ArgumentParser, what: str) -> None:
     """``--slots``, ``--reps``, ``--seed``, ``--burn-in`` of a Monte Carlo run; ``what`` prefixes their help
     (``"Monte Carlo"``, ``"--untruncated"``)."""
-    p.add_argument("--slots", type=int, default=40_000, help=f"{what}: slots per replication (default 40000)")
-    p.add_argument("--reps", type=int, default=20, help=f"{what}: independent replications (default 20)")
-    p.add_argument("--seed", type=int, default=0, help=f"{what}: random seed (default 0)")
-    p.add_argument("--burn-in", type=int, default=1000, help=f"{what}: slots discarded first (default 1000)")
+    p.add_argument("--slots", type=SLOTS, default=40_000, help=f"{what}: slots per replication (default 40000)")
+    p.add_argument("--reps", type=COUNT, default=20, help=f"{what}: independent replications (default 20)")
+    p.add_argument("--seed", type=SEED, default=0, help=f"{what}: random seed, a whole number >= 0 (default 0)")
+    p.add_argument("--burn-in", type=NONNEGATIVE, default=1000, help=f"{what}: slots discarded first (default 1000)")
 
 
 def add_progress_arg(p: argparse.ArgumentParser) -> None:

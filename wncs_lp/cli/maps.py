@@ -5,7 +5,10 @@ import argparse
 from typing import Sequence
 
 from .common import (MATRIX_FREE_METHODS, Command, add_method_arg, add_progress_arg, add_scenario_args,
-                     add_threads_arg, emit_json, load, output_file, progress_for)
+                     add_threads_arg, emit_json, load, output_file, progress_for, whole_option)
+
+#: The largest ``--dpi``: a figure of the default size at 1200 dpi is already 7,680 x 5,760 pixels.
+MAX_DPI = 1200
 
 
 def _parse_axes(text: str) -> tuple[int, ...]:
@@ -85,8 +88,10 @@ def cmd_map(args: argparse.Namespace) -> int:
 
         raise ModelError(f"--axes {args.axes!r}: a map takes two processes (three with --slice)")
     fixed = _parse_fix(args.fix)
-    _check_route(args, scenario)
     prog = progress_for(args)
+    if args.policy is not None:
+        return _saved_policy_map(args, scenario, axes, fixed, prog)
+    _check_route(args, scenario)
     config = []  # the configuration, read off the MDP before the solve (a bad --servers fails early)
     run = solve_scenario(scenario, args.method, constrained=False if args.ignore_constraints else None,
                          force=args.force, threads=args.threads, progress=prog, need_mdp=args.slice is not None,
@@ -116,9 +121,48 @@ def cmd_map(args: argparse.Namespace) -> int:
         "regions": stats,
     }
     if args.json:
-        emit_json(payload)
+        emit_json({**payload, "status": str(sol.status)})
     else:
         print(f"map of [{payload['configuration']}] written to {args.out}")
+        if not sol.ok:  # the label "optimal" is earned only where the certificate closed
+            print(f"note: the solve is not certified (status {sol.status}: {sol.status.message}); the map shows "
+                  "its policy, not a certified optimum")
+        _print_regions(stats)
+    return 0 if sol.ok else 1
+
+
+def _saved_policy_map(args: argparse.Namespace, scenario, axes, fixed, prog) -> int:
+    """``--policy FILE.npz``: draw a policy saved by ``wncs-lp solve --out`` on the scenario's MDP,
+    as ``evaluate`` and ``simulate`` take it (nothing is solved)."""
+    from ..errors import PolicyError
+    from ..export import load_policy_npz
+    from ..maps import parse_config_spec, region_stats
+    from ..solvers.route import build_scenario
+    from ..viz import plot_policy_map, plot_policy_slice, save_figure
+
+    if not args.policy.lower().endswith(".npz"):
+        raise PolicyError(f"--policy {args.policy!r}: map draws a policy saved by wncs-lp solve --out FILE.npz "
+                          "(without --policy: the optimal policy, solved here)")
+    mdp, _ = build_scenario(scenario, force=args.force, progress=prog)
+    config = parse_config_spec(mdp, args.servers)
+    prog.phase(f"reading the policy of {args.policy}")
+    probs = load_policy_npz(args.policy, mdp)
+    prog.phase(f"drawing the map and writing {args.out}")
+    if args.slice is not None:
+        axes = axes if len(axes) == 3 else (1, 2, 3)
+        ax = plot_policy_slice(mdp, probs, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
+        stats = region_stats(mdp, probs, config, axes=axes, fixed_tau=fixed, total=args.slice, scenario=scenario)
+    else:
+        ax = plot_policy_map(mdp, probs, config, axes=axes, fixed_tau=fixed, scenario=scenario)
+        stats = region_stats(mdp, probs, config, axes=axes, fixed_tau=fixed, scenario=scenario)
+    save_figure(ax.figure, args.out, dpi=args.dpi, bbox_inches="tight")
+    payload = {"scenario": scenario.source, "overrides": args.overrides, "out": args.out, "policy": args.policy,
+               "configuration": mdp.states.describe_config(mdp.states.configs[config]), "configuration_id": config,
+               "axes": list(axes), "slice_total": args.slice, "regions": stats}
+    if args.json:
+        emit_json(payload)
+    else:
+        print(f"map of [{payload['configuration']}] of the policy of {args.policy} written to {args.out}")
         _print_regions(stats)
     return 0
 
@@ -143,16 +187,20 @@ def _configure_map(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fix", action="append", default=[], metavar="K=TAU",
                    help="AoI of a process not on the axes, e.g. 3=5 (repeatable; default: the value with the "
                         "most reachable states)")
-    p.add_argument("--slice", type=int, default=None, metavar="TOTAL",
+    p.add_argument("--slice", type=whole_option(1, what="total AoI"), default=None, metavar="TOTAL",
                    help="draw the plane tau_i + tau_j + tau_k = TOTAL as a triangle (three processes)")
     add_method_arg(p, "solver of the optimal policy (constrained scenarios: auto, lp or lp-cvxpy)", MATRIX_FREE_METHODS,
                    "matrix-free: certified value iteration without building the MDP, for models too large to "
                    "store (auto switches to it when the stored matrix would not fit; two-AoI maps only, the "
                    "AoIs off the axes default to the lower end of the configuration's box)")
+    p.add_argument("--policy", default=None, metavar="FILE.npz",
+                   help="draw a policy saved by wncs-lp solve --out FILE.npz (on the same scenario and overrides) "
+                        "instead of solving, as evaluate and simulate take it")
     p.add_argument("--ignore-constraints", action="store_true",
                    help="map the unconstrained optimum even if the scenario has [[constraint]] tables (by default "
                         "the constrained optimum is drawn, with its randomised states starred)")
-    p.add_argument("--dpi", type=int, default=120, help="resolution of raster output (default 120)")
+    p.add_argument("--dpi", type=whole_option(10, MAX_DPI, what="resolution"), default=120,
+                   help=f"resolution of raster output, 10 to {MAX_DPI} dots per inch (default 120)")
     add_threads_arg(p)
     add_progress_arg(p)
 

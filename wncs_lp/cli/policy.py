@@ -4,8 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import (Command, add_method_arg, add_parallel_args, add_progress_arg, add_scenario_args,
-                     add_threads_arg, emit_json, executor_of, head, load, output_folder, progress_for)
+from .common import (COUNT, NONNEGATIVE, SEED, SLOTS, Command, add_method_arg, add_parallel_args, add_progress_arg,
+                     add_scenario_args, add_threads_arg, emit_json, executor_of, head, load, output_folder, progress_for)
 
 
 def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
@@ -58,6 +58,21 @@ def _policy_file(args: argparse.Namespace, scenario, prog):
     return PolicySetup(system=policy.system, mdp=mdp, policy=policy, seconds=time.perf_counter() - t0)
 
 
+def _solve_label(made) -> tuple[dict, str | None]:
+    """The status of the solve an ``optimal`` policy comes from, for the payload, and the line
+    saying it is not certified (None when it is, or when no solve made the policy): the label
+    "optimal" is earned only where the certificate closed, as for ``wncs-lp solve``."""
+    status = getattr(made, "status", None)
+    if status is None:
+        return {}, None
+    from ..status import as_status
+
+    st = as_status(status)
+    line = None if st.ok else (f"note: the solve of the {made.policy.name} policy is not certified (status {st}: "
+                               f"{st.message}); the numbers below are this policy's, not a certified optimum's")
+    return {"policy_status": str(st), "policy_certified": bool(st.ok)}, line
+
+
 # ----------------------------------------------------------------------------- evaluate
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..errors import PolicyError
@@ -73,6 +88,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             raise
         return _evaluate_matrix_free(args, scenario, prog, refused)
     mdp, policy = made.mdp, made.policy
+    label, note = _solve_label(made)
     prog.phase(f"evaluating the {policy.name} policy exactly (its chain's stationary law)")
     try:
         ev = evaluate(mdp, policy, multichain="initial" if args.from_initial else "error", method=args.stationary,
@@ -84,6 +100,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         **head(args, scenario, mdp),
         **ev.to_dict(),
         "policy_info": policy.describe(),
+        **label,
         "setup_seconds": made.seconds,
     }
     if transient is not None:
@@ -93,6 +110,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     else:
         print(scenario.describe())
         print(f"MDP: {mdp.n_states:,} states, {mdp.n_pairs:,} state-action pairs")
+        if note:
+            print(note)
         print(f"policy {ev.policy}: average cost (gain) {ev.gain:.10g}")
         if args.certify:
             print(f"certificate: {ev.gain_lower:.12g} <= g_pi <= {ev.gain_upper:.12g} (certified value iteration of "
@@ -111,7 +130,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             tr, best = transient
             print(f"first {tr.horizon} slots from {tr.start}: expected cost {tr.total:.10g} (average "
                   f"{tr.average:.8g} a slot) under {tr.policy}; the finite-horizon optimum {best.total:.10g} (average {best.average:.8g})")
-    return 0
+    return 0 if note is None else 1
 
 
 def _transient(args: argparse.Namespace, mdp, policy, prog):
@@ -144,6 +163,7 @@ def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> 
     prog.phase(f"{why}: evaluating without it")
     made = _policy(args, scenario, need_mdp=False, prog=prog)
     policy, system = made.policy, made.system
+    label, note = _solve_label(made)
     if hasattr(policy, "separable_evaluation"):
         prog.phase(f"evaluating the {policy.name} policy exactly on its per-process chains")
         ev = policy.separable_evaluation()
@@ -158,13 +178,16 @@ def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> 
         prog.phase(f"measuring the {policy.name} policy's time at the AoI cap (certified matrix-free evaluation)")
         cap = CapCount.of(matrix_free_cap_mass(system, policy, threads=args.threads, progress=prog), system)
     payload = {**head(args, scenario), "policy": policy.name, "route": why, **out,
-               "cap_mass": None if cap is None else cap.to_dict(), "policy_info": policy.describe(),
+               "cap_mass": None if cap is None else cap.to_dict(), "policy_info": policy.describe(), **label,
                "setup_seconds": made.seconds}
+    code = 0 if out["status"] == "optimal" and note is None else 1
     if args.json:
         emit_json(payload)
-        return 0 if out["status"] == "optimal" else 1
+        return code
     print(scenario.describe())
     print(f"no MDP built ({why}); {out['how']} evaluation over {out['states']:,} states")
+    if note:
+        print(note)
     print(f"policy {policy.name}: average cost (gain) {out['gain']:.10g}")
     if out["how"] == "separable":
         for name, v in zip([p.name for p in scenario.processes], out["mse"]):
@@ -174,7 +197,7 @@ def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> 
     else:
         print(f"certificate: {out['gain_lower']:.12g} <= g_pi <= {out['gain_upper']:.12g} (status {out['status']})")
         print(f"truncation: under the {policy.name} policy {cap.message()}")
-    return 0 if out["status"] == "optimal" else 1
+    return code
 
 
 def _configure_evaluate(p: argparse.ArgumentParser) -> None:
@@ -190,7 +213,7 @@ def _configure_evaluate(p: argparse.ArgumentParser) -> None:
                         "for recurrent classes under 1,000 states, BiCGSTAB above (benchmarks/evaluation.py)")
     p.add_argument("--certify", action="store_true",
                    help="also bracket the gain by the certified value iteration of the policy's chain")
-    p.add_argument("--horizon", type=int, default=None, metavar="T",
+    p.add_argument("--horizon", type=COUNT, default=None, metavar="T",
                    help="also the expected cost over the first T slots (the policy's, and the finite-horizon "
                         "optimum's), by exact recursion on the enumerated MDP")
     p.add_argument("--start", default=None, metavar="TAU",
@@ -206,6 +229,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     prog = progress_for(args)
     made = _policy(args, scenario, need_mdp=False, prog=prog)
     policy = made.policy
+    label, note = _solve_label(made)
     control = None
     if args.control_variate:
         from ..bounds import lower_bound
@@ -219,19 +243,22 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "configs": made.system.n_configs,
         **res.to_dict(),
         "policy_info": policy.describe(),
+        **label,
         "setup_seconds": made.seconds,
     }
     if args.json:
         emit_json(payload)
     else:
-        _print_simulation(scenario, res)
-    return 0
+        _print_simulation(scenario, res, note)
+    return 0 if note is None else 1
 
 
-def _print_simulation(scenario, res) -> None:
+def _print_simulation(scenario, res, note: str | None = None) -> None:
     from ..intervals import AGREEMENT_LEVEL
 
     print(scenario.describe())
+    if note:
+        print(note)
     print(f"policy {res.policy}: {res.reps} replications x {res.slots} slots (burn-in {res.burn_in}, seed {res.seed})")
     two, up = res.interval(0.95, "two-sided"), res.interval(0.95, "upper")  # batch means for one replication
     print(f"average cost {res.mean:.8g} +- {two.stderr:.3g} (standard error, {two.method}), {res.seconds:.2f} s")
@@ -253,10 +280,10 @@ def _print_simulation(scenario, res) -> None:
 def _configure_simulate(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
     _add_policy_args(p)
-    p.add_argument("--slots", type=int, default=40_000, help="slots averaged per replication (default 40000)")
-    p.add_argument("--reps", type=int, default=20, help="independent replications (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--burn-in", type=int, default=1000, help="slots discarded first (default 1000)")
+    p.add_argument("--slots", type=SLOTS, default=40_000, help="slots averaged per replication (default 40000)")
+    p.add_argument("--reps", type=COUNT, default=20, help="independent replications (default 20)")
+    p.add_argument("--seed", type=SEED, default=0, help="random seed, a whole number >= 0 (default 0)")
+    p.add_argument("--burn-in", type=NONNEGATIVE, default=1000, help="slots discarded first (default 1000)")
     p.add_argument("--control-variate", action="store_true",
                    help="average the Bellman residual of relaxation 1's value tables instead of the cost: the same "
                         "expectation, usually a far smaller variance (docs/simulation.md)")
@@ -328,10 +355,11 @@ def _configure_sweep(p: argparse.ArgumentParser) -> None:
                         "max_weight,round_robin (docs/policies.md)")
     p.add_argument("--out", required=True, help="output folder (resumed when it holds rows)")
     add_method_arg(p, "solver of the optimal policy at every grid value")
-    p.add_argument("--simulate-slots", type=int, default=0, help="also simulate each policy for this many slots")
-    p.add_argument("--reps", type=int, default=20, help="replications when simulating (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="simulation seed (default 0)")
-    p.add_argument("--burn-in", type=int, default=1000, help="simulation burn-in (default 1000)")
+    p.add_argument("--simulate-slots", type=NONNEGATIVE, default=0,
+                   help="also simulate each policy for this many slots (default 0: no simulation)")
+    p.add_argument("--reps", type=COUNT, default=20, help="replications when simulating (default 20)")
+    p.add_argument("--seed", type=SEED, default=0, help="simulation seed, a whole number >= 0 (default 0)")
+    p.add_argument("--burn-in", type=NONNEGATIVE, default=1000, help="simulation burn-in (default 1000)")
     p.add_argument("--no-exact", action="store_true", help="no exact evaluation (simulate only; needs --simulate-slots)")
     add_parallel_args(p, "grid values")
     add_threads_arg(p)

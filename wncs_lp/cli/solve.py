@@ -6,7 +6,8 @@ import time
 
 from ..methods import DEFAULT_METHOD, METHOD_HELP
 from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args, add_simulation_args, add_threads_arg,
-                     emit_json, head, load, output_file, progress_for, solution_json, write_after_work)
+                     emit_json, head, load, output_file, progress_for, real_option, solution_json,
+                     write_after_work)
 
 
 def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
@@ -242,7 +243,7 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dry-run", action="store_true",
                    help="check the scenario and print the size of its MDP and the memory a solve needs, as wncs-lp "
                         "validate does; build and solve nothing")
-    p.add_argument("--discount", type=float, default=None, metavar="BETA",
+    p.add_argument("--discount", type=real_option(0.0, 1.0, hi_open=True), default=None, metavar="BETA",
                    help="solve the discounted problem with this discount factor in [0, 1) instead of the average "
                         "cost (--method auto/pi: policy iteration, vi/rvi: value iteration, lp/lp-highs: the LP on "
                         "HiGHS; certified by MacQueen's bounds)")

@@ -6,7 +6,7 @@ import math
 import sys
 
 from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD
-from .common import (Command, add_parallel_args, add_scenario_args, add_threads_arg, emit_json, executor_of, head,
+from .common import (COUNT, Command, add_parallel_args, add_scenario_args, add_threads_arg, emit_json, executor_of, head,
                      load, output_folder)
 
 
@@ -52,7 +52,7 @@ def cmd_tradeoff(args: argparse.Namespace) -> int:
 
 def _configure_tradeoff(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
-    p.add_argument("--constraint", type=int, required=True, metavar="N",
+    p.add_argument("--constraint", type=COUNT, required=True, metavar="N",
                    help="the scenario's [[constraint]] table to sweep (1-based)")
     p.add_argument("--values", required=True,
                    help="bounds: START:STOP:STEP (stop included) or a comma list "

@@ -40,7 +40,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
     what = "configurations (servers and sensors' ages)" if scenario.has_arrivals else "server configurations"
     print(f"valid. The MDP: {est.configs:,} {what}, {bound}{est.states:,} states, "
           f"{est.pairs:,} state-action pairs, {est.nnz:,} transition nonzeros")
-    print(f"memory: build about {_gib(est.build_bytes)}, LP about {_gib(est.lp_bytes)}; available now {_gib(avail)}")
+    print(f"memory: build about {_gib(est.build_bytes)}, LP about {_gib(est.lp_bytes)} on Clarabel "
+          f"({_gib(est.lp_need('highs'))} on HiGHS); available now {_gib(avail)}")
     print(f"matrix-free solver: {est.matrix_free_states:,} states, {matrix_free_fit(est, avail)}")
     print("a solve would build it" if refusal is None else f"a solve would refuse to build it: {refusal}")
     return 0

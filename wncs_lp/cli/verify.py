@@ -11,7 +11,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from .common import Command, add_method_arg, add_scenario_args, add_threads_arg, emit_json, head, load
+from .common import (NONNEGATIVE, Command, add_method_arg, add_scenario_args, add_threads_arg, emit_json, head, load,
+                     real_option)
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
@@ -76,10 +77,11 @@ def cmd_verify(args: argparse.Namespace) -> int:
 def _configure_verify(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
     add_method_arg(p)
-    p.add_argument("--atol", type=float, default=1e-9, help="absolute part of the tie tolerance (default 1e-9)")
-    p.add_argument("--rtol", type=float, default=1e-9,
+    p.add_argument("--atol", type=real_option(0.0), default=1e-9,
+                   help="absolute part of the tie tolerance (default 1e-9)")
+    p.add_argument("--rtol", type=real_option(0.0), default=1e-9,
                    help="part of the tie tolerance relative to span(V) = max V - min V (default 1e-9)")
-    p.add_argument("--examples", type=int, default=10, help="example violations kept per check (default 10)")
+    p.add_argument("--examples", type=NONNEGATIVE, default=10, help="example violations kept per check (default 10)")
     add_threads_arg(p)
 
 

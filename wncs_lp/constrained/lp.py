@@ -41,7 +41,8 @@ import scipy.sparse as sp
 from ..errors import InfeasibleConstraintsError, SolverError
 from ..mdp import MDP
 from ..solvers.certify import greedy_first
-from ..solvers.lp import LPData, build_lp, clarabel_settings, clarabel_stats, clarabel_status, cvxpy_status
+from ..solvers.lp import (LPData, build_lp, clarabel_settings, clarabel_solve, clarabel_stats, clarabel_status,
+                          cvxpy_status)
 from ..status import FAILED, INFEASIBLE
 from .certify import CERT_RTOL, certify, policy_from_occupation
 from .problem import LinearConstraint, Rows, max_form, with_cost
@@ -85,7 +86,7 @@ def _run_clarabel(lp: LPData, G, h, tol, max_iter, verbose, settings):
     st = clarabel_settings(tol, max_iter, verbose, settings)
     cones = [clarabel.ZeroConeT(m)] + ([clarabel.NonnegativeConeT(K)] if K else []) + [clarabel.NonnegativeConeT(L)]
     solver = clarabel.DefaultSolver(sp.csc_matrix((L, L)), lp.q, A, b, cones, st)
-    sol = solver.solve()
+    sol = clarabel_solve(solver)
     info = solver.get_info()
     z = np.asarray(sol.z, float)
     stats = {**clarabel_stats(sol, info), "obj_scaled": float(sol.obj_val)}

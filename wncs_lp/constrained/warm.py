@@ -43,7 +43,7 @@ import scipy.sparse as sp
 
 from ..errors import SolverError
 from ..mdp import MDP
-from ..solvers.highs import new_highs
+from ..solvers.highs import new_highs, run_highs
 from ..solvers.lp import build_lp
 from .certify import CERT_RTOL
 from .lp import certify_lp_solution, check_reachable, scaled_rows
@@ -135,7 +135,7 @@ class WarmConstrainedLP:
             H.setOptionValue("run_crossover", "on")  # end on a basis: a vertex, and the next warm start
             H.setOptionValue("time_limit", inf)
         t0 = time.perf_counter()
-        H.run()
+        run_highs(H)
         dt = time.perf_counter() - t0
         info = H.getInfo()
         status = H.modelStatusToString(H.getModelStatus())

@@ -36,7 +36,7 @@ import math
 import os
 import re
 from collections import deque
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -60,9 +60,22 @@ BUILD_BYTES_PER_NNZ = 16
 #: and bias) at that peak.
 BYTES_PER_PAIR = 40
 BYTES_PER_STATE = 100
-#: Extra factor for an interior-point LP (KKT matrix and its sparse factorisation), measured on
-#: the paper's instances to be 10-40x the MDP's own size.
+#: Extra factor for an interior-point LP (KKT matrix and its sparse factorisation) on small
+#: instances: 10-40x the MDP's own size. The floor of :func:`lp_bytes`.
 LP_FACTOR = 40.0
+#: The LP's peak grows faster than its size: the fill of the interior point's factor. Peak resident
+#: memory of ``wncs-lp solve --method lp`` (Clarabel) on processes 1-3 of the paper: 0.23 GB at cap 8,
+#: over 1.0 GB at cap 10, 3.78 GB at cap 12; the 3-process preemption scenario at cap 7: 2.35 GB
+#: (``/usr/bin/time -v``). In x = sqrt(transition nonzeros x pairs) these lie on
+#: ``LP_BYTES_REF * (x / LP_SIZE_REF) ** LP_EXPONENT`` (the size alone would put the preemption LP, with
+#: 9 nonzeros a pair, at 3x its peak; the pairs alone at 0.4x); :data:`LP_SLACK` above it.
+LP_BYTES_REF = 120e6
+LP_SIZE_REF = 92_000
+LP_EXPONENT = 1.85
+LP_SLACK = 1.25
+#: Each LP backend's peak against Clarabel's (processes 1-3 at cap 8: HiGHS 146 MB and cvxpy with
+#: Clarabel 306 MB against Clarabel's 231 MB, of which ~100 MB is the interpreter's), rounded up.
+LP_BACKEND_SHARE = {"clarabel": 1.0, "highs": 0.6, "cvxpy": 1.5}
 #: Fraction of the available memory a build may use before it is refused.
 MEMORY_FRACTION = 0.5
 #: Bytes per state of the matrix-free solver at its floor: the float64 value vector, the uint8
@@ -90,7 +103,7 @@ class SizeEstimate:
     build_bytes : int
         Estimated peak memory of the build.
     lp_bytes : int
-        Estimated peak memory of an interior-point LP solve.
+        Estimated peak memory of the LP on Clarabel (:func:`lp_bytes`).
     matrix_free_states : int
         States of the matrix-free solver's layout (the per-axis interval hull; exact).
     matrix_free_bytes : int
@@ -118,9 +131,16 @@ class SizeEstimate:
     matrix_free_full_bytes: int = 0
     configs_bound: int | None = None
     complete: bool = True
+    lp_backend_bytes: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    def lp_need(self, backend: str | bool = True) -> int:
+        """The LP's estimated peak on ``backend`` (``clarabel``, ``highs``, ``cvxpy``; True: Clarabel's)."""
+        if backend is True or backend not in self.lp_backend_bytes:
+            return self.lp_bytes
+        return int(self.lp_backend_bytes[backend])
 
 
 def _meminfo() -> dict[str, int]:
@@ -263,11 +283,12 @@ def estimate_size(scenario: Scenario, model=None) -> SizeEstimate:
     nnz = int((per_cfg * n_out).sum())
     box = math.prod(caps)
     build = nnz * BUILD_BYTES_PER_NNZ + pairs * BYTES_PER_PAIR + states * BYTES_PER_STATE + nC * box
-    lp = int(LP_FACTOR * (nnz * 16 + pairs * 8))
     mf_states = int(hull.sum())
     mf = mf_states * MATRIX_FREE_BYTES_PER_STATE + MATRIX_FREE_OVERHEAD
-    return SizeEstimate(nC, box, states, pairs, nnz, int(build), lp, mf_states, int(mf),
-                        int(mf + mf_states * MATRIX_FREE_SECOND_VECTOR), model.automaton_bounds().configs)
+    by_backend = {b: lp_bytes(nnz, pairs, b) for b in LP_BACKEND_SHARE}
+    return SizeEstimate(nC, box, states, pairs, nnz, int(build), by_backend["clarabel"], mf_states, int(mf),
+                        int(mf + mf_states * MATRIX_FREE_SECOND_VECTOR), model.automaton_bounds().configs,
+                        lp_backend_bytes=by_backend)
 
 
 def matrix_free_fit(est: SizeEstimate, available: int) -> str:
@@ -285,6 +306,16 @@ def matrix_free_fit(est: SizeEstimate, available: int) -> str:
         return words + ": fits with both vectors"
     return words + (": fits with one vector only (a solve then runs without the extrapolation and the Jacobi "
                     "fallback)")
+
+
+def lp_bytes(nnz: int, pairs: int, backend: str = "clarabel") -> int:
+    """Estimated peak memory of the occupation-measure LP of an MDP with ``nnz`` transition
+    nonzeros and ``pairs`` state-action pairs, solved on ``backend`` (``clarabel``, ``highs``,
+    ``cvxpy``): the larger of the linear floor (:data:`LP_FACTOR`) and the measured power law of
+    the factor's fill (:data:`LP_EXPONENT`), times :data:`LP_SLACK` and the backend's share."""
+    linear = LP_FACTOR * (nnz * 16 + pairs * 8)
+    fill = LP_BYTES_REF * (math.sqrt(float(nnz) * float(pairs)) / LP_SIZE_REF) ** LP_EXPONENT
+    return int(LP_SLACK * LP_BACKEND_SHARE.get(backend, max(LP_BACKEND_SHARE.values())) * max(linear, fill))
 
 
 def _axis_masks(auto, caps: tuple[int, ...]) -> list[np.ndarray]:
@@ -368,7 +399,7 @@ def check_size(
     scenario: Scenario,
     *,
     force: bool = False,
-    need_lp: bool = False,
+    need_lp: bool | str = False,
     limit_bytes: int | None = None,
     model=None,
     method: str | None = None,
@@ -378,7 +409,8 @@ def check_size(
 
     The limit is ``MEMORY_FRACTION`` of :func:`available_memory` (the smallest of the limits
     that apply: :func:`memory_limits`) unless ``limit_bytes`` is given. With ``need_lp`` the LP's
-    memory counts too. ``force=True`` only returns the estimate (and lifts the exploration budget).
+    memory counts too: on the backend it names (``"clarabel"``, ``"highs"``, ``"cvxpy"``; True:
+    Clarabel's, :func:`lp_bytes`). ``force=True`` only returns the estimate (and lifts the exploration budget).
     The message gives the estimate and the cheaper routes that exist.
     With a method whose memory model is the AoI box (:data:`wncs_lp.methods.BOX`: the
     matrix-free solver) the need is that solver's (``matrix_free_bytes``: nothing is built),
@@ -390,7 +422,7 @@ def check_size(
     naming the process and the AoI), the lower bounds the scenario alone gives (refused before
     exploring), the automaton explored within its budget, the estimate.
     """
-    from ..methods import BOX, STORED, TABLE, memory_of
+    from ..methods import BOX, STORED, STORED_LP, TABLE, memory_of
     from .cost import cost_tables
 
     if model is None:
@@ -421,7 +453,7 @@ def check_size(
             + "; ".join(model.cheaper_routes() or ["none"]) + ". Use --force (force=True) to run anyway.",
             est,
         )
-    need = est.build_bytes + (est.lp_bytes if need_lp else 0)
+    need = est.build_bytes + (est.lp_need(need_lp) if need_lp else 0)
     if need <= limit:
         return est
     routes = []
@@ -429,6 +461,13 @@ def check_size(
     lean = next((m for m in rows if m.hint and m.memory == STORED), None)
     if need_lp and est.build_bytes <= limit and lean is not None:
         routes.append(f"{lean.hint} (--method {lean.name}) instead of the LP, which fits")
+    if need_lp:  # the same LP on a backend that needs less
+        for m in rows:
+            other = dict(m.preset).get("backend")
+            if m.memory == STORED_LP and other not in (None, need_lp) and \
+                    est.build_bytes + est.lp_need(other) <= limit < need:
+                routes.append(f"the LP on {other} (--method {m.name}, about "
+                              f"{_gib(est.build_bytes + est.lp_need(other))}), which fits")
     box = next((m for m in rows if m.hint and m.memory == BOX), None)
     if est.matrix_free_bytes <= limit and box is not None:
         routes.append(f"{box.hint} (--method {box.name}, about {_gib(est.matrix_free_bytes)}: "
@@ -446,7 +485,7 @@ def check_size(
     )
 
 
-def build_checked(scenario: Scenario, *, force: bool = False, need_lp: bool = False,
+def build_checked(scenario: Scenario, *, force: bool = False, need_lp: bool | str = False,
                   limit_bytes: int | None = None, offer: tuple | None = None):
     """Build a scenario's MDP after the size guard (:func:`check_size`), exploring its automaton once.
 

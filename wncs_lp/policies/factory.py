@@ -5,7 +5,8 @@ import time
 from dataclasses import dataclass
 from typing import Any, Sequence
 
-from ..errors import PolicyError
+from ..arguments import shown
+from ..errors import ArgumentError, PolicyError
 from ..mdp import MDP
 from ..methods import DEFAULT_METHOD
 from ..models.system import System
@@ -72,8 +73,12 @@ def make_policy(
     PolicyError
         Unknown name (the message lists the allowed ones), or a needed MDP missing.
     """
-    if name not in POLICY_NAMES:
-        raise PolicyError(f"unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
+    if not isinstance(name, str) or name not in POLICY_NAMES:
+        raise PolicyError(f"name: unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
+    if not isinstance(system, System):
+        raise ArgumentError("system", f"expected the System of a scenario (System.from_scenario, from "
+                                      "wncs_lp.models.system), "
+                                      f"got {shown(system)}")
     if name in NEED_MDP and mdp is None:
         raise PolicyError(f"policy {name!r} needs the enumerated MDP")
     if name == OPTIMAL:
@@ -155,13 +160,15 @@ def parse_assignment(text: str | None, scenario: Any) -> list[int] | None:
 
 @dataclass(frozen=True)
 class PolicySetup:
-    """What :func:`policy_for` made: the system, the MDP (``None`` when not built), the policy and
-    the seconds the whole setup took."""
+    """What :func:`policy_for` made: the system, the MDP (``None`` when not built), the policy, the
+    seconds the whole setup took and, for ``optimal``, the status of its solve (the policy is the
+    optimal one only where that status is ``optimal``: its certificate closed)."""
 
     system: System
     mdp: MDP | None
     policy: Policy
     seconds: float
+    status: Any = None
 
 
 def policy_for(
@@ -228,11 +235,11 @@ def policy_for(
             from .matrix_free import MatrixFreePolicy
 
             return PolicySetup(system, None, MatrixFreePolicy.from_solution(run.solution),
-                               time.perf_counter() - t0)
+                               time.perf_counter() - t0, run.solution.status)
         mdp, solution = run.mdp, run.solution
     elif name in NEED_MDP or need_mdp:
         mdp, _ = build_scenario(scenario, force=force, progress=prog)
     if name == "best_static":
         prog.phase("evaluating every static assignment exactly")
     policy = make_policy(name, system, mdp, method=method, solution=solution, assignment=assignment, progress=prog)
-    return PolicySetup(system, mdp, policy, time.perf_counter() - t0)
+    return PolicySetup(system, mdp, policy, time.perf_counter() - t0, None if solution is None else solution.status)

@@ -91,7 +91,8 @@ class OptimalPolicy(Policy):
         return super().on_mdp(mdp)
 
     def describe(self):
-        return {**super().describe(), "method": self.solution.method, "solver_gain": float(self.solution.gain)}
+        return {**super().describe(), "method": self.solution.method, "solver_gain": float(self.solution.gain),
+                "solve_status": str(self.solution.status)}
 
 
 class CappedPolicy(Policy):

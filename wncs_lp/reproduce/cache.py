@@ -7,9 +7,12 @@ so an interrupted run never leaves a half-written entry, and two runs into the s
 worst compute a step twice.
 
 Every entry carries a checksum of its key, result and arrays (:meth:`StepCache.checksum`). An
-entry is used only when it reads back whole and its checksum matches; otherwise -- a truncated
-``.npz``, JSON without a ``result`` or with ``result: null``, a hand-edited number, an entry
-copied from another key -- it is recomputed (and counted in ``StepCache.rejected``).
+entry is used only when it reads back whole, its checksum matches and it names the step and the
+parameters asked for; otherwise -- a truncated ``.npz``, JSON without a ``result`` or with
+``result: null``, a hand-edited number, an entry copied from another key (even with its key and
+checksum rewritten), a folder or a pipe in an entry's place -- it is recomputed (and counted in
+``StepCache.rejected``), and the new entry replaces it. An entry that cannot be written (a
+read-only folder) leaves the computed result in use (counted in ``StepCache.unwritten``).
 """
 from __future__ import annotations
 
@@ -21,7 +24,10 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import WncsError
-from ..files import atomic_write_bytes, atomic_write_text, json_ready, read_npz
+from ..files import atomic_write_bytes, atomic_write_text, json_ready, read_npz, read_regular
+
+#: Largest entry JSON read back (bytes); a larger file is not an entry of this cache.
+MAX_ENTRY_BYTES = 256 << 20
 
 __all__ = ["StepCache", "code_version"]
 
@@ -58,6 +64,8 @@ class StepCache:
         Entries used, steps computed.
     rejected : list of str
         Entry files found damaged, foreign or edited (recomputed).
+    unwritten : list of str
+        Entries computed but not written (their folder refused the write): used this run only.
     """
 
     def __init__(self, root: Path, force: bool = False):
@@ -67,6 +75,7 @@ class StepCache:
         self.hits = 0
         self.misses = 0
         self.rejected: list[str] = []
+        self.unwritten: list[str] = []
 
     @staticmethod
     def key(step: str, params: dict[str, Any]) -> str:
@@ -95,18 +104,22 @@ class StepCache:
         jpath, npath = self._paths(key)
         if not jpath.exists():
             return None
-        entry = self._read(key, jpath, npath)
+        entry = self._read(key, jpath, npath, step, params)
         if entry is None:
             self.rejected.append(jpath.name)
         return entry
 
-    def _read(self, key: str, jpath: Path, npath: Path) -> tuple[dict, dict[str, np.ndarray]] | None:
+    def _read(self, key: str, jpath: Path, npath: Path, step: str, params: dict[str, Any]
+              ) -> tuple[dict, dict[str, np.ndarray]] | None:
         try:
-            doc = json.loads(jpath.read_text(encoding="utf-8"))
+            doc = json.loads(read_regular(jpath, MAX_ENTRY_BYTES).decode("utf-8"))
         except (OSError, ValueError):
             return None
         if not isinstance(doc, dict) or not isinstance(doc.get("result"), dict) or doc.get("key") != key:
             return None
+        same = json.dumps(doc.get("params"), sort_keys=True) == json.dumps(json_ready(params), sort_keys=True)
+        if doc.get("step") != step or not same:
+            return None  # another step's or another scenario's entry under this key
         arrays: dict[str, np.ndarray] = {}
         names = doc.get("arrays", [])
         if not isinstance(names, list) or not all(isinstance(k, str) for k in names):
@@ -135,6 +148,18 @@ class StepCache:
                "arrays": sorted(arrays), "checksum": self.checksum(key, result, arrays)}
         atomic_write_text(jpath, json.dumps(doc, indent=1))
 
+    def _clear(self, path: Path) -> None:
+        """Remove what stands in an entry's place when it is not a regular file (a folder, a pipe):
+        the entry is the cache's own, and it is about to be written anew."""
+        if path.is_symlink() or not path.exists() or path.is_file():
+            return
+        if path.is_dir():
+            import shutil
+
+            shutil.rmtree(path)
+        else:
+            path.unlink()
+
     def get_or_compute(
         self,
         step: str,
@@ -148,6 +173,11 @@ class StepCache:
             return hit
         self.misses += 1
         result, arrays = compute()
-        self.store(step, params, result, arrays)
+        try:
+            for p in self._paths(self.key(step, params)):
+                self._clear(p)
+            self.store(step, params, result, arrays)
+        except OSError:  # the result stands; the next run computes it again
+            self.unwritten.append(self.key(step, params))
         # round-trip through JSON so a fresh and a cached run see the same types
         return json.loads(json.dumps(json_ready(result))), dict(arrays or {})

@@ -145,6 +145,14 @@ def solve_auto(
     t0 = time.perf_counter()
     L = mdp.n_pairs
     choice, reason = _choose(L, need, lp_small_pairs, lp_max_pairs)
+    if choice == "lp":  # the route that fits: the LP only when its estimated peak does
+        from ..models.guard import MEMORY_FRACTION, available_memory, lp_bytes
+
+        need_bytes, room = lp_bytes(int(mdp.P.nnz), L), int(MEMORY_FRACTION * available_memory())
+        if need_bytes > room:
+            choice, reason = "vi", (f"{reason}; but the LP would need about {need_bytes / 2**30:.2f} GiB, over "
+                                    f"{room / 2**30:.2f} GiB ({MEMORY_FRACTION:.0%} of the memory available): "
+                                    "value iteration instead")
     prog = as_progress(progress)
     lp_kw, vi_kw = _options(lp_options, vi_options, h0, tol, threads, prog)
 

@@ -34,7 +34,8 @@ from ..errors import SolverError
 from ..progress import Progress
 from ..status import FAILED, INFEASIBLE, INTERRUPTED, MAX_ITER, OPTIMAL, Code, Status, from_backend
 
-__all__ = ["HIGHS_VARIANTS", "HIGHS_DEFAULT_VARIANT", "HIGHS_STATUS", "highs_status", "new_highs", "solve_highs"]
+__all__ = ["HIGHS_VARIANTS", "HIGHS_DEFAULT_VARIANT", "HIGHS_STATUS", "highs_status", "new_highs", "solve_highs",
+           "run_highs"]
 
 #: The HiGHS solver variants :func:`solve_highs` accepts.
 HIGHS_VARIANTS = ("ipx", "simplex")
@@ -177,8 +178,36 @@ def solve_highs(A: sp.csc_matrix, b: np.ndarray, q: np.ndarray, tol: float, max_
         h.startCallback(highspy.cb.HighsCallbackType.kCallbackIpmInterrupt)
     if prog is not None and prog.enabled:
         prog.tick(f"[lp] HiGHS ({variant}) running on {m:,} rows x {L:,} columns")
-    h.run()
+    run_highs(h)
     return _read_solution(h, variant, A, q)
+
+
+#: Seconds HiGHS is given to stop after a cancel before it is left to finish in the background.
+CANCEL_GRACE = 5.0
+
+
+def run_highs(h) -> None:
+    """``h.run()``, stoppable by Ctrl-C / SIGTERM (:mod:`wncs_lp.stopping`).
+
+    HiGHS runs in a thread of highspy's (``startSolve``) with its interrupt callbacks on; this
+    thread waits, and a stop asked meanwhile cancels the solve (HiGHS stops at its next simplex
+    or interior-point iteration; the interrupt then reaches the caller). A run that does not stop
+    within :data:`CANCEL_GRACE` seconds of the cancel is left to end with the process.
+    """
+    import time
+
+    from ..stopping import deferred
+
+    h.HandleUserInterrupt = True  # the interrupt callbacks that cancelSolve() trips
+    with deferred() as stop:
+        h.startSolve()
+        cancelled = None
+        while not h.wait(0.1)[0]:
+            if cancelled is None and stop():
+                h.cancelSolve()
+                cancelled = time.monotonic()
+            if cancelled is not None and time.monotonic() - cancelled > CANCEL_GRACE:
+                break
 
 
 def _set_options(h, tol: float, max_iter: int, variant: str, opts: dict[str, Any]) -> None:

@@ -121,6 +121,7 @@ __all__ = ["LPData", "LPChoice", "build_lp", "build_reduced_lp", "choose_lp", "s
            "highs_max_rows",
            "CLARABEL_DEFAULTS", "POLISH_VI_MIN_STATES", "FAILED_STATUSES", "CLARABEL_STATUS", "CVXPY_STATUS",
            "clarabel_status", "cvxpy_status", "backend_status", "usable", "clarabel_settings", "clarabel_stats",
+           "clarabel_solve",
            "cost_scale_of", "status_from"]
 
 #: A state counts as visited when its scaled frequency n * sum_a x(s, a) exceeds this, i.e.
@@ -490,22 +491,32 @@ def clarabel_settings(tol: float, max_iter: int, verbose: bool, settings: dict |
     return st
 
 
-def _watch(solver, prog: Progress | None, what: str = "lp") -> None:
-    """Report Clarabel's interior-point iterations through ``prog`` (a termination callback that
-    never terminates)."""
-    if prog is None or not prog.enabled:
-        return
+def clarabel_solve(solver, prog: Progress | None = None, what: str = "lp"):
+    """``solver.solve()`` of a Clarabel solver, stoppable, its iterations reported through ``prog``.
+
+    Clarabel calls a termination callback at every interior-point iteration: it shows the
+    iteration (rate-limited) and ends the solve when a stop is asked (Ctrl-C / SIGTERM turned
+    into a flag while the solve runs: :func:`wncs_lp.stopping.deferred`); the interrupt then
+    reaches the caller. Without callbacks (an older Clarabel) the solve runs in a thread this one
+    waits on (:func:`wncs_lp.stopping.in_thread`).
+    """
+    from ..stopping import deferred, in_thread, stop_asked
 
     def callback(info) -> bool:
-        if prog.due():
-            prog.tick(f"[{what}] interior-point iteration {info.iterations}: relative gap {info.gap_rel:.1e}, "
-                      f"residuals {info.res_primal:.1e} (primal) {info.res_dual:.1e} (dual)")
-        return False
+        try:
+            if prog is not None and prog.enabled and prog.due():
+                prog.tick(f"[{what}] interior-point iteration {info.iterations}: relative gap {info.gap_rel:.1e}, "
+                          f"residuals {info.res_primal:.1e} (primal) {info.res_dual:.1e} (dual)")
+            return stop_asked()
+        except BaseException:  # noqa: BLE001 - nothing may be raised into the backend: stop instead
+            return True
 
     try:
         solver.set_termination_callback(callback)
-    except AttributeError:  # an older Clarabel without callbacks: no iteration progress
-        pass
+    except AttributeError:  # an older Clarabel without callbacks
+        return in_thread(solver.solve)
+    with deferred():
+        return solver.solve()
 
 
 def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, settings: dict | None,
@@ -634,8 +645,7 @@ def _run_clarabel(P, c, A, b, cones, settings, prog: Progress | None):
     import clarabel
 
     solver = clarabel.DefaultSolver(P, c, A, b, cones, settings)
-    _watch(solver, prog)
-    sol = solver.solve()
+    sol = clarabel_solve(solver, prog)
     stats = {**clarabel_stats(sol, solver.get_info()), "obj_scaled": float(sol.obj_val),
              "obj_dual_scaled": float(sol.obj_val_dual)}
     return clarabel_status(sol.status), np.asarray(sol.x, float), np.asarray(sol.z, float), stats
@@ -644,6 +654,8 @@ def _run_clarabel(P, c, A, b, cones, settings, prog: Progress | None):
 def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings: dict | None,
                  prog: Progress | None = None):
     import cvxpy as cp
+
+    from ..stopping import in_thread
 
     L = lp.n_pairs
     y = cp.Variable(L, nonneg=True)
@@ -655,7 +667,9 @@ def _solve_cvxpy(lp: LPData, tol: float, max_iter: int, verbose: bool, settings:
     try:
         with warnings.catch_warnings():  # "Solution may be inaccurate": reported via our status instead
             warnings.simplefilter("ignore", UserWarning)
-            prob.solve(solver=cp.CLARABEL, verbose=bool(verbose), **opts)
+            # cvxpy offers no hook into Clarabel's iterations: a thread this one waits on, so a
+            # Ctrl-C / SIGTERM returns at once (the abandoned solve ends with the process)
+            in_thread(lambda: prob.solve(solver=cp.CLARABEL, verbose=bool(verbose), **opts))
     except cp.error.SolverError as exc:
         raise SolverError(f"cvxpy/Clarabel failed: {exc}") from exc
     native = str(prob.status)

@@ -185,7 +185,9 @@ def build_scenario(scenario: Any, method: str | None = None, *, constrained: boo
         warnings.warn(text, ScenarioWarning, stacklevel=3)
 
     prog = as_progress(progress)
-    need_lp = method is not None and _row(method, constrained).memory == STORED_LP
+    row = _row(method, constrained) if method is not None else None
+    # the LP's memory on the backend the method names (Clarabel unless it says otherwise)
+    need_lp = dict(row.preset).get("backend", "clarabel") if row is not None and row.memory == STORED_LP else False
     if offer is None:
         offer = tuple(m for m in (CONSTRAINED if constrained else TABLE).values() if m.takes != SCENARIO_INPUT)
     t0 = time.perf_counter()

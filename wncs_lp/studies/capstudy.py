@@ -32,7 +32,8 @@ from dataclasses import asdict, dataclass
 from functools import partial
 from typing import Any, Callable, Sequence
 
-from ..errors import WncsError
+from ..arguments import real, shown, whole
+from ..errors import ArgumentError, WncsError
 from ..methods import DEFAULT_METHOD
 from ..scenario import Scenario
 from .runner import run_grid
@@ -63,6 +64,9 @@ class CapRow:
         ``pairs`` is 0, ``states`` counts the matrix-free layout, ``cap_mass`` is the certified
         upper end of the mass (:class:`~wncs_lp.truncation.CapCount`) and ``first_policy_gain``
         the midpoint of a certified matrix-free evaluation).
+    status : str
+        The status of this cap's solve (:mod:`wncs_lp.status`): ``"optimal"`` only where its
+        certificate closed; the study converges only on certified rows.
     """
 
     cap: int
@@ -76,6 +80,12 @@ class CapRow:
     first_policy_gain: float
     seconds: float
     method: str = ""
+    status: str = "optimal"
+
+    @property
+    def certified(self) -> bool:
+        """This cap's solve is certified (status ``optimal``)."""
+        return self.status == "optimal"
 
 
 @dataclass(frozen=True)
@@ -86,7 +96,8 @@ class CapStudy:
     ----------
     rows : tuple of CapRow
     converged : bool
-        The last row meets both tolerances.
+        The last row meets both tolerances, and its solve and the previous cap's are certified
+        (a gain change between uncertified gains proves nothing).
     mass_tol, gain_rtol : float
     """
 
@@ -126,7 +137,7 @@ def _cap_row(scenario: Scenario, opts: dict[str, Any], cap: int, carry: dict[str
     prev = carry["prev"]
     change = float("nan") if prev is None else (sol.gain - prev) / abs(sol.gain)
     row = CapRow(cap, states, pairs, float(sol.gain), float(sol.gain_lower), float(sol.gain_upper), float(mass),
-                 float(change), float(fp), time.perf_counter() - t0, run.method)
+                 float(change), float(fp), time.perf_counter() - t0, run.method, str(sol.status))
     if emit is not None:
         emit(row)
     return [row], {**carry, "prev": float(sol.gain)}
@@ -203,7 +214,11 @@ def cap_study(
     """
     from ..methods import check_method
 
-    caps = [int(c) for c in caps]
+    mass_tol = real(mass_tol, "mass_tol", lo=0.0, hi=1.0)
+    gain_rtol = real(gain_rtol, "gain_rtol", lo=0.0)
+    if isinstance(caps, (str, bytes)) or not hasattr(caps, "__iter__"):
+        raise ArgumentError("caps", f"expected a sequence of whole numbers, got {shown(caps)}")
+    caps = [whole(c, "caps", lo=1) for c in caps]
     if not caps or any(b <= a for a, b in zip(caps, caps[1:])):
         raise WncsError(f"cap study: expected increasing caps, got {caps}")
     longest = max(max(s.loop) for s in scenario.servers)
@@ -220,7 +235,8 @@ def cap_study(
 
     def converged(results: list[CapRow], carry: Any) -> bool:
         r = results[-1]
-        return len(rows) > 1 and r.cap_mass <= mass_tol and abs(r.rel_change) <= gain_rtol
+        return (len(rows) > 1 and r.cap_mass <= mass_tol and abs(r.rel_change) <= gain_rtol
+                and r.certified and rows[-2].certified)
 
     opts = {"method": method, "force": force, "threads": threads}
     run_grid(caps, partial(_cap_row, scenario, opts), record, stop=converged)

@@ -20,7 +20,7 @@ import numpy as np
 from ...errors import PolicyError, SolverError
 from ...models.system import System
 from ...scenario import Scenario
-from ...status import Status
+from ...status import INACCURATE, UNVERIFIED, Status, of
 from ..result import Certificate, Certified, Solution, certificate_rows, describe_array, stats_row, takes_bounds
 from .layout import DOMAINS_OF_LAYOUT, BoxLayout, check_local_actions
 
@@ -128,6 +128,7 @@ class MatrixFreeSolution(Certified):
         meta = dict(method=self.method, status=str(self.status), gain=self.gain, gain_lower=self.gain_lower,
                     gain_upper=self.gain_upper, iterations=self.iterations, seconds=self.seconds,
                     domain=self.layout.domain, fingerprint=self.system.scenario.fingerprint())
+        meta["digest"] = solution_digest(meta, arrays)
         buf = io.BytesIO()  # written whole or not at all (an interrupt leaves no half file)
         np.savez(buf, meta=np.array(json.dumps(meta)), **arrays)
         atomic_write_bytes(path, buf.getvalue())
@@ -164,6 +165,22 @@ SAVED_ARRAYS = ("meta", "policy", "lo", "dims", "caps")
 #: The entries of a saved solution's ``meta``, with their types.
 SAVED_META = {"method": str, "status": str, "gain": float, "gain_lower": float, "gain_upper": float,
               "iterations": int, "seconds": float, "domain": str, "fingerprint": str}
+#: What a saved solution's digest binds together: the certificate and what it was computed for.
+DIGEST_META = ("method", "status", "gain", "gain_lower", "gain_upper", "domain", "fingerprint")
+
+
+def solution_digest(meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
+    """sha256 of a saved solution's certificate (:data:`DIGEST_META`) and of every array (the
+    policy, the layout, the bias when kept): :func:`load_solution` trusts the certificate only
+    for the policy it was saved with."""
+    import hashlib
+
+    h = hashlib.sha256(json.dumps({k: meta[k] for k in DIGEST_META}, sort_keys=True).encode())
+    for name in sorted(k for k in arrays if k != "meta"):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"|{name}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def load_solution(path, system_or_scenario: System | Scenario) -> MatrixFreeSolution:
@@ -176,9 +193,16 @@ def load_solution(path, system_or_scenario: System | Scenario) -> MatrixFreeSolu
     missing, a policy entry out of range -- is one :class:`~wncs_lp.errors.PolicyError` naming
     the file and what is wrong, never a solution (a policy read outside its tables would give a
     wrong certified gain).
+
+    The certificate is bound to the policy (and bias) it was computed for by a digest written
+    with them (:func:`solution_digest`): a file whose policy, bias or certificate was changed
+    after it was saved -- even to other valid actions -- is refused. A file without a digest
+    (saved before it was written) loads with the status ``inaccurate:unverified``: its numbers
+    are shown, never trusted as a certificate.
     """
     system = as_system(system_or_scenario)
     arrays, meta = _read_npz(path)
+    digest = meta.pop("digest", None)
     if meta["fingerprint"] != system.scenario.fingerprint():
         raise PolicyError(f"{path}: saved for another scenario (fingerprint {meta['fingerprint']})")
     if meta["domain"] not in DOMAINS_OF_LAYOUT:
@@ -193,7 +217,12 @@ def load_solution(path, system_or_scenario: System | Scenario) -> MatrixFreeSolu
         if bias.shape != (layout.n_states,) or not np.issubdtype(bias.dtype, np.floating) or not np.all(np.isfinite(bias)):
             raise PolicyError(f"{path}: bias must be {layout.n_states:,} finite floats, one per layout state; "
                               f"got shape {bias.shape}, dtype {bias.dtype}")
-    return MatrixFreeSolution(method=meta["method"], status=meta["status"], gain=meta["gain"],
+    if digest is not None and digest != solution_digest(meta, arrays):  # after the checks that name an entry
+        raise PolicyError(f"{path}: its policy, bias or certificate is not what was saved together (the digest "
+                          "written with them does not match): the file was edited, and its certificate holds for "
+                          "no policy in it; solve again, or evaluate this policy (matrix_free_evaluate)")
+    status = meta["status"] if digest is not None else of(INACCURATE, UNVERIFIED)
+    return MatrixFreeSolution(method=meta["method"], status=status, gain=meta["gain"],
                               gain_lower=meta["gain_lower"], gain_upper=meta["gain_upper"], bias=bias,
                               local_actions=policy, iterations=meta["iterations"], seconds=meta["seconds"],
                               stats={"loaded_from": str(path)}, layout=layout, system=system)
@@ -233,7 +262,12 @@ def _check_meta(path, raw: np.ndarray) -> dict[str, Any]:
     if not meta["gain_lower"] <= meta["gain"] <= meta["gain_upper"]:
         raise PolicyError(f"{path}: meta gain {meta['gain']!r} is outside its certificate "
                           f"[{meta['gain_lower']!r}, {meta['gain_upper']!r}]")
-    return {k: (float(meta[k]) if kind is float else meta[k]) for k, kind in SAVED_META.items()}
+    out = {k: (float(meta[k]) if kind is float else meta[k]) for k, kind in SAVED_META.items()}
+    if "digest" in meta:
+        if not isinstance(meta["digest"], str):
+            raise PolicyError(f"{path}: meta 'digest' must be a string, got {meta['digest']!r}")
+        out["digest"] = meta["digest"]
+    return out
 
 
 # ----------------------------------------------------------------------------- evaluation

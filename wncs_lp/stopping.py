@@ -1,0 +1,140 @@
+"""Stopping long work on Ctrl-C (SIGINT) and SIGTERM: promptly, inside compiled backends too.
+
+Python runs a signal's handler only between bytecodes of the main thread. While a compiled
+backend runs -- Clarabel's interior point, HiGHS's simplex or IPX -- nothing of Python runs, and
+a Ctrl-C waits for the backend to finish (minutes on a large LP). Two tools here:
+
+* :func:`deferred` wraps a backend call: while it runs, SIGINT and SIGTERM only set a flag (no
+  exception is thrown into a backend's callback), the backend's own hook reads it
+  (:func:`stop_asked`: Clarabel's termination callback, HiGHS's interrupt callbacks through a
+  cancel) and stops at its next iteration; on leaving, the signal is handed to the handler that
+  was in place before (``KeyboardInterrupt`` for Ctrl-C, the command line's for SIGTERM).
+* A **stop request** that outlives the exception: the command line records the signal
+  (:func:`request`) before raising ``KeyboardInterrupt``. A solver that catches the interrupt
+  to return what it has (value iteration's "interrupted" status, relaxation 2's best bound so
+  far) returns; the next step of the command -- a progress phase, the next policy of ``bound
+  --policy``, the next point of a study -- calls :func:`check`, which raises again, so the whole
+  command stops, not only the step in progress. A library caller never calls :func:`request`:
+  there Ctrl-C stops the solve in progress, as before.
+"""
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+from typing import Callable, Iterator
+
+__all__ = ["request", "requested", "clear", "check", "deferred", "stop_asked", "in_thread", "STOP_SIGNALS"]
+
+#: The signals that stop a command.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+_requested: list[int] = []  # the signal of a stop request (the command line's), first first
+_pending: list[int] = []  # signals noted inside deferred() blocks
+
+
+def request(signum: int) -> None:
+    """Record a stop request (the command line's signal handlers call this)."""
+    _requested.append(int(signum))
+
+
+def requested() -> int | None:
+    """The signal of the stop request, or None."""
+    return _requested[0] if _requested else None
+
+
+def clear() -> None:
+    """Forget a stop request (at the end of a command)."""
+    _requested.clear()
+    _pending.clear()
+
+
+def check() -> None:
+    """Raise ``KeyboardInterrupt`` when a stop was requested: called between the steps of long
+    work, so that work a solver returned from after an interrupt does not go on."""
+    if _requested:
+        raise KeyboardInterrupt
+
+
+def stop_asked() -> bool:
+    """A stop was asked: a signal inside a :func:`deferred` block, or a stop request."""
+    return bool(_pending or _requested)
+
+
+def _deliver(signum: int, handler) -> None:
+    """Hand a signal noted inside :func:`deferred` to the handler that was in place before."""
+    if callable(handler):
+        handler(signum, None)
+    elif handler == signal.SIG_DFL:
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        signal.raise_signal(signum)  # the default action (the handler is restored already)
+
+
+@contextmanager
+def deferred() -> Iterator[Callable[[], bool]]:
+    """Run a block with SIGINT / SIGTERM turned into a flag; yields :func:`stop_asked`.
+
+    Outside the main thread (where handlers cannot be set) it only yields :func:`stop_asked`.
+    Blocks nest: the inner one leaves a signal for the outer one to deliver.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield stop_asked
+        return
+    outer = bool(_handlers)
+    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    if not outer:
+        for s in STOP_SIGNALS:
+            if signal.getsignal(s) != signal.SIG_IGN:
+                signal.signal(s, _note)
+        _handlers.update(previous)
+    try:
+        yield stop_asked
+    finally:
+        if not outer:
+            for s, h in _handlers.items():
+                signal.signal(s, h)
+            saved = dict(_handlers)
+            _handlers.clear()
+            if _pending:
+                signum = _pending[0]
+                _pending.clear()
+                _deliver(signum, saved[signum])
+
+
+_handlers: dict[int, object] = {}
+
+
+def _note(signum: int, frame) -> None:
+    _pending.append(signum)
+
+
+def in_thread(fn: Callable[[], object], poll: float = 0.1) -> object:
+    """``fn()`` run in a daemon thread while this one waits for it, stoppable.
+
+    For a compiled call that offers no hook to stop it (Clarabel inside cvxpy) but releases the
+    GIL: inside a :func:`deferred` block, a stop asked while it runs returns control at once by
+    ``KeyboardInterrupt`` (the handler in place before the block is called on leaving it); the
+    abandoned call finishes in the background (or ends with the process). Its exception, if it
+    raises one, is raised here.
+    """
+    box: dict[str, object] = {}
+
+    def run() -> None:
+        try:
+            box["value"] = fn()
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
+            box["error"] = exc
+
+    t = threading.Thread(target=run, daemon=True, name="wncs-lp-backend")
+    with deferred() as stop:
+        t.start()
+        while t.is_alive():
+            t.join(poll)
+            if stop():
+                break
+    if t.is_alive():  # stopped, and the handler in place let it go on: nothing to return
+        raise KeyboardInterrupt
+    if "error" in box:
+        raise box["error"]  # type: ignore[misc]
+    return box.get("value")
