@@ -98,8 +98,9 @@ def test_solve_discount(capsys, reference):
 
 
 def test_solve_discount_refuses_what_it_cannot_do(capsys):
-    code, _, err = run(capsys, "solve", "paper_p12", "--discount", "1")
-    assert code == 2 and "beta must be in [0, 1)" in err
+    with pytest.raises(SystemExit) as exc:  # refused by the parser, before any work
+        run(capsys, "solve", "paper_p12", "--discount", "1")
+    assert exc.value.code == 2 and "expected a finite number >= 0 and < 1, got '1'" in capsys.readouterr().err
     code, _, err = run(capsys, "solve", "paper_p12", "--discount", "0.9", "--method", "matrix-free")
     assert code == 2 and "--discount solves with" in err
     code, _, err = run(capsys, "solve", "paper_p12_cloud_budget", "--discount", "0.9")
