@@ -73,9 +73,9 @@ def _check_route(args: argparse.Namespace, scenario) -> None:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
-    from ..maps import parse_config_spec, region_stats
+    from ..maps import parse_config_spec
     from ..solvers.route import solve_scenario
-    from ..viz import file_backend, image_formats, plot_policy_map, plot_policy_slice, save_figure
+    from ..viz import file_backend, image_formats
 
     file_backend()
     # before any work: an image format matplotlib writes, in an existing folder
@@ -99,15 +99,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     if not run.built:
         return _matrix_free_map(args, scenario, run, axes, fixed, prog)
     mdp, sol, config = run.mdp, run.solution, config[0]
-    prog.phase(f"drawing the map and writing {args.out}")
-    if args.slice is not None:
-        axes = axes if len(axes) == 3 else (1, 2, 3)
-        ax = plot_policy_slice(mdp, sol, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
-        stats = region_stats(mdp, sol, config, axes=axes, fixed_tau=fixed, total=args.slice, scenario=scenario)
-    else:
-        ax = plot_policy_map(mdp, sol, config, axes=axes, fixed_tau=fixed, scenario=scenario)
-        stats = region_stats(mdp, sol, config, axes=axes, fixed_tau=fixed, scenario=scenario)
-    save_figure(ax.figure, args.out, dpi=args.dpi, bbox_inches="tight")
+    axes, stats = _draw(args, mdp, sol, config, axes, fixed, scenario, prog)
     payload = {
         "scenario": scenario.source,
         "overrides": args.overrides,
@@ -131,14 +123,31 @@ def cmd_map(args: argparse.Namespace) -> int:
     return 0 if sol.ok else 1
 
 
+def _draw(args: argparse.Namespace, mdp, policy, config: int, axes, fixed, scenario, prog):
+    """Draw the map (or the --slice) of ``policy`` in configuration ``config``, save it to --out;
+    the axes drawn and the regions' statistics."""
+    from ..maps import region_stats
+    from ..viz import plot_policy_map, plot_policy_slice, save_figure
+
+    prog.phase(f"drawing the map and writing {args.out}")
+    total = {} if args.slice is None else {"total": args.slice}
+    if args.slice is not None:
+        axes = axes if len(axes) == 3 else (1, 2, 3)
+        ax = plot_policy_slice(mdp, policy, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
+    else:
+        ax = plot_policy_map(mdp, policy, config, axes=axes, fixed_tau=fixed, scenario=scenario)
+    stats = region_stats(mdp, policy, config, axes=axes, fixed_tau=fixed, scenario=scenario, **total)
+    save_figure(ax.figure, args.out, dpi=args.dpi, bbox_inches="tight")
+    return axes, stats
+
+
 def _saved_policy_map(args: argparse.Namespace, scenario, axes, fixed, prog) -> int:
     """``--policy FILE.npz``: draw a policy saved by ``wncs-lp solve --out`` on the scenario's MDP,
     as ``evaluate`` and ``simulate`` take it (nothing is solved)."""
     from ..errors import PolicyError
     from ..export import load_policy_npz
-    from ..maps import parse_config_spec, region_stats
+    from ..maps import parse_config_spec
     from ..solvers.route import build_scenario
-    from ..viz import plot_policy_map, plot_policy_slice, save_figure
 
     if not args.policy.lower().endswith(".npz"):
         raise PolicyError(f"--policy {args.policy!r}: map draws a policy saved by wncs-lp solve --out FILE.npz "
@@ -147,15 +156,7 @@ def _saved_policy_map(args: argparse.Namespace, scenario, axes, fixed, prog) -> 
     config = parse_config_spec(mdp, args.servers)
     prog.phase(f"reading the policy of {args.policy}")
     probs = load_policy_npz(args.policy, mdp)
-    prog.phase(f"drawing the map and writing {args.out}")
-    if args.slice is not None:
-        axes = axes if len(axes) == 3 else (1, 2, 3)
-        ax = plot_policy_slice(mdp, probs, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
-        stats = region_stats(mdp, probs, config, axes=axes, fixed_tau=fixed, total=args.slice, scenario=scenario)
-    else:
-        ax = plot_policy_map(mdp, probs, config, axes=axes, fixed_tau=fixed, scenario=scenario)
-        stats = region_stats(mdp, probs, config, axes=axes, fixed_tau=fixed, scenario=scenario)
-    save_figure(ax.figure, args.out, dpi=args.dpi, bbox_inches="tight")
+    axes, stats = _draw(args, mdp, probs, config, axes, fixed, scenario, prog)
     payload = {"scenario": scenario.source, "overrides": args.overrides, "out": args.out, "policy": args.policy,
                "configuration": mdp.states.describe_config(mdp.states.configs[config]), "configuration_id": config,
                "axes": list(axes), "slice_total": args.slice, "regions": stats}
