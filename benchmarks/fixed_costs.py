@@ -63,7 +63,7 @@ import numpy; mark("import numpy")
 import scipy.sparse; mark("import scipy.sparse")
 import scipy.sparse.csgraph; mark("import scipy.sparse.csgraph")
 import wncs_lp.cli; mark("import wncs_lp.cli")
-from wncs_lp.solvers.route import solve_scenario; mark("import wncs_lp.solvers")
+from wncs_lp.workflow import solve_scenario; mark("import wncs_lp.workflow")
 from wncs_lp.scenario import load_scenario
 sc = load_scenario(sys.argv[1], ["tau_cap=" + sys.argv[2]]); mark("load the scenario")
 run = solve_scenario(sc, "auto"); mark("guard, build, solve")

@@ -22,7 +22,7 @@ import wncs_lp
 from wncs_lp.errors import ScenarioWarning
 from wncs_lp.policies import MatrixFreePolicy, make_policy
 from wncs_lp.solvers.matrix_free import matrix_free_cap_mass, matrix_free_evaluate
-from wncs_lp.solvers.route import solve_scenario
+from wncs_lp.workflow import solve_scenario
 from wncs_lp.truncation import CapCount
 from wncs_lp.untruncated import untruncated_interval
 

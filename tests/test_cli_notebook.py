@@ -50,7 +50,7 @@ def test_validate_gives_the_size_without_solving(capsys, reference):
 
 
 def test_solve_dry_run_is_validate(capsys, monkeypatch):
-    import wncs_lp.solvers.route as route
+    import wncs_lp.workflow as route
 
     monkeypatch.setattr(route, "solve_scenario", lambda *a, **k: pytest.fail("a dry run solved"))
     code, out, _ = run(capsys, "solve", "paper_p12", *CAP, "--dry-run", "--json")
@@ -128,7 +128,7 @@ def test_errors_under_json_carry_the_schema_version(capsys):
 
 
 def test_ctrl_c_under_json_prints_one_object_saying_so(capsys, monkeypatch):
-    import wncs_lp.solvers.route as route
+    import wncs_lp.workflow as route
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt

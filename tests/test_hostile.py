@@ -188,7 +188,7 @@ def test_dataclasses_replace_cannot_leave_derived_fields_stale(tmp_path):
 def no_work(monkeypatch):
     """Fail when a command starts working before it checked its output."""
     import wncs_lp.models.guard as guard
-    import wncs_lp.solvers.route as route
+    import wncs_lp.workflow as route
 
     def refuse(*a, **k):
         raise AssertionError("work started before the output was checked")

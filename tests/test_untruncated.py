@@ -12,7 +12,7 @@ from wncs_lp.models.system import System
 from wncs_lp.policies import make_policy
 from wncs_lp.scenario import scenario_from_dict
 from wncs_lp.simulate import simulate
-from wncs_lp.solvers.route import solve_scenario
+from wncs_lp.workflow import solve_scenario
 from wncs_lp.untruncated import simulate_uncapped, untruncated_interval
 
 

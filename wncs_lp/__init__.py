@@ -60,7 +60,7 @@ def solve(problem: "MDP | Scenario | str", method: str = DEFAULT_METHOD, **kwarg
     problem : MDP, Scenario, path or str
         An MDP (:func:`wncs_lp.solvers.solve`), or a scenario, its TOML file or a shipped
         scenario's name (``"paper_p12"``), solved by the one route of the command line
-        (:func:`wncs_lp.solvers.route.solve_scenario`: size guard, build, solve; ``auto``
+        (:func:`wncs_lp.workflow.solve_scenario`: size guard, build, solve; ``auto``
         solves without a stored matrix when that matrix would not fit; a scenario's
         ``[[constraint]]`` tables are solved, as ``wncs-lp solve`` does).
     method : str
@@ -94,7 +94,7 @@ def solve(problem: "MDP | Scenario | str", method: str = DEFAULT_METHOD, **kwarg
         from .solvers import solve as _solve
 
         return _solve(problem, method, **kwargs)
-    from .solvers.route import solve_scenario
+    from .workflow import solve_scenario
 
     return solve_scenario(problem, method, **kwargs).solution
 

@@ -1,14 +1,20 @@
 """The method registry: every solve method in one table (like cvxpy's solver map).
 
-One row per method: its name, the function that runs it (``"module:function"``, imported on
-first use, so the command line builds its parser from this module without loading numpy), what
-it takes (an MDP or a scenario), the keywords it fixes, the warm start it takes from a previous
-solution, what the size guard counts for it (its memory model), the method it falls back to when
-the guard refuses the stored matrix, and its help text. Every command (``solve``, ``evaluate``,
+One row per method: its name, its criterion (average cost, or average cost under constraints),
+its representation (what it takes: a stored MDP, or the scenario's AoI box without a matrix), the
+keywords it fixes, the warm start it takes from a previous solution, what the size guard counts
+for it (its memory model), the method it falls back to when the guard refuses the stored matrix,
+and its help text. This module is the vocabulary alone: it imports nothing numeric, so the
+command line builds its parser from it without loading numpy. The function that runs each row is
+registered beside the dispatcher that calls it, imported normally (an :class:`Entry`:
+:data:`wncs_lp.solvers.registry.AVERAGE` for :func:`wncs_lp.solvers.solve`,
+:data:`wncs_lp.constrained.registry.CONSTRAINED_ENTRIES` for
+:func:`wncs_lp.constrained.solve_constrained`), and :func:`method` is the one validator of a
+method name. Every command (``solve``, ``evaluate``,
 ``simulate``, ``sweep``, ``verify``, ``map``, ``capstudy``, ``tradeoff``) and every library entry
 point that takes a ``method`` (:func:`wncs_lp.solve`, :func:`wncs_lp.solvers.solve`,
-:func:`wncs_lp.solvers.route.solve_scenario`, :func:`wncs_lp.constrained.solve_constrained`,
-:func:`wncs_lp.policies.make_policy`, :func:`wncs_lp.policies.policy_for`,
+:func:`wncs_lp.workflow.solve_scenario`, :func:`wncs_lp.constrained.solve_constrained`,
+:func:`wncs_lp.policies.make_policy`, :func:`wncs_lp.workflow.policy_for`,
 :func:`wncs_lp.studies.run_sweep`, :func:`wncs_lp.studies.cap_study`,
 :func:`wncs_lp.studies.tradeoff`) reads its vocabulary and default (``"auto"``) from here:
 
@@ -46,8 +52,8 @@ from typing import Any, Callable
 __all__ = [
     "Method", "TABLE", "CONSTRAINED", "METHODS", "SCENARIO_METHODS", "CONSTRAINED_METHODS", "DEFAULT_METHOD",
     "LP_METHODS", "METHOD_HELP", "STORED", "STORED_LP", "BOX", "BIAS", "POLICY", "BASIS", "MDP_INPUT",
-    "SCENARIO_INPUT", "method", "check_method", "memory_of", "resolve", "exact_method",
-    "EXACT_METHOD_MAX_STATES", "SOLVE", "SOLVE_CONSTRAINED",
+    "SCENARIO_INPUT", "AVERAGE", "CONSTRAINED_CRITERION", "Entry", "method", "check_method", "memory_of",
+    "exact_method", "EXACT_METHOD_MAX_STATES",
 ]
 
 # ------------------------------------------------------------------ what the size guard counts
@@ -70,17 +76,11 @@ BASIS = "basis"
 MDP_INPUT = "mdp"
 SCENARIO_INPUT = "scenario"
 
-#: The two dispatchers (``"module:function"``): an MDP by method name, an MDP and its constraints.
-SOLVE = "wncs_lp.solvers:solve"
-SOLVE_CONSTRAINED = "wncs_lp.constrained:solve_constrained"
-
-
-def resolve(target: str) -> Callable[..., Any]:
-    """The function named by ``"module:function"`` (imported now)."""
-    import importlib
-
-    module, _, name = target.partition(":")
-    return getattr(importlib.import_module(module), name)
+# ------------------------------------------------------------------ criteria
+#: The long-run average cost.
+AVERAGE = "average"
+#: The long-run average cost under bounds on other long-run averages (``[[constraint]]`` tables).
+CONSTRAINED_CRITERION = "constrained"
 
 
 @dataclass(frozen=True)
@@ -91,16 +91,11 @@ class Method:
     ----------
     name : str
         As ``--method`` and ``method=`` spell it.
-    target : str
-        ``"module:function"`` of the function that runs it: ``fn(mdp, **preset, **kw)`` (an MDP
-        method), ``fn(scenario_or_system, **kw)`` (a scenario method) or
-        ``fn(mdp, constraints, **preset, **kw)`` (a constrained one). Empty for a constrained
-        ``auto``, which runs the method its ``chooser`` names.
     help : str
         One line for ``--help``.
     takes : {"mdp", "scenario"}
-        A scenario method runs without building the MDP; on an MDP built from a scenario it runs
-        ``mdp_target``.
+        Its representation: a scenario method runs on the scenario's AoI box without building the
+        MDP; on an MDP built from a scenario it runs its entry's ``on_mdp`` function.
     preset : tuple of (str, object)
         Keywords the name fixes (``lp-highs``: ``backend="highs"``).
     warm_start : {None, "bias", "policy", "basis"}
@@ -109,32 +104,52 @@ class Method:
         What the size guard counts (:func:`wncs_lp.models.guard.check_size`).
     fallback : str or None
         The method a scenario is solved by when the guard refuses this one's stored matrix.
-    chooser : str or None
-        ``"module:function"`` of ``(mdp, constraints) -> method name`` (a constrained ``auto``).
-    mdp_target : str or None
-        A scenario method's function on an MDP built from a scenario.
-    constrained : bool
+    criterion : {"average", "constrained"}
     hint : str
         How the size guard's message names the method when it suggests it as a cheaper route
         (empty: never suggested).
     """
 
     name: str
-    target: str
     help: str
     takes: str = MDP_INPUT
     preset: tuple[tuple[str, Any], ...] = ()
     warm_start: str | None = None
     memory: str = STORED
     fallback: str | None = None
-    chooser: str | None = None
-    mdp_target: str | None = None
-    constrained: bool = False
+    criterion: str = AVERAGE
     hint: str = ""
+
+    @property
+    def constrained(self) -> bool:
+        return self.criterion == CONSTRAINED_CRITERION
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A registry row with the functions that run it (imported normally by the dispatcher's room).
+
+    Attributes
+    ----------
+    row : Method
+    run : callable or None
+        ``run(mdp, **preset, **kw)`` (an MDP method), ``run(scenario_or_system, **kw)`` (a scenario
+        method) or ``run(mdp, constraints, **preset, **kw)`` (a constrained one). None for a
+        constrained ``auto``, which runs the method ``choose`` names.
+    on_mdp : callable, optional
+        A scenario method's function on an MDP built from a scenario.
+    choose : callable, optional
+        ``choose(mdp, constraints) -> method name`` (a constrained ``auto``).
+    """
+
+    row: Method
+    run: Callable[..., Any] | None
+    on_mdp: Callable[..., Any] | None = None
+    choose: Callable[..., Any] | None = None
 
     def function(self, on_mdp: bool = False) -> Callable[..., Any]:
         """The function that runs the method (``on_mdp``: a scenario method's MDP form)."""
-        return resolve(self.mdp_target if on_mdp and self.mdp_target else self.target)
+        return self.on_mdp if on_mdp and self.on_mdp is not None else self.run
 
     def keywords(self, on_mdp: bool = False) -> tuple[str, ...] | None:
         """The keywords the method takes (None: any, its function takes ``**kw``)."""
@@ -143,7 +158,7 @@ class Method:
         params = inspect.signature(self.function(on_mdp)).parameters.values()
         if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
             return None
-        fixed = {k for k, _ in self.preset}
+        fixed = {k for k, _ in self.row.preset}
         return tuple(p.name for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name not in fixed)
 
     def takes_keyword(self, name: str, on_mdp: bool = False) -> bool:
@@ -157,46 +172,40 @@ class Method:
         if bad:
             from .errors import SolverError
 
-            raise SolverError(f"method {self.name!r} takes no keyword {bad[0]!r}; it takes {', '.join(taken)}")
+            raise SolverError(f"method {self.row.name!r} takes no keyword {bad[0]!r}; it takes {', '.join(taken)}")
 
     def call(self, subject: Any, *args: Any, on_mdp: bool = False, **kw: Any) -> Any:
         """Run the method on ``subject`` (after the keyword check)."""
         self.check_keywords(kw, on_mdp)
-        return self.function(on_mdp)(subject, *args, **dict(self.preset), **kw)
+        return self.function(on_mdp)(subject, *args, **dict(self.row.preset), **kw)
 
-
-_LP = "wncs_lp.solvers.lp:solve_lp"
-_CLP = "wncs_lp.constrained.lp:solve_constrained_lp"
 
 #: The methods of an unconstrained solve, in the order the help lists them.
 TABLE: dict[str, Method] = {m.name: m for m in (
-    Method("auto", "wncs_lp.solvers.auto:solve_auto",
+    Method("auto",
            "default: the LP on small models, certified value iteration above, cross-checked when both are cheap; "
            "it says which it chose", warm_start=BIAS, fallback="matrix-free"),
-    Method("lp", _LP, "occupation-measure LP on Clarabel", preset=(("backend", "clarabel"),), memory=STORED_LP),
-    Method("lp-highs", _LP, "the same LP on HiGHS", preset=(("backend", "highs"),), memory=STORED_LP),
-    Method("lp-cvxpy", _LP, "the same LP through cvxpy", preset=(("backend", "cvxpy"),), memory=STORED_LP),
-    Method("vi", "wncs_lp.solvers.dp:value_iteration", "certified value iteration", warm_start=BIAS),
-    Method("rvi", "wncs_lp.solvers.dp:relative_value_iteration", "relative value iteration", warm_start=BIAS,
+    Method("lp", "occupation-measure LP on Clarabel", preset=(("backend", "clarabel"),), memory=STORED_LP),
+    Method("lp-highs", "the same LP on HiGHS", preset=(("backend", "highs"),), memory=STORED_LP),
+    Method("lp-cvxpy", "the same LP through cvxpy", preset=(("backend", "cvxpy"),), memory=STORED_LP),
+    Method("vi", "certified value iteration", warm_start=BIAS),
+    Method("rvi", "relative value iteration", warm_start=BIAS,
            hint="value iteration"),
-    Method("pi", "wncs_lp.solvers.dp:policy_iteration", "policy iteration", warm_start=POLICY),
-    Method("matrix-free", "wncs_lp.solvers.matrix_free:matrix_free_value_iteration",
-           "certified value iteration without building the MDP", takes=SCENARIO_INPUT, memory=BOX,
-           mdp_target="wncs_lp.solvers.matrix_free:solve_mdp", hint="the matrix-free solver"),
+    Method("pi", "policy iteration", warm_start=POLICY),
+    Method("matrix-free", "certified value iteration without building the MDP", takes=SCENARIO_INPUT, memory=BOX,
+           hint="the matrix-free solver"),
 )}
 
 #: The methods of a constrained solve (a scenario with ``[[constraint]]`` tables).
 CONSTRAINED: dict[str, Method] = {m.name: m for m in (
-    Method("auto", "", "the LP on HiGHS up to its size or with several bounds, the Lagrangian route beyond",
-           chooser="wncs_lp.constrained.lagrangian:auto_method", constrained=True),
-    Method("lp", _CLP, "the occupation-measure LP on Clarabel, then a crossover", preset=(("backend", "clarabel"),),
-           memory=STORED_LP, warm_start=BASIS, constrained=True),
-    Method("lp-highs", "wncs_lp.constrained:solve_constrained_highs", "the same LP on HiGHS",
-           memory=STORED_LP, warm_start=BASIS, constrained=True),
-    Method("lp-cvxpy", _CLP, "the same LP through cvxpy", preset=(("backend", "cvxpy"),), memory=STORED_LP,
-           constrained=True),
-    Method("lagrangian", "wncs_lp.constrained.lagrangian:solve_lagrangian",
-           "one bound: multiplier search with certified value iteration", constrained=True,
+    Method("auto", "the LP on HiGHS up to its size or with several bounds, the Lagrangian route beyond",
+           criterion=CONSTRAINED_CRITERION),
+    Method("lp", "the occupation-measure LP on Clarabel, then a crossover", preset=(("backend", "clarabel"),),
+           memory=STORED_LP, warm_start=BASIS, criterion=CONSTRAINED_CRITERION),
+    Method("lp-highs", "the same LP on HiGHS", memory=STORED_LP, warm_start=BASIS, criterion=CONSTRAINED_CRITERION),
+    Method("lp-cvxpy", "the same LP through cvxpy", preset=(("backend", "cvxpy"),), memory=STORED_LP,
+           criterion=CONSTRAINED_CRITERION),
+    Method("lagrangian", "one bound: multiplier search with certified value iteration", criterion=CONSTRAINED_CRITERION,
            hint="the Lagrangian route"),
 )}
 
@@ -215,26 +224,42 @@ LP_METHODS = tuple(name for name, m in TABLE.items() if m.memory == STORED_LP)
 METHOD_HELP = "solver: " + ", ".join(f"{m.name} ({m.help})" for m in TABLE.values() if m.takes == MDP_INPUT)
 
 
-def method(name: str, constrained: bool = False, allowed: tuple[str, ...] | None = None) -> Method:
-    """The registry row of ``name`` (of :data:`CONSTRAINED` with ``constrained``), else one
-    :class:`~wncs_lp.errors.SolverError` listing the names allowed (``allowed``, default all)."""
+def method(name: str, constrained: bool = False, allowed: tuple[str, ...] | None = None,
+           problem: str | None = None) -> Method:
+    """The registry row of ``name`` (of :data:`CONSTRAINED` with ``constrained``): the one
+    validator of a method name.
+
+    Parameters
+    ----------
+    name : str
+    constrained : bool
+        Look ``name`` up among the constrained methods.
+    allowed : tuple of str, optional
+        The names the caller takes (default: the whole table).
+    problem : str, optional
+        What the caller solves (``"an unconstrained scenario"``): the message then says that
+        ``name`` does not solve it.
+
+    Raises
+    ------
+    SolverError
+        ``name`` is not allowed; the message lists the names that are.
+    """
     table = CONSTRAINED if constrained else TABLE
     names = tuple(table) if allowed is None else allowed
-    if name not in names or name not in table:
-        from .errors import SolverError
+    if isinstance(name, str) and name in names and name in table:
+        return table[name]
+    from .errors import SolverError
 
-        what = "constrained method" if constrained else "method"
-        raise SolverError(f"unknown {what} {name!r}; expected one of {', '.join(map(repr, names))}")
-    return table[name]
+    if problem is not None:
+        raise SolverError(f"method {name!r} does not solve {problem}; expected one of {', '.join(names)}")
+    what = "constrained method" if constrained else "method"
+    raise SolverError(f"unknown {what} {name!r}; expected one of {', '.join(map(repr, names))}")
 
 
-def check_method(name: str, allowed: tuple[str, ...] = METHODS, what: str = "method") -> str:
-    """``name`` if it is one of ``allowed``, else a :class:`~wncs_lp.errors.SolverError` listing them."""
-    if name not in allowed:
-        from .errors import SolverError
-
-        raise SolverError(f"unknown {what} {name!r}; expected one of {', '.join(allowed)}")
-    return name
+def check_method(name: str, allowed: tuple[str, ...] = METHODS) -> str:
+    """``name`` if it is one of ``allowed`` (:func:`method`'s check), else its :class:`~wncs_lp.errors.SolverError`."""
+    return method(name, allowed=allowed).name
 
 
 def memory_of(name: str | None, constrained: bool = False) -> str:

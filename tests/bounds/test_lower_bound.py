@@ -1,13 +1,13 @@
-"""lower_bound's dispatch: the relaxation asked for, and auto with or without relaxation 2 (a
-stand-in module plays relaxation 2 here, so the tests hold whether or not it is installed)."""
+"""lower_bound's dispatch: the relaxation asked for, and auto's choice (stand-in functions play
+relaxation 2 here, so auto's rule is checked on bounds of known order)."""
 from __future__ import annotations
 
-import types
 from dataclasses import replace
 
 import pytest
 
 from wncs_lp import scenario_path
+from wncs_lp.bounds import lower
 from wncs_lp.bounds import RELAXATIONS, lower_bound, parse_relaxation, private_bound
 from wncs_lp.errors import WncsError
 from wncs_lp.models import build
@@ -15,7 +15,6 @@ from wncs_lp.models.system import System
 from wncs_lp.scenario import load_scenario
 from wncs_lp.solvers import solve
 
-JOINT = "wncs_lp.bounds.joint"
 
 
 @pytest.fixture(scope="module")
@@ -23,12 +22,10 @@ def p12():
     return System.from_scenario(load_scenario(scenario_path("paper_p12"), ["tau_cap=9"]))
 
 
-def _fake_joint(reach=None, bound=None):
-    mod = types.ModuleType(JOINT)
-    if reach is not None:
-        mod.joint_reach = reach
-    mod.joint_bound = bound
-    return mod
+def _fake_joint(monkeypatch, reach, bound):
+    """Relaxation 2 played by ``reach`` (None within reach, else why not) and ``bound``."""
+    monkeypatch.setattr(lower, "joint_reach", reach)
+    monkeypatch.setattr(lower, "joint_bound", bound)
 
 
 def test_names_and_short_names():
@@ -45,18 +42,10 @@ def test_auto_is_a_valid_bound_and_says_which_fired(p12):
     assert res.lower_bound <= solve(build(p12.scenario)).gain_upper * (1 + 1e-12)
 
 
-def test_auto_without_relaxation_2(monkeypatch, p12):
-    monkeypatch.setitem(__import__("sys").modules, JOINT, None)
-    res = lower_bound(p12, "auto")
-    assert res.relaxation == "private-servers" and "not installed" in res.stats["auto_reason"]
-    with pytest.raises(WncsError, match="not installed"):
-        lower_bound(p12, 2)
-
-
 def test_auto_takes_relaxation_2_within_its_reach(monkeypatch, p12):
     base = private_bound(p12)
     fake = replace(base, relaxation="joint-configuration", lower_bound=base.lower_bound + 1.0, stats={})
-    monkeypatch.setitem(__import__("sys").modules, JOINT, _fake_joint(lambda s: None, lambda s, **kw: fake))
+    _fake_joint(monkeypatch, lambda s: None, lambda s, **kw: fake)
     res = lower_bound(p12, "auto")
     assert res.relaxation == "joint-configuration" and res.stats["auto_choice"] == "joint-configuration"
     assert lower_bound(p12, "joint-configuration") is fake
@@ -66,10 +55,10 @@ def test_auto_falls_back_beyond_the_reach_of_relaxation_2(monkeypatch, p12):
     def refuse(system, **kw):
         raise WncsError("no room for the joint LP")
 
-    monkeypatch.setitem(__import__("sys").modules, JOINT, _fake_joint(lambda s: "2.5e9 columns", refuse))
+    _fake_joint(monkeypatch, lambda s: "2.5e9 columns", refuse)
     res = lower_bound(p12, "auto")
     assert res.relaxation == "private-servers" and "2.5e9 columns" in res.stats["auto_reason"]
-    monkeypatch.setitem(__import__("sys").modules, JOINT, _fake_joint(None, refuse))
+    _fake_joint(monkeypatch, lambda s: None, refuse)
     res = lower_bound(p12, "auto")
     assert res.relaxation == "private-servers" and "no room for the joint LP" in res.stats["auto_reason"]
 
@@ -85,7 +74,7 @@ def test_scenario_or_system(p12):
 def test_auto_takes_relaxation_1_when_relaxation_2_stopped_below_it(monkeypatch, p12):
     base = private_bound(p12)
     worse = replace(base, relaxation="joint-configuration", lower_bound=base.lower_bound - 1.0, stats={})
-    monkeypatch.setitem(__import__("sys").modules, JOINT, _fake_joint(lambda s: None, lambda s, **kw: worse))
+    _fake_joint(monkeypatch, lambda s: None, lambda s, **kw: worse)
     res = lower_bound(p12, "auto")
     assert res.relaxation == "private-servers" and res.lower_bound == base.lower_bound
     assert res.stats["auto_bounds"] == {"joint-configuration": base.lower_bound - 1.0, "private-servers": base.lower_bound}

@@ -10,7 +10,7 @@ the enumerated MDP).
 * :func:`~wncs_lp.bounds.grouped.grouped_bound` -- relaxation 3, relaxation 1 with groups of
   processes sharing their private servers (:mod:`wncs_lp.bounds.grouped`);
 * relaxation 2, the joint configuration with separable value functions, lives in
-  :mod:`wncs_lp.bounds.joint` when installed: ``joint_bound(system, **options)`` (the command
+  :mod:`wncs_lp.bounds.joint`: ``joint_bound(system, **options)`` (the command
   line passes ``tol`` and ``progress``; a :class:`~wncs_lp.errors.WncsError` it raises makes
   ``auto`` fall back to relaxation 1) and optionally ``joint_reach(system)``, ``None`` when the
   instance is within its reach, else the reason in words;

@@ -7,7 +7,6 @@ that factory.
 """
 from __future__ import annotations
 
-import importlib
 from dataclasses import replace
 from typing import Any
 
@@ -18,6 +17,7 @@ from ..models.system import System
 from ..scenario import Scenario
 from .grouped import grouped_bound
 from .inputs import bound_system
+from .joint import joint_bound, joint_reach, joint_size
 from .private import private_bound
 from .result import BoundResult
 
@@ -62,16 +62,6 @@ def parse_relaxation(name: str | int) -> str:
     return text
 
 
-def _joint_module() -> tuple[Any, str]:
-    """(the relaxation-2 module or None, why not)."""
-    try:
-        return importlib.import_module(f"{__package__}.joint"), ""
-    except ModuleNotFoundError as exc:
-        if exc.name != f"{__package__}.joint":
-            raise
-        return None, "relaxation 2 (wncs_lp.bounds.joint) is not installed"
-
-
 def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "auto", **options: Any) -> BoundResult:
     """A certified lower bound on the optimal gain g* of a Section II scenario.
 
@@ -79,8 +69,8 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     ----------
     scenario_or_system : Scenario or System
     relaxation : {"auto", "private-servers", "joint-configuration", "grouped-private-servers"} or 1 / 2 / 3
-        ``"auto"``: the largest certified bound of relaxation 1, relaxation 2 when it is installed
-        and the instance is within its reach, and relaxation 3 (pairs, :mod:`~wncs_lp.bounds.grouped`)
+        ``"auto"``: the largest certified bound of relaxation 1, relaxation 2 when the instance is
+        within its reach, and relaxation 3 (pairs, :mod:`~wncs_lp.bounds.grouped`)
         when there are at least three processes and relaxation 2 was not solved by its interior
         point (where it was, it was the tighter: processes 1-4, cap 20, 1547.6 against 1441.2);
         on a tie the first of 2, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
@@ -99,48 +89,39 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     Raises
     ------
     WncsError
-        An unknown relaxation, relaxation 2 asked for but not installed, or a model without the
+        An unknown relaxation, or a model without the
         relaxation (the preemption model), refused before any work with the reason.
     """
     name = parse_relaxation(relaxation)
     if not isinstance(scenario_or_system, (Scenario, System)):
         raise ArgumentError("scenario_or_system", f"expected a Scenario or a System, got {shown(scenario_or_system)}")
-    joint, why_not = _joint_module()
-    _check_options(name, options, joint)
+    _check_options(name, options)
     if name == "private-servers":
         return private_bound(scenario_or_system, **options)
     if name == "grouped-private-servers":
         return grouped_bound(scenario_or_system, **options)
     if name == "joint-configuration":
-        if joint is None:
-            raise WncsError(f"relaxation joint-configuration asked for, but {why_not}")
         system = _as_system(scenario_or_system)
         if system.is_lazy:
             raise WncsError(f"relaxation joint-configuration asked for, but {LAZY_NOTE}")
-        size = getattr(joint, "joint_size", None)
-        if size is not None:  # estimate first: refuse, with the cheaper routes, what would not fit
-            s = size(system)
-            require_memory(s["memory_bytes"], f"relaxation 2 on {system.n_processes} processes ({s['lp_nnz']:,} LP "
-                           f"nonzeros, {s['configurations']:,} joint configurations)",
-                           ["relaxation 3 (--relaxation 3: pairs sharing private servers)",
-                            "relaxation 1 (--relaxation 1: seconds at any size)"])
-        return joint.joint_bound(system, **options)
-    return _auto(_as_system(scenario_or_system), joint, why_not, {**AUTO_SEARCH, **options})
+        size = joint_size(system)  # estimate first: refuse, with the cheaper routes, what would not fit
+        require_memory(size["memory_bytes"], f"relaxation 2 on {system.n_processes} processes ({size['lp_nnz']:,} "
+                       f"LP nonzeros, {size['configurations']:,} joint configurations)",
+                       ["relaxation 3 (--relaxation 3: pairs sharing private servers)",
+                        "relaxation 1 (--relaxation 1: seconds at any size)"])
+        return joint_bound(system, **options)
+    return _auto(_as_system(scenario_or_system), {**AUTO_SEARCH, **options})
 
 
-def _auto(system: System, joint: Any, why_not: str, options: dict) -> BoundResult:
+def _auto(system: System, options: dict) -> BoundResult:
     """``"auto"``: every relaxation that applies, the largest certified bound returned."""
     found: list[BoundResult] = []
     notes: list[str] = []
-    res2 = None
-    if joint is not None:
-        res2, note = _try_joint(joint, system, options)
-        if res2 is not None:
-            found.append(res2)
-        else:
-            notes.append(note)
+    res2, note = _try_joint(system, options)
+    if res2 is not None:
+        found.append(res2)
     else:
-        notes.append(why_not)
+        notes.append(note)
     res1 = _try(private_bound, system, _private_options(options))
     if res1 is not None and runs_grouped(system, res2):
         limit = options.get("time_limit")
@@ -172,12 +153,11 @@ def auto_pick(found: list[BoundResult], notes: list[str] = ()) -> BoundResult:
                                 "auto_bounds": bounds})
 
 
-def _check_options(name: str, options: dict, joint: Any) -> None:
+def _check_options(name: str, options: dict) -> None:
     """Refuse, naming it, a keyword the relaxation does not take (under ``"auto"``: none of them
     does), and a ``tol``, ``time_limit`` or ``max_iter`` out of range, before any work."""
     fns = {"private-servers": [private_bound], "grouped-private-servers": [grouped_bound],
-           "joint-configuration": [joint.joint_bound] if joint is not None else [],
-           "auto": [private_bound, grouped_bound] + ([joint.joint_bound] if joint is not None else [])}[name]
+           "joint-configuration": [joint_bound], "auto": [private_bound, grouped_bound, joint_bound]}[name]
     import inspect
 
     takes = {p for fn in fns for p, v in inspect.signature(fn).parameters.items() if v.kind is v.KEYWORD_ONLY
@@ -205,16 +185,15 @@ def _try(relaxation: Any, system: System, options: dict) -> BoundResult | None:
         return None
 
 
-def _try_joint(joint: Any, system: System, options: dict) -> tuple[BoundResult | None, str]:
+def _try_joint(system: System, options: dict) -> tuple[BoundResult | None, str]:
     """Relaxation 2 when the instance is within its reach: (its result, "") or (None, why not)."""
     if system.is_lazy:
         return None, f"beyond relaxation 2's reach: {LAZY_NOTE}"
-    reach = getattr(joint, "joint_reach", None)
-    why_not = reach(system) if reach is not None else None
+    why_not = joint_reach(system)
     if why_not is not None:
         return None, f"beyond relaxation 2's reach: {why_not}"
     try:
-        res = joint.joint_bound(system, **options)
+        res = joint_bound(system, **options)
     except WncsError as exc:
         return None, f"relaxation 2 could not run: {exc}"
     return res, ""

@@ -74,7 +74,7 @@ def _check_route(args: argparse.Namespace, scenario) -> None:
 
 def cmd_map(args: argparse.Namespace) -> int:
     from ..maps import parse_config_spec
-    from ..solvers.route import solve_scenario
+    from ..workflow import solve_scenario
     from ..viz import file_backend, image_formats
 
     file_backend()

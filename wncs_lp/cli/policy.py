@@ -36,7 +36,7 @@ def _add_policy_args(p: argparse.ArgumentParser, required: bool = True) -> None:
 
 
 def _policy(args: argparse.Namespace, scenario, *, need_mdp: bool, prog=False):
-    from ..policies import policy_for
+    from ..workflow import policy_for
 
     if args.policy.lower().endswith(".npz"):
         return _policy_file(args, scenario, prog)

@@ -77,7 +77,7 @@ def _write_failed(message: str | None) -> int:
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
-    from ..solvers.route import solve_scenario
+    from ..workflow import solve_scenario
 
     if args.dry_run:  # what wncs-lp validate says: the checks and the size, nothing built
         from .validate import cmd_validate

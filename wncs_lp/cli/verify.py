@@ -16,7 +16,7 @@ from .common import (NONNEGATIVE, Command, add_method_arg, add_scenario_args, ad
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    from ..solvers.route import solve_scenario
+    from ..workflow import solve_scenario
     from ..verify import Tolerance, verify_all
     from ..verify.verdict import FAILS, RULE, combine
 

@@ -15,11 +15,16 @@ from __future__ import annotations
 
 from typing import Any, Iterable
 
+from ..errors import SolverError
 from ..mdp import MDP
+from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD  # one vocabulary: wncs_lp.methods
 from .convex import OccupationProgram
 from .certify import CERT_RTOL, certify, evaluate_rows, lagrangian_bound, policy_from_occupation
 from .lp import check_reachable, reachable_range, solve_constrained_lp
+from .warm import solve_constrained_highs
 from .problem import LinearConstraint, Rows, constraints_for, max_form, with_cost
+from .registry import CONSTRAINED_ENTRIES
+from .registry import entry as method_entry
 from .result import ConstrainedSolution, ConstraintReport
 
 __all__ = [
@@ -41,9 +46,8 @@ __all__ = [
     "reachable_range",
     "check_reachable",
     "CONSTRAINED_METHODS",
+    "CONSTRAINED_ENTRIES",
 ]
-
-from ..methods import CONSTRAINED_METHODS, DEFAULT_METHOD, resolve  # noqa: E402  (one vocabulary: wncs_lp.methods)
 
 
 def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = DEFAULT_METHOD,
@@ -57,7 +61,8 @@ def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = DEFAUL
     constraints : iterable of ConstraintSpec or LinearConstraint
         ``scenario.constraints`` or your own :class:`LinearConstraint` objects.
     method : {"auto", "lp", "lp-highs", "lp-cvxpy", "lagrangian"}
-        A row of :data:`wncs_lp.methods.CONSTRAINED`. ``"lp"``: the occupation-measure LP on
+        A row of :data:`wncs_lp.methods.CONSTRAINED` (run by its entry in
+        :data:`wncs_lp.constrained.registry.CONSTRAINED_ENTRIES`). ``"lp"``: the occupation-measure LP on
         Clarabel, then a crossover to a basic solution; ``"lp-highs"``: the same LP on HiGHS
         (interior point + crossover, ending on a basis:
         :class:`~wncs_lp.constrained.warm.WarmConstrainedLP`); ``"lp-cvxpy"``: the Clarabel LP
@@ -69,29 +74,15 @@ def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = DEFAUL
         Passed to :func:`solve_constrained_lp`, :func:`solve_constrained_highs` or
         :func:`~wncs_lp.constrained.lagrangian.solve_lagrangian`.
     """
-    from ..errors import SolverError
-    from ..methods import method as method_row
-
     if not isinstance(mdp, MDP):
         raise SolverError(f"solve_constrained takes an MDP (wncs_lp.build(scenario)); got {type(mdp).__name__} "
                           "(wncs_lp.solve(scenario) solves a scenario with its [[constraint]] tables)")
-    row = method_row(method, constrained=True)
+    found = method_entry(method)
     cons = constraints_for(mdp, constraints)
     if not cons:
         raise SolverError("solve_constrained needs at least one constraint (use wncs_lp.solve for the unconstrained problem)")
-    if row.chooser is not None:  # auto: the method its rule picks, recorded as asked for
-        sol = solve_constrained(mdp, cons, resolve(row.chooser)(mdp, cons), **kw)
-        sol.stats["method_requested"] = row.name
+    if found.choose is not None:  # auto: the method its rule picks, recorded as asked for
+        sol = solve_constrained(mdp, cons, found.choose(mdp, cons), **kw)
+        sol.stats["method_requested"] = found.row.name
         return sol
-    return row.call(mdp, cons, **kw)
-
-
-def solve_constrained_highs(mdp: MDP, constraints: Iterable[Any], *, budget: float | None = None,
-                            cert_rtol: float = CERT_RTOL, tol: float = 1e-9) -> ConstrainedSolution:
-    """The constrained LP on HiGHS from scratch (interior point + crossover, ending on a basis):
-    method ``"lp-highs"`` (:class:`~wncs_lp.constrained.warm.WarmConstrainedLP`, whose options
-    these are)."""
-    from .warm import WarmConstrainedLP
-
-    cons = constraints_for(mdp, constraints)
-    return WarmConstrainedLP(mdp, cons, budget=budget, cert_rtol=cert_rtol, tol=tol).solve(cons, warm=False)
+    return found.call(mdp, cons, **kw)

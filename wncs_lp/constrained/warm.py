@@ -36,7 +36,7 @@ the cold route; the basis stays for the next bound.
 from __future__ import annotations
 
 import time
-from typing import Sequence
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -47,10 +47,10 @@ from ..solvers.highs import new_highs, run_highs
 from ..solvers.lp import build_lp
 from .certify import CERT_RTOL
 from .lp import certify_lp_solution, check_reachable, scaled_rows
-from .problem import LinearConstraint, max_form
+from .problem import LinearConstraint, constraints_for, max_form
 from .result import ConstrainedSolution
 
-__all__ = ["WarmConstrainedLP", "WARM_MIN_SECONDS"]
+__all__ = ["WarmConstrainedLP", "WARM_MIN_SECONDS", "solve_constrained_highs"]
 
 #: A warm restart is always allowed at least this many seconds before it is abandoned.
 WARM_MIN_SECONDS = 1.0
@@ -223,3 +223,11 @@ class WarmConstrainedLP:
         return certify_lp_solution(self.mdp, constraints, self.lp, self.scales, y, z[:self.n_eq], z[self.n_eq:],
                                    method=method, solver_status="optimal", stats=st, t0=t0,
                                    cert_rtol=self.cert_rtol)
+
+
+def solve_constrained_highs(mdp: MDP, constraints: Iterable[Any], *, budget: float | None = None,
+                            cert_rtol: float = CERT_RTOL, tol: float = 1e-9) -> ConstrainedSolution:
+    """The constrained LP on HiGHS from scratch (interior point + crossover, ending on a basis):
+    method ``"lp-highs"`` (:class:`WarmConstrainedLP`, whose options these are)."""
+    cons = constraints_for(mdp, constraints)
+    return WarmConstrainedLP(mdp, cons, budget=budget, cert_rtol=cert_rtol, tol=tol).solve(cons, warm=False)

@@ -45,12 +45,15 @@ The exact rules are in ``docs/policies.md``.
 """
 from __future__ import annotations
 
+from typing import Any
+
+from .. import moved
 from ..models.system import OutcomeTables, System
 from ..policy_forms import pairs_to_sigma, policy_array, sigma_to_pairs
 from .base import Configuration, FunctionPolicy, MemoryPolicy, Policy, TablePolicy, as_rng, system_of
 from .baselines import MaxAgePolicy, MaxWeightPolicy, RoundRobinPolicy, max_weight_index
 from .convert import as_policy, policy_from_file
-from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names, policy_for
+from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
 from .optimal import CappedPolicy, ClippedPolicy, OptimalPolicy
@@ -105,6 +108,10 @@ __all__ = [
     "make_policy",
     "parse_policy_names",
     "parse_assignment",
-    "policy_for",
     "PolicySetup",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """Names that moved to the workflow floor (:mod:`wncs_lp.moved`): still found here, with a warning."""
+    return moved.old_name(__name__, name)

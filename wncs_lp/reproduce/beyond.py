@@ -89,12 +89,10 @@ def _lp_warm_route(mdp, spec: ConstraintSpec, method: str) -> bool:
     """Whether ``method`` solves this curve's points by the LP that one warm HiGHS model re-solves
     point after point (the registry row, or the row ``auto`` picks): then the points run in order."""
     from ..constrained import constraints_for
-    from ..methods import BASIS, CONSTRAINED, method as method_row, resolve
+    from ..constrained.registry import row_that_runs
+    from ..methods import BASIS
 
-    row = method_row(method, constrained=True)
-    if row.chooser is not None:
-        row = CONSTRAINED[resolve(row.chooser)(mdp, constraints_for(mdp, [spec]))]
-    return row.warm_start == BASIS
+    return row_that_runs(method, mdp, constraints_for(mdp, [spec])).warm_start == BASIS
 
 
 def _curve(ctx: Context, cap: int, st: BeyondSettings) -> tuple[TradeoffResult, dict[str, Any]]:

@@ -19,7 +19,7 @@ from ..models import build
 from ..scenario import Scenario, load_scenario
 from ..methods import EXACT_METHOD_MAX_STATES, exact_method
 from ..solvers.result import Solution
-from ..solvers.route import solve_scenario
+from ..workflow import solve_scenario
 from ..truncation import CAP_MASS_WARN, CapMass, cap_mass
 from ..verify.verdict import decide, subclaims_verdict  # the rules of the verdicts live together
 from ..viz import save_figure

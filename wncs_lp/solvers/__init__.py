@@ -2,7 +2,8 @@
 
 ``solve(mdp, method)`` dispatches to
 
-Every method is a row of the one registry, :data:`wncs_lp.methods.TABLE`:
+Every method is a row of the one vocabulary, :data:`wncs_lp.methods.TABLE`, run by the function
+registered for it in :data:`wncs_lp.solvers.registry.AVERAGE`:
 
 * ``"lp"``       -- occupation-measure LP, Clarabel called directly (:func:`solve_lp`);
 * ``"lp-highs"`` -- the same LP on HiGHS (:mod:`wncs_lp.solvers.highs`);
@@ -17,9 +18,9 @@ Every method is a row of the one registry, :data:`wncs_lp.methods.TABLE`:
 * ``"matrix-free"`` -- certified value iteration without the transition matrix, on the MDP's
   scenario (:mod:`wncs_lp.solvers.matrix_free`; the answer is returned on the MDP).
 
-From a scenario, :func:`solve_scenario` (:mod:`wncs_lp.solvers.route`) is the one route: size
-guard, build, solve, and ``auto``'s switch to the matrix-free solver when the stored matrix
-would not fit.
+From a scenario, :func:`wncs_lp.workflow.solve_scenario` (the workflow floor, above the solvers
+and the constrained solvers) is the one route: size guard, build (:func:`build_scenario`),
+solve, and ``auto``'s switch to the matrix-free solver when the stored matrix would not fit.
 
 The discounted criterion (a discount factor beta, certified by MacQueen's bounds) is
 :func:`solve_discounted` (:mod:`wncs_lp.solvers.discounted`).
@@ -32,10 +33,10 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+from .. import moved
 from ..errors import SolverError
 from ..mdp import MDP
 from ..methods import DEFAULT_METHOD, METHODS, SCENARIO_METHODS
-from ..methods import method as method_row
 from .certify import bellman_step, bracket, certificate_closed, greedy_first, q_values
 from .auto import solve_auto
 from .discounted import DiscountedSolution, discounted_value, laurent_terms, solve_discounted
@@ -49,7 +50,9 @@ from .dp import (
 )
 from .lp import LPData, build_lp, extract_policy, solve_lp
 from .result import Solution
-from .route import ScenarioSolve, WarmStart, build_scenario, solve_scenario
+from .registry import AVERAGE
+from .registry import entry as method_entry
+from .route import ScenarioSolve, WarmStart, build_scenario
 
 __all__ = [
     "METHODS",
@@ -71,10 +74,10 @@ __all__ = [
     "build_lp",
     "extract_policy",
     "solve_lp",
-    "solve_scenario",
     "ScenarioSolve",
     "WarmStart",
     "build_scenario",
+    "AVERAGE",
     "DiscountedSolution",
     "solve_discounted",
     "discounted_value",
@@ -108,10 +111,14 @@ def solve(mdp: MDP, method: str = DEFAULT_METHOD, **kw: Any) -> Solution:
     """
     if not isinstance(mdp, MDP):
         raise SolverError(f"solve takes an MDP (wncs_lp.build(scenario)); got {type(mdp).__name__} "
-                          "(wncs_lp.solve and wncs_lp.solvers.route.solve_scenario take a scenario)")
-    row = method_row(method, allowed=SCENARIO_METHODS)
-    sol = row.call(mdp, on_mdp=True, **kw)
+                          "(wncs_lp.solve and wncs_lp.workflow.solve_scenario take a scenario)")
+    sol = method_entry(method, allowed=SCENARIO_METHODS).call(mdp, on_mdp=True, **kw)
     if isinstance(sol, Solution) and sol.pair_actions is None:  # e.g. a matrix-free solve mapped onto the MDP
         sol = replace(sol, pair_actions=mdp.a_indices)
     return sol
 
+
+
+def __getattr__(name: str) -> Any:
+    """Names that moved to the workflow floor (:mod:`wncs_lp.moved`): still found here, with a warning."""
+    return moved.old_name(__name__, name)

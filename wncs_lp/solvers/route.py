@@ -1,20 +1,11 @@
-"""The one route from a scenario to a solution: size guard -> build -> solve.
+"""The steps of the scenario route that need no solver: the size guard and the build
+(:func:`build_scenario`), a scenario read from a file or a name (:func:`as_scenario`), the row of
+a method for a scenario (:func:`scenario_row`), and what a solve hands on (:class:`ScenarioSolve`,
+:class:`WarmStart`).
 
-Every command and library function that solves a scenario goes through :func:`solve_scenario`
-(``wncs-lp solve``, ``map``, ``verify``, ``evaluate`` / ``simulate`` / ``sweep`` through the policy
-factory, ``capstudy``, :func:`wncs_lp.solve` on a scenario, the reproduction). It
-
-1. reads the method's row in the registry (:data:`wncs_lp.methods.TABLE`, or
-   :data:`~wncs_lp.methods.CONSTRAINED` when the scenario's ``[[constraint]]`` tables are solved);
-2. runs a scenario method (``matrix-free``) on the scenario, without building anything;
-3. otherwise builds the MDP after the size guard, counting the memory the method needs (its
-   memory model: the stored matrix, plus an interior-point LP for the LP methods);
-4. when the guard refuses the stored matrix and the method names a fallback (``auto``: the
-   matrix-free solver), solves by the fallback instead and says why; a refusal stands for a
-   method without one, for a constrained solve, and when the caller needs the MDP;
-5. solves the MDP with the method (its warm start and ``threads`` passed when it takes them).
-
-It returns a :class:`ScenarioSolve`: the solution with what was built and why.
+The route itself, :func:`wncs_lp.workflow.solve_scenario` (size guard -> build -> solve, and
+``auto``'s fallback to the matrix-free solver), lives on the workflow floor above the solvers and
+the constrained solvers, which it calls.
 """
 from __future__ import annotations
 
@@ -22,17 +13,18 @@ import hashlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
+from .. import moved
 from ..errors import SolverError
 from ..mdp import MDP
-from ..methods import (BIAS, CONSTRAINED, DEFAULT_METHOD, POLICY, SCENARIO_INPUT, SOLVE, SOLVE_CONSTRAINED,
-                       STORED_LP, TABLE, Method, resolve)
+from ..methods import BIAS, CONSTRAINED, POLICY, SCENARIO_INPUT, STORED_LP, TABLE, Method
+from ..methods import method as method_row
 from ..progress import Progress, as_progress
 
-__all__ = ["ScenarioSolve", "WarmStart", "solve_scenario", "build_scenario", "as_scenario", "space_key"]
+__all__ = ["ScenarioSolve", "WarmStart", "build_scenario", "as_scenario", "scenario_row", "space_key"]
 
 
 def space_key(mdp: MDP) -> str:
@@ -148,12 +140,11 @@ def as_scenario(scenario: Any) -> Any:
                       f"{type(scenario).__name__}")
 
 
-def _row(method: str, constrained: bool) -> Method:
-    table = CONSTRAINED if constrained else TABLE
-    if method not in table:
-        what = "a scenario with [[constraint]] tables" if constrained else "an unconstrained scenario"
-        raise SolverError(f"method {method!r} does not solve {what}; expected one of {', '.join(table)}")
-    return table[method]
+def scenario_row(method: str, constrained: bool) -> Method:
+    """The registry row of ``method`` for a scenario solved with (``constrained``) or without its
+    ``[[constraint]]`` tables (:func:`wncs_lp.methods.method`: the one validator)."""
+    what = "a scenario with [[constraint]] tables" if constrained else "an unconstrained scenario"
+    return method_row(method, constrained=constrained, problem=what)
 
 
 def build_scenario(scenario: Any, method: str | None = None, *, constrained: bool = False, force: bool = False,
@@ -185,7 +176,7 @@ def build_scenario(scenario: Any, method: str | None = None, *, constrained: boo
         warnings.warn(text, ScenarioWarning, stacklevel=3)
 
     prog = as_progress(progress)
-    row = _row(method, constrained) if method is not None else None
+    row = scenario_row(method, constrained) if method is not None else None
     # the LP's memory on the backend the method names (Clarabel unless it says otherwise)
     need_lp = dict(row.preset).get("backend", "clarabel") if row is not None and row.memory == STORED_LP else False
     if offer is None:
@@ -199,111 +190,6 @@ def build_scenario(scenario: Any, method: str | None = None, *, constrained: boo
     return mdp, seconds
 
 
-def solve_scenario(
-    scenario: Any,
-    method: str = DEFAULT_METHOD,
-    *,
-    constrained: bool | None = None,
-    force: bool = False,
-    threads: int | None = None,
-    progress: bool | Progress | None = None,
-    mdp: MDP | None = None,
-    need_mdp: bool = False,
-    warm: WarmStart | None = None,
-    check: Callable[[MDP], Any] | None = None,
-    **kw: Any,
-) -> ScenarioSolve:
-    """Solve a scenario by name of method: size guard, build, solve (module docstring).
-
-    Parameters
-    ----------
-    scenario : Scenario, path or str
-        A scenario, its TOML file, or a shipped scenario's name (``"paper_p12"``).
-    method : str
-        A name of :data:`wncs_lp.methods.TABLE` (of :data:`~wncs_lp.methods.CONSTRAINED` for a
-        constrained solve); default ``"auto"``.
-    constrained : bool, optional
-        Solve the scenario's ``[[constraint]]`` tables: by default when it has some; False
-        solves the unconstrained problem (``--ignore-constraints``).
-    force : bool
-        Build (or sweep the box) even when the size guard refuses.
-    threads : int, optional
-        Kernel threads, for the methods that take them (default: the solver's).
-    progress : bool or Progress
-        The phases and the solver's progress on stderr.
-    mdp : MDP, optional
-        The scenario's MDP, already built (the guard and the build are skipped).
-    need_mdp : bool
-        The caller needs the MDP: a scenario method then runs on the built MDP, and a refusal
-        of the guard is never answered by the matrix-free fallback.
-    warm : WarmStart, optional
-        A previous solution on the same state space to start from (:meth:`ScenarioSolve.warm`).
-    check : callable, optional
-        Called with the MDP before the solve (the caller's own arguments checked against it
-        before the time is spent).
-    **kw
-        The method's own keywords (``tol``, ``max_iter``, ...); a keyword it does not take is
-        one :class:`SolverError` naming those it does.
-
-    Returns
-    -------
-    ScenarioSolve
-
-    Raises
-    ------
-    SolverError
-        An unknown method, or one that does not solve this kind of problem (the message lists
-        those that do), a keyword it does not take, or a solver failure.
-    SizeLimitError
-        The guard refuses the stored matrix and the method has no fallback.
-    """
-    t0 = time.perf_counter()
-    scenario = as_scenario(scenario)
-    constrained = bool(scenario.constraints) if constrained is None else bool(constrained)
-    row = _row(method, constrained)
-    prog = as_progress(progress)
-    if row.takes == SCENARIO_INPUT and mdp is None and not need_mdp:
-        return _without_matrix(scenario, row, row.name, "asked for", t0, force, threads, prog, kw)
-    build_seconds = 0.0
-    if mdp is None:
-        from ..models.guard import SizeLimitError
-
-        offer = tuple(TABLE.values()) if not (constrained or need_mdp) else None  # the caller takes matrix-free
-        try:
-            mdp, build_seconds = build_scenario(scenario, method, constrained=constrained, force=force, progress=prog,
-                                                offer=offer)
-        except SizeLimitError as refused:
-            if row.fallback is None or constrained or need_mdp:
-                raise
-            why = f"{row.name}: the stored matrix would not fit in memory"
-            try:
-                return _without_matrix(scenario, TABLE[row.fallback], row.name, why, t0, force, threads, prog, kw)
-            except SolverError:  # not a model the fallback takes: the guard's refusal stands
-                raise refused from None
-    if check is not None:
-        check(mdp)
-    if constrained:
-        prog.phase(f"solving the constrained problem ({len(scenario.constraints)} bound(s)) with method {method}")
-        sol = resolve(SOLVE_CONSTRAINED)(mdp, scenario.constraints, method, **kw)
-        return ScenarioSolve(sol, mdp, sol.method, method, constrained=True, build_seconds=build_seconds,
-                             seconds=time.perf_counter() - t0)
-    extra = warm.keywords(mdp, row) if warm is not None else {}
-    if threads is not None and row.takes_keyword("threads", on_mdp=True):
-        extra["threads"] = threads
-    prog.phase(f"solving with method {method}")
-    sol = resolve(SOLVE)(mdp, method, progress=prog, **extra, **kw)
-    return ScenarioSolve(sol, mdp, method, method, build_seconds=build_seconds, seconds=time.perf_counter() - t0,
-                         warm_start=bool(set(extra) - {"threads"}))
-
-
-def _without_matrix(scenario: Any, row: Method, requested: str, why: str, t0: float, force: bool,
-                    threads: int | None, prog: Progress, kw: dict[str, Any]) -> ScenarioSolve:
-    """A scenario method on the scenario itself: nothing is built."""
-    extra = dict(kw)
-    if threads is not None and row.takes_keyword("threads"):
-        extra["threads"] = threads
-    if force:
-        extra["force"] = True
-    prog.phase(f"solving without a stored matrix ({why})")
-    sol = row.call(scenario, progress=bool(prog.enabled), **extra)
-    return ScenarioSolve(sol, None, row.name, requested, route=why, seconds=time.perf_counter() - t0)
+def __getattr__(name: str) -> Any:
+    """Names that moved to the workflow floor (:mod:`wncs_lp.moved`): still found here, with a warning."""
+    return moved.old_name(__name__, name)

@@ -58,10 +58,11 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..constrained.problem import LinearConstraint
+from ..constrained.registry import row_that_runs
 from ..errors import InfeasibleConstraintsError, PolicyError, WncsError
 from ..files import dumps
 from ..mdp import MDP
-from ..methods import BASIS, CONSTRAINED, DEFAULT_METHOD, resolve
+from ..methods import BASIS, DEFAULT_METHOD
 from ..methods import method as method_row
 from .folder import FINGERPRINT, StudyFolder, read_table
 from .grid import parse_values, value_key
@@ -412,10 +413,7 @@ def _warm_route(mdp: MDP, cons: Sequence[LinearConstraint], method: str) -> bool
     """Whether :func:`~wncs_lp.constrained.solve_constrained` would solve these by an LP that a
     warm HiGHS model can re-solve from the previous basis (the method's registry row, or the row
     ``auto``'s rule picks)."""
-    row = method_row(method, constrained=True)
-    if row.chooser is not None:
-        row = CONSTRAINED[resolve(row.chooser)(mdp, cons)]
-    return row.warm_start == BASIS
+    return row_that_runs(method, mdp, cons).warm_start == BASIS
 
 
 def _width(p: TradeoffPoint) -> float:
@@ -450,8 +448,8 @@ def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: s
                unconstrained: str, threads: int | None = None) -> dict[str, Any]:
     """The optimum without the swept constraint, the quantity's value under it, and its reachable end."""
     from ..constrained import evaluate_rows, reachable_range, solve_constrained
-    from ..methods import method as unconstrained_row
     from ..solvers import solve
+    from ..solvers.registry import entry as unconstrained_entry
 
     c = cons[index]
     others = cons[:index] + cons[index + 1:]
@@ -463,8 +461,8 @@ def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: s
         probs = np.asarray(sol.policy, dtype=float)
         g, lo, hi, how = sol.gain, sol.gain_lower, sol.gain_upper, f"constrained ({sol.method}) without the swept one"
     else:
-        row = unconstrained_row(unconstrained)
-        extra = {"threads": threads} if threads is not None and row.takes_keyword("threads", on_mdp=True) else {}
+        found = unconstrained_entry(unconstrained)
+        extra = {"threads": threads} if threads is not None and found.takes_keyword("threads", on_mdp=True) else {}
         sol = solve(mdp, method=unconstrained, **extra)
         probs = np.zeros(mdp.n_pairs)
         probs[np.asarray(sol.policy, dtype=np.int64)] = 1.0

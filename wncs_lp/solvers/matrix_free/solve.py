@@ -1,6 +1,6 @@
 """The matrix-free solver on a built MDP, answered on the MDP (:func:`solve_mdp`, the registry's
 ``matrix-free`` row for an MDP). A scenario is solved through the one route,
-:func:`wncs_lp.solvers.route.solve_scenario`."""
+:func:`wncs_lp.workflow.solve_scenario`."""
 from __future__ import annotations
 
 from dataclasses import replace

@@ -13,7 +13,9 @@ import wncs_lp
 from wncs_lp import methods
 from wncs_lp.errors import SolverError
 from wncs_lp.models import guard
-from wncs_lp.solvers.route import ScenarioSolve, WarmStart, solve_scenario
+from wncs_lp.constrained.registry import CONSTRAINED_ENTRIES
+from wncs_lp.solvers.registry import AVERAGE
+from wncs_lp.workflow import ScenarioSolve, WarmStart, solve_scenario
 
 P12 = wncs_lp.scenario_path("paper_p12")
 
@@ -118,14 +120,22 @@ def test_a_method_for_the_other_kind_of_problem_is_refused_with_the_list(small):
 
 
 # ----------------------------------------------------------------------------- the registry
-@pytest.mark.parametrize("row", [*methods.TABLE.values(), *methods.CONSTRAINED.values()], ids=lambda r: r.name)
-def test_every_row_names_a_function_that_takes_what_the_row_says(row):
+def test_every_row_of_the_vocabulary_has_one_entry_and_no_other():
+    assert [e.row for e in AVERAGE.values()] == list(methods.TABLE.values())
+    assert [e.row for e in CONSTRAINED_ENTRIES.values()] == list(methods.CONSTRAINED.values())
+    assert all(e.row.criterion == methods.AVERAGE for e in AVERAGE.values())
+    assert all(e.row.criterion == methods.CONSTRAINED_CRITERION for e in CONSTRAINED_ENTRIES.values())
+
+
+@pytest.mark.parametrize("entry", [*AVERAGE.values(), *CONSTRAINED_ENTRIES.values()], ids=lambda e: e.row.name)
+def test_every_row_names_a_function_that_takes_what_the_row_says(entry):
     import inspect
 
-    if row.chooser is not None:
-        assert not row.target and callable(methods.resolve(row.chooser))
+    row = entry.row
+    if entry.choose is not None:
+        assert entry.run is None and callable(entry.choose)
         return
-    fn = row.function()
+    fn = entry.function()
     params = inspect.signature(fn).parameters
     for key, _ in row.preset:
         assert key in params
@@ -134,6 +144,6 @@ def test_every_row_names_a_function_that_takes_what_the_row_says(row):
         assert warm in params
     assert row.memory in (methods.STORED, methods.STORED_LP, methods.BOX)
     if row.takes == methods.SCENARIO_INPUT:
-        assert callable(row.function(on_mdp=True)) and row.memory == methods.BOX
+        assert callable(entry.function(on_mdp=True)) and row.memory == methods.BOX
     if row.fallback is not None:
         assert methods.TABLE[row.fallback].takes == methods.SCENARIO_INPUT

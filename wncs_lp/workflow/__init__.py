@@ -1,0 +1,24 @@
+"""The workflow floor: the jobs that join the rooms below it, each importing what it calls.
+
+It stands above the solvers, the constrained solvers, the bounds and the policies, and below the
+studies, the reproduction and the command line:
+
+* :func:`solve_scenario` (:mod:`~wncs_lp.workflow.route`) -- the one route from a scenario to a
+  solution: size guard, build, solve (:func:`wncs_lp.solvers.solve` or
+  :func:`wncs_lp.constrained.solve_constrained`), and ``auto``'s fallback to the matrix-free
+  solver when the stored matrix would not fit;
+* :func:`policy_for` (:mod:`~wncs_lp.workflow.policies`) -- a policy by name on a scenario: its
+  system, its MDP when needed, ``optimal`` solved by the route, then the policy factory
+  (:func:`wncs_lp.policies.make_policy`).
+
+The method registry's vocabulary is :mod:`wncs_lp.methods`; the functions of its rows are
+registered beside their dispatchers (:mod:`wncs_lp.solvers.registry`,
+:mod:`wncs_lp.constrained.registry`), imported normally.
+"""
+from __future__ import annotations
+
+from ..solvers.route import ScenarioSolve, WarmStart, as_scenario, build_scenario
+from .policies import policy_for
+from .route import solve_scenario
+
+__all__ = ["solve_scenario", "policy_for", "ScenarioSolve", "WarmStart", "as_scenario", "build_scenario"]
