@@ -63,7 +63,7 @@ def measure(name: str, cap: int, policy: str, repeat: int, lu_max: int) -> list[
     from wncs_lp.evaluate import memory_chain
     from wncs_lp.mdp import MDP
     from wncs_lp.models.system import System
-    from wncs_lp.policies import make_policy
+    from wncs_lp.workflow import make_policy
     from wncs_lp.solvers.dp import value_iteration
 
     sc = load_scenario(scenario_path(name)).with_overrides({"tau_cap": cap})

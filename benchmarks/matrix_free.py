@@ -55,7 +55,7 @@ sys.path.insert(0, os.environ.get("WNCS_LP_BENCH_TREE", str(ROOT)))
 
 import wncs_lp  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
-from wncs_lp.policies import make_policy  # noqa: E402
+from wncs_lp.workflow import make_policy  # noqa: E402
 from wncs_lp.solvers.matrix_free import (  # noqa: E402
     matrix_free_evaluate,
     matrix_free_value_iteration,

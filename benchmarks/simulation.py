@@ -48,7 +48,8 @@ from wncs_lp.bounds import BoundPolicy, bound_policy, lower_bound, policy_gaps  
 from wncs_lp.files import atomic_write_text  # noqa: E402
 from wncs_lp.intervals import batch_means_interval, replication_interval  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
-from wncs_lp.policies import Policy, make_policy  # noqa: E402
+from wncs_lp.policies import Policy  # noqa: E402
+from wncs_lp.workflow import make_policy  # noqa: E402
 from wncs_lp.scenario import load_scenario, scenario_from_dict  # noqa: E402
 from wncs_lp.formulations import scenario_path  # noqa: E402
 from wncs_lp.simulate import simulate  # noqa: E402

@@ -12,7 +12,8 @@ import numpy as np
 
 import wncs_lp
 from wncs_lp.evaluate import evaluate
-from wncs_lp.policies import Policy, System, make_policy, pairs_to_sigma, sigma_to_pairs
+from wncs_lp.policies import Policy, System, pairs_to_sigma, sigma_to_pairs
+from wncs_lp.workflow import make_policy
 from wncs_lp.simulate import simulate
 from wncs_lp.solvers import laurent_terms, solve_discounted
 from wncs_lp.solvers.dp import evaluate_policy

@@ -20,7 +20,8 @@ import warnings
 
 import wncs_lp
 from wncs_lp.errors import ScenarioWarning
-from wncs_lp.policies import MatrixFreePolicy, make_policy
+from wncs_lp.policies import MatrixFreePolicy
+from wncs_lp.workflow import make_policy
 from wncs_lp.solvers.matrix_free import matrix_free_cap_mass, matrix_free_evaluate
 from wncs_lp.workflow import solve_scenario
 from wncs_lp.truncation import CapCount

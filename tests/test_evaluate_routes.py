@@ -42,7 +42,7 @@ def test_the_iterative_law_and_the_certified_bracket_agree_with_the_lu():
     from wncs_lp import build, load_scenario
     from wncs_lp.evaluate import evaluate
     from wncs_lp.models.system import System
-    from wncs_lp.policies import make_policy
+    from wncs_lp.workflow import make_policy
 
     sc = load_scenario(PATH, ["tau_cap=9"])
     system, mdp = System.from_scenario(sc), build(sc)

@@ -10,7 +10,8 @@ import pytest
 from wncs_lp.errors import ArgumentError, PolicyError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
-from wncs_lp.policies import System, make_policy
+from wncs_lp.policies import System
+from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import load_scenario
 from wncs_lp.simulate import SimulationResult, simulate
 

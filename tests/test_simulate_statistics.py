@@ -16,7 +16,8 @@ from wncs_lp.bounds import bound_policy, lower_bound
 from wncs_lp.evaluate import evaluate
 from wncs_lp.intervals import batch_means_interval, difference_interval, replication_interval, replications_agree
 from wncs_lp.models import build
-from wncs_lp.policies import System, make_policy
+from wncs_lp.policies import System
+from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import load_scenario
 from wncs_lp.simulate import simulate
 

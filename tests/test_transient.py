@@ -17,7 +17,7 @@ from policies.test_baselines import RAW, max_age_order, serve
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
 from wncs_lp.models.system import System
-from wncs_lp.policies import make_policy
+from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import scenario_from_dict
 from wncs_lp.transient import transient_cost
 

@@ -9,7 +9,7 @@ import pytest
 
 from wncs_lp import load_scenario, scenario_path
 from wncs_lp.models.system import System
-from wncs_lp.policies import make_policy
+from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import scenario_from_dict
 from wncs_lp.simulate import simulate
 from wncs_lp.workflow import solve_scenario

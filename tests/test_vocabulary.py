@@ -46,8 +46,8 @@ def test_every_command_has_the_same_methods_and_default_auto(command):
 def test_library_defaults_are_auto_and_the_vocabulary_is_the_solvers():
     from wncs_lp import solvers, workflow
     from wncs_lp.studies import cap_study
-    from wncs_lp.policies import OptimalPolicy, make_policy
-    from wncs_lp.workflow import policy_for
+    from wncs_lp.policies import OptimalPolicy
+    from wncs_lp.workflow import make_policy, policy_for
     from wncs_lp.studies import run_sweep, tradeoff
 
     assert set(solvers.METHODS) == set(methods.METHODS)

@@ -187,7 +187,8 @@ from .errors import ModelError, PolicyError, WncsError
 from .files import atomic_write_bytes, json_ready, npz_array, npz_json, read_npz
 from .mdp import MAX_COST, MDP
 from .models.statespace import StateSpace
-from .policies.mixed import pair_probabilities, randomised_states
+from .policies.base import Policy, TablePolicy, system_of
+from .policies.mixed import MixedPolicy, pair_probabilities, randomised_states
 
 __all__ = [
     "FORMAT",
@@ -198,6 +199,7 @@ __all__ = [
     "load_npz",
     "save_policy_npz",
     "load_policy_npz",
+    "policy_from_file",
     "save_solution_npz",
     "save_drn",
     "save_prism",
@@ -930,3 +932,34 @@ def load_policy_npz(path: str | Path, mdp: MDP | None = None) -> np.ndarray:
                               f"({mdp.name})")
         probs = _probs_for(mdp, probs)
     return probs
+
+
+def policy_from_file(path: Any, mdp: MDP, *, name: str | None = None) -> Policy:
+    """The policy saved in a ``.npz`` file (``wncs-lp solve --out``, :func:`wncs_lp.export.save_policy_npz`),
+    on the MDP it was saved for.
+
+    Parameters
+    ----------
+    path : file name
+    mdp : MDP
+        The MDP of the scenario the policy was solved on (its pairs and fingerprint must match).
+    name : str, optional
+        Default: the file's stem.
+
+    Returns
+    -------
+    Policy
+        A deterministic :class:`TablePolicy` when every state has one pair of probability 1,
+        else a :class:`MixedPolicy`.
+
+    Raises
+    ------
+    ExportError
+        Not such a file, or a policy of another MDP (the message says which).
+    """
+    probs = load_policy_npz(path, mdp)
+    name = name or Path(path).stem
+    pairs = np.flatnonzero(probs == 1.0)
+    if pairs.size == mdp.n_states and np.array_equal(np.asarray(mdp.s_indices)[pairs], np.arange(mdp.n_states)):
+        return TablePolicy(system_of(mdp), mdp, pairs, name=name)
+    return MixedPolicy(system_of(mdp), mdp, probs, name=name)

@@ -14,7 +14,7 @@ method name. Every command (``solve``, ``evaluate``,
 ``simulate``, ``sweep``, ``verify``, ``map``, ``capstudy``, ``tradeoff``) and every library entry
 point that takes a ``method`` (:func:`wncs_lp.solve`, :func:`wncs_lp.solvers.solve`,
 :func:`wncs_lp.workflow.solve_scenario`, :func:`wncs_lp.constrained.solve_constrained`,
-:func:`wncs_lp.policies.make_policy`, :func:`wncs_lp.workflow.policy_for`,
+:func:`wncs_lp.workflow.make_policy`, :func:`wncs_lp.workflow.policy_for`,
 :func:`wncs_lp.studies.run_sweep`, :func:`wncs_lp.studies.cap_study`,
 :func:`wncs_lp.studies.tradeoff`) reads its vocabulary and default (``"auto"``) from here:
 

@@ -3,8 +3,8 @@ with a :class:`DeprecationWarning` that names the new one.
 
 A module that lost a name ends with ``def __getattr__(name): return moved.old_name(__name__, name)``
 (PEP 562). The new home is loaded by name here, and only here: it stands on a higher floor than
-the old one (the workflow floor above the solvers), so a plain import from the old module would
-climb a floor and close a cycle.
+the old one (the workflow floor above the solvers and the policies; the files' room above the
+policies), so a plain import from the old module would climb a floor and close a cycle.
 """
 from __future__ import annotations
 
@@ -20,6 +20,10 @@ MOVED = {
     "wncs_lp.solvers.route.solve_scenario": "wncs_lp.workflow",
     "wncs_lp.policies.policy_for": "wncs_lp.workflow",
     "wncs_lp.policies.factory.policy_for": "wncs_lp.workflow",
+    "wncs_lp.policies.make_policy": "wncs_lp.workflow",
+    "wncs_lp.policies.factory.make_policy": "wncs_lp.workflow",
+    "wncs_lp.policies.policy_from_file": "wncs_lp.export",
+    "wncs_lp.policies.convert.policy_from_file": "wncs_lp.export",
 }
 
 

@@ -116,7 +116,7 @@ def test_make_policy_by_name_is_the_policy_of_the_auto_bound():
     # the factory's "relaxation" is lower_bound(system, "auto") then bound_policy: the same actions
     # on every state, and an exact gain between the optimum and its own certified bound's reach
     from wncs_lp.bounds import lower_bound
-    from wncs_lp.policies import make_policy
+    from wncs_lp.workflow import make_policy
 
     sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=8"])
     system = System.from_scenario(sc)

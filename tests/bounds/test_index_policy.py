@@ -16,7 +16,7 @@ from wncs_lp.errors import PolicyError, SolverError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
 from wncs_lp.models.system import System
-from wncs_lp.policies import make_policy
+from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import load_scenario
 from wncs_lp.solvers import solve
 from wncs_lp.solvers.matrix_free import matrix_free_evaluate

@@ -13,7 +13,8 @@ from wncs_lp.errors import PolicyError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
 from wncs_lp.models.system import System
-from wncs_lp.policies import GreedyPolicy, make_policy
+from wncs_lp.policies import GreedyPolicy
+from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import load_scenario
 from wncs_lp.solvers import solve
 from wncs_lp.solvers.matrix_free import matrix_free_evaluate

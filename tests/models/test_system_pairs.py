@@ -12,7 +12,7 @@ from wncs_lp import scenario_path
 from wncs_lp.errors import ModelError, PolicyError, SizeLimitError
 from wncs_lp.models import system as system_module
 from wncs_lp.models.system import System
-from wncs_lp.policies import make_policy
+from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import load_scenario, scenario_from_dict
 from wncs_lp.simulate import simulate
 

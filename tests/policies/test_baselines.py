@@ -19,7 +19,8 @@ from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
 from wncs_lp.models.cost import cost_tables
 from wncs_lp.models.system import System
-from wncs_lp.policies import POLICY_NAMES, make_policy
+from wncs_lp.policies import POLICY_NAMES
+from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import scenario_from_dict
 from wncs_lp.simulate import simulate
 

@@ -18,10 +18,10 @@ from wncs_lp.policies import (
     TauIndependentPolicy,
     best_static,
     default_assignment,
-    make_policy,
     static_assignments,
 )
 from wncs_lp.scenario import load_scenario, scenario_from_dict
+from wncs_lp.workflow import make_policy
 from wncs_lp.solvers import solve
 from wncs_lp.solvers.dp import evaluate_policy
 

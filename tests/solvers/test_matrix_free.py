@@ -16,7 +16,7 @@ import wncs_lp  # noqa: E402
 from wncs_lp.errors import PolicyError, SolverError  # noqa: E402
 from wncs_lp.evaluate import evaluate  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
-from wncs_lp.policies import make_policy  # noqa: E402
+from wncs_lp.workflow import make_policy  # noqa: E402
 from wncs_lp.simulate import simulate  # noqa: E402
 from wncs_lp.solvers import bracket  # noqa: E402
 from wncs_lp.workflow import solve_scenario  # noqa: E402

@@ -12,7 +12,8 @@ import wncs_lp as w
 from wncs_lp.errors import SolverError
 from wncs_lp.formulations import scenario_path
 from wncs_lp.models.system import System
-from wncs_lp.policies import MatrixFreePolicy, make_policy
+from wncs_lp.policies import MatrixFreePolicy
+from wncs_lp.workflow import make_policy
 from wncs_lp.solvers.matrix_free import (cap_cost, matrix_free_cap_mass, matrix_free_evaluate,
                                          matrix_free_value_iteration)
 from wncs_lp.truncation import policy_cap_mass

@@ -15,7 +15,8 @@ import wncs_lp  # noqa: E402
 from wncs_lp.errors import PolicyError, SolverError, WncsError  # noqa: E402
 from wncs_lp.evaluate import evaluate  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
-from wncs_lp.policies import MatrixFreePolicy, make_policy  # noqa: E402
+from wncs_lp.policies import MatrixFreePolicy  # noqa: E402
+from wncs_lp.workflow import make_policy  # noqa: E402
 from wncs_lp.solvers.matrix_free import (  # noqa: E402
     BoxLayout,
     MatrixFreeOptions,

@@ -19,7 +19,7 @@ import wncs_lp  # noqa: E402
 from wncs_lp.bounds import lower_bound  # noqa: E402
 from wncs_lp.errors import SolverError  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
-from wncs_lp.policies import make_policy  # noqa: E402
+from wncs_lp.workflow import make_policy  # noqa: E402
 from wncs_lp.solvers.matrix_free import (  # noqa: E402
     BoxLayout,
     matrix_free_evaluate,

@@ -37,11 +37,13 @@ from scipy import stats as sps
 
 from ..errors import PolicyError, SizeLimitError, SolverError
 from ..models.system import System
-from ..policies import Policy, make_policy
+from ..policies import Policy
+from ..policies.factory import BOUND_POLICY_NAMES, make_basic_policy
 from ..progress import as_progress
 from ..simulate import simulate
 from .index import IndexPolicy, whittle_indices
 from .lookahead import LookaheadPolicy
+from .named import named_policy
 from .policy import bound_policy
 from .projected import PROJECTED, ProjectedValue
 from .result import BoundResult
@@ -135,8 +137,9 @@ class GapReport:
 def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Policy:
     """A policy of a gap report by name: ``"bound"`` (the bound's greedy policy) and
     ``"lookahead"`` on this bound's tables, ``"index"`` priced from relaxation 1 (this bound when
-    it is relaxation 1's, else computed: seconds), any other name by
-    :func:`wncs_lp.policies.make_policy`; a :class:`Policy` is returned as it is."""
+    it is relaxation 1's, else computed: seconds), any other name by the policy factory's rooms
+    (:func:`~wncs_lp.bounds.named.named_policy`, :func:`~wncs_lp.policies.factory.make_basic_policy`);
+    a :class:`Policy` is returned as it is."""
     if isinstance(name, Policy):
         return name
     if name == "bound":
@@ -145,7 +148,9 @@ def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Po
         return LookaheadPolicy(bound_policy(bound, system))
     if name == "index":
         return IndexPolicy(system, whittle_indices(system, bound if bound.relaxation == "private-servers" else None))
-    return make_policy(name, system)
+    if name in BOUND_POLICY_NAMES:
+        return named_policy(name, system)
+    return make_basic_policy(name, system)
 
 
 def _exact_route(system: System, exact: bool | None, exact_max_states: int) -> tuple[bool, int]:
@@ -226,7 +231,7 @@ def policy_gaps(
     policies : sequence of str or Policy
         ``"bound"`` (the bound's greedy policy), ``"lookahead"`` (the two-step lookahead on the
         bound's tables), ``"index"`` (the index policy of relaxation 1's chains), any name of
-        :func:`wncs_lp.policies.make_policy` that needs no enumerated MDP (``suboptimal``,
+        :func:`wncs_lp.workflow.make_policy` that needs no enumerated MDP (``suboptimal``,
         ``static``, ``greedy``, ``random``), or policies.
     exact : bool, optional
         Evaluate by the certified matrix-free evaluation (True) or by Monte Carlo (False);

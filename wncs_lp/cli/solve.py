@@ -48,7 +48,8 @@ def _untruncated(args: argparse.Namespace, sol, mdp, prog):
     """The interval for the optimum without the cap: the certified lower end always; with
     ``--untruncated`` the optimal policy and the field's baselines simulated without the cap, the
     least upper confidence limit for the upper end."""
-    from ..policies import as_policy, make_policy
+    from ..policies import as_policy
+    from ..workflow import make_policy
     from ..untruncated import untruncated_interval
 
     if not args.untruncated:

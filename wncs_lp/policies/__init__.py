@@ -17,7 +17,7 @@ A :class:`Policy` has one interface that serves both uses:
   pair probabilities (randomised ones), the two forms accepted by
   :func:`wncs_lp.solvers.dp.evaluate_policy`.
 
-Policies (``make_policy`` builds them by name):
+Policies (:func:`wncs_lp.workflow.make_policy` builds them by name):
 
 ``optimal``      :class:`OptimalPolicy`, the policy of a :class:`~wncs_lp.solvers.result.Solution`;
 ``suboptimal``   :class:`SuboptimalPolicy`, the separable one-step improvement of paper Section III;
@@ -52,8 +52,8 @@ from ..models.system import OutcomeTables, System
 from ..policy_forms import pairs_to_sigma, policy_array, sigma_to_pairs
 from .base import Configuration, FunctionPolicy, MemoryPolicy, Policy, TablePolicy, as_rng, system_of
 from .baselines import MaxAgePolicy, MaxWeightPolicy, RoundRobinPolicy, max_weight_index
-from .convert import as_policy, policy_from_file
-from .factory import POLICY_NAMES, PolicySetup, make_policy, parse_assignment, parse_policy_names
+from .convert import as_policy
+from .factory import POLICY_NAMES, PolicySetup, parse_assignment, parse_policy_names
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
 from .optimal import CappedPolicy, ClippedPolicy, OptimalPolicy
@@ -76,7 +76,6 @@ __all__ = [
     "Policy",
     "as_rng",
     "as_policy",
-    "policy_from_file",
     "system_of",
     "Configuration",
     "FunctionPolicy",
@@ -105,7 +104,6 @@ __all__ = [
     "default_assignment",
     "static_assignments",
     "best_static",
-    "make_policy",
     "parse_policy_names",
     "parse_assignment",
     "PolicySetup",

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import moved
 from ..errors import PolicyError
 from ..mdp import MDP
 from ..models.system import System
@@ -14,7 +15,7 @@ from .base import Policy, TablePolicy, system_of
 from .matrix_free import MatrixFreePolicy
 from .mixed import MixedPolicy
 
-__all__ = ["as_policy", "policy_from_file"]
+__all__ = ["as_policy"]
 
 
 def as_policy(policy: Any = None, mdp: MDP | None = None, *, sigma: Any = None, system: System | None = None,
@@ -63,36 +64,6 @@ def as_policy(policy: Any = None, mdp: MDP | None = None, *, sigma: Any = None, 
     return TablePolicy(system, mdp, arr, name=name)
 
 
-def policy_from_file(path: Any, mdp: MDP, *, name: str | None = None) -> Policy:
-    """The policy saved in a ``.npz`` file (``wncs-lp solve --out``, :func:`wncs_lp.export.save_policy_npz`),
-    on the MDP it was saved for.
-
-    Parameters
-    ----------
-    path : file name
-    mdp : MDP
-        The MDP of the scenario the policy was solved on (its pairs and fingerprint must match).
-    name : str, optional
-        Default: the file's stem.
-
-    Returns
-    -------
-    Policy
-        A deterministic :class:`TablePolicy` when every state has one pair of probability 1,
-        else a :class:`MixedPolicy`.
-
-    Raises
-    ------
-    ExportError
-        Not such a file, or a policy of another MDP (the message says which).
-    """
-    from pathlib import Path
-
-    from ..export import load_policy_npz  # export reads policies.mixed: imported on use
-
-    probs = load_policy_npz(path, mdp)
-    name = name or Path(path).stem
-    pairs = np.flatnonzero(probs == 1.0)
-    if pairs.size == mdp.n_states and np.array_equal(np.asarray(mdp.s_indices)[pairs], np.arange(mdp.n_states)):
-        return TablePolicy(system_of(mdp), mdp, pairs, name=name)
-    return MixedPolicy(system_of(mdp), mdp, probs, name=name)
+def __getattr__(name: str) -> Any:
+    """Names that moved up (:mod:`wncs_lp.moved`): still found here, with a warning."""
+    return moved.old_name(__name__, name)

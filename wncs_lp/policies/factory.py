@@ -1,12 +1,13 @@
-"""Policies by name: the factory the command line and the sweeps use.
+"""Policies by name: the names, their checks, and the policies this room makes.
 
-:func:`wncs_lp.workflow.policy_for` (a scenario's system, its MDP when needed, the solve of
-``optimal`` by the one route, then :func:`make_policy`) lives on the workflow floor, above the
-route it calls.
+The factory the command line and the sweeps use, :func:`wncs_lp.workflow.make_policy`, lives on
+the workflow floor: it makes the bounds room's policies (:data:`BOUND_POLICY_NAMES`, from
+:func:`wncs_lp.bounds.named.named_policy`) and this room's (:func:`make_basic_policy`);
+:func:`wncs_lp.workflow.policy_for` adds a scenario's system, its MDP when needed and the solve of
+``optimal`` by the one route.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -24,11 +25,16 @@ from .rules import GreedyPolicy, RandomPolicy, StaticPolicy, default_assignment
 from .search import best_static
 from .suboptimal import SuboptimalPolicy
 
-__all__ = ["POLICY_NAMES", "NEED_MDP", "OPTIMAL", "PolicySetup", "make_policy", "parse_assignment", "parse_policy_names"]
+__all__ = ["POLICY_NAMES", "BASIC_POLICY_NAMES", "BOUND_POLICY_NAMES", "NEED_MDP", "OPTIMAL", "PolicySetup",
+           "check_policy_request", "make_basic_policy", "parse_assignment", "parse_policy_names"]
 
-#: Policy names understood by :func:`make_policy` and the command line.
+#: Policy names understood by :func:`wncs_lp.workflow.make_policy` and the command line.
 POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "lookahead",
                 "index", "max_age", "max_weight", "round_robin")
+#: The policies the bounds room makes (:func:`wncs_lp.bounds.named.named_policy`), and those of this
+#: room (:func:`make_basic_policy`).
+BOUND_POLICY_NAMES = ("relaxation", "lookahead", "index")
+BASIC_POLICY_NAMES = tuple(n for n in POLICY_NAMES if n not in BOUND_POLICY_NAMES)
 #: The policy a solve makes, and those that need the enumerated MDP.
 OPTIMAL = "optimal"
 NEED_MDP = ("optimal", "best_static")
@@ -36,7 +42,20 @@ NEED_MDP = ("optimal", "best_static")
 _BASELINES = {"max_age": MaxAgePolicy, "max_weight": MaxWeightPolicy, "round_robin": RoundRobinPolicy}
 
 
-def make_policy(
+def check_policy_request(name: Any, system: Any, mdp: MDP | None) -> None:
+    """The checks of a policy asked for by name, before any work: a name of :data:`POLICY_NAMES`,
+    the system of a scenario, and the enumerated MDP where the policy needs it."""
+    if not isinstance(name, str) or name not in POLICY_NAMES:
+        raise PolicyError(f"name: unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
+    if not isinstance(system, System):
+        raise ArgumentError("system", f"expected the System of a scenario (System.from_scenario, from "
+                                      "wncs_lp.models.system), "
+                                      f"got {shown(system)}")
+    if name in NEED_MDP and mdp is None:
+        raise PolicyError(f"policy {name!r} needs the enumerated MDP")
+
+
+def make_basic_policy(
     name: str,
     system: System,
     mdp: MDP | None = None,
@@ -46,20 +65,16 @@ def make_policy(
     assignment: Sequence[int] | None = None,
     progress: Any = False,
 ) -> Policy:
-    """Build a policy by name.
+    """Build a policy of this room by name (:data:`BASIC_POLICY_NAMES`); the full factory,
+    with the bounds room's policies too, is :func:`wncs_lp.workflow.make_policy`.
 
     Parameters
     ----------
-    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "lookahead", \
-            "index", "max_age", "max_weight", "round_robin"}
+    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random", "max_age", "max_weight", \
+            "round_robin"}
         ``max_age``, ``max_weight`` and ``round_robin`` are the field's baselines
         (:mod:`wncs_lp.policies.baselines`: max-age-first, max-weighted-cost-first, round robin, a
-        policy with memory). ``relaxation`` is the greedy policy of the certified lower bound
-        (:func:`wncs_lp.bounds.lower_bound` with ``relaxation="auto"``, then
-        :func:`wncs_lp.bounds.bound_policy`): it needs no MDP, so it reaches any number of processes.
-        ``lookahead`` is the two-step lookahead on the same tables
-        (:class:`wncs_lp.bounds.LookaheadPolicy`), ``index`` the Whittle-type index policy of
-        relaxation 1's priced chains (:class:`wncs_lp.bounds.IndexPolicy`); neither needs an MDP.
+        policy with memory).
     system : System
     mdp : MDP, optional
         Needed by ``optimal`` (solved with ``method`` unless ``solution`` is given) and
@@ -78,14 +93,9 @@ def make_policy(
     PolicyError
         Unknown name (the message lists the allowed ones), or a needed MDP missing.
     """
-    if not isinstance(name, str) or name not in POLICY_NAMES:
-        raise PolicyError(f"name: unknown policy {name!r}; expected one of {', '.join(POLICY_NAMES)}")
-    if not isinstance(system, System):
-        raise ArgumentError("system", f"expected the System of a scenario (System.from_scenario, from "
-                                      "wncs_lp.models.system), "
-                                      f"got {shown(system)}")
-    if name in NEED_MDP and mdp is None:
-        raise PolicyError(f"policy {name!r} needs the enumerated MDP")
+    check_policy_request(name, system, mdp)
+    if name in BOUND_POLICY_NAMES:
+        raise PolicyError(f"policy {name!r} comes from the bounds room: wncs_lp.workflow.make_policy makes it")
     if name == OPTIMAL:
         if solution is None:
             solution = solve(mdp, method=method, progress=progress)
@@ -98,30 +108,9 @@ def make_policy(
         return best_static(system, mdp)
     if name == "greedy":
         return GreedyPolicy(system)
-    if name in ("relaxation", "lookahead", "index"):
-        return _bound_room_policy(name, system)
     if name in _BASELINES:
         return _BASELINES[name](system)
     return RandomPolicy(system)
-
-
-def _bound_room_policy(name: str, system: System) -> Policy:
-    # imported when asked for: the bounds room builds on policies (its policies are a
-    # SeparableGreedyPolicy or, for relaxation 3, a Policy on group tables); its gaps module takes
-    # comparators from this factory, so only the bound and the policy modules are named here
-    if name == "index":
-        from ..bounds.index import index_policy
-
-        return index_policy(system)
-    from ..bounds.lower import lower_bound
-    from ..bounds.policy import bound_policy
-
-    greedy = bound_policy(lower_bound(system, "auto"), system)
-    if name == "lookahead":
-        from ..bounds.lookahead import LookaheadPolicy
-
-        return LookaheadPolicy(greedy)
-    return greedy
 
 
 def parse_policy_names(text: str | Sequence[str]) -> list[str]:

@@ -645,14 +645,15 @@ class Context:
 
         ``optimal`` simulates the policy of :meth:`solve` (the instance is solved once per run,
         whichever claim asks first); the others are built as a sweep builds them
-        (:func:`wncs_lp.policies.make_policy`, the static one on the spec's default assignment); the
+        (:func:`wncs_lp.workflow.make_policy`, the static one on the spec's default assignment); the
         rule-based ones of :data:`TABLE_FORM` are simulated through their action in each state of the
         enumerated MDP (a deterministic rule draws no random numbers, so the sample paths are the
         same, and a table lookup is cheaper than the rule: about 40% less time per slot).
         Returns ``{"mean", "stderr"}``.
         """
         from ..models.system import System
-        from ..policies import TablePolicy, make_policy
+        from ..policies import TablePolicy
+        from ..workflow import make_policy
         from ..simulate import simulate
 
         def compute():

@@ -54,12 +54,12 @@ from ..display import Display, fmt
 from ..errors import WncsError
 from ..methods import DEFAULT_METHOD, check_method
 from ..models.system import System
-from ..policies import POLICY_NAMES, make_policy, parse_policy_names
+from ..policies import POLICY_NAMES, parse_policy_names
 from ..policies.factory import NEED_MDP, OPTIMAL
 from ..progress import eta
 from ..scenario import Scenario
 from ..solvers.route import build_scenario
-from ..workflow import solve_scenario
+from ..workflow import make_policy, solve_scenario
 from .executors import check_executor
 from .folder import FINGERPRINT, StudyFolder, read_table
 from .grid import parse_values, value_key

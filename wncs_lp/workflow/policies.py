@@ -1,20 +1,74 @@
-"""A policy by name on a scenario: the system, the MDP when needed, the solve of ``optimal`` by the
-one route, then the factory (:func:`wncs_lp.policies.make_policy`)."""
+"""Policies by name: :func:`make_policy`, the factory the command line and the sweeps use (the
+policies room's own, :func:`~wncs_lp.policies.factory.make_basic_policy`, and the bounds room's,
+:func:`~wncs_lp.bounds.named.named_policy`), and :func:`policy_for`, a policy by name on a
+scenario (its system, its MDP when needed, ``optimal`` solved by the one route)."""
 from __future__ import annotations
 
 import time
 from typing import Any, Sequence
 
+from ..bounds.named import named_policy
 from ..errors import PolicyError
+from ..mdp import MDP
 from ..methods import DEFAULT_METHOD
 from ..models.system import System
-from ..policies import MatrixFreePolicy
-from ..policies.factory import NEED_MDP, OPTIMAL, POLICY_NAMES, PolicySetup, make_policy, parse_assignment
+from ..policies import MatrixFreePolicy, Policy
+from ..policies.factory import (BOUND_POLICY_NAMES, NEED_MDP, OPTIMAL, POLICY_NAMES, PolicySetup, check_policy_request,
+                                make_basic_policy, parse_assignment)
 from ..progress import as_progress
 from ..solvers.route import build_scenario
 from .route import solve_scenario
 
-__all__ = ["policy_for"]
+__all__ = ["make_policy", "policy_for"]
+
+
+def make_policy(
+    name: str,
+    system: System,
+    mdp: MDP | None = None,
+    *,
+    method: str = DEFAULT_METHOD,
+    solution: Any = None,
+    assignment: Sequence[int] | None = None,
+    progress: Any = False,
+) -> Policy:
+    """Build a policy by name.
+
+    Parameters
+    ----------
+    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "lookahead", \
+            "index", "max_age", "max_weight", "round_robin"}
+        ``max_age``, ``max_weight`` and ``round_robin`` are the field's baselines
+        (:mod:`wncs_lp.policies.baselines`: max-age-first, max-weighted-cost-first, round robin, a
+        policy with memory). ``relaxation`` is the greedy policy of the certified lower bound
+        (:func:`wncs_lp.bounds.lower_bound` with ``relaxation="auto"``, then
+        :func:`wncs_lp.bounds.bound_policy`): it needs no MDP, so it reaches any number of processes.
+        ``lookahead`` is the two-step lookahead on the same tables
+        (:class:`wncs_lp.bounds.LookaheadPolicy`), ``index`` the Whittle-type index policy of
+        relaxation 1's priced chains (:class:`wncs_lp.bounds.IndexPolicy`); neither needs an MDP.
+    system : System
+    mdp : MDP, optional
+        Needed by ``optimal`` (solved with ``method`` unless ``solution`` is given) and
+        ``best_static`` (exact evaluation of every assignment).
+    method : str
+        Solver method for ``optimal`` (:data:`wncs_lp.methods.METHODS`, default ``"auto"``).
+    solution : Solution, optional
+        A solution of ``mdp`` to wrap instead of solving.
+    assignment : sequence of int, optional
+        For ``static`` (0-based servers); default :func:`~wncs_lp.policies.default_assignment`.
+    progress : bool or Progress
+        The solver's progress on stderr (``optimal``).
+
+    Raises
+    ------
+    PolicyError
+        Unknown name (the message lists the allowed ones), or a needed MDP missing.
+    """
+    check_policy_request(name, system, mdp)
+    if name in BOUND_POLICY_NAMES:
+        return named_policy(name, system)
+    return make_basic_policy(name, system, mdp, method=method, solution=solution, assignment=assignment,
+                             progress=progress)
 
 
 def policy_for(
