@@ -3,7 +3,13 @@
 * every package folder is listed in pyproject.toml, and the scenarios install as package data;
 * no import cycle between the package's modules (runtime imports, function-level ones included);
 * no private name (leading underscore) imported from another module;
-* only ``models/`` (and ``scenario.py``, which validates it) tests a model kind.
+* only ``models/`` (and ``scenario.py``, which validates it) tests a model kind;
+* nothing of the package loaded by a name in a string (importlib, ``__import__``,
+  ``"module:function"``), but the lazy public names of ``wncs_lp/__init__.py`` and the old paths
+  of ``moved.py`` (which warn and give the object of the new path);
+* no import, function-level ones included, climbs a floor: the rooms (a top-level folder of the
+  package, or a top-level module) and their imports form no cycle;
+* method names are compared only in ``methods.py`` and the command line's parser.
 """
 from __future__ import annotations
 
@@ -120,4 +126,136 @@ def test_only_models_test_a_model_kind():
         for i, line in enumerate(path.read_text().splitlines(), 1):
             if KIND_TEST.search(line) and "executor" not in line and '"process"' not in line and '"dask"' not in line:
                 bad.append(f"{rel}:{i}: {line.strip()}")
+    assert not bad, bad
+
+
+# ----------------------------------------------------------------------------- loaded by name
+#: Where the package may load a module by a name in a string: the lazy public names (start-up time),
+#: the old paths of moved names, optional third-party packages, third-party versions in a report.
+LOADS_BY_NAME = {"wncs_lp/__init__.py", "wncs_lp/moved.py", "wncs_lp/interop.py", "wncs_lp/reproduce/__init__.py"}
+TARGET_STRING = re.compile(r"^wncs_lp(\.\w+)+:\w+$")
+
+
+def _loads_by_name(tree: ast.AST) -> list[int]:
+    lines = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import) and any(a.name == "importlib" for a in node.names):
+            lines.append(node.lineno)
+        elif isinstance(node, ast.ImportFrom) and node.module == "importlib" and any(
+                a.name == "import_module" for a in node.names):
+            lines.append(node.lineno)
+        elif isinstance(node, ast.Name) and node.id == "__import__":
+            lines.append(node.lineno)
+    return lines
+
+
+def test_nothing_of_the_package_is_loaded_by_name():
+    bad = []
+    for path in MODS.values():
+        rel = path.relative_to(ROOT).as_posix()
+        tree = ast.parse(path.read_text())
+        if rel not in LOADS_BY_NAME:
+            bad += [f"{rel}:{line}: loads a module by name" for line in _loads_by_name(tree)]
+        bad += [f"{rel}:{n.lineno}: {n.value!r} names a function by a string" for n in ast.walk(tree)
+                if isinstance(n, ast.Constant) and isinstance(n.value, str) and TARGET_STRING.match(n.value)]
+    assert not bad, bad
+    # third-party only: no name of the package in what interop and the report's versions load
+    for rel in ("wncs_lp/interop.py", "wncs_lp/reproduce/__init__.py"):
+        assert "import_module(f\"wncs_lp" not in (ROOT / rel).read_text() and "__import__(\"wncs_lp" not in (
+            ROOT / rel).read_text()
+
+
+def test_every_moved_name_is_found_at_its_old_path_with_a_warning():
+    import importlib
+
+    from wncs_lp import moved
+
+    for old, new in moved.MOVED.items():
+        module, name = old.rsplit(".", 1)
+        with pytest.warns(DeprecationWarning, match=f"{old} has moved to {new}.{name}"):
+            found = getattr(importlib.import_module(module), name)
+        assert found is getattr(importlib.import_module(new), name)
+        assert name not in vars(importlib.import_module(module))  # nothing left behind at the old place
+    with pytest.raises(AttributeError, match="has no attribute 'nothing'"):
+        importlib.import_module("wncs_lp.solvers").nothing
+
+
+# ----------------------------------------------------------------------------- floors
+def _room(module: str) -> str:
+    """``wncs_lp.solvers.lp`` -> ``wncs_lp.solvers`` (a folder is one room); a top-level module is its own."""
+    return ".".join(module.split(".")[:2])
+
+
+def test_no_import_climbs_a_floor():
+    """Rooms as the house is drawn (a top-level folder of the package, or a top-level module): with
+    every import counted, function-level ones included, they form no cycle, so every import goes
+    down to a lower floor."""
+    edges: dict[str, dict[str, str]] = {}
+    for m, found in IMPORTS.items():
+        for t, name, line in found:
+            a, b = _room(m), _room(t)
+            if a != b:
+                edges.setdefault(a, {}).setdefault(b, f"{MODS[m].relative_to(ROOT).as_posix()}:{line} imports {t}")
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(r: str) -> None:
+        state[r] = 1
+        stack.append(r)
+        for t in sorted(edges.get(r, {})):
+            if state.get(t) == 1:
+                ring = stack[stack.index(t):] + [t]
+                pytest.fail("rooms in a circle: " + "; ".join(edges[x][y] for x, y in zip(ring, ring[1:])))
+            if t not in state:
+                visit(t)
+        stack.pop()
+        state[r] = 2
+
+    for r in sorted(edges):
+        if r not in state:
+            visit(r)
+
+
+# ----------------------------------------------------------------------------- method names
+#: Where method names may be compared: the registry and the command line's parser.
+COMPARES_METHOD_NAMES = ("wncs_lp/methods.py", "wncs_lp/cli/common.py")
+
+
+def _identifier(node: ast.AST) -> str:
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        return node.attr
+    if isinstance(node, ast.Subscript) and isinstance(node.slice, ast.Constant) and isinstance(node.slice.value, str):
+        return node.slice.value
+    return ""
+
+
+def _strings(node: ast.AST) -> set[str]:
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return {node.value}
+    if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        return {e.value for e in node.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)}
+    return set()
+
+
+def test_method_names_are_compared_in_one_place():
+    """A value called ``method`` (or ``*_method``) is never compared with a method's name outside
+    the registry and the parser: the rest asks the name's row. ``auto`` is left out: several
+    parameters of other vocabularies (a stationary solver's, a bundle's) call their default so."""
+    from wncs_lp import methods
+
+    names = (set(methods.TABLE) | set(methods.CONSTRAINED) | set(methods.DISCOUNTED)) - {"auto"}
+    bad = []
+    for path in MODS.values():
+        rel = path.relative_to(ROOT).as_posix()
+        if rel in COMPARES_METHOD_NAMES:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not (isinstance(node, ast.Compare) and len(node.ops) == 1
+                    and isinstance(node.ops[0], (ast.Eq, ast.NotEq, ast.In, ast.NotIn))):
+                continue
+            a, b = node.left, node.comparators[0]
+            if any("method" in _identifier(x).lower() and _strings(y) & names for x, y in ((a, b), (b, a))):
+                bad.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
     assert not bad, bad

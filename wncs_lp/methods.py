@@ -42,7 +42,8 @@ Every method returns the same certificate ``gain_lower <= g* <= gain_upper`` and
 
 A scenario with ``[[constraint]]`` tables is solved by the methods of :data:`CONSTRAINED`
 (``auto``, ``lp``, ``lp-highs``, ``lp-cvxpy``, ``lagrangian``): the same names where they mean
-the same LP, one table of their own because their functions take the constraints too.
+the same LP, one table of their own because their functions take the constraints too. The
+discounted criterion has its table too, :data:`DISCOUNTED` (``pi``, ``vi``, ``lp``).
 """
 from __future__ import annotations
 
@@ -52,7 +53,8 @@ from typing import Any, Callable
 __all__ = [
     "Method", "TABLE", "CONSTRAINED", "METHODS", "SCENARIO_METHODS", "CONSTRAINED_METHODS", "DEFAULT_METHOD",
     "LP_METHODS", "METHOD_HELP", "STORED", "STORED_LP", "BOX", "BIAS", "POLICY", "BASIS", "MDP_INPUT",
-    "SCENARIO_INPUT", "AVERAGE", "CONSTRAINED_CRITERION", "Entry", "method", "check_method", "memory_of",
+    "SCENARIO_INPUT", "AVERAGE", "CONSTRAINED_CRITERION", "DISCOUNTED_CRITERION", "DISCOUNTED", "DISCOUNTED_METHODS",
+    "TABLES", "Entry", "method", "check_method", "memory_of",
     "exact_method", "EXACT_METHOD_MAX_STATES",
 ]
 
@@ -81,6 +83,8 @@ SCENARIO_INPUT = "scenario"
 AVERAGE = "average"
 #: The long-run average cost under bounds on other long-run averages (``[[constraint]]`` tables).
 CONSTRAINED_CRITERION = "constrained"
+#: The expected discounted cost with a discount factor beta in [0, 1).
+DISCOUNTED_CRITERION = "discounted"
 
 
 @dataclass(frozen=True)
@@ -104,7 +108,7 @@ class Method:
         What the size guard counts (:func:`wncs_lp.models.guard.check_size`).
     fallback : str or None
         The method a scenario is solved by when the guard refuses this one's stored matrix.
-    criterion : {"average", "constrained"}
+    criterion : {"average", "constrained", "discounted"}
     hint : str
         How the size guard's message names the method when it suggests it as a cheaper route
         (empty: never suggested).
@@ -209,12 +213,25 @@ CONSTRAINED: dict[str, Method] = {m.name: m for m in (
            hint="the Lagrangian route"),
 )}
 
+#: The methods of the discounted criterion (:func:`wncs_lp.solvers.solve_discounted`).
+DISCOUNTED: dict[str, Method] = {m.name: m for m in (
+    Method("pi", "policy iteration with exact evaluation", criterion=DISCOUNTED_CRITERION),
+    Method("vi", "value iteration, certified by MacQueen's bounds", criterion=DISCOUNTED_CRITERION),
+    Method("lp", "the discounted LP on HiGHS", criterion=DISCOUNTED_CRITERION),
+)}
+
+#: The tables by criterion.
+TABLES: dict[str, dict[str, Method]] = {AVERAGE: TABLE, CONSTRAINED_CRITERION: CONSTRAINED,
+                                        DISCOUNTED_CRITERION: DISCOUNTED}
+
 #: The methods every command and library function that solves an MDP takes, in help order.
 METHODS = tuple(name for name, m in TABLE.items() if m.takes == MDP_INPUT)
 #: The methods of a command that takes a scenario: :data:`METHODS` and the matrix-free solver.
 SCENARIO_METHODS = tuple(TABLE)
 #: The methods of a constrained solve.
 CONSTRAINED_METHODS = tuple(CONSTRAINED)
+#: The methods of a discounted solve.
+DISCOUNTED_METHODS = tuple(DISCOUNTED)
 #: The default of every command and library function that solves.
 DEFAULT_METHOD = "auto"
 #: The methods that solve an interior-point LP (the size guard counts the LP's memory for them).
@@ -225,15 +242,17 @@ METHOD_HELP = "solver: " + ", ".join(f"{m.name} ({m.help})" for m in TABLE.value
 
 
 def method(name: str, constrained: bool = False, allowed: tuple[str, ...] | None = None,
-           problem: str | None = None) -> Method:
-    """The registry row of ``name`` (of :data:`CONSTRAINED` with ``constrained``): the one
-    validator of a method name.
+           problem: str | None = None, criterion: str | None = None) -> Method:
+    """The registry row of ``name`` (of :data:`CONSTRAINED` with ``constrained``, of the table of
+    ``criterion`` when given): the one validator of a method name.
 
     Parameters
     ----------
     name : str
     constrained : bool
         Look ``name`` up among the constrained methods.
+    criterion : {"average", "constrained", "discounted"}, optional
+        The table to look ``name`` up in (default: by ``constrained``).
     allowed : tuple of str, optional
         The names the caller takes (default: the whole table).
     problem : str, optional
@@ -245,7 +264,8 @@ def method(name: str, constrained: bool = False, allowed: tuple[str, ...] | None
     SolverError
         ``name`` is not allowed; the message lists the names that are.
     """
-    table = CONSTRAINED if constrained else TABLE
+    criterion = criterion or (CONSTRAINED_CRITERION if constrained else AVERAGE)
+    table = TABLES[criterion]
     names = tuple(table) if allowed is None else allowed
     if isinstance(name, str) and name in names and name in table:
         return table[name]
@@ -253,7 +273,9 @@ def method(name: str, constrained: bool = False, allowed: tuple[str, ...] | None
 
     if problem is not None:
         raise SolverError(f"method {name!r} does not solve {problem}; expected one of {', '.join(names)}")
-    what = "constrained method" if constrained else "method"
+    if criterion == DISCOUNTED_CRITERION:
+        raise SolverError(f"unknown discounted method {name!r}; expected one of {', '.join(names)}")
+    what = "constrained method" if criterion == CONSTRAINED_CRITERION else "method"
     raise SolverError(f"unknown {what} {name!r}; expected one of {', '.join(map(repr, names))}")
 
 

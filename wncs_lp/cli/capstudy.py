@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..methods import SCENARIO_INPUT, TABLE
 from .common import (Command, add_method_arg, add_scenario_args, add_threads_arg, emit_json, head, load,
                      real_option)
 
@@ -22,10 +23,11 @@ def cmd_capstudy(args: argparse.Namespace) -> int:
     def show(row) -> None:
         if not args.json:
             change = "" if row.rel_change != row.rel_change else f"{row.rel_change:+.3%}"
-            mass = f"{'<=' if row.method == 'matrix-free' else ''}{row.cap_mass:.3%}"  # a certified upper end there
+            on_box = getattr(TABLE.get(row.method), "takes", None) == SCENARIO_INPUT  # on the AoI box, no matrix
+            mass = f"{'<=' if on_box else ''}{row.cap_mass:.3%}"  # a certified upper end there
             print(f"{row.cap:>5} {row.states:>10,} {row.gain:>16.10g} {row.gain_upper - row.gain_lower:>10.2e} "
                   f"{mass:>10} {change:>10} {row.first_policy_gain:>16.10g} {row.seconds:>7.1f}"
-                  + ("  matrix-free" if row.method == "matrix-free" else "")
+                  + (f"  {row.method}" if on_box else "")
                   + ("" if row.certified else f"  NOT CERTIFIED: {row.status}"), flush=True)
         elif sys.stderr.isatty():
             print(f"cap {row.cap}: gain {row.gain:.10g}, mass at cap {row.cap_mass:.3%}", file=sys.stderr)

@@ -48,6 +48,8 @@ SCENARIO = "paper_p12.toml"
 SERVER = "remote"
 #: Relative tolerance of the convexity / monotonicity / multiplier checks on the numbers.
 CHECK_RTOL = 1e-6
+#: The constrained method that re-solves a point the first method does not certify (the LP).
+FALLBACK = "lp"
 
 
 def _grid(a: float, b: float, step: float) -> tuple[float, ...]:
@@ -62,7 +64,7 @@ class BeyondSettings:
     caps: tuple[int, ...]
     values: tuple[float, ...]
     method: str = "auto"
-    #: The LP re-solves a point the first method does not certify, up to this many pairs.
+    #: :data:`FALLBACK` (the LP) re-solves a point the first method does not certify, up to this many pairs.
     fallback_max_pairs: int = 25_000
 
 
@@ -109,7 +111,7 @@ def _curve(ctx: Context, cap: int, st: BeyondSettings) -> tuple[TradeoffResult, 
         folder = ctx.cache.root / "tradeoff" / ctx.cache.key("tradeoff", params)
         if ctx.cache.force:
             shutil.rmtree(folder, ignore_errors=True)
-        fallback = "lp" if st.method != "lp" and mdp.n_pairs <= st.fallback_max_pairs else None
+        fallback = FALLBACK if st.method != FALLBACK and mdp.n_pairs <= st.fallback_max_pairs else None
         ctx.log(f"trade-off: cap {cap}, {mdp.n_states:,} states, {len(st.values)} bounds ({st.method})")
         # the bounds side by side in the run's worker processes: each point of the Lagrangian route is an
         # independent certified solve (the LP route's warm basis is the only thing carried between points)

@@ -50,14 +50,17 @@ import scipy.sparse.linalg as spla
 
 from ..errors import SolverError
 from ..mdp import MDP
+from ..methods import DISCOUNTED, DISCOUNTED_CRITERION, Entry
+from ..methods import method as method_row
 from ..policy_forms import policy_array
 from .certify import greedy_first
 from .result import describe_array, result_repr
 
-__all__ = ["DiscountedSolution", "solve_discounted", "discounted_value", "laurent_terms", "DISCOUNTED_METHODS"]
+__all__ = ["DiscountedSolution", "solve_discounted", "discounted_value", "laurent_terms", "DISCOUNTED_METHODS",
+           "DISCOUNTED_ENTRIES"]
 
-#: The methods :func:`solve_discounted` takes.
-DISCOUNTED_METHODS = ("pi", "vi", "lp")
+#: The methods :func:`solve_discounted` takes (the rows of :data:`wncs_lp.methods.DISCOUNTED`).
+DISCOUNTED_METHODS = tuple(DISCOUNTED)
 
 
 @dataclass(frozen=True, repr=False)
@@ -204,6 +207,27 @@ def _linear_program(mdp: MDP, beta: float) -> tuple[np.ndarray, int, str]:
     return np.minimum.reduceat(cand, mdp.pair_ptr[:-1]), int(getattr(res, "nit", 0)), "optimal"
 
 
+def _run_policy_iteration(mdp: MDP, beta: float, tol: float, max_iter: int | None) -> tuple[np.ndarray, int, str]:
+    return _policy_iteration(mdp, beta, max_iter or 1000)
+
+
+def _run_value_iteration(mdp: MDP, beta: float, tol: float, max_iter: int | None) -> tuple[np.ndarray, int, str]:
+    return _value_iteration(mdp, beta, tol / 10, max_iter or 1_000_000)
+
+
+def _run_linear_program(mdp: MDP, beta: float, tol: float, max_iter: int | None) -> tuple[np.ndarray, int, str]:
+    return _linear_program(mdp, beta)
+
+
+#: The discounted methods' functions, one entry per row of :data:`wncs_lp.methods.DISCOUNTED`:
+#: ``run(mdp, beta, tol, max_iter) -> (policy, iterations, status)``.
+DISCOUNTED_ENTRIES: dict[str, Entry] = {
+    "pi": Entry(DISCOUNTED["pi"], _run_policy_iteration),
+    "vi": Entry(DISCOUNTED["vi"], _run_value_iteration),
+    "lp": Entry(DISCOUNTED["lp"], _run_linear_program),
+}
+
+
 def solve_discounted(mdp: MDP, beta: float, method: str = "pi", *, tol: float = 1e-9,
                      max_iter: int | None = None) -> DiscountedSolution:
     """Solve the discounted problem with discount factor ``beta``, certified (module docstring).
@@ -231,15 +255,9 @@ def solve_discounted(mdp: MDP, beta: float, method: str = "pi", *, tol: float = 
         beta outside [0, 1), an unknown method, or an LP HiGHS could not solve.
     """
     b = _check_beta(beta)
-    if method not in DISCOUNTED_METHODS:
-        raise SolverError(f"unknown discounted method {method!r}; expected one of {', '.join(DISCOUNTED_METHODS)}")
+    found = DISCOUNTED_ENTRIES[method_row(method, criterion=DISCOUNTED_CRITERION).name]
     t0 = time.perf_counter()
-    if method == "pi":
-        pol, its, status = _policy_iteration(mdp, b, max_iter or 1000)
-    elif method == "vi":
-        pol, its, status = _value_iteration(mdp, b, tol / 10, max_iter or 1_000_000)
-    else:
-        pol, its, status = _linear_program(mdp, b)
+    pol, its, status = found.run(mdp, b, tol, max_iter)
     value = discounted_value(mdp, pol, b)
     lower, _, _ = _bounds(mdp, value, b)
     lower = np.minimum(lower, value)  # v_d >= v* >= lower: a rounding above v_d says nothing more

@@ -4,7 +4,8 @@ per row of :data:`wncs_lp.methods.TABLE` (like cvxpy's solver map).
 :func:`wncs_lp.solvers.solve` dispatches through :data:`AVERAGE`; the scenario route
 (:func:`wncs_lp.workflow.solve_scenario`) reads it for a scenario method (``matrix-free`` on the
 AoI box) and for the keywords a method takes. The constrained methods' functions are registered
-in :mod:`wncs_lp.constrained.registry`, beside their dispatcher.
+in :mod:`wncs_lp.constrained.registry`, beside their dispatcher; the discounted ones in
+:data:`wncs_lp.solvers.discounted.DISCOUNTED_ENTRIES`, beside theirs.
 """
 from __future__ import annotations
 
