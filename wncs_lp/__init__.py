@@ -88,15 +88,9 @@ def solve(problem: "MDP | Scenario | str", method: str = DEFAULT_METHOD, **kwarg
         ``problem`` is none of the above (the message names its type), an unknown method or
         keyword, or a solver failure.
     """
-    from .mdp import MDP as _MDP
+    from .workflow.route import solve_any
 
-    if isinstance(problem, _MDP):
-        from .solvers import solve as _solve
-
-        return _solve(problem, method, **kwargs)
-    from .workflow import solve_scenario
-
-    return solve_scenario(problem, method, **kwargs).solution
+    return solve_any(problem, method=method, **kwargs)
 
 
 __version__ = "0.1.0"

@@ -23,8 +23,7 @@ from .certify import CERT_RTOL, certify, evaluate_rows, lagrangian_bound, policy
 from .lp import check_reachable, reachable_range, solve_constrained_lp
 from .warm import solve_constrained_highs
 from .problem import LinearConstraint, Rows, constraints_for, max_form, with_cost
-from .registry import CONSTRAINED_ENTRIES
-from .registry import entry as method_entry
+from .registry import CONSTRAINED_ENTRIES, constrained_entry
 from .result import ConstrainedSolution, ConstraintReport
 
 __all__ = [
@@ -77,7 +76,7 @@ def solve_constrained(mdp: MDP, constraints: Iterable[Any], method: str = DEFAUL
     if not isinstance(mdp, MDP):
         raise SolverError(f"solve_constrained takes an MDP (wncs_lp.build(scenario)); got {type(mdp).__name__} "
                           "(wncs_lp.solve(scenario) solves a scenario with its [[constraint]] tables)")
-    found = method_entry(method)
+    found = constrained_entry(method)
     cons = constraints_for(mdp, constraints)
     if not cons:
         raise SolverError("solve_constrained needs at least one constraint (use wncs_lp.solve for the unconstrained problem)")

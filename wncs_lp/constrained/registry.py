@@ -12,7 +12,7 @@ from .lagrangian import auto_method, solve_lagrangian
 from .lp import solve_constrained_lp
 from .warm import solve_constrained_highs
 
-__all__ = ["CONSTRAINED_ENTRIES", "entry", "row_that_runs"]
+__all__ = ["CONSTRAINED_ENTRIES", "constrained_entry", "row_that_runs"]
 
 #: Method name -> its entry (the row and the function that runs it).
 CONSTRAINED_ENTRIES: dict[str, Entry] = {
@@ -24,7 +24,7 @@ CONSTRAINED_ENTRIES: dict[str, Entry] = {
 }
 
 
-def entry(name: str, problem: str | None = None) -> Entry:
+def constrained_entry(name: str, problem: str | None = None) -> Entry:
     """The entry of ``name`` after the one validator (:func:`wncs_lp.methods.method`)."""
     return CONSTRAINED_ENTRIES[method(name, constrained=True, problem=problem).name]
 
@@ -32,5 +32,5 @@ def entry(name: str, problem: str | None = None) -> Entry:
 def row_that_runs(name: str, mdp: Any, constraints: Any) -> Method:
     """The row of the method that would solve these constraints: ``name``'s, or the one ``auto``'s
     rule picks for them (``constraints`` as :func:`~wncs_lp.constrained.constraints_for` gives them)."""
-    found = entry(name)
+    found = constrained_entry(name)
     return CONSTRAINED[found.choose(mdp, constraints)] if found.choose is not None else found.row

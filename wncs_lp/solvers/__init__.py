@@ -50,8 +50,7 @@ from .dp import (
 )
 from .lp import LPData, build_lp, extract_policy, solve_lp
 from .result import Solution
-from .registry import AVERAGE
-from .registry import entry as method_entry
+from .registry import AVERAGE, average_entry
 from .route import ScenarioSolve, WarmStart, build_scenario
 
 __all__ = [
@@ -112,7 +111,7 @@ def solve(mdp: MDP, method: str = DEFAULT_METHOD, **kw: Any) -> Solution:
     if not isinstance(mdp, MDP):
         raise SolverError(f"solve takes an MDP (wncs_lp.build(scenario)); got {type(mdp).__name__} "
                           "(wncs_lp.solve and wncs_lp.workflow.solve_scenario take a scenario)")
-    sol = method_entry(method, allowed=SCENARIO_METHODS).call(mdp, on_mdp=True, **kw)
+    sol = average_entry(method, allowed=SCENARIO_METHODS).call(mdp, on_mdp=True, **kw)
     if isinstance(sol, Solution) and sol.pair_actions is None:  # e.g. a matrix-free solve mapped onto the MDP
         sol = replace(sol, pair_actions=mdp.a_indices)
     return sol

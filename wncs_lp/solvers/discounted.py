@@ -50,8 +50,8 @@ import scipy.sparse.linalg as spla
 
 from ..errors import SolverError
 from ..mdp import MDP
+from .. import methods
 from ..methods import DISCOUNTED, DISCOUNTED_CRITERION, Entry
-from ..methods import method as method_row
 from ..policy_forms import policy_array
 from .certify import greedy_first
 from .result import describe_array, result_repr
@@ -255,7 +255,7 @@ def solve_discounted(mdp: MDP, beta: float, method: str = "pi", *, tol: float = 
         beta outside [0, 1), an unknown method, or an LP HiGHS could not solve.
     """
     b = _check_beta(beta)
-    found = DISCOUNTED_ENTRIES[method_row(method, criterion=DISCOUNTED_CRITERION).name]
+    found = DISCOUNTED_ENTRIES[methods.method(method, criterion=DISCOUNTED_CRITERION).name]
     t0 = time.perf_counter()
     pol, its, status = found.run(mdp, b, tol, max_iter)
     value = discounted_value(mdp, pol, b)

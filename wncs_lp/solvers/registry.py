@@ -15,7 +15,7 @@ from .dp import policy_iteration, relative_value_iteration, value_iteration
 from .lp import solve_lp
 from .matrix_free import matrix_free_value_iteration, solve_mdp
 
-__all__ = ["AVERAGE", "entry"]
+__all__ = ["AVERAGE", "average_entry"]
 
 #: Method name -> its entry (the row and the function that runs it).
 AVERAGE: dict[str, Entry] = {
@@ -30,6 +30,6 @@ AVERAGE: dict[str, Entry] = {
 }
 
 
-def entry(name: str, allowed: tuple[str, ...] | None = None, problem: str | None = None) -> Entry:
+def average_entry(name: str, allowed: tuple[str, ...] | None = None, problem: str | None = None) -> Entry:
     """The entry of ``name`` after the one validator (:func:`wncs_lp.methods.method`)."""
     return AVERAGE[method(name, allowed=allowed, problem=problem).name]

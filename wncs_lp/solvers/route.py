@@ -17,11 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from .. import moved
+from .. import methods, moved
 from ..errors import SolverError
 from ..mdp import MDP
 from ..methods import BIAS, CONSTRAINED, POLICY, SCENARIO_INPUT, STORED_LP, TABLE, Method
-from ..methods import method as method_row
 from ..progress import Progress, as_progress
 
 __all__ = ["ScenarioSolve", "WarmStart", "build_scenario", "as_scenario", "scenario_row", "space_key"]
@@ -144,7 +143,7 @@ def scenario_row(method: str, constrained: bool) -> Method:
     """The registry row of ``method`` for a scenario solved with (``constrained``) or without its
     ``[[constraint]]`` tables (:func:`wncs_lp.methods.method`: the one validator)."""
     what = "a scenario with [[constraint]] tables" if constrained else "an unconstrained scenario"
-    return method_row(method, constrained=constrained, problem=what)
+    return methods.method(method, constrained=constrained, problem=what)
 
 
 def build_scenario(scenario: Any, method: str | None = None, *, constrained: bool = False, force: bool = False,

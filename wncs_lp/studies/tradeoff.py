@@ -449,7 +449,7 @@ def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: s
     """The optimum without the swept constraint, the quantity's value under it, and its reachable end."""
     from ..constrained import evaluate_rows, reachable_range, solve_constrained
     from ..solvers import solve
-    from ..solvers.registry import entry as unconstrained_entry
+    from ..solvers.registry import average_entry
 
     c = cons[index]
     others = cons[:index] + cons[index + 1:]
@@ -461,7 +461,7 @@ def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: s
         probs = np.asarray(sol.policy, dtype=float)
         g, lo, hi, how = sol.gain, sol.gain_lower, sol.gain_upper, f"constrained ({sol.method}) without the swept one"
     else:
-        found = unconstrained_entry(unconstrained)
+        found = average_entry(unconstrained)
         extra = {"threads": threads} if threads is not None and found.takes_keyword("threads", on_mdp=True) else {}
         sol = solve(mdp, method=unconstrained, **extra)
         probs = np.zeros(mdp.n_pairs)

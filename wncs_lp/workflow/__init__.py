@@ -3,6 +3,8 @@
 It stands above the solvers, the constrained solvers, the bounds and the policies, and below the
 studies, the reproduction and the command line:
 
+* :func:`solve_any` -- what :func:`wncs_lp.solve` runs: an MDP by :func:`wncs_lp.solvers.solve`,
+  anything else by :func:`solve_scenario`;
 * :func:`solve_scenario` (:mod:`~wncs_lp.workflow.route`) -- the one route from a scenario to a
   solution: size guard, build, solve (:func:`wncs_lp.solvers.solve` or
   :func:`wncs_lp.constrained.solve_constrained`), and ``auto``'s fallback to the matrix-free
@@ -21,6 +23,6 @@ from __future__ import annotations
 
 from ..solvers.route import ScenarioSolve, WarmStart, as_scenario, build_scenario
 from .policies import make_policy, policy_for
-from .route import solve_scenario
+from .route import solve_any, solve_scenario
 
-__all__ = ["solve_scenario", "make_policy", "policy_for", "ScenarioSolve", "WarmStart", "as_scenario", "build_scenario"]
+__all__ = ["solve_any", "solve_scenario", "make_policy", "policy_for", "ScenarioSolve", "WarmStart", "as_scenario", "build_scenario"]

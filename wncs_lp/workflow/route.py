@@ -35,7 +35,15 @@ from ..solvers import solve
 from ..solvers.registry import AVERAGE
 from ..solvers.route import ScenarioSolve, WarmStart, as_scenario, build_scenario, scenario_row
 
-__all__ = ["solve_scenario"]
+__all__ = ["solve_any", "solve_scenario"]
+
+
+def solve_any(problem: Any, method: str = DEFAULT_METHOD, **kw: Any) -> Any:
+    """What :func:`wncs_lp.solve` runs: an MDP by :func:`wncs_lp.solvers.solve`, a scenario (or its
+    file, or a shipped scenario's name) by :func:`solve_scenario`, whose solution is returned."""
+    if isinstance(problem, MDP):
+        return solve(problem, method, **kw)
+    return solve_scenario(problem, method, **kw).solution
 
 
 def solve_scenario(
