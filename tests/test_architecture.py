@@ -82,29 +82,36 @@ def test_every_package_folder_is_installed():
     assert shipped and set(scenario_names()) == shipped
 
 
+def _cycle(graph: dict) -> list[str] | None:
+    """The first cycle of a directed graph (node -> its successors), closed on its first node; None without one."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m: str) -> list[str] | None:
+        state[m] = 1
+        stack.append(m)
+        for t in sorted(graph.get(m, ())):
+            if state.get(t) == 1:
+                return stack[stack.index(t):] + [t]
+            if t not in state and (found := visit(t)) is not None:
+                return found
+        stack.pop()
+        state[m] = 2
+        return None
+
+    for m in sorted(graph):
+        if m not in state and (found := visit(m)) is not None:
+            return found
+    return None
+
+
 def test_no_import_cycle():
     # a package's __init__ importing its own submodules is how a package exposes them, not a cycle
     graph = {m: {t for t, _, _ in edges if not (MODS[m].name == "__init__.py" and t.startswith(m + "."))
                  and not (t == m.rsplit(".", 1)[0])}
              for m, edges in IMPORTS.items()}
-    state: dict[str, int] = {}
-    stack: list[str] = []
-
-    def visit(m: str) -> None:
-        state[m] = 1
-        stack.append(m)
-        for t in sorted(graph.get(m, ())):
-            if state.get(t) == 1:
-                cycle = stack[stack.index(t):] + [t]
-                pytest.fail("import cycle: " + " -> ".join(cycle))
-            if t not in state:
-                visit(t)
-        stack.pop()
-        state[m] = 2
-
-    for m in sorted(graph):
-        if m not in state:
-            visit(m)
+    cycle = _cycle(graph)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
 
 
 def test_no_private_name_imported_from_another_module():
@@ -196,24 +203,8 @@ def test_no_import_climbs_a_floor():
             a, b = _room(m), _room(t)
             if a != b:
                 edges.setdefault(a, {}).setdefault(b, f"{MODS[m].relative_to(ROOT).as_posix()}:{line} imports {t}")
-    state: dict[str, int] = {}
-    stack: list[str] = []
-
-    def visit(r: str) -> None:
-        state[r] = 1
-        stack.append(r)
-        for t in sorted(edges.get(r, {})):
-            if state.get(t) == 1:
-                ring = stack[stack.index(t):] + [t]
-                pytest.fail("rooms in a circle: " + "; ".join(edges[x][y] for x, y in zip(ring, ring[1:])))
-            if t not in state:
-                visit(t)
-        stack.pop()
-        state[r] = 2
-
-    for r in sorted(edges):
-        if r not in state:
-            visit(r)
+    ring = _cycle(edges)
+    assert ring is None, "rooms in a circle: " + "; ".join(edges[x][y] for x, y in zip(ring, ring[1:]))
 
 
 # ----------------------------------------------------------------------------- method names

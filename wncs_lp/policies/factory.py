@@ -65,34 +65,9 @@ def make_basic_policy(
     assignment: Sequence[int] | None = None,
     progress: Any = False,
 ) -> Policy:
-    """Build a policy of this room by name (:data:`BASIC_POLICY_NAMES`); the full factory,
-    with the bounds room's policies too, is :func:`wncs_lp.workflow.make_policy`.
-
-    Parameters
-    ----------
-    name : {"optimal", "suboptimal", "static", "best_static", "greedy", "random", "max_age", "max_weight", \
-            "round_robin"}
-        ``max_age``, ``max_weight`` and ``round_robin`` are the field's baselines
-        (:mod:`wncs_lp.policies.baselines`: max-age-first, max-weighted-cost-first, round robin, a
-        policy with memory).
-    system : System
-    mdp : MDP, optional
-        Needed by ``optimal`` (solved with ``method`` unless ``solution`` is given) and
-        ``best_static`` (exact evaluation of every assignment).
-    method : str
-        Solver method for ``optimal`` (:data:`wncs_lp.methods.METHODS`, default ``"auto"``).
-    solution : Solution, optional
-        A solution of ``mdp`` to wrap instead of solving.
-    assignment : sequence of int, optional
-        For ``static`` (0-based servers); default :func:`default_assignment`.
-    progress : bool or Progress
-        The solver's progress on stderr (``optimal``).
-
-    Raises
-    ------
-    PolicyError
-        Unknown name (the message lists the allowed ones), or a needed MDP missing.
-    """
+    """Build a policy of this room by name: ``name`` one of :data:`BASIC_POLICY_NAMES`, the
+    other arguments and the errors as :func:`wncs_lp.workflow.make_policy`, the full factory, which
+    makes the bounds room's policies too and calls this one for the rest."""
     check_policy_request(name, system, mdp)
     if name in BOUND_POLICY_NAMES:
         raise PolicyError(f"policy {name!r} comes from the bounds room: wncs_lp.workflow.make_policy makes it")
