@@ -132,8 +132,10 @@ def run_hostile(names: list[str], record: str | None, verbose: bool) -> int:
     import json
     import tempfile
 
-    from fuzz_reliability import FAMILIES, OUTCOMES
+    import wncs_lp
+    from fuzz_reliability import FAMILIES, OUTCOMES, code_under_test
 
+    print(f"code under test: commands {code_under_test()}, library calls {wncs_lp.__file__}", flush=True)
     tmp = Path(tempfile.mkdtemp(prefix="wncs_lp-hostile-"))
     results = []
     t0 = time.perf_counter()

@@ -76,6 +76,12 @@ def child_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     return env
 
 
+def code_under_test() -> str:
+    """The folder of the ``wncs_lp`` package the child commands import."""
+    return subprocess.run([sys.executable, "-P", "-c", "import wncs_lp; print(wncs_lp.__file__)"], env=child_env(),
+                          capture_output=True, text=True, check=True).stdout.strip()
+
+
 def cli(argv: list[str], *, timeout: float = 60, mem: int | None = 3 * GiB, stop: tuple | None = None,
         head: int | None = None, cwd: Path | None = None, stdin: Any = subprocess.DEVNULL) -> Run:
     """Run ``wncs-lp argv`` in a child process.
@@ -84,7 +90,8 @@ def cli(argv: list[str], *, timeout: float = 60, mem: int | None = 3 * GiB, stop
     stderr matches ``pattern`` (give ``--progress``), then wait at most 10 s for the exit.
     ``head``: read that many bytes of stdout, then close it (``| head -c N``).
     """
-    cmd = [sys.executable, "-m", "wncs_lp", *argv]
+    # -P: the working directory is not put first on the path, so WNCS_FUZZ_CODE's package is the one run
+    cmd = [sys.executable, "-P", "-m", "wncs_lp", *argv]
     t0 = time.monotonic()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=stdin, cwd=cwd,
                             env=child_env(), preexec_fn=_child_setup(mem))
