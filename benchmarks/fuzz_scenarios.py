@@ -148,6 +148,8 @@ def run_hostile(names: list[str], record: str | None, verbose: bool) -> int:
                 label, detail = "harness error", f"{type(exc).__name__}: {exc}"
             results.append({"family": family, "case": case.name, "outcome": label, "detail": detail,
                             "seconds": round(time.perf_counter() - t1, 1)})
+            if record:  # as each case ends: a run stopped half-way keeps what it measured
+                Path(record).write_text(json.dumps(results, indent=1))
             if verbose:
                 print(f"  [{family}] {case.name}: {label} ({detail}) {results[-1]['seconds']} s", flush=True)
     cols = ["cases", *OUTCOMES]

@@ -95,19 +95,21 @@ def cli(argv: list[str], *, timeout: float = 60, mem: int | None = 3 * GiB, stop
     t0 = time.monotonic()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=stdin, cwd=cwd,
                             env=child_env(), preexec_fn=_child_setup(mem))
-    err_lines: list[str] = []
+    err_chunks: list[bytes] = []
     out_chunks: list[bytes] = []
     matched = threading.Event()
     pattern = re.compile(stop[0]) if stop and stop[0] else None
     if stop and not stop[0]:  # no pattern: the delay counts from the start
         matched.set()
 
-    def read_err() -> None:
-        for raw in proc.stderr:
-            line = raw.decode("utf-8", "replace")
-            err_lines.append(line)
-            if pattern is not None and pattern.search(line):
-                matched.set()
+    def read_err() -> None:  # by chunks: a progress bar redraws its line with \r, never ending it
+        tail = b""
+        while chunk := proc.stderr.read1(1 << 16):
+            err_chunks.append(chunk)
+            if pattern is not None and not matched.is_set():
+                tail = (tail + chunk)[-4096:]
+                if any(pattern.search(part) for part in re.split(r"[\r\n]", tail.decode("utf-8", "replace"))):
+                    matched.set()
 
     def read_out() -> None:
         if head is not None:
@@ -151,7 +153,7 @@ def cli(argv: list[str], *, timeout: float = 60, mem: int | None = 3 * GiB, stop
     if run.signalled is not None:
         run.stopped_in = run.seconds - run.signalled
     run.out = b"".join(c for c in out_chunks if c).decode("utf-8", "replace")
-    run.err = "".join(err_lines)
+    run.err = b"".join(err_chunks).decode("utf-8", "replace")
     return run
 
 
