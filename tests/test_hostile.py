@@ -275,19 +275,38 @@ def test_temporaries_of_killed_writers_are_cleaned_on_the_next_write(tmp_path):
 
 
 def test_sigterm_says_so_and_exits_143(tmp_path):
+    """SIGTERM once the sweep has written its first row (its line on stderr is the readiness signal:
+    no fixed sleep, so a loaded machine only makes it wait longer); 501 points, so it cannot end first."""
+    import threading
+
     out = tmp_path / "sw"
     proc = subprocess.Popen([sys.executable, "-m", "wncs_lp", "sweep", P12, "--set", "tau_cap=8",
-                             "--values", "0.5:1.0:0.01", "--policies", "optimal", "--no-plot", "--out", str(out)],
+                             "--values", "0.5:1.0:0.001", "--policies", "optimal", "--no-plot", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    deadline = time.time() + 120
-    while not (out / "sweep.csv").exists() and time.time() < deadline and proc.poll() is None:
-        time.sleep(0.05)
-    assert proc.poll() is None, "the sweep ended before it could be terminated"
+    err: list[bytes] = []
+    row_written = threading.Event()
+
+    def read_err() -> None:
+        for line in proc.stderr:
+            err.append(line)
+            if b"optimal: gain" in line:  # printed after the row was saved to sweep.csv
+                row_written.set()
+
+    reader = threading.Thread(target=read_err, daemon=True)
+    reader.start()
+    deadline = time.monotonic() + 300
+    while not row_written.wait(0.05) and proc.poll() is None and time.monotonic() < deadline:
+        pass
+    assert row_written.is_set() and proc.poll() is None, b"".join(err).decode()[-2000:]
     proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 143, err.decode()[-2000:]
-    assert "terminated (SIGTERM)" in err.decode() and b"Traceback" not in err
+    proc.stdout.read()
+    proc.wait(timeout=120)
+    reader.join(timeout=10)
+    text = b"".join(err).decode()
+    assert proc.returncode == 143, text[-2000:]
+    assert "terminated (SIGTERM)" in text and "Traceback" not in text
     assert not list(out.glob(".*.tmp"))
+    assert (out / "sweep.csv").read_text().count("optimal") >= 1  # the rows written are kept
 
 
 @pytest.mark.parametrize("damage", [b"param,value\xb3,policy\n", b"param,value\x00,policy\n", "folder"])
