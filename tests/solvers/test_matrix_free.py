@@ -261,6 +261,41 @@ def test_save_and_load_round_trip(tmp_path):
         load_solution(path, paper("paper_p12", "tau_cap=9"))
 
 
+def test_an_edited_solution_file_is_refused_or_not_trusted(tmp_path):
+    """The certificate is bound to the policy: a file whose policy was changed to other valid
+    actions (its true gain 5% above the stored one in the issue) is refused; with the digest
+    removed too it loads, but is not called optimal."""
+    import io
+    import json
+
+    sc = paper("paper_p12", "tau_cap=8")
+    path = tmp_path / "p12.npz"
+    solved(sc).save(path, bias=True)
+    with np.load(path, allow_pickle=False) as z:
+        saved = {k: z[k] for k in z.files}
+    pol = saved["policy"]
+    layout = BoxLayout.from_system(System.from_scenario(sc))
+    n_act = np.repeat(System.from_scenario(sc).n_actions, np.diff(layout.off))  # each state's action count
+    other = (pol.astype(np.int64) + 1) % n_act  # another valid action where there is a choice
+    flip = (np.random.default_rng(1).random(pol.size) < 0.2) & (n_act > 1)
+    assert flip.sum() > 100
+    meta = json.loads(str(saved["meta"]))
+    widened = np.array(json.dumps({**meta, "gain_lower": meta["gain_lower"] - 1.0}))  # digest kept
+    del meta["digest"]
+    for edit, refused in (({"policy": np.where(flip, other, pol).astype(pol.dtype)}, True), ({"bias": saved["bias"] * 2}, True),
+                          ({"meta": widened}, True),
+                          ({"policy": np.where(flip, other, pol).astype(pol.dtype), "meta": np.array(json.dumps(meta))}, False)):
+        buf = io.BytesIO()
+        np.savez(buf, **{**saved, **edit})
+        (tmp_path / "edited.npz").write_bytes(buf.getvalue())
+        if refused:
+            with pytest.raises(PolicyError, match="digest"):
+                load_solution(tmp_path / "edited.npz", sc)
+        else:
+            back = load_solution(tmp_path / "edited.npz", sc)
+            assert not back.status.ok and back.status == "inaccurate:unverified"
+
+
 def test_interrupt_returns_a_certified_iterate(monkeypatch):
     from wncs_lp.solvers.matrix_free.sweeper import Sweeper
 
