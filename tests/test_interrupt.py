@@ -96,3 +96,35 @@ def test_interrupted_reproduction_resumes(quick_reproduction):
     assert [c["id"] for c in run.report["claims"]] == list(CLAIMS)  # every claim, none lost to the interrupt
     assert len(CLAIMS) == 16
     assert run.report["provenance"]["cache"]["hits"] >= 1  # the steps finished before Ctrl-C were reused
+
+
+def test_a_signal_inside_the_kernel_compiler_waits_for_the_compilation_to_end():
+    """An exception raised inside numba's compiler can leave it holding its lock (the command then
+    hangs): the command line's handler, finding a numba or llvmlite frame on the stack, returns
+    and the signal is sent again once the main thread has left the compiler."""
+    from wncs_lp import stopping
+
+    got: list[tuple[int, bool]] = []
+
+    def handler(signum, frame):
+        got.append((signum, stopping.in_compiler(frame)))
+
+    compiling = {"__name__": "numba.core.fake_compiler", "time": time, "stopping": stopping, "got": got,
+                 "USR1": signal.SIGUSR1}
+    exec("def compile_for(seconds):\n"
+         "    stopping.deliver_later(USR1)  # as the handler does for a signal arriving here\n"
+         "    t = time.monotonic()\n"
+         "    while time.monotonic() - t < seconds:\n"
+         "        pass\n"
+         "    return list(got)\n", compiling)
+    assert not stopping.in_compiler(sys._getframe())
+    old = signal.signal(signal.SIGUSR1, handler)
+    try:
+        assert compiling["compile_for"](0.3) == []  # nothing sent while the compiler runs
+        ended = time.monotonic()
+        while not got and time.monotonic() - ended < 5:
+            time.sleep(0.01)
+        assert got == [(signal.SIGUSR1, False)]  # sent once, handled outside the compiler
+    finally:
+        signal.signal(signal.SIGUSR1, old)
+        stopping.clear()

@@ -16,6 +16,11 @@ a Ctrl-C waits for the backend to finish (minutes on a large LP). Two tools here
   --policy``, the next point of a study -- calls :func:`check`, which raises again, so the whole
   command stops, not only the step in progress. A library caller never calls :func:`request`:
   there Ctrl-C stops the solve in progress, as before.
+* **Not inside the compiler**: a signal that arrives while numba compiles a kernel (or loads
+  it from its cache) is not turned into an exception there -- raised inside numba's or
+  llvmlite's Python code it could leave their lock held and the command hanging. The command
+  line's handler (:func:`in_compiler`) hands it to :func:`deliver_later`, which sends it again
+  once the compilation is over: the stop then takes the rest of the compilation (seconds).
 """
 from __future__ import annotations
 
@@ -24,7 +29,8 @@ import threading
 from contextlib import contextmanager
 from typing import Callable, Iterator
 
-__all__ = ["request", "requested", "clear", "check", "deferred", "stop_asked", "in_thread", "STOP_SIGNALS"]
+__all__ = ["request", "requested", "clear", "check", "deferred", "stop_asked", "in_thread", "in_compiler",
+           "deliver_later", "STOP_SIGNALS"]
 
 #: The signals that stop a command.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -47,6 +53,7 @@ def clear() -> None:
     """Forget a stop request (at the end of a command)."""
     _requested.clear()
     _pending.clear()
+    _later.clear()
 
 
 def check() -> None:
@@ -138,3 +145,51 @@ def in_thread(fn: Callable[[], object], poll: float = 0.1) -> object:
     if "error" in box:
         raise box["error"]  # type: ignore[misc]
     return box.get("value")
+
+
+# ----------------------------------------------------------------------------- not inside the compiler
+#: Packages whose Python code must not be interrupted by an exception: numba's compiler and
+#: llvmlite hold a lock and half-built objects while a kernel compiles (a ``KeyboardInterrupt``
+#: raised there left the process hanging on the lock, or printed a traceback from a ``__del__``).
+COMPILER_PACKAGES = ("numba", "llvmlite")
+
+_later: list[int] = []  # signals waiting for the main thread to leave the compiler
+
+
+def in_compiler(frame) -> bool:
+    """The frame (a signal handler's ``frame``) or one of its callers runs numba's or llvmlite's
+    Python code: a kernel is being compiled (or loaded from numba's cache)."""
+    while frame is not None:
+        name = frame.f_globals.get("__name__", "")
+        if name.split(".", 1)[0] in COMPILER_PACKAGES:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def deliver_later(signum: int, poll: float = 0.02) -> None:
+    """Send ``signum`` to this process again once the main thread has left the compiler.
+
+    For a signal handler that found the main thread compiling (:func:`in_compiler`): it returns
+    without raising, and a watcher thread re-sends the signal when no compiler frame is left on
+    the main thread's stack, so the handler then raises where it is safe -- within a moment of
+    the compilation's end. A stop already handled meanwhile (:func:`clear`) sends nothing.
+    """
+    import os
+    import sys
+
+    if _later:  # a watcher is already waiting: one delivery is enough
+        return
+    _later.append(int(signum))
+    main = threading.main_thread().ident
+
+    def watch() -> None:
+        while _later:
+            if not in_compiler(sys._current_frames().get(main)):
+                if _later:
+                    _later.clear()
+                    os.kill(os.getpid(), signum)
+                return
+            threading.Event().wait(poll)
+
+    threading.Thread(target=watch, daemon=True, name="wncs-lp-stop-later").start()

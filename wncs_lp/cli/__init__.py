@@ -59,6 +59,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
 
     def on_signal(signum, frame):  # stop the whole command (files are written atomically), then say so
+        if stopping.in_compiler(frame):  # an exception inside numba's compiler can hang it: a moment later
+            stopping.deliver_later(signum)
+            return
         stopping.request(signum)
         raise KeyboardInterrupt
 
