@@ -40,6 +40,7 @@ from __future__ import annotations
 import argparse
 import collections
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -127,7 +128,7 @@ def families(tmp: Path, args) -> dict:
     }, sweep
 
 
-def run_hostile(names: list[str], record: str | None, verbose: bool) -> int:
+def run_hostile(names: list[str], record: str | None, verbose: bool, only: str | None = None) -> int:
     """The hostile families: every case run, its outcome counted by family."""
     import json
     import tempfile
@@ -141,6 +142,8 @@ def run_hostile(names: list[str], record: str | None, verbose: bool) -> int:
     t0 = time.perf_counter()
     for family in names:
         for case in FAMILIES[family]():
+            if only and not re.search(only, case.name):
+                continue
             t1 = time.perf_counter()
             try:
                 label, detail = case.run(tmp)
@@ -176,6 +179,7 @@ def main() -> int:
                          "'all' (default)")
     ap.add_argument("--record", default=None, metavar="FILE.json", help="write every hostile case's outcome here")
     ap.add_argument("--verbose", action="store_true", help="one line per hostile case as it ends")
+    ap.add_argument("--only", default=None, metavar="REGEX", help="only the hostile cases whose name matches")
     ap.add_argument("--cases", type=int, default=2000, help="examples per scenario family (default 2000; 7 families)")
     ap.add_argument("--npz-cases", type=int, default=400, help="mutated .npz files (default 400; each MDP is solved twice)")
     ap.add_argument("--cache-cases", type=int, default=2000, help="mutated cache entries (default 2000)")
@@ -191,7 +195,7 @@ def main() -> int:
     if unknown:
         ap.error(f"unknown families {unknown}; expected 'all', 'hostile', 'scenarios' or some of {list(FAMILIES)}")
     if hostile:
-        run_hostile(hostile, args.record, args.verbose)
+        run_hostile(hostile, args.record, args.verbose, args.only)
     if not ("all" in wanted or "scenarios" in wanted):
         return 0
     tmp = scratch_dir()

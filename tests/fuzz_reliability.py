@@ -389,7 +389,7 @@ LONG_COMMANDS = {
     "simulate": (["simulate", P12, "--policy", "greedy", "--slots", "100000000"], r"simulat", 1.5),
     "sweep": (["sweep", P12, "--set", "tau_cap=9", "--values", "0.5:1:0.01", "--out", "sweep_stop", "--no-plot",
                "--policies", "optimal,suboptimal"], r"\d+/\d+", 1.5),
-    "capstudy": (["capstudy", P12, "--caps", "10:80:2", "--method", "vi"], None, 15),
+    "capstudy": (["capstudy", P12, "--caps", "10:160:2", "--method", "vi"], None, 8),
 }
 
 
@@ -444,18 +444,23 @@ def json_contract_cases() -> list[Case]:
         "simulate": ["simulate", *SMALL, "--policy", "greedy", "--slots", "2000"],
         "evaluate": ["evaluate", *SMALL, "--policy", "static"],
     }.items():
-        cases.append(Case("JSON contract", f"{name} --json | head -c 10", lambda tmp, argv=argv: expect_quiet_pipe(
-            cli([*argv, "--json"], head=10, timeout=120))))
+        # the reader closes stdout before the command writes (a reader that takes 10 bytes of a
+        # short output may close after the one write: nothing would be tested)
+        cases.append(Case("JSON contract", f"{name} --json | head -c 0", lambda tmp, argv=argv: expect_quiet_pipe(
+            cli([*argv, "--json"], head=0, timeout=120))))
     return cases
 
 
 def expect_quiet_pipe(run: Run) -> tuple[str, str]:
+    """The reader went away: the command ends without a word about it (the scenario's warnings,
+    printed before the output, may stand)."""
     crash = crash_of(run)
     if crash:
         return crash
-    if run.err.strip():
-        return "wrong", "stderr: " + last_line(run.err)
-    return "ok", f"exit {run.code}, nothing on stderr"
+    said = [ln for ln in run.err.splitlines() if ln.strip() and not ln.startswith("warning: ")]
+    if said:
+        return "wrong", "stderr: " + said[-1][:160]
+    return "ok", f"exit {run.code}, nothing on stderr but the scenario's warnings"
 
 
 #: Numeric options out of range or not finite: each must be argparse's usage error (exit 2).

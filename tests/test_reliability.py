@@ -125,7 +125,8 @@ def test_sigterm_stops_bound_policy_within_ten_seconds_with_one_json_object(tmp_
 
 
 def test_a_reader_closing_stdout_ends_the_command_quietly(tmp_path):
-    run = cli(["solve", P12, "--set", "tau_cap=7", "--json"], head=10, timeout=120, cwd=tmp_path)
+    run = cli(["simulate", P12, "--set", "tau_cap=7", "--policy", "greedy", "--slots", "2000", "--json"], head=0,
+              timeout=120, cwd=tmp_path)  # stdout closed before the command writes
     assert run.code is not None and run.code >= 0 and not run.hung
     assert run.err.strip() == "", run.err[-1500:]  # no BrokenPipeError traceback, not even at exit
 
