@@ -278,3 +278,41 @@ def test_highs_status_map_covers_every_highs_model_status():
     assert [k for k, c in HIGHS_STATUS.items() if c == "optimal"] == ["kOptimal"]
     assert {HIGHS_STATUS[k] for k in ("kInfeasible", "kUnbounded", "kUnboundedOrInfeasible")} <= {"infeasible", "failed"}
     assert not FAILED_STATUSES & set(HIGHS_STATUS)
+
+
+def test_a_stop_does_not_wait_for_a_long_clarabel_iteration():
+    """One interior-point iteration of a large LP lasts seconds to minutes (one KKT factorization):
+    a stop asked meanwhile returns control at once, and the solve left behind is told to end at
+    its next iteration."""
+    import threading
+    import time
+
+    from wncs_lp import stopping
+    from wncs_lp.solvers.lp import clarabel_solve
+
+    class SlowSolver:  # Clarabel's interface: a callback after each (here 1-second) iteration
+        answers: list[bool] = []
+
+        def set_termination_callback(self, cb):
+            self.cb = cb
+
+        def solve(self):
+            while True:
+                time.sleep(1.0)
+                self.answers.append(self.cb(None))
+                if self.answers[-1]:
+                    return "stopped by the callback"
+
+    solver = SlowSolver()
+    threading.Timer(0.2, stopping.request, (15,)).start()  # a stop asked mid-iteration (SIGTERM)
+    t0 = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            clarabel_solve(solver)
+        assert time.monotonic() - t0 < 0.8  # not the end of the iteration (1 s)
+    finally:
+        stopping.clear()
+    deadline = time.monotonic() + 5
+    while not solver.answers and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert solver.answers == [True]  # abandoned: stopped at its next iteration, even with the request cleared

@@ -495,15 +495,23 @@ def clarabel_solve(solver, prog: Progress | None = None, what: str = "lp"):
     """``solver.solve()`` of a Clarabel solver, stoppable, its iterations reported through ``prog``.
 
     Clarabel calls a termination callback at every interior-point iteration: it shows the
-    iteration (rate-limited) and ends the solve when a stop is asked (Ctrl-C / SIGTERM turned
-    into a flag while the solve runs: :func:`wncs_lp.stopping.deferred`); the interrupt then
-    reaches the caller. Without callbacks (an older Clarabel) the solve runs in a thread this one
-    waits on (:func:`wncs_lp.stopping.in_thread`).
+    iteration (rate-limited) and ends the solve when a stop is asked. One iteration of a large
+    LP factorizes the whole KKT system (about 10 s for processes 1-3 at cap 10, longer above),
+    and nothing of Python runs in the thread that waits for it; so the solve runs in a thread
+    this one waits on (:func:`wncs_lp.stopping.in_thread`: Clarabel releases the GIL), and a
+    Ctrl-C / SIGTERM returns control at once. The solve left behind is ended by its callback
+    at its next iteration instead of running on.
     """
-    from ..stopping import deferred, in_thread, stop_asked
+    import threading
+
+    from ..stopping import in_thread, stop_asked
+
+    abandoned = threading.Event()
 
     def callback(info) -> bool:
         try:
+            if abandoned.is_set():
+                return True
             if prog is not None and prog.enabled and prog.due():
                 prog.tick(f"[{what}] interior-point iteration {info.iterations}: relative gap {info.gap_rel:.1e}, "
                           f"residuals {info.res_primal:.1e} (primal) {info.res_dual:.1e} (dual)")
@@ -515,8 +523,11 @@ def clarabel_solve(solver, prog: Progress | None = None, what: str = "lp"):
         solver.set_termination_callback(callback)
     except AttributeError:  # an older Clarabel without callbacks
         return in_thread(solver.solve)
-    with deferred():
-        return solver.solve()
+    try:
+        return in_thread(solver.solve)
+    except BaseException:
+        abandoned.set()
+        raise
 
 
 def _solve_clarabel_dual(mdp: MDP, tol: float, max_iter: int, verbose: bool, settings: dict | None,
