@@ -389,7 +389,9 @@ LONG_COMMANDS = {
     "simulate": (["simulate", P12, "--policy", "greedy", "--slots", "100000000"], r"simulat", 1.5),
     "sweep": (["sweep", P12, "--set", "tau_cap=9", "--values", "0.5:1:0.01", "--out", "sweep_stop", "--no-plot",
                "--policies", "optimal,suboptimal"], r"\d+/\d+", 1.5),
-    "capstudy": (["capstudy", P12, "--caps", "10:160:2", "--method", "vi"], None, 8),
+    # tolerances it cannot meet before cap 160: it would stop at the cap where it converges
+    "capstudy": (["capstudy", P12, "--caps", "10:160:2", "--method", "vi", "--gain-rtol", "1e-15", "--mass-tol",
+                  "1e-15"], None, 8),
 }
 
 
