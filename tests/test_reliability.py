@@ -151,18 +151,11 @@ def test_the_public_api_names_the_bad_argument(argument, label, call):
 # ----------------------------------------------------------------------------- labels
 @pytest.fixture
 def vi_stops_short(monkeypatch):
-    """Value iteration given a budget of 3 passes: its solves end uncertified (``max_iter``)."""
-    import functools
-
+    """Value iteration's default budget set to 3 passes: its solves end uncertified (``max_iter``).
+    The default itself is changed, so every route that calls the function finds it."""
     from wncs_lp.solvers import dp
 
-    real = dp.value_iteration
-
-    @functools.wraps(real)
-    def short(mdp, **kw):
-        return real(mdp, **{**kw, "max_iter": 3})
-
-    monkeypatch.setattr(dp, "value_iteration", short)
+    monkeypatch.setitem(dp.value_iteration.__kwdefaults__, "max_iter", 3)
 
 
 def test_an_uncertified_optimal_policy_is_not_labelled_optimal(vi_stops_short, capsys):
