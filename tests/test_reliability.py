@@ -102,8 +102,9 @@ print(codes)
     assert out.stdout.strip().splitlines()[-1] == "[2, 2, 2]", out.stdout
     lines = error_lines(out.stderr)
     assert len(lines) == 3, out.stderr
-    assert all("over the limit" in ln or "needing about" in ln for ln in lines), lines
-    assert "matrix-free" in lines[0] or "vi" in lines[0], lines[0]  # a cheaper route named
+    assert all("over the limit" in ln for ln in lines), lines
+    assert all("RLIMIT_AS" in ln for ln in lines[:2]), lines  # the limit is the one set here
+    assert all("Cheaper routes" in ln and "--method matrix-free" in ln for ln in lines[:2]), lines
     assert "replications" in lines[2], lines[2]
 
 
