@@ -60,6 +60,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def on_signal(signum, frame):  # stop the whole command (files are written atomically), then say so
         if stopping.in_compiler(frame):  # an exception inside numba's compiler can hang it: a moment later
+            stopping.request(signum)  # the next check between steps stops the command, if it comes first
             stopping.deliver_later(signum)
             return
         stopping.request(signum)
