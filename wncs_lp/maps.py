@@ -50,7 +50,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .chain import PROB_SUM_TOL, policy_matrices, recurrent_classes
-from .errors import ModelError, PolicyError
+from .errors import ModelError, PolicyError, WncsError
 from .mdp import MDP
 from .models import model_type
 from .scenario import load_scenario
@@ -99,7 +99,7 @@ def map_names(mdp: MDP, scenario: Any = None) -> dict:
             info["servers"] = [s.name for s in sc0.servers]
             if sc0.fingerprint() == mdp.meta.get("fingerprint"):
                 info["p"] = _one_p(sc0)
-        except Exception:
+        except (OSError, WncsError):  # the file moved or changed since the build: default names
             pass
     elif sc is not None:
         info.update(_scenario_names(sc))
