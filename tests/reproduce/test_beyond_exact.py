@@ -11,7 +11,7 @@ import dataclasses
 
 import pytest
 
-from wncs_lp.bounds import bound_policy, lower_bound
+from wncs_lp.bounds import LookaheadPolicy, bound_policy, lower_bound
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models.system import System
 from wncs_lp.reproduce import beyond, beyondexact as b3
@@ -63,6 +63,10 @@ def test_four_processes_against_the_enumerated_mdp(tiny):
     row = next(r for r in inst["policies"] if r["policy"].startswith("bound"))
     assert row["how"] == "exact"
     assert row["gain"] == pytest.approx(exact, rel=1e-7)
+    # and the two-step lookahead on the same tables, on the stored matrix
+    ahead = evaluate(ctx.mdp(sc), LookaheadPolicy(pol)).gain
+    (row2,) = [r for r in inst["policies"] if r["policy"].startswith("lookahead")]
+    assert row2["how"] == "exact" and row2["gain"] == pytest.approx(ahead, rel=1e-7)
     for r in inst["policies"]:  # a certified gap bounds the true one from above
         assert r["gap"] >= r["gain"] / ref.gain - 1 - 1e-9
         assert r["gain"] >= ref.gain * (1 - 1e-9)
@@ -70,7 +74,8 @@ def test_four_processes_against_the_enumerated_mdp(tiny):
         first = evaluate(ctx.mdp(sc), bound_policy(lower_bound(system, 1), system)).gain
         (row1,) = [r for r in inst["policies"] if r["policy"] == "bound[private-servers]"]
         assert row1["gain"] == pytest.approx(first, rel=1e-7)
-        best = min((r for r in inst["policies"] if r["policy"].startswith("bound")), key=lambda r: r["gap"])
+        best = min((r for r in inst["policies"] if r["policy"].startswith(("bound", "lookahead"))),
+                   key=lambda r: r["gap"])
         assert f"best bound's policy ({best['policy']}) is within" in sec["summary"]
 
 
