@@ -84,3 +84,30 @@ def test_projected_value_on_a_lazy_system_is_the_enumerated_tables_value():
     got = ProjectedValue(res_lazy, lazy)(tau, c_lazy)
     want = res_full.tables.value(tau, c_full)
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
+
+
+def test_the_bound_policy_builds_on_a_lazy_system_that_grew_after_the_bound():
+    """A greedy policy of a bound built after a simulation has met configurations the bound's column
+    maps never saw (it had refused them as "tables numbered otherwise") values every action as on
+    the enumerated system; the two-step lookahead, whose arrays are the pairs known when it is
+    built, refuses a lazily explored system by name."""
+    from wncs_lp.bounds import LookaheadPolicy, bound_policy, lower_bound
+    from wncs_lp.errors import PolicyError
+
+    sc = load_scenario(scenario_path("paper_p1234"), ["tau_cap=5"])
+    full, lazy = System.from_scenario(sc), System.from_scenario(sc, explore="lazy")
+    res_full, res_lazy = lower_bound(full, 1), lower_bound(lazy, 1)
+    for _ in range(3):
+        lazy.expand(np.arange(len(lazy.automaton.configs)))
+    n = len(lazy.automaton.configs)
+    assert n > res_lazy.tables.column[0].shape[0]  # the system grew past the tables' maps
+    c_lazy = np.arange(n)
+    c_full = np.array([full.automaton.index[lazy.automaton.configs[c]] for c in c_lazy])
+    tau = np.random.default_rng(1).integers(1, 6, size=(n, sc.n_processes))
+    pol = bound_policy(res_lazy, lazy)
+    got, want = pol.values(tau, c_lazy), bound_policy(res_full, full).values(tau, c_full)
+    fin = np.isfinite(want)
+    np.testing.assert_array_equal(np.isfinite(got), fin)
+    np.testing.assert_allclose(got[fin], want[fin], rtol=1e-12, atol=0)
+    with pytest.raises(PolicyError, match="explored lazily"):
+        LookaheadPolicy(pol)

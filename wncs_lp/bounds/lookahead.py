@@ -88,6 +88,10 @@ class LookaheadPolicy(Policy):
             raise PolicyError(f"candidates must be a whole number >= 1 (or None: every action), got {candidates!r}")
         if depth not in (2, 3) or not (isinstance(middle, (int, np.integer)) and middle >= 1):
             raise PolicyError(f"depth must be 2 or 3 and middle a whole number >= 1, got {depth!r} and {middle!r}")
+        if base.system.is_lazy:  # its arrays are the pairs known when built; a simulation meets more
+            raise PolicyError("the lookahead policy needs the outcomes of every configuration one step ahead, and "
+                              "this system's configuration automaton is explored lazily (too large to enumerate); "
+                              "the bound's greedy policy runs on it")
         super().__init__(base.system)
         t0 = time.perf_counter()
         self.kernels = _kernels()

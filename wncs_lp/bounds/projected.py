@@ -247,11 +247,14 @@ class ProjectedLookahead:
                               f"{tuple(k + 1 for k in g)} is not a configuration of its private system") from None
 
     def _check_columns(self, column: Sequence[np.ndarray]) -> None:
+        # the column maps cover the configurations known when the bound was computed: on a lazily
+        # explored system a simulation may have met more since (those are projected, prepare())
         n = self.system.n_configs
-        sample = np.unique(np.linspace(0, n - 1, min(n, CHECK_CONFIGS)).astype(np.int64))
         for i in range(len(self.groups)):
-            if np.shape(column[i]) != (n,) or not np.array_equal(np.asarray(column[i])[sample],
-                                                                 self._project(i, sample)):
+            col = np.asarray(column[i])
+            m = col.shape[0] if col.ndim == 1 else -1
+            sample = np.unique(np.linspace(0, m - 1, min(max(m, 1), CHECK_CONFIGS)).astype(np.int64))
+            if not 0 < m <= n or not np.array_equal(col[sample], self._project(i, sample)):
                 raise PolicyError(f"group {tuple(k + 1 for k in self.groups[i])}: the tables' column map is not the "
                                   "projection on its private system (tables numbered otherwise)")
 
@@ -265,8 +268,11 @@ class ProjectedLookahead:
             new = np.arange(n_old, n_new)
             col = np.empty((len(self.groups), new.size), np.int64)
             for i in range(len(self.groups)):
-                known = self._column[i] if self._column is not None and self._column[i].shape == (n_new,) else None
-                col[i] = known[new] if known is not None else self._project(i, new)
+                known = self._column[i] if self._column is not None else np.zeros(0, np.int64)
+                inside = new < known.shape[0]  # read from the tables' map; configurations met since projected
+                col[i, inside] = known[new[inside]]
+                if not inside.all():
+                    col[i, ~inside] = self._project(i, new[~inside])
             if n_new > self._col.shape[1]:
                 self._col, self._idle = (_grown(a, n_new, axis=1) for a in (self._col, self._idle))
             self._col[:, n_old:n_new] = col
