@@ -227,6 +227,12 @@ def json_objects(text: str) -> list[Any]:
     return out
 
 
+def first_object(run: Run) -> dict:
+    """The first JSON object the command printed ({} when none)."""
+    objs = json_objects(run.out)
+    return objs[0] if objs and isinstance(objs[0], dict) else {}
+
+
 # ----------------------------------------------------------------------------- a library call in a child
 def in_child(fn: Callable[[], Any], *, timeout: float = 60, mem: int | None = 3 * GiB) -> tuple[str, Any]:
     """``fn()`` in a forked child under ``RLIMIT_AS``: ("return", its repr) | ("raise", (type names of
@@ -838,8 +844,7 @@ def label_cases() -> list[Case]:
         crash = crash_of(run)
         if crash:
             return crash
-        objs = json_objects(run.out)
-        doc = objs[0] if objs and isinstance(objs[0], dict) else {}
+        doc = first_object(run)
         if status == "optimal":
             return "ok", "the solve certified (no inaccurate solve to label)"
         label = json.dumps(doc.get("policy_info", {})) + json.dumps(doc.get("policy_status"))
@@ -853,8 +858,7 @@ def label_cases() -> list[Case]:
         crash = crash_of(run)
         if crash:
             return crash
-        objs = json_objects(run.out)
-        doc = objs[0] if objs and isinstance(objs[0], dict) else {}
+        doc = first_object(run)
         rows = doc.get("rows", [])
         if not rows or any("status" not in r for r in rows):
             return "wrong", f"rows without the status of their solve (cap 16's is not certified), exit {run.code}"
