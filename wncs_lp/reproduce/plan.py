@@ -14,23 +14,21 @@ from typing import Sequence
 __all__ = ["ESTIMATE_SECONDS", "ESTIMATE_WHERE", "Plan", "duration"]
 
 #: Seconds of each section with a cold cache, per profile: ``default`` from one run of
-#: ``wncs-lp reproduce`` on a fresh clone (commit f27f716, 2 cores, 2 threads, quiet: 8 min 36 s in
-#: all; the code before relaxation 3 took 7 min 06 s to 8 min 04 s over three runs); ``quick`` from
-#: one run of ``wncs-lp reproduce --profile quick`` on the same machine (55 s) (report.json's
-#: ``timings_seconds``). ``full`` adds B2's caps 20, 25 and 30 and its sweep at cap 20, and B3's
-#: processes 1-4 at caps 20 and 30, estimated from the matrix-free and bounds benchmarks (not one
-#: measured run). C14-C16 (issue 37) reuse the solves of C1, C2, C3 and C11: their default figures are
-#: their seconds in a default run under load 20-30, divided by the ratio (4.4) of that run's C1-C13 to
-#: their estimates here (the quick profile: the same).
+#: ``wncs-lp reproduce`` on a fresh clone (commit efcd123, 2 cores, 2 threads, quiet, numba's caches
+#: cold: 6 min 52 s in all; report.json's ``timings_seconds``); ``quick`` from one run of
+#: ``wncs-lp reproduce --profile quick`` on the same machine (55 s). ``full`` adds B2's caps 20, 25
+#: and 30 and its sweep at cap 20, and B3's processes 1-4 at caps 20 and 30, estimated from the
+#: matrix-free and bounds benchmarks (not one measured run). C14-C16 (issue 37) reuse the solves of
+#: C1, C2, C3 and C11 (a fraction of a second each).
 ESTIMATE_SECONDS: dict[str, dict[str, float]] = {
     "quick": {"C1": 2.3, "C2": 1.6, "C3": 2.8, "C4": 1.4, "C5": 1.0, "C6": 3.7, "C7": 0.8, "C8": 0.1,
               "C9": 1.6, "C10": 0.1, "C11": 1.4, "C12": 1.1, "C13": 5.7, "C14": 0.3, "C15": 0.3, "C16": 0.3,
               "B1": 7.6, "B2": 4.5, "B3": 19.5},
-    "default": {"C1": 7.5, "C2": 11.4, "C3": 50.8, "C4": 31.4, "C5": 1.9, "C6": 138.4, "C7": 7.6,
-                "C8": 0.7, "C9": 3.7, "C10": 2.7, "C11": 15.6, "C12": 7.3, "C13": 6.4, "C14": 0.3, "C15": 0.3,
-                "C16": 0.3, "B1": 46.2, "B2": 59.5, "B3": 122.8},
+    "default": {"C1": 5.3, "C2": 9.2, "C3": 30.0, "C4": 16.7, "C5": 0.9, "C6": 68.4, "C7": 5.0, "C8": 0.6,
+                "C9": 2.6, "C10": 1.8, "C11": 10.2, "C12": 3.2, "C13": 3.2, "C14": 0.1, "C15": 0.2, "C16": 0.1,
+                "B1": 25.1, "B2": 163.7, "B3": 64.6},
 }
-ESTIMATE_SECONDS["full"] = {**ESTIMATE_SECONDS["default"], "B1": 80.0, "B2": 71.0 + 75 * 60.0, "B3": 122.8 + 15 * 60.0}
+ESTIMATE_SECONDS["full"] = {**ESTIMATE_SECONDS["default"], "B1": 80.0, "B2": 164.0 + 75 * 60.0, "B3": 65.0 + 15 * 60.0}
 #: Where the estimates come from, in the line that prints them.
 ESTIMATE_WHERE = "measured on a 2-core machine with a cold cache"
 
