@@ -34,7 +34,6 @@ One CSV row per quantity and a table on stdout. The machine is shared: every row
 from __future__ import annotations
 
 import argparse
-import csv
 import io
 import json
 import os
@@ -53,7 +52,7 @@ sys.path.insert(0, str(ROOT))
 import wncs_lp  # noqa: E402
 from wncs_lp.bounds import bound_policy, lower_bound, policy_gaps  # noqa: E402
 from wncs_lp.bounds.lower import AUTO_SEARCH, auto_pick, runs_grouped  # noqa: E402
-from wncs_lp.files import atomic_write_text  # noqa: E402
+from wncs_lp.files import atomic_write_csv, atomic_write_text  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
 from wncs_lp.reproduce.beyondexact import reference  # noqa: E402
 from wncs_lp.solvers.matrix_free import matrix_free_value_iteration  # noqa: E402
@@ -265,12 +264,7 @@ def table(rows) -> str:
 
 
 def write_csv(path, rows) -> None:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=COLUMNS)
-    w.writeheader()
-    for r in rows:
-        w.writerow({c: r.get(c, "") for c in COLUMNS})
-    atomic_write_text(path, buf.getvalue())
+    atomic_write_csv(path, rows, COLUMNS, extras="ignore")
 
 
 def _child_args(args) -> list[str]:

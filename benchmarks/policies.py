@@ -27,8 +27,6 @@ One CSV row per quantity and a table on stdout. The machine is shared: every row
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import os
 import sys
 import time
@@ -42,7 +40,7 @@ import numpy as np  # noqa: E402
 
 import wncs_lp  # noqa: E402
 from wncs_lp.bounds import IndexPolicy, LookaheadPolicy, bound_policy, lower_bound, policy_gaps, whittle_indices  # noqa: E402
-from wncs_lp.files import atomic_write_text  # noqa: E402
+from wncs_lp.files import atomic_write_csv  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
 
 COLUMNS = ["instance", "cap", "processes", "row", "how", "value", "value_upper", "gap_certified", "gap_optimum",
@@ -150,11 +148,7 @@ def main(argv=None) -> int:
     warnings.simplefilter("ignore", wncs_lp.errors.ScenarioWarning)
     rows = run(args)
     if args.out:
-        buf = io.StringIO()
-        w = csv.DictWriter(buf, fieldnames=COLUMNS)
-        w.writeheader()
-        w.writerows(rows)
-        atomic_write_text(args.out, buf.getvalue())
+        atomic_write_csv(args.out, rows, COLUMNS)
     return 0
 
 

@@ -21,8 +21,6 @@ seconds, its peak memory and the 1-minute load average when it started: the mach
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import json
 import os
 import subprocess
@@ -36,7 +34,7 @@ sys.path.insert(0, str(ROOT))
 
 from wncs_lp import load_scenario, scenario_path  # noqa: E402
 from wncs_lp.bounds.gaps import DEFAULT_POLICIES  # noqa: E402
-from wncs_lp.files import atomic_write_text  # noqa: E402
+from wncs_lp.files import atomic_write_csv  # noqa: E402
 
 COLUMNS = ["instance", "processes", "explored", "relaxation", "row", "gain", "upper", "gap", "lower_bound",
            "seconds", "cpu_seconds", "peak_gib", "load1", "note"]
@@ -116,11 +114,8 @@ def main() -> int:
             rows += got
             for r in got:
                 print("  ".join(f"{k}={r[k]}" for k in COLUMNS if r.get(k) not in (None, "")), flush=True)
-            buf = io.StringIO()  # written after every instance: a long run keeps what it measured
-            w = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore")
-            w.writeheader()
-            w.writerows(rows)
-            atomic_write_text(args.out, buf.getvalue())
+            # written after every instance: a long run keeps what it measured
+            atomic_write_csv(args.out, rows, COLUMNS, extras="ignore")
     return 0
 
 

@@ -31,8 +31,6 @@ it started: the machine is shared; compare rows of one run):
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import os
 import sys
 import time
@@ -45,7 +43,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from wncs_lp.bounds import BoundPolicy, bound_policy, lower_bound, policy_gaps  # noqa: E402
-from wncs_lp.files import atomic_write_text  # noqa: E402
+from wncs_lp.files import atomic_write_csv  # noqa: E402
 from wncs_lp.intervals import batch_means_interval, replication_interval  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
 from wncs_lp.policies import Policy  # noqa: E402
@@ -220,11 +218,7 @@ def main() -> None:
     for section in args.sections.split(","):
         {"precision": precision, "cost": cost, "coverage": coverage, "seeds": seeds}[section](args, emit)
     if args.out:
-        buf = io.StringIO()
-        w = csv.DictWriter(buf, fieldnames=COLUMNS)
-        w.writeheader()
-        w.writerows(rows)
-        atomic_write_text(args.out, buf.getvalue())
+        atomic_write_csv(args.out, rows, COLUMNS)
 
 
 if __name__ == "__main__":

@@ -275,6 +275,19 @@ def test_temporaries_of_killed_writers_are_cleaned_on_the_next_write(tmp_path):
     assert (tmp_path / "out.csv").read_text() == "a,b\n"
 
 
+def test_a_csv_table_is_written_whole_with_its_header(tmp_path):
+    from wncs_lp.files import atomic_write_csv
+
+    out = tmp_path / "t.csv"
+    atomic_write_csv(out, [{"a": 1, "b": 2.5}, {"a": 3}], ["a", "b"])
+    assert out.read_text().splitlines() == ["a,b", "1,2.5", "3,"]  # a missing key: an empty cell
+    with pytest.raises(ValueError, match="'c'"):
+        atomic_write_csv(out, [{"a": 1, "c": 2}], ["a", "b"])
+    assert out.read_text().splitlines()[1] == "1,2.5"  # a failed write leaves the file as it was
+    atomic_write_csv(out, [{"a": 1, "c": 2}], ["a", "b"], extras="ignore")
+    assert out.read_text().splitlines() == ["a,b", "1,"]
+
+
 def test_sigterm_says_so_and_exits_143(tmp_path):
     """SIGTERM once the sweep has written its first row (its line on stderr is the readiness signal:
     no fixed sleep, so a loaded machine only makes it wait longer); 501 points, so it cannot end first."""

@@ -20,6 +20,8 @@ the reader's limit is refused by its size.
 """
 from __future__ import annotations
 
+import csv
+import io
 import json
 import math
 import os
@@ -29,13 +31,13 @@ import time
 import zipfile
 import zlib
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from .errors import WncsError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "json_ready", "dumps", "csv_records", "scalars",
+__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_csv", "json_ready", "dumps", "csv_records", "scalars",
            "check_output_file", "check_output_folder", "read_npz", "npz_array", "npz_json", "open_regular",
            "read_regular", "STALE_TMP_SECONDS"]
 
@@ -107,6 +109,17 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
 def atomic_write_text(path: str | Path, text: str) -> None:
     """UTF-8 text, written byte for byte (no newline translation), atomically."""
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_write_csv(path: str | Path, rows: Iterable[Mapping[str, Any]], columns: Sequence[str], *,
+                     extras: str = "raise") -> None:
+    """``rows`` as a CSV table with a header of ``columns``, written atomically; a missing key is an
+    empty cell, a key outside ``columns`` raises (``extras="ignore"``: left out)."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(columns), extrasaction=extras)
+    w.writeheader()
+    w.writerows(rows)
+    atomic_write_text(path, buf.getvalue())
 
 
 def json_ready(obj: Any) -> Any:
