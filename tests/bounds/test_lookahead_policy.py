@@ -22,6 +22,13 @@ from wncs_lp.solvers.matrix_free import matrix_free_evaluate
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
 
 
+def _after(system, tau, delta) -> tuple[np.ndarray, float]:
+    """The AoI vector one slot after ``tau`` with deliveries ``delta`` (0: none), and its cost."""
+    nt = [min(tau[k] + 1, int(system.caps[k])) for k in range(system.n_processes)]
+    nt = np.array([min(t, delta[k]) if delta[k] > 0 else t for k, t in enumerate(nt)])
+    return nt, sum(float(system.q[k][nt[k] - 1]) for k in range(system.n_processes))
+
+
 def brute_two_step(system, groups, h, column, tau, c: int) -> np.ndarray:
     """sum_o P(o | C, a) [c(tau'_o) + min_a' brute_lookahead(tau'_o, C'_o)[a']] per feasible action
     of configuration c, by loops over the automaton's outcome lists."""
@@ -29,9 +36,7 @@ def brute_two_step(system, groups, h, column, tau, c: int) -> np.ndarray:
     for outs in system.automaton.outcomes[c]:
         v = 0.0
         for nxt, delta, p in outs:
-            nt = [min(tau[k] + 1, int(system.caps[k])) for k in range(system.n_processes)]
-            nt = np.array([min(t, delta[k]) if delta[k] > 0 else t for k, t in enumerate(nt)])
-            cost = sum(float(system.q[k][nt[k] - 1]) for k in range(system.n_processes))
+            nt, cost = _after(system, tau, delta)
             v += p * (cost + brute_lookahead(system, groups, h, column, nt, nxt).min())
         out.append(v)
     return np.array(out)
@@ -151,9 +156,7 @@ def brute_three_step(system, groups, h, column, tau, c: int, middle: int) -> np.
     for outs in system.automaton.outcomes[c]:
         v = 0.0
         for nxt, delta, p in outs:
-            nt = [min(tau[k] + 1, int(system.caps[k])) for k in range(system.n_processes)]
-            nt = np.array([min(t, delta[k]) if delta[k] > 0 else t for k, t in enumerate(nt)])
-            cost = sum(float(system.q[k][nt[k] - 1]) for k in range(system.n_processes))
+            nt, cost = _after(system, tau, delta)
             g = brute_lookahead(system, groups, h, column, nt, nxt)
             best = np.sort(np.argsort(g, kind="stable")[:middle])
             v += p * (cost + brute_two_step(system, groups, h, column, nt, nxt)[best].min())
