@@ -101,6 +101,18 @@ def projected_tables(result: BoundResult) -> tuple[tuple, tuple, tuple] | None:
     return tuple((k,) for k in range(len(t.h))), tuple(t.h), tuple(t.column)
 
 
+def project_configs(system: System, group: Sequence[int], index: dict, configs: np.ndarray) -> np.ndarray:
+    """The private configuration ids (``index``: the group's private automaton's) of the joint
+    configurations ``configs`` of ``system``, projected on ``group``."""
+    model, joint = system.model, system.automaton.configs
+    try:
+        return np.array([index[model.project_group(joint[c], group)] for c in np.asarray(configs).tolist()],
+                        np.int64)
+    except KeyError as exc:  # the projection argument says this cannot happen
+        raise PolicyError(f"internal error: the projection {exc} of a joint configuration on the group "
+                          f"{tuple(k + 1 for k in group)} is not a configuration of its private system") from None
+
+
 def _grown(a: np.ndarray, size: int, axis: int) -> np.ndarray:
     """``a`` with room for ``size`` entries along ``axis`` (at least twice its length on a lazily
     explored system; exactly ``size`` the first time), its content kept."""
@@ -238,13 +250,7 @@ class ProjectedLookahead:
 
     def _project(self, i: int, configs: np.ndarray) -> np.ndarray:
         """Group i's private configuration id of joint configurations ``configs``."""
-        g, index, model = self.groups[i], self.private[i].automaton.index, self.system.model
-        joint = self.system.automaton.configs
-        try:
-            return np.array([index[model.project_group(joint[c], g)] for c in configs.tolist()], np.int64)
-        except KeyError as exc:  # the projection argument says this cannot happen
-            raise PolicyError(f"internal error: the projection {exc} of a joint configuration on the group "
-                              f"{tuple(k + 1 for k in g)} is not a configuration of its private system") from None
+        return project_configs(self.system, self.groups[i], self.private[i].automaton.index, configs)
 
     def _check_columns(self, column: Sequence[np.ndarray]) -> None:
         # the column maps cover the configurations known when the bound was computed: on a lazily
@@ -424,12 +430,11 @@ class ProjectedValue:
         self._col = [np.asarray(c, np.int64) for c in column]
 
     def _grow(self, n: int) -> None:
-        joint, model = self.system.automaton.configs, self.system.model
         for i, g in enumerate(self.groups):
             have = self._col[i].size
             if have < n:
-                new = [self._index[i][model.project_group(joint[c], g)] for c in range(have, n)]
-                self._col[i] = np.concatenate([self._col[i], np.asarray(new, np.int64)])
+                new = project_configs(self.system, g, self._index[i], np.arange(have, n))
+                self._col[i] = np.concatenate([self._col[i], new])
 
     def __call__(self, tau: np.ndarray, config_ids: np.ndarray) -> np.ndarray:
         tau = np.asarray(tau, np.int64)
