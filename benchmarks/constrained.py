@@ -8,10 +8,10 @@ One command measures, on the same instances and in the same run (the machine is 
 ratios are steadier than seconds):
 
 * ``lp``              -- the unconstrained occupation LP, ``wncs_lp.solve(mdp, "lp")``;
-* ``constrained-lp``  -- ``solve_constrained(mdp, [send_rate[remote] <= B], "lp")``;
+* ``constrained-lp``  -- ``wncs_lp.solve(mdp, "lp", constraints=[send_rate[remote] <= B])``;
   ``ratio`` = its seconds / the unconstrained LP's (what the constraint costs the LP);
 * ``vi``              -- the unconstrained certified value iteration, ``wncs_lp.solve(mdp, "vi")``;
-* ``lagrangian``      -- ``solve_constrained(..., "lagrangian")``; ``ratio`` = its seconds / the
+* ``lagrangian``      -- ``wncs_lp.solve(mdp, "lagrangian", constraints=...)``; ``ratio`` = its seconds / the
   unconstrained VI's (how many VI solves it is worth), ``speedup`` = constrained LP seconds /
   its seconds; the note has its agreement with the constrained LP (gain, multiplier).
 
@@ -59,7 +59,7 @@ def _rss_mib() -> float:
 def worker(job: dict) -> dict:
     """One solve in this (fresh) process; returns the JSON-ready measurements."""
     import wncs_lp
-    from wncs_lp.constrained import solve_constrained
+    from wncs_lp import solve
     from wncs_lp.scenario import ConstraintSpec
 
     def model(name: str, cap: int):
@@ -72,7 +72,7 @@ def worker(job: dict) -> dict:
         m = job["method"]
         if m in ("lp", "vi"):
             return wncs_lp.solve(mdp, m)
-        return solve_constrained(mdp, [spec], "lp" if m == "constrained-lp" else "lagrangian")
+        return solve(mdp, "lp" if m == "constrained-lp" else "lagrangian", constraints=[spec])
 
     run(model("paper_p12.toml", 4))  # warm-up: numba kernels and imports off the clock
     mdp = model(job["scenario"], job["cap"])

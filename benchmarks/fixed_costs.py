@@ -63,10 +63,14 @@ import numpy; mark("import numpy")
 import scipy.sparse; mark("import scipy.sparse")
 import scipy.sparse.csgraph; mark("import scipy.sparse.csgraph")
 import wncs_lp.cli; mark("import wncs_lp.cli")
-from wncs_lp.workflow import solve_scenario; mark("import wncs_lp.workflow")
+try:
+    from wncs_lp.workflow import run_scenario
+except ImportError:  # a baseline tree from before the route's step had its name
+    from wncs_lp.workflow import solve_scenario as run_scenario
+mark("import wncs_lp.workflow")
 from wncs_lp.scenario import load_scenario
 sc = load_scenario(sys.argv[1], ["tau_cap=" + sys.argv[2]]); mark("load the scenario")
-run = solve_scenario(sc, "auto"); mark("guard, build, solve")
+run = run_scenario(sc, "auto"); mark("guard, build, solve")
 from wncs_lp.truncation import policy_cap_mass
 policy_cap_mass(run.mdp, run.solution.policy); mark("mass at the cap")
 out = {b[0]: b[1] - a[1] for a, b in zip(marks, marks[1:])}

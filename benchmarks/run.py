@@ -43,7 +43,8 @@ from wncs_lp.models.cost import cost_tables  # noqa: E402
 from wncs_lp.models.preemption import preemption_automaton  # noqa: E402
 from wncs_lp.models.wncs import wncs_automaton  # noqa: E402
 from wncs_lp.scenario import load_scenario  # noqa: E402
-from wncs_lp.solvers import evaluate_policy, relative_value_iteration, solve, value_iteration  # noqa: E402
+from wncs_lp import solve  # noqa: E402
+from wncs_lp.solvers import evaluate_policy, relative_value_iteration, value_iteration  # noqa: E402
 from wncs_lp.solvers.kernels import numba_available, prepare  # noqa: E402
 from wncs_lp.solvers.lp import solve_lp  # noqa: E402
 

@@ -15,7 +15,7 @@ from wncs_lp.evaluate import evaluate
 from wncs_lp.policies import Policy, System, pairs_to_sigma, sigma_to_pairs
 from wncs_lp.workflow import make_policy
 from wncs_lp.simulate import simulate
-from wncs_lp.solvers import laurent_terms, solve_discounted
+from wncs_lp.solvers import laurent_terms
 from wncs_lp.solvers.dp import evaluate_policy
 
 cap = int(sys.argv[1]) if len(sys.argv) > 1 else 10
@@ -77,7 +77,7 @@ ev = evaluate_policy(mdp, sol)
 print(f"\n{'beta':>7} {'status':>8} {'gap':>9} {'(1-b) min v':>12} {'(1-b) max v':>12} {'same policy':>12} "
       f"{'|(1-b)v - g|':>13} {'|v - g/(1-b) - h|':>18}")
 for beta in (0.9, 0.99, 0.999, 0.9999):
-    d = solve_discounted(mdp, beta)
+    d = wncs_lp.solve(mdp, discount=beta)
     lt = laurent_terms(mdp, sol.policy, beta, gain=ev.gain, bias=ev.bias, stationary=ev.stationary)
     same = f"{np.mean(d.policy == sol.policy):.1%}"
     print(f"{beta:>7g} {d.status:>8} {d.gap:9.1e} {(1 - beta) * d.value.min():12.3f} {(1 - beta) * d.value.max():12.3f} "

@@ -23,7 +23,6 @@ from wncs_lp.errors import ScenarioWarning
 from wncs_lp.policies import MatrixFreePolicy
 from wncs_lp.workflow import make_policy
 from wncs_lp.solvers.matrix_free import matrix_free_cap_mass, matrix_free_evaluate
-from wncs_lp.workflow import solve_scenario
 from wncs_lp.truncation import CapCount
 from wncs_lp.untruncated import untruncated_interval
 
@@ -33,7 +32,7 @@ BASELINES = ("greedy", "max_age", "max_weight", "round_robin", "static", "subopt
 def main(cap: int = 12, slots: int = 40_000, reps: int = 20) -> None:
     warnings.simplefilter("ignore", ScenarioWarning)  # caps at the loop lengths, for a quick look
     sc = wncs_lp.load_scenario(wncs_lp.scenario_path("lab_5sensors"), [f"tau_cap={cap}"])
-    sol = solve_scenario(sc, "matrix-free").solution
+    sol = wncs_lp.solve(sc, "matrix-free")
     system = sol.system
     lo = sol.gain_lower
     print(f"lab_5sensors at cap {cap}: {sol.stats['n_states']:,} states; g* = {sol.gain:.10g} "

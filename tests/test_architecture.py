@@ -187,6 +187,35 @@ def test_every_moved_name_is_found_at_its_old_path_with_a_warning():
         importlib.import_module("wncs_lp.solvers").nothing
 
 
+def test_every_replaced_entry_point_still_runs_its_step_with_a_warning_naming_wncs_lp_solve():
+    """The old public solves (``solvers.solve``, ``solve_scenario``, ``solve_constrained``,
+    ``solve_discounted``, ``matrix_free.solve_mdp``, ``workflow.solve_any``) give the step that now
+    runs, for one release, with a DeprecationWarning naming the call that replaces them."""
+    import importlib
+
+    from wncs_lp import moved
+
+    assert {old.rsplit(".", 1)[1] for old in moved.REPLACED} == {
+        "solve", "solve_scenario", "solve_constrained", "solve_discounted", "solve_mdp", "solve_any"}
+    for old, (home, step, call) in moved.REPLACED.items():
+        module, name = old.rsplit(".", 1)
+        assert call.startswith("wncs_lp.solve(")
+        with pytest.warns(DeprecationWarning, match=re.escape(f"{old} is deprecated: call {call}")):
+            found = getattr(importlib.import_module(module), name)
+        assert found is getattr(importlib.import_module(home), step)
+        assert name not in vars(importlib.import_module(module))  # nothing left behind at the old place
+
+
+def test_one_public_solve():
+    """``wncs_lp.solve`` is the workflow floor's function, the one public solve; the steps it runs are
+    not exported by the top-level package."""
+    import wncs_lp
+    from wncs_lp.workflow import route
+
+    assert wncs_lp.solve is route.solve
+    assert [n for n in wncs_lp.__all__ if n.startswith("solve") or n.startswith("run_")] == ["solve"]
+
+
 # ----------------------------------------------------------------------------- floors
 def _room(module: str) -> str:
     """``wncs_lp.solvers.lp`` -> ``wncs_lp.solvers`` (a folder is one room); a top-level module is its own."""

@@ -134,13 +134,13 @@ def test_to_frame_without_pandas_is_one_clear_error(small, monkeypatch):
 
 
 def test_a_constrained_solution_is_certified_and_shows_its_mix():
-    from wncs_lp.constrained import solve_constrained
+    from wncs_lp import solve
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sc = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p12_cloud_budget"), ["tau_cap=6"])
     mdp = wncs_lp.build(sc)
-    sol = solve_constrained(mdp, sc.constraints, "lp")
+    sol = solve(mdp, "lp", constraints=sc.constraints)
     assert isinstance(sol.certificate, Certificate) and sol.ok and sol.success
     assert sol.certificate.contains(sol.gain, rtol=1e-12)
     text = repr(sol)

@@ -14,7 +14,8 @@ from reference.model_files import parse_drn, storm_dtmc
 
 import wncs_lp
 from wncs_lp.cli import main
-from wncs_lp.constrained import constraints_for, solve_constrained
+from wncs_lp.constrained import constraints_for
+from wncs_lp import solve
 from wncs_lp.export import (ExportError, constraint_reward_names, initial_state, load_policy_npz,
                             multi_objective_property, reward_models, save_drn)
 from wncs_lp.mdp import MDP
@@ -79,7 +80,7 @@ def budget():
     """The cloud-budget scenario at cap 8, its MDP and its certified constrained optimum."""
     sc = wncs_lp.load_scenario(BUDGET, ["tau_cap=8"])
     mdp = wncs_lp.build(sc)
-    return sc, mdp, solve_constrained(mdp, sc.constraints)
+    return sc, mdp, solve(mdp, constraints=sc.constraints)
 
 
 def test_constraint_quantities_travel_as_reward_models(tmp_path, budget):

@@ -12,7 +12,7 @@ from wncs_lp.export import FORMAT, FORMAT_VERSION, ExportError, load_npz, save_n
 from wncs_lp.mdp import MDP
 from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 
 FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
 

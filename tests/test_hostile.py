@@ -194,7 +194,7 @@ def no_work(monkeypatch):
     def refuse(*a, **k):
         raise AssertionError("work started before the output was checked")
 
-    monkeypatch.setattr(route, "solve_scenario", refuse)
+    monkeypatch.setattr(route, "run_scenario", refuse)
     monkeypatch.setattr(route, "build_scenario", refuse)
     monkeypatch.setattr(guard, "build_checked", refuse)
     monkeypatch.setattr("wncs_lp.scenario.load_scenario", refuse)

@@ -39,7 +39,7 @@ def test_the_matrix_free_solver_runs_on_the_installed_dependencies(monkeypatch):
     monkeypatch.delenv("WNCS_LP_NO_NUMBA", raising=False)
     from wncs_lp import build, load_scenario
     from wncs_lp.formulations import scenario_path
-    from wncs_lp.solvers import solve
+    from wncs_lp import solve
     from wncs_lp.solvers.matrix_free import matrix_free_value_iteration
 
     sc = load_scenario(scenario_path("paper_p12.toml"), ["tau_cap=7", "p=0.9"])

@@ -25,7 +25,7 @@ from wncs_lp.models import build  # noqa: E402
 from wncs_lp.models.preemption import PreemptionConfig  # noqa: E402
 from wncs_lp.models.wncs import idle_config  # noqa: E402
 from wncs_lp.scenario import load_scenario  # noqa: E402
-from wncs_lp.solvers import solve  # noqa: E402
+from wncs_lp import solve  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 F = ROOT / "formulations"

@@ -12,7 +12,7 @@ import pytest  # noqa: E402
 from wncs_lp import scenario_path  # noqa: E402
 from wncs_lp.models import build  # noqa: E402
 from wncs_lp.scenario import load_scenario  # noqa: E402
-from wncs_lp.solvers import solve  # noqa: E402
+from wncs_lp import solve  # noqa: E402
 from wncs_lp.viz import plot_policy_map, plot_policy_slice  # noqa: E402
 
 

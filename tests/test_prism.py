@@ -13,7 +13,7 @@ from reference.model_files import parse_prism, storm_mdp
 
 import wncs_lp
 from wncs_lp.cli import main
-from wncs_lp.constrained import solve_constrained
+from wncs_lp import solve
 from wncs_lp.export import initial_state, multi_objective_property, save_prism
 from wncs_lp.mdp import MDP
 
@@ -88,7 +88,7 @@ def test_constrained_scenario_in_prism_files(tmp_path):
     np.testing.assert_array_equal(d["rewards"]["send_rate_remote"], sends.astype(float))
     (init,) = d["labels"]["init"]
     g_storm = _storm_value(storm_mdp(d["P"], d["s_indices"], d["rewards"], init), multi_objective_property(sc), init)
-    cs = solve_constrained(mdp, sc.constraints)
+    cs = solve(mdp, constraints=sc.constraints)
     assert cs.status == "optimal"
     slack = STORM_MULTI_ATOL + STORM_RTOL * abs(cs.gain)
     assert cs.gain_lower - slack <= g_storm <= cs.gain_upper + slack

@@ -239,15 +239,15 @@ def test_the_constrained_lp_maps_its_backend_by_the_same_table(method, native):
     import warnings
 
     import wncs_lp
-    from wncs_lp.constrained import solve_constrained
+    from wncs_lp import solve
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sc = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p12_cloud_budget"), ["tau_cap=6"])
     mdp = wncs_lp.build(sc)
-    short = solve_constrained(mdp, sc.constraints, method, max_iter=2)
+    short = solve(mdp, method, constraints=sc.constraints, max_iter=2)
     assert short.stats["solver_status"] == native
     assert short.status == f"max_iter:{native}" and short.status_code is MAX_ITER and not short.ok
-    full = solve_constrained(mdp, sc.constraints, method)
+    full = solve(mdp, method, constraints=sc.constraints)
     assert full.status == "optimal" and full.status_code is OPTIMAL
     assert full.gain_lower <= full.gain <= full.gain_upper + 1e-9 * abs(full.gain)

@@ -12,7 +12,7 @@ from wncs_lp.models.system import System
 from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import scenario_from_dict
 from wncs_lp.simulate import simulate
-from wncs_lp.workflow import solve_scenario
+from wncs_lp.workflow import run_scenario
 from wncs_lp.untruncated import simulate_uncapped, untruncated_interval
 
 
@@ -31,7 +31,7 @@ def one_process(a: float, r: float, p: float, cap: int):
 def test_the_interval_holds_the_closed_form(a, r, p, cap):
     # P(tau = n) = p (1 - p)^(n - 1), q(n) = r (a^(2n) - 1) / (a^2 - 1): E q = r / (1 - (1 - p) a^2)
     true = r / (1 - (1 - p) * a * a)
-    run = solve_scenario(one_process(a, r, p, cap), "pi", need_mdp=True)
+    run = run_scenario(one_process(a, r, p, cap), "pi", need_mdp=True)
     # a one-sided 99.9% limit: the statement fails for one seed in a thousand, whatever the stream
     iv = untruncated_interval(run.solution.gain_lower, run.solution, run.mdp, slots=8_000, reps=8, seed=0,
                               confidence=0.999)
@@ -44,7 +44,7 @@ def test_the_interval_holds_the_closed_form(a, r, p, cap):
 @pytest.fixture(scope="module")
 def p12():
     sc = load_scenario(scenario_path("paper_p12.toml")).with_overrides({"tau_cap": 8})
-    return sc, solve_scenario(sc, "pi", need_mdp=True)
+    return sc, run_scenario(sc, "pi", need_mdp=True)
 
 
 def test_coupling_capped_aoi_never_exceeds_the_true_one(p12):
@@ -99,7 +99,7 @@ def test_a_policy_that_starves_a_process_past_the_cap_is_unbounded():
     # at cap 4 the lab's optimal policy leaves sensor 3 alone once its AoI sits at the cap (it costs
     # nothing more there): without the cap its AoI grows without end; round robin serves everyone
     sc = load_scenario(scenario_path("lab_5sensors"), ["tau_cap=4"])
-    run = solve_scenario(sc, "vi", need_mdp=True)
+    run = run_scenario(sc, "vi", need_mdp=True)
     system = System.from_scenario(sc)
     iv = untruncated_interval(run.solution.gain_lower, [make_policy("optimal", system, run.mdp, solution=run.solution),
                                                         make_policy("round_robin", system)],
@@ -139,7 +139,7 @@ def test_no_upper_end_where_a_run_without_the_cap_would_under_report():
 
     for sc, field in ((one(cost="aoi", arrival_probability=0.1), "process[1].arrival_probability"),
                       (one(cost=[1, 2, 3, 4]), "process[1].cost")):
-        run = solve_scenario(sc, "pi", need_mdp=True)
+        run = run_scenario(sc, "pi", need_mdp=True)
         iv = untruncated_interval(run.solution.gain_lower, run.solution, run.mdp, slots=2_000, reps=4)
         assert iv.lower == run.solution.gain_lower and not iv.upper < 10.0 and field in iv.message()
         with pytest.raises(ModelError, match=re.escape(field)):

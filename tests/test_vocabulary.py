@@ -44,15 +44,17 @@ def test_every_command_has_the_same_methods_and_default_auto(command):
 
 
 def test_library_defaults_are_auto_and_the_vocabulary_is_the_solvers():
-    from wncs_lp import solvers, workflow
+    from wncs_lp import solvers
+    from wncs_lp.constrained.registry import run_constrained
+    from wncs_lp.solvers.registry import run_average
     from wncs_lp.studies import cap_study
     from wncs_lp.policies import OptimalPolicy
-    from wncs_lp.workflow import make_policy, policy_for
+    from wncs_lp.workflow import make_policy, policy_for, run_scenario
     from wncs_lp.studies import run_sweep, tradeoff
 
     assert set(solvers.METHODS) == set(methods.METHODS)
     for fn in (wncs_lp.solve, make_policy, policy_for, OptimalPolicy.from_scenario, run_sweep, cap_study, tradeoff,
-               solvers.solve, workflow.solve_scenario):
+               run_average, run_constrained, run_scenario):
         assert inspect.signature(fn).parameters["method"].default == "auto", fn.__qualname__
 
 
@@ -141,10 +143,10 @@ def test_status_vocabulary(small, text, code):
 
 
 def test_constrained_solution_follows_the_vocabulary():
-    from wncs_lp.constrained import solve_constrained
+    from wncs_lp import solve
 
     sc = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p12_cloud_budget"), ["tau_cap=8"])
-    sol = solve_constrained(wncs_lp.build(sc), sc.constraints, "lp")
+    sol = solve(wncs_lp.build(sc), "lp", constraints=sc.constraints)
     assert sol.status_code == status.OPTIMAL and "certificate" in sol.message
     assert sol.summary()["status_code"] == status.OPTIMAL
 

@@ -668,7 +668,7 @@ def multi_objective_property(scenario: Any, *, direction: str = "min") -> str:
     subject to each ``[[constraint]]`` bound on its reward model's long-run average, e.g.
     ``multi(R{"cost"}min=? [LRA], R{"send_rate_remote"}<=0.2 [LRA])``.
 
-    Its value is the constrained optimum that :func:`wncs_lp.constrained.solve_constrained`
+    Its value is the constrained optimum that :func:`wncs_lp.solve` (``constraints=``)
     certifies (Storm's multi-objective engine lets the scheduler randomise, as the constrained
     optimum does).
 

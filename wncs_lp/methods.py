@@ -7,13 +7,15 @@ for it (its memory model), the method it falls back to when the guard refuses th
 and its help text. This module is the vocabulary alone: it imports nothing numeric, so the
 command line builds its parser from it without loading numpy. The function that runs each row is
 registered beside the dispatcher that calls it, imported normally (an :class:`Entry`:
-:data:`wncs_lp.solvers.registry.AVERAGE` for :func:`wncs_lp.solvers.solve`,
+:data:`wncs_lp.solvers.registry.AVERAGE` for :func:`~wncs_lp.solvers.registry.run_average`,
 :data:`wncs_lp.constrained.registry.CONSTRAINED_ENTRIES` for
-:func:`wncs_lp.constrained.solve_constrained`), and :func:`method` is the one validator of a
-method name. Every command (``solve``, ``evaluate``,
-``simulate``, ``sweep``, ``verify``, ``map``, ``capstudy``, ``tradeoff``) and every library entry
-point that takes a ``method`` (:func:`wncs_lp.solve`, :func:`wncs_lp.solvers.solve`,
-:func:`wncs_lp.workflow.solve_scenario`, :func:`wncs_lp.constrained.solve_constrained`,
+:func:`~wncs_lp.constrained.registry.run_constrained`,
+:data:`wncs_lp.solvers.discounted.DISCOUNTED_ENTRIES` for
+:func:`~wncs_lp.solvers.discounted.run_discounted`: the steps of :func:`wncs_lp.solve`), and
+:func:`method` is the one validator of a method name (:func:`discounted_method` reads a name for
+the discounted criterion). Every command (``solve``, ``evaluate``, ``simulate``, ``sweep``,
+``verify``, ``map``, ``capstudy``, ``tradeoff``) and every library entry
+point that takes a ``method`` (:func:`wncs_lp.solve` and its steps,
 :func:`wncs_lp.workflow.make_policy`, :func:`wncs_lp.workflow.policy_for`,
 :func:`wncs_lp.studies.run_sweep`, :func:`wncs_lp.studies.cap_study`,
 :func:`wncs_lp.studies.tradeoff`) reads its vocabulary and default (``"auto"``) from here:
@@ -54,7 +56,8 @@ __all__ = [
     "Method", "TABLE", "CONSTRAINED", "METHODS", "SCENARIO_METHODS", "CONSTRAINED_METHODS", "DEFAULT_METHOD",
     "LP_METHODS", "METHOD_HELP", "STORED", "STORED_LP", "BOX", "BIAS", "POLICY", "BASIS", "MDP_INPUT",
     "SCENARIO_INPUT", "AVERAGE", "CONSTRAINED_CRITERION", "DISCOUNTED_CRITERION", "DISCOUNTED", "DISCOUNTED_METHODS",
-    "TABLES", "Entry", "method", "check_method", "memory_of",
+    "TABLES", "CRITERIA", "DISCOUNTED_FOR", "Entry", "method", "check_method", "check_criterion", "discounted_method",
+    "memory_of",
     "exact_method", "EXACT_METHOD_MAX_STATES",
 ]
 
@@ -213,7 +216,7 @@ CONSTRAINED: dict[str, Method] = {m.name: m for m in (
            hint="the Lagrangian route"),
 )}
 
-#: The methods of the discounted criterion (:func:`wncs_lp.solvers.solve_discounted`).
+#: The methods of the discounted criterion (``wncs_lp.solve(..., discount=beta)``).
 DISCOUNTED: dict[str, Method] = {m.name: m for m in (
     Method("pi", "policy iteration with exact evaluation", criterion=DISCOUNTED_CRITERION),
     Method("vi", "value iteration, certified by MacQueen's bounds", criterion=DISCOUNTED_CRITERION),
@@ -223,6 +226,14 @@ DISCOUNTED: dict[str, Method] = {m.name: m for m in (
 #: The tables by criterion.
 TABLES: dict[str, dict[str, Method]] = {AVERAGE: TABLE, CONSTRAINED_CRITERION: CONSTRAINED,
                                         DISCOUNTED_CRITERION: DISCOUNTED}
+
+#: The criteria :func:`wncs_lp.solve` takes (``criterion=``), in the order the docs list them.
+CRITERIA = (AVERAGE, DISCOUNTED_CRITERION, CONSTRAINED_CRITERION)
+
+#: The discounted method each name of the average-cost vocabulary runs (``wncs-lp solve --discount``,
+#: ``wncs_lp.solve(..., criterion="discounted")``): ``auto`` is policy iteration, value iteration
+#: either kind of value iteration, every LP the discounted LP on HiGHS.
+DISCOUNTED_FOR = {"auto": "pi", "pi": "pi", "vi": "vi", "rvi": "vi", "lp": "lp", "lp-highs": "lp", "lp-cvxpy": "lp"}
 
 #: The methods every command and library function that solves an MDP takes, in help order.
 METHODS = tuple(name for name, m in TABLE.items() if m.takes == MDP_INPUT)
@@ -277,6 +288,35 @@ def method(name: str, constrained: bool = False, allowed: tuple[str, ...] | None
         raise SolverError(f"unknown discounted method {name!r}; expected one of {', '.join(names)}")
     what = "constrained method" if criterion == CONSTRAINED_CRITERION else "method"
     raise SolverError(f"unknown {what} {name!r}; expected one of {', '.join(map(repr, names))}")
+
+
+def check_criterion(criterion: str) -> str:
+    """``criterion`` if it is one of :data:`CRITERIA`, else one :class:`~wncs_lp.errors.SolverError` listing them."""
+    if isinstance(criterion, str) and criterion in CRITERIA:
+        return criterion
+    from .errors import SolverError
+
+    raise SolverError(f"unknown criterion {criterion!r}; expected one of {', '.join(map(repr, CRITERIA))}")
+
+
+def discounted_method(name: str) -> Method:
+    """The row of :data:`DISCOUNTED` that ``name`` runs: a discounted method's own name, or a name of
+    the average-cost vocabulary read through :data:`DISCOUNTED_FOR`.
+
+    Raises
+    ------
+    SolverError
+        ``name`` is neither; the message lists the discounted methods and the names that run them.
+    """
+    found = DISCOUNTED_FOR.get(name) if isinstance(name, str) else None
+    if found is None and isinstance(name, str) and name in DISCOUNTED:
+        found = name
+    if found is not None:
+        return DISCOUNTED[found]
+    from .errors import SolverError
+
+    raise SolverError(f"the discounted criterion solves with {', '.join(sorted(DISCOUNTED))} (method "
+                      f"{', '.join(DISCOUNTED_FOR)}); got method {name!r}")
 
 
 def check_method(name: str, allowed: tuple[str, ...] = METHODS) -> str:

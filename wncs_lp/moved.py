@@ -1,5 +1,12 @@
-"""Public names that moved to another module: the old import path still works for one release,
+"""Public names that moved or were replaced: the old import path still works for one release,
 with a :class:`DeprecationWarning` that names the new one.
+
+* :data:`MOVED` -- a name now held by another module under the same name;
+* :data:`REPLACED` -- an old public entry point of a solve (``wncs_lp.solvers.solve``,
+  ``solve_scenario``, ``solve_constrained``, ``solve_discounted``, ``matrix_free.solve_mdp``), now
+  a step of the one public :func:`wncs_lp.solve` under a name that says so; the old name gives
+  that step, which behaves as the old function did, and the warning names the call that replaces
+  it.
 
 A module that lost a name ends with ``def __getattr__(name): return moved.old_name(__name__, name)``
 (PEP 562). The new home is loaded by name here, and only here: it stands on a higher floor than
@@ -12,12 +19,10 @@ import importlib
 import warnings
 from typing import Any
 
-__all__ = ["MOVED", "old_name"]
+__all__ = ["MOVED", "REPLACED", "old_name"]
 
 #: Old ``module.name`` -> the module that now holds ``name``.
 MOVED = {
-    "wncs_lp.solvers.solve_scenario": "wncs_lp.workflow",
-    "wncs_lp.solvers.route.solve_scenario": "wncs_lp.workflow",
     "wncs_lp.policies.policy_for": "wncs_lp.workflow",
     "wncs_lp.policies.factory.policy_for": "wncs_lp.workflow",
     "wncs_lp.policies.make_policy": "wncs_lp.workflow",
@@ -26,11 +31,39 @@ MOVED = {
     "wncs_lp.policies.convert.policy_from_file": "wncs_lp.export",
 }
 
+_SCENARIO = ("wncs_lp.workflow.route", "run_scenario", "wncs_lp.solve(scenario, method=...)")
+_DISCOUNTED = ("wncs_lp.solvers.discounted", "run_discounted", "wncs_lp.solve(mdp, method=..., discount=beta)")
+_MATRIX_FREE = ("wncs_lp.solvers.matrix_free.solve", "run_on_mdp", "wncs_lp.solve(mdp, method=\"matrix-free\")")
+_ANY = ("wncs_lp.workflow.route", "solve", "wncs_lp.solve(problem, method=...)")
+
+#: Old ``module.name`` -> (the module and the name of the step that now runs, the call that replaces it).
+REPLACED = {
+    "wncs_lp.solvers.solve": ("wncs_lp.solvers.registry", "run_average", "wncs_lp.solve(mdp, method=...)"),
+    "wncs_lp.constrained.solve_constrained": ("wncs_lp.constrained.registry", "run_constrained",
+                                              "wncs_lp.solve(mdp, method=..., constraints=...)"),
+    "wncs_lp.solvers.solve_discounted": _DISCOUNTED,
+    "wncs_lp.solvers.discounted.solve_discounted": _DISCOUNTED,
+    "wncs_lp.solvers.solve_scenario": _SCENARIO,
+    "wncs_lp.solvers.route.solve_scenario": _SCENARIO,
+    "wncs_lp.workflow.solve_scenario": _SCENARIO,
+    "wncs_lp.workflow.route.solve_scenario": _SCENARIO,
+    "wncs_lp.workflow.solve_any": _ANY,
+    "wncs_lp.workflow.route.solve_any": _ANY,
+    "wncs_lp.solvers.matrix_free.solve_mdp": _MATRIX_FREE,
+    "wncs_lp.solvers.matrix_free.solve.solve_mdp": _MATRIX_FREE,
+}
+
 
 def old_name(module: str, name: str) -> Any:
     """``name`` of ``module`` where it moved (with a :class:`DeprecationWarning`), else the
     :class:`AttributeError` a module without it raises."""
-    new = MOVED.get(f"{module}.{name}")
+    old = f"{module}.{name}"
+    if old in REPLACED:
+        home, step, call = REPLACED[old]
+        warnings.warn(f"{old} is deprecated: call {call} (the step it was is now {home}.{step}; the old name goes "
+                      "in the next release)", DeprecationWarning, stacklevel=3)
+        return getattr(importlib.import_module(home), step)
+    new = MOVED.get(old)
     if new is None:
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
     warnings.warn(f"{module}.{name} has moved to {new}.{name}; import it from there (the old path goes in the "

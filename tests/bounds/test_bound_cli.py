@@ -12,7 +12,7 @@ from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.policies import SuboptimalPolicy
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 
 P12 = str(scenario_path("paper_p12"))
 

@@ -11,7 +11,7 @@ from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.policies import GreedyPolicy
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
 

@@ -17,7 +17,7 @@ from wncs_lp.models.system import System
 from wncs_lp.policies.suboptimal import SeparableGreedyPolicy, SuboptimalPolicy
 from wncs_lp.scenario import load_scenario
 from wncs_lp.simulate import simulate
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 from wncs_lp.solvers.matrix_free import matrix_free_evaluate
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")

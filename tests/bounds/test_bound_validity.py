@@ -14,7 +14,7 @@ from wncs_lp.bounds.joint_symmetry import process_symmetry
 from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.scenario import scenario_from_dict
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
 

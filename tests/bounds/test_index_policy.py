@@ -18,7 +18,7 @@ from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.workflow import make_policy
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 from wncs_lp.solvers.matrix_free import matrix_free_evaluate
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")

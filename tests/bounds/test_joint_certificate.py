@@ -13,7 +13,7 @@ from wncs_lp.errors import SolverError
 from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.scenario import load_scenario, scenario_from_dict
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 from wncs_lp.bounds.joint_chains import JointData, certify_tables
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")

@@ -13,7 +13,7 @@ from wncs_lp.errors import WncsError
 from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 
 
 

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import wncs_lp
-from wncs_lp.constrained import LinearConstraint, evaluate_rows, solve_constrained, with_cost
+from wncs_lp.constrained import LinearConstraint, evaluate_rows, with_cost
+from wncs_lp import solve
 from wncs_lp.constrained.convex import OccupationProgram
 from wncs_lp.errors import InfeasibleConstraintsError, SolverError
 from wncs_lp.models.quantities import pair_values
@@ -119,7 +120,7 @@ def test_linear_constraint_matches_the_constrained_lp(p6):
     mdp, prog, vi = p6
     rate = pair_values(mdp, ConstraintSpec("send_rate", server=0))
     B = 0.7 * float(averages(mdp, vi.policy, [rate])[0])
-    ref = solve_constrained(mdp, [ConstraintSpec("send_rate", server=0, max=B, label="x")], "lp")
+    ref = solve(mdp, "lp", constraints=[ConstraintSpec("send_rate", server=0, max=B, label="x")])
     sol = prog.solve(cp.Minimize(prog.cost()), {"x": prog.send_rate(0) <= B})
     assert ref.ok and sol.ok, (ref, sol)
     assert sol.gain == pytest.approx(ref.gain, rel=1e-7)

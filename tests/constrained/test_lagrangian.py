@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import wncs_lp
-from wncs_lp.constrained import LinearConstraint, solve_constrained, with_cost
+from wncs_lp.constrained import LinearConstraint, with_cost
+from wncs_lp import solve
 from wncs_lp.constrained.lagrangian import LP_MAX_PAIRS, solve_lagrangian
 from wncs_lp.errors import InfeasibleConstraintsError, SolverError
 from wncs_lp.mdp import MDP
@@ -163,8 +164,8 @@ def remote(B: float | None = None, **kw) -> ConstraintSpec:
 
 @pytest.mark.parametrize("B", [0.05, 0.2, 0.33])
 def test_paper_agrees_with_constrained_lp(p12, B):
-    lp = solve_constrained(p12, [remote(B)], "lp")
-    lag = solve_constrained(p12, [remote(B)], "lagrangian")
+    lp = solve(p12, "lp", constraints=[remote(B)])
+    lag = solve(p12, "lagrangian", constraints=[remote(B)])
     assert lp.status == "optimal" and lag.status == "optimal"
     assert lag.method == "lagrangian"
     # each gain inside the other's certificate (up to the certificates' own widths)
@@ -194,7 +195,7 @@ def test_paper_unreachable_bound_names_least_rate():
     least = wncs_lp.solve(with_cost(mdp, d), "lp").gain  # the unconstrained LP with cost d
     assert least > 0.05
     with pytest.raises(InfeasibleConstraintsError) as err:
-        solve_constrained(mdp, [remote(0.5 * least)], "lagrangian")
+        solve(mdp, "lagrangian", constraints=[remote(0.5 * least)])
     assert err.value.reachable[0] == pytest.approx(least, rel=1e-7, abs=1e-9)
     assert err.value.sides == ("max",)
 
@@ -205,9 +206,9 @@ def test_auto_switches_at_lp_max_pairs(monkeypatch):
     assert isinstance(LP_MAX_PAIRS, int) and LP_MAX_PAIRS > 4
     mdp = sender_mdp()  # 4 pairs
     con = LinearConstraint(send_values(mdp), max=0.2)
-    small = solve_constrained(mdp, [con], "auto")
+    small = solve(mdp, "auto", constraints=[con])
     assert small.method == "lp-highs" and small.gain == pytest.approx(2 - 3 * Q * 0.2, rel=1e-9)
     monkeypatch.setattr(lagrangian, "LP_MAX_PAIRS", 3)
-    sol = solve_constrained(mdp, [con], "auto")
+    sol = solve(mdp, "auto", constraints=[con])
     assert sol.method == "lagrangian" and sol.stats["method_requested"] == "auto"
     assert sol.gain == pytest.approx(2 - 3 * Q * 0.2, rel=1e-9)

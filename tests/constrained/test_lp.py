@@ -12,7 +12,8 @@ import pytest
 
 import wncs_lp
 from wncs_lp.chain import PolicyChain
-from wncs_lp.constrained import LinearConstraint, constraints_for, solve_constrained, with_cost
+from wncs_lp.constrained import LinearConstraint, constraints_for, with_cost
+from wncs_lp import solve
 from wncs_lp.errors import InfeasibleConstraintsError, SolverError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models.quantities import pair_values
@@ -43,7 +44,7 @@ GO = np.array([0.0, 1.0, 0.0])  # pairs: (0, stay), (0, go), (1, back)
 @pytest.mark.parametrize("b", [0.1, 0.2, 0.4])
 def test_closed_form_two_state_mix(method, b):
     mdp = two_state_mdp()
-    sol = solve_constrained(mdp, [LinearConstraint(GO, max=b, label="go <= b")], method)
+    sol = solve(mdp, method, constraints=[LinearConstraint(GO, max=b, label="go <= b")])
     assert sol.ok, sol
     assert sol.gain == pytest.approx(1 - 2 * b, abs=1e-8)
     assert sol.gain_lower <= 1 - 2 * b + 1e-8 and sol.gain_upper >= 1 - 2 * b - 1e-8
@@ -58,7 +59,7 @@ def test_min_bound_enters_as_a_max_bound_with_positive_multiplier():
     # "stay" frequency >= 0.7 is the same set as "go" frequency <= 0.15 (x_stay + 2 x_go = 1)
     mdp = two_state_mdp()
     stay = np.array([1.0, 0.0, 0.0])
-    sol = solve_constrained(mdp, [LinearConstraint(stay, min=0.7, label="stay >= 0.7")], "lp")
+    sol = solve(mdp, "lp", constraints=[LinearConstraint(stay, min=0.7, label="stay >= 0.7")])
     assert sol.gain == pytest.approx(0.7, abs=1e-8)
     rep = sol.constraints[0]
     assert rep.side == "min" and rep.active
@@ -76,9 +77,9 @@ def p12():
 def test_strong_duality_and_backends_agree(p12):
     _, mdp, opt = p12
     spec = ConstraintSpec("send_rate", server=0, max=0.15, label="send_rate[remote] <= 0.15")
-    a = solve_constrained(mdp, [spec], "lp")
-    b = solve_constrained(mdp, [spec], "lp-cvxpy")
-    c = solve_constrained(mdp, [spec], "lp-highs")
+    a = solve(mdp, "lp", constraints=[spec])
+    b = solve(mdp, "lp-cvxpy", constraints=[spec])
+    c = solve(mdp, "lp-highs", constraints=[spec])
     for s in (a, b, c):
         assert s.ok, s
         # LP value = Lagrangian lower bound = exact cost of the returned policy
@@ -96,7 +97,7 @@ def test_policy_values_agree_with_independent_evaluation(p12):
     sc, mdp, _ = p12
     specs = [ConstraintSpec("send_rate", server=0, max=0.15, label="r"),
              ConstraintSpec("process_cost", process=1, max=300.0, label="q2")]
-    sol = solve_constrained(mdp, specs, "lp")
+    sol = solve(mdp, "lp", constraints=specs)
     ev = evaluate(mdp, sol.policy, System.from_scenario(sc), "mixed")
     assert ev.randomised and ev.gain == pytest.approx(sol.gain, rel=1e-10)
     assert ev.mse[1] == pytest.approx(sol.constraints[1].value, rel=1e-10)
@@ -111,7 +112,7 @@ def test_bound_that_does_not_bind_leaves_the_unconstrained_optimum(p12):
     _, mdp, opt = p12
     d = pair_values(mdp, ConstraintSpec("send_rate", server=0))
     rate = float(d[opt.policy] @ PolicyChain(mdp, opt.policy).stationary)
-    sol = solve_constrained(mdp, [LinearConstraint(d, max=rate + 0.05, label="loose")], "lp")
+    sol = solve(mdp, "lp", constraints=[LinearConstraint(d, max=rate + 0.05, label="loose")])
     assert opt.gain_lower - 1e-7 * opt.gain <= sol.gain <= opt.gain_upper + 1e-7 * opt.gain
     assert sol.multipliers[0] == pytest.approx(0.0, abs=1e-6 * opt.gain)
     assert not sol.constraints[0].active and sol.n_randomized == 0
@@ -125,7 +126,7 @@ def test_infeasible_bound_names_the_least_reachable_value():
     assert least.gain > 0.01  # without idling the remote server cannot stay unused
     spec = ConstraintSpec("send_rate", server=0, max=0.01, label="send_rate[remote] <= 0.01")
     with pytest.raises(InfeasibleConstraintsError) as info:
-        solve_constrained(mdp, [spec], "lp")
+        solve(mdp, "lp", constraints=[spec])
     err = info.value
     assert isinstance(err, ValueError) and "\n" not in str(err)
     assert err.constraints == ("send_rate[remote] <= 0.01",) and err.sides == ("max",)
@@ -138,19 +139,19 @@ def test_jointly_infeasible_bounds_are_all_named(p12):
     d = pair_values(mdp, ConstraintSpec("send_rate", server=0))
     cons = [LinearConstraint(d, max=0.1, label="rate <= 0.1"), LinearConstraint(d, min=0.2, label="rate >= 0.2")]
     with pytest.raises(InfeasibleConstraintsError) as info:
-        solve_constrained(mdp, cons, "lp")
+        solve(mdp, "lp", constraints=cons)
     assert info.value.jointly and info.value.constraints == ("rate <= 0.1", "rate >= 0.2")
 
 
 def test_bad_constraint_objects_are_clear(p12):
     _, mdp, _ = p12
     with pytest.raises(SolverError, match="pairs"):
-        solve_constrained(mdp, [LinearConstraint(np.ones(3), max=1.0, label="short")], "lp")
+        solve(mdp, "lp", constraints=[LinearConstraint(np.ones(3), max=1.0, label="short")])
     with pytest.raises(SolverError, match="min = 2 > max = 1"):
         LinearConstraint(np.ones(3), max=1.0, min=2.0, label="x")
     with pytest.raises(SolverError, match="finite"):
         LinearConstraint(np.ones(3), max=float("nan"), label="x")
     with pytest.raises(SolverError, match="unknown constrained method"):
-        solve_constrained(mdp, [ConstraintSpec("cost", max=1e9, label="c")], "simplex")
+        solve(mdp, "simplex", constraints=[ConstraintSpec("cost", max=1e9, label="c")])
     with pytest.raises(SolverError, match="at least one constraint"):
-        solve_constrained(mdp, [], "lp")
+        solve(mdp, "lp", constraints=[])

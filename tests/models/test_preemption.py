@@ -163,7 +163,7 @@ def test_reference_gain(paper_mdp):
 
 @pytest.mark.parametrize("method", ["pi", "rvi"])
 def test_reference_gain_with_package_solvers(paper_mdp, method):
-    from wncs_lp.solvers import solve
+    from wncs_lp import solve
 
     sol = solve(paper_mdp, method=method)
     assert sol.gain_lower - 1e-9 * REF_GAIN <= REF_GAIN <= sol.gain_upper + 1e-9 * REF_GAIN
@@ -173,7 +173,7 @@ def test_reference_gain_with_package_solvers(paper_mdp, method):
 def test_lp_gain_against_the_damped_rvi_here():
     """The LP on the preemption model (Clarabel; cap 8, 6k states: the reference row's 23k took
     30 s of the suite) against this file's own certified relative value iteration."""
-    from wncs_lp.solvers import solve
+    from wncs_lp import solve
 
     mdp = build(paper(**{"model.tau_cap": 8}))
     lo, hi = certified_gain(mdp)

@@ -9,7 +9,7 @@ from wncs_lp.models.cost import mse_table
 from wncs_lp.models import build
 from wncs_lp.models.wncs import feasible_actions, idle_config
 from wncs_lp.scenario import load_scenario, scenario_from_dict
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 
 
 def one_process(a: float, r: float, p: float, cap: int, U: int, D: int, T: int, pd: float | None = None):

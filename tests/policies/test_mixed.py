@@ -11,7 +11,7 @@ import pytest  # noqa: E402
 
 import wncs_lp  # noqa: E402
 from wncs_lp.chain import PolicyChain  # noqa: E402
-from wncs_lp.constrained import solve_constrained  # noqa: E402
+from wncs_lp import solve  # noqa: E402
 from wncs_lp.errors import ModelError, PolicyError  # noqa: E402
 from wncs_lp.evaluate import evaluate  # noqa: E402
 from wncs_lp.export import ExportError, load_npz, load_policy_npz, save_npz, save_policy_npz  # noqa: E402
@@ -20,7 +20,6 @@ from wncs_lp.models import build  # noqa: E402
 from wncs_lp.policies import MixedPolicy, OptimalPolicy, RandomPolicy, System  # noqa: E402
 from wncs_lp.scenario import ConstraintSpec  # noqa: E402
 from wncs_lp.simulate import simulate  # noqa: E402
-from wncs_lp.solvers import solve  # noqa: E402
 from wncs_lp.viz import plot_policy_map, plot_policy_slice  # noqa: E402
 from wncs_lp.viz.maps import MIX_GID, MIX_OFFSET  # noqa: E402
 
@@ -36,7 +35,7 @@ def setup():
     sc = p12()
     mdp = build(sc)
     system = System.from_scenario(sc)
-    sol = solve_constrained(mdp, [ConstraintSpec("send_rate", server=0, max=0.2, label="x")], "lp")
+    sol = solve(mdp, "lp", constraints=[ConstraintSpec("send_rate", server=0, max=0.2, label="x")])
     return sc, mdp, system, sol
 
 

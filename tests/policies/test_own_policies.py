@@ -14,7 +14,7 @@ from wncs_lp.policies import (Configuration, Policy, StaticPolicy, System, as_po
                               pairs_to_sigma, sigma_to_pairs)
 from wncs_lp.scenario import load_scenario
 from wncs_lp.simulate import simulate
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 from wncs_lp.solvers.dp import evaluate_policy
 
 

@@ -22,7 +22,7 @@ from wncs_lp.policies import (
 )
 from wncs_lp.scenario import load_scenario, scenario_from_dict
 from wncs_lp.workflow import make_policy
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 from wncs_lp.solvers.dp import evaluate_policy
 
 A1 = [[1.02, 1, 0, 1], [0, 1, 0.2, 0], [0, 0, 1, 0], [0, 0, 0, 1.01]]

@@ -37,13 +37,13 @@ def test_the_monte_carlo_table_shows_a_row_status_that_is_not_ok():
 @pytest.fixture()
 def inaccurate(monkeypatch):
     """Every solve of the reproduction ends "inaccurate:precision" (the numbers of the real solve)."""
-    real = context.solve_scenario
+    real = context.run_scenario
 
     def solve(*a, **k):
         run = real(*a, **k)
         return dataclasses.replace(run, solution=dataclasses.replace(run.solution, status="inaccurate:precision"))
 
-    monkeypatch.setattr(context, "solve_scenario", solve)
+    monkeypatch.setattr(context, "run_scenario", solve)
 
 
 def test_a_solve_that_did_not_close_keeps_its_status_and_is_noted(tmp_path, inaccurate):
@@ -90,13 +90,13 @@ def test_c3_shows_every_planted_status_in_its_tables_and_section(tmp_path, inacc
     Monte Carlo sweep) ends "inaccurate:precision"; no row of its tables may read as if it closed."""
     import wncs_lp.studies.sweep as sweep_mod
 
-    real = sweep_mod.solve_scenario
+    real = sweep_mod.run_scenario
 
     def solve(*a, **k):
         run = real(*a, **k)
         return dataclasses.replace(run, solution=dataclasses.replace(run.solution, status="inaccurate:precision"))
 
-    monkeypatch.setattr(sweep_mod, "solve_scenario", solve)
+    monkeypatch.setattr(sweep_mod, "run_scenario", solve)
     prof = dataclasses.replace(PROFILES["quick"], name="tiny-status", caps_2p=(7,), p_grid=(0.9, 1.0),
                                sweep_cap_2p=7, mc_slots=200, mc_reps=2)
     ctx = Context(tmp_path, prof)

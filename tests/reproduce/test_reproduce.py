@@ -108,7 +108,7 @@ def test_the_mass_at_the_cap_agrees_with_an_independent_computation(quick):
     from wncs_lp import scenario_path
     from wncs_lp.models import build
     from wncs_lp.scenario import load_scenario
-    from wncs_lp.solvers import solve
+    from wncs_lp import solve
     from wncs_lp.truncation import policy_cap_mass
 
     out, _ = quick

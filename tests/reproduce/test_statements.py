@@ -16,7 +16,7 @@ from wncs_lp.policies import StaticPolicy, default_assignment
 from wncs_lp.reproduce.context import Solved
 from wncs_lp.reproduce.statements import idle_share, static_disagreement
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 
 
 def _solved(file: str, overrides: list[str]):

@@ -10,8 +10,8 @@ from wncs_lp import MDP, scenario_path
 from wncs_lp.errors import SolverError
 from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve
-from wncs_lp.solvers.discounted import discounted_value, laurent_terms, solve_discounted
+from wncs_lp import solve
+from wncs_lp.solvers.discounted import discounted_value, laurent_terms, run_discounted
 from wncs_lp.solvers.dp import evaluate_policy
 
 METHODS = ("pi", "vi", "lp")
@@ -38,7 +38,7 @@ def closed_form(stay: float, q: float, beta: float) -> tuple[np.ndarray, int]:
 def test_two_states_against_the_closed_form(method, beta):
     stay, q = 2.0, 0.5
     v, pair0 = closed_form(stay, q, beta)
-    sol = solve_discounted(two_states(stay, q), beta, method)
+    sol = solve(two_states(stay, q), method, discount=beta)
     assert sol.status == "optimal"
     np.testing.assert_allclose(sol.value, v, rtol=1e-12)
     assert np.all(sol.lower <= v + 1e-9 * v.max()) and np.all(v <= sol.value + 1e-9 * v.max())
@@ -50,8 +50,8 @@ def test_the_optimal_action_switches_with_beta():
     # by hand: staying costs 2 per step, going 3 once and then nothing for a while; a patient
     # controller (beta = 0.9) goes, an impatient one (beta = 0.1) stays
     assert closed_form(2.0, 0.5, 0.9)[1] == 1 and closed_form(2.0, 0.5, 0.1)[1] == 0
-    assert solve_discounted(two_states(2.0, 0.5), 0.9).policy[0] == 1
-    assert solve_discounted(two_states(2.0, 0.5), 0.1).policy[0] == 0
+    assert solve(two_states(2.0, 0.5), discount=0.9).policy[0] == 1
+    assert solve(two_states(2.0, 0.5), discount=0.1).policy[0] == 0
 
 
 def test_the_value_of_a_fixed_policy_by_hand():
@@ -72,7 +72,7 @@ def p12():
 @pytest.mark.parametrize("beta", [0.5, 0.99])
 def test_the_three_methods_agree_on_the_paper_scenario(p12, beta):
     mdp, _ = p12
-    sols = [solve_discounted(mdp, beta, m) for m in METHODS]
+    sols = [solve(mdp, m, discount=beta) for m in METHODS]
     assert all(s.status == "optimal" for s in sols)
     for s in sols[1:]:
         np.testing.assert_allclose(s.value, sols[0].value, rtol=1e-9)
@@ -92,7 +92,7 @@ def test_the_laurent_expansion_towards_the_average_cost(p12):
 
 def test_discounted_optimal_is_average_optimal_near_one(p12):
     mdp, sol = p12
-    d = solve_discounted(mdp, 0.999)
+    d = solve(mdp, discount=0.999)
     # (1 - beta) v*_beta brackets g* up to O(1 - beta); Blackwell: the policy is average-optimal
     assert np.abs((1 - 0.999) * d.value - sol.gain).max() < 0.01 * sol.gain
     g = evaluate_policy(mdp, d.policy).gain
@@ -102,7 +102,11 @@ def test_discounted_optimal_is_average_optimal_near_one(p12):
 def test_bad_input_is_one_clear_error():
     mdp = two_states(2.0, 0.5)
     with pytest.raises(SolverError, match=r"beta must be in \[0, 1\); got 1"):
-        solve_discounted(mdp, 1)
+        solve(mdp, discount=1)
     with pytest.raises(SolverError, match="unknown discounted method 'rvi'; expected one of pi, vi, lp"):
-        solve_discounted(mdp, 0.5, "rvi")
+        run_discounted(mdp, 0.5, "rvi")  # the step takes the discounted table's own names
+    # wncs_lp.solve reads the average-cost vocabulary too (rvi -> vi), and refuses a name outside both
+    assert solve(mdp, "rvi", discount=0.5).method == "vi"
+    with pytest.raises(SolverError, match="discounted criterion solves with lp, pi, vi .*got method 'matrix-free'"):
+        solve(mdp, "matrix-free", discount=0.5)
 

@@ -12,7 +12,8 @@ from wncs_lp.errors import SolverError
 from wncs_lp.mdp import MDP
 from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve, value_iteration
+from wncs_lp.solvers import value_iteration
+from wncs_lp import solve
 from wncs_lp.solvers.certify import greedy_first, q_values
 from wncs_lp.solvers.dp import greedy_policy
 from wncs_lp.solvers.kernels import code_table, get_kernel, numba_available, prepare

@@ -16,7 +16,8 @@ from wncs_lp.status import STATUS_CODES
 from wncs_lp.mdp import MDP
 from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve, value_iteration
+from wncs_lp.solvers import value_iteration
+from wncs_lp import solve
 from wncs_lp.solvers import lp as lpmod
 from wncs_lp.solvers.highs import HIGHS_STATUS, HIGHS_VARIANTS
 from wncs_lp.solvers.lp import FAILED_STATUSES, choose_lp, highs_max_rows, solve_lp

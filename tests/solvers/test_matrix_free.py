@@ -19,7 +19,7 @@ from wncs_lp.models.system import System  # noqa: E402
 from wncs_lp.workflow import make_policy  # noqa: E402
 from wncs_lp.simulate import simulate  # noqa: E402
 from wncs_lp.solvers import bracket  # noqa: E402
-from wncs_lp.workflow import solve_scenario  # noqa: E402
+from wncs_lp.workflow import run_scenario  # noqa: E402
 from wncs_lp.solvers.matrix_free import (  # noqa: E402
     BoxLayout,
     MatrixFreeSolution,
@@ -196,7 +196,7 @@ def test_solve_registers_the_method_on_a_built_mdp():
     assert sol.method == "matrix-free" and sol.status == "optimal"
     assert sol.policy.shape == (mdp.n_states,) and sol.bias.shape == (mdp.n_states,)
     assert _within(ref.gain, sol.gain_lower, sol.gain_upper)
-    direct = solve_scenario(sc, "matrix-free").solution
+    direct = run_scenario(sc, "matrix-free").solution
     assert isinstance(direct, MatrixFreeSolution) and direct.gain == pytest.approx(sol.gain, rel=1e-12)
     with pytest.raises(SolverError, match="matrix-free"):
         wncs_lp.solve(wncs_lp.MDP.from_dense(np.ones((1, 1, 1)), np.ones((1, 1))), "matrix-free")

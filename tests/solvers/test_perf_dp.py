@@ -9,7 +9,8 @@ from wncs_lp import scenario_path
 from wncs_lp.mdp import MDP
 from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import bracket, policy_iteration, relative_value_iteration, solve, value_iteration
+from wncs_lp.solvers import bracket, policy_iteration, relative_value_iteration, value_iteration
+from wncs_lp import solve
 from wncs_lp.solvers import kernels
 from wncs_lp.solvers.kernels import ScipyKernel, get_kernel, numba_available, prepare
 

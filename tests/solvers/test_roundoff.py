@@ -13,7 +13,8 @@ from wncs_lp import scenario_path
 from wncs_lp.mdp import MDP
 from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import policy_iteration, relative_value_iteration, solve, value_iteration
+from wncs_lp.solvers import policy_iteration, relative_value_iteration, value_iteration
+from wncs_lp import solve
 from wncs_lp.solvers.dp import PRECISION_STALL_SWEEPS, roundoff_bound
 from wncs_lp.solvers.kernels import get_kernel, numba_available
 from wncs_lp.status import INACCURATE, status_message

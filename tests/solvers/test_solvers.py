@@ -10,6 +10,7 @@ import itertools
 import numpy as np
 import pytest
 
+from wncs_lp import solve
 from wncs_lp.errors import ModelError, PolicyError, SolverError
 from wncs_lp.mdp import MDP
 from wncs_lp.solvers import (
@@ -20,7 +21,6 @@ from wncs_lp.solvers import (
     policy_iteration,
     q_values,
     relative_value_iteration,
-    solve,
     solve_lp,
     value_iteration,
 )

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 import wncs_lp
-from wncs_lp.constrained import solve_constrained
+from wncs_lp import solve
 from wncs_lp.scenario import ConstraintSpec, load_scenario
 from wncs_lp.studies import read_points, read_rows, run_sweep, tradeoff
 
@@ -123,7 +123,7 @@ def test_tradeoff_does_not_reuse_another_scenarios_points(tmp_path):
     res = tradeoff(m7, [remote], 0, [0.1, 0.2], method="lp", out=out, **KW)
     assert res.computed == 2 and res.reused == 0
     for p in res.points:  # the point of p = 0.7, against a cold constrained solve of it
-        direct = solve_constrained(m7, [ConstraintSpec("send_rate", server=0, max=p.bound)], "lp-cvxpy")
+        direct = solve(m7, "lp-cvxpy", constraints=[ConstraintSpec("send_rate", server=0, max=p.bound)])
         assert p.gain == pytest.approx(direct.gain, rel=1e-7)
     # the reference optimum is p = 0.7's too (certified value iteration on the unconstrained MDP)
     vi = wncs_lp.solve(m7, "vi")

@@ -203,7 +203,7 @@ def test_a_warm_started_sweep_closes_every_certificate_like_a_cold_solve():
     Every row must be "ok" and its gain that of a cold solve by another scheme (Gauss-Seidel
     value iteration, as ``wncs-lp solve`` runs it), within both certificates (1e-9)."""
     from wncs_lp import build
-    from wncs_lp.solvers import solve
+    from wncs_lp import solve
 
     sc = load_scenario(P12, ["tau_cap=16"])
     res = run_sweep(sc, "p", [0.8, 0.85], ["optimal"], method="rvi")
@@ -224,16 +224,16 @@ def test_a_resumed_sweep_computes_an_error_row_again(tmp_path, monkeypatch):
 
     sc = load_scenario(P12, ["tau_cap=7"])
     out = tmp_path / "sw"
-    real = sweep_mod.solve_scenario
+    real = sweep_mod.run_scenario
 
     def stops_short(*a, **k):
         run = real(*a, **k)
         return dataclasses.replace(run, solution=dataclasses.replace(run.solution, status="inaccurate:precision"))
 
-    monkeypatch.setattr(sweep_mod, "solve_scenario", stops_short)
+    monkeypatch.setattr(sweep_mod, "run_scenario", stops_short)
     first = run_sweep(sc, "p", [0.9], ["optimal", "static"], out, method="vi", plot=False)
     assert [r.status for r in first.rows] == ["error: solver status inaccurate:precision", "ok"]
-    monkeypatch.setattr(sweep_mod, "solve_scenario", real)
+    monkeypatch.setattr(sweep_mod, "run_scenario", real)
     lines = []
     again = run_sweep(sc, "p", [0.9], ["optimal", "static"], out, method="vi", plot=False, log=lines.append)
     assert again.computed == 1 and again.reused == 1

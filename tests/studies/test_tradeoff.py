@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import wncs_lp
-import wncs_lp.constrained as constrained
+import wncs_lp.constrained.registry as registry
 from wncs_lp.studies.tradeoff import TradeoffResult, read_points, tradeoff
 from wncs_lp.errors import WncsError
 from wncs_lp.scenario import ConstraintSpec
@@ -120,7 +120,7 @@ def test_flat_beyond_the_threshold_at_the_unconstrained_optimum(p6, curve6, curv
 
 
 class _Counting:
-    """Wraps solve_constrained: counts calls and raises KeyboardInterrupt at call number ``stop``."""
+    """Wraps the constrained step (run_constrained): counts calls and raises KeyboardInterrupt at call number ``stop``."""
 
     def __init__(self, real, stop=None):
         self.real, self.stop, self.calls, self.bounds = real, stop, 0, []
@@ -134,18 +134,18 @@ class _Counting:
 
 
 def test_resume_after_interrupt_solves_only_the_missing_bounds(p6, tmp_path, monkeypatch):
-    # cold points (warm=False): each is one solve_constrained call to count; the warm sweep's
+    # cold points (warm=False): each is one run_constrained call to count; the warm sweep's
     # resume is in test_tradeoff_warm.py
-    real = constrained.solve_constrained
+    real = registry.run_constrained
     grid = [0.05, 0.1, 0.15, 0.2, 0.25]
     first = _Counting(real, stop=3)
-    monkeypatch.setattr(constrained, "solve_constrained", first)
+    monkeypatch.setattr(registry, "run_constrained", first)
     with pytest.raises(KeyboardInterrupt):
         tradeoff(p6, [REMOTE], 0, grid, method="lp", out=tmp_path / "t", plot=False, warm=False)
     done = read_points(tmp_path / "t" / "tradeoff.csv")
     assert [p.bound for p in done] == [0.05, 0.1]  # written after each point
     second = _Counting(real)
-    monkeypatch.setattr(constrained, "solve_constrained", second)
+    monkeypatch.setattr(registry, "run_constrained", second)
     res = tradeoff(p6, [REMOTE], 0, grid, method="lp", out=tmp_path / "t", plot=False, warm=False)
     assert second.calls == 3 and sorted(second.bounds) == [0.15, 0.2, 0.25]
     assert res.computed == 3 and res.reused == 2
@@ -155,7 +155,7 @@ def test_resume_after_interrupt_solves_only_the_missing_bounds(p6, tmp_path, mon
     np.testing.assert_allclose(res.gains, fresh.gains, rtol=1e-10)
     # a third run solves nothing; a wider grid only the new bound
     third = _Counting(real)
-    monkeypatch.setattr(constrained, "solve_constrained", third)
+    monkeypatch.setattr(registry, "run_constrained", third)
     res3 = tradeoff(p6, [REMOTE], 0, grid + [0.3], method="lp", out=tmp_path / "t", plot=False, warm=False)
     assert third.calls == 1 and res3.reused == 5 and len(res3.points) == 6
     with open(tmp_path / "t" / "tradeoff.csv", newline="") as fh:
@@ -175,7 +175,7 @@ def test_other_constraints_stay_fixed(p6):
     res = tradeoff(p6, [edge, REMOTE], 1, [0.1, 0.2], method="lp")
     assert res.others == ("send_rate[edge] <= 0.3",) and res.index == 1
     for p in res.points:
-        direct = constrained.solve_constrained(p6, [edge, ConstraintSpec("send_rate", server=0, max=p.bound)], "lp")
+        direct = wncs_lp.solve(p6, "lp", constraints=[edge, ConstraintSpec("send_rate", server=0, max=p.bound)])
         assert p.gain == pytest.approx(direct.gain, rel=1e-8)
 
 

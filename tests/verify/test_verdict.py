@@ -17,7 +17,7 @@ from wncs_lp import scenario_path
 from wncs_lp.cli import main
 from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 from wncs_lp.verify import check_threshold, policy_context
 from wncs_lp.verify.verdict import (DEPENDS, ERROR, FAILS, HOLDS, combine, structural_verdict, verdict_of)
 

@@ -19,7 +19,7 @@ from wncs_lp.mdp import MDP
 from wncs_lp.models import build
 from wncs_lp.models.wncs import idle_config
 from wncs_lp.scenario import load_scenario
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 from wncs_lp.solvers.certify import q_values
 from wncs_lp.verify import (
     CheckReport,

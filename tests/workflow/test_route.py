@@ -15,7 +15,7 @@ from wncs_lp.errors import SolverError
 from wncs_lp.models import guard
 from wncs_lp.constrained.registry import CONSTRAINED_ENTRIES
 from wncs_lp.solvers.registry import AVERAGE
-from wncs_lp.workflow import ScenarioSolve, WarmStart, solve_scenario
+from wncs_lp.workflow import ScenarioSolve, WarmStart, run_scenario
 
 P12 = wncs_lp.scenario_path("paper_p12")
 
@@ -50,15 +50,15 @@ def test_anything_else_is_one_solver_error_naming_its_type(bad):
         wncs_lp.solve(bad)
 
 
-def test_solve_constrained_names_a_scenario_instead_of_an_attribute_error():
-    from wncs_lp.constrained import solve_constrained
+def test_the_constrained_step_names_a_scenario_instead_of_an_attribute_error():
+    from wncs_lp.constrained.registry import run_constrained
 
     sc = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p12_cloud_budget"), ["tau_cap=7"])
     with pytest.raises(SolverError, match="takes an MDP.*got Scenario"):
-        solve_constrained(sc, sc.constraints)
+        run_constrained(sc, sc.constraints)
     # wncs_lp.solve solves a scenario's bounds, as the command line does
     got = wncs_lp.solve(sc)
-    direct = solve_constrained(wncs_lp.build(sc), sc.constraints, "lp-cvxpy")
+    direct = wncs_lp.solve(wncs_lp.build(sc), "lp-cvxpy", constraints=sc.constraints)
     assert got.gain == pytest.approx(direct.gain, rel=1e-7) and got.stats["method_requested"] == "auto"
     plain = wncs_lp.solve(sc, "vi", constrained=False)
     assert plain.gain < got.gain  # the bound costs something
@@ -66,13 +66,13 @@ def test_solve_constrained_names_a_scenario_instead_of_an_attribute_error():
 
 def test_the_route_reports_what_it_built(small):
     sc, mdp = small
-    run = solve_scenario(sc, "vi")
+    run = run_scenario(sc, "vi")
     assert isinstance(run, ScenarioSolve) and run.built and run.mdp.n_states == mdp.n_states
     assert run.method == run.requested == "vi" and run.route == "asked for" and not run.constrained
     assert run.build_seconds > 0 and run.seconds >= run.build_seconds
     np.testing.assert_array_equal(run.solution.sigma, run.mdp.a_indices[run.solution.policy])
     assert "vi (asked for)" in repr(run) and "2,703 states" in repr(run)
-    mf = solve_scenario(sc, "matrix-free")
+    mf = run_scenario(sc, "matrix-free")
     assert not mf.built and mf.method == "matrix-free" and _within(run.solution, mf.gain)
 
 
@@ -84,39 +84,39 @@ def test_auto_falls_back_to_matrix_free_when_the_stored_matrix_would_not_fit(sma
         raise guard.SizeLimitError("the MDP would need more memory than the limit", None)
 
     monkeypatch.setattr(guard, "build_checked", refuse)
-    run = solve_scenario(sc)
+    run = run_scenario(sc)
     assert run.method == "matrix-free" and run.requested == "auto" and run.mdp is None
     assert run.route == "auto: the stored matrix would not fit in memory" and _within(ref, run.gain)
     assert wncs_lp.solve(sc).method == "matrix-free"  # the library's auto is the command line's
     for kw in ({"need_mdp": True}, {"method": "vi"}):  # the caller needs the MDP, or asked for a stored one
         with pytest.raises(guard.SizeLimitError):
-            solve_scenario(sc, **kw)
+            run_scenario(sc, **kw)
 
 
 def test_a_warm_start_is_used_on_the_same_state_space_only(small):
     sc, mdp = small
-    first = solve_scenario(sc, "vi")
+    first = run_scenario(sc, "vi")
     warm = first.warm()
     assert isinstance(warm, WarmStart)
-    again = solve_scenario(sc.with_overrides({"p": 0.85}), "vi", warm=warm)
+    again = run_scenario(sc.with_overrides({"p": 0.85}), "vi", warm=warm)
     assert again.warm_start and again.solution.iterations < first.solution.iterations
-    pi = solve_scenario(sc.with_overrides({"p": 0.85}), "pi", warm=warm)
+    pi = run_scenario(sc.with_overrides({"p": 0.85}), "pi", warm=warm)
     assert pi.warm_start and _within(again.solution, pi.gain)
-    lp = solve_scenario(sc.with_overrides({"p": 0.85}), "lp", warm=warm)
+    lp = run_scenario(sc.with_overrides({"p": 0.85}), "lp", warm=warm)
     assert not lp.warm_start  # the LP takes none
-    other = solve_scenario(sc.with_overrides({"tau_cap": 7}), "vi", warm=warm)
+    other = run_scenario(sc.with_overrides({"tau_cap": 7}), "vi", warm=warm)
     assert not other.warm_start  # another state space
 
 
 def test_a_method_for_the_other_kind_of_problem_is_refused_with_the_list(small):
     sc, _ = small
     with pytest.raises(SolverError, match="'lagrangian' does not solve an unconstrained scenario.*matrix-free"):
-        solve_scenario(sc, "lagrangian")
+        run_scenario(sc, "lagrangian")
     budget = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p12_cloud_budget"), ["tau_cap=7"])
     with pytest.raises(SolverError, match=r"'rvi' does not solve a scenario with \[\[constraint\]\] tables"):
-        solve_scenario(budget, "rvi")
+        run_scenario(budget, "rvi")
     with pytest.raises(SolverError, match="takes no keyword 'tolerance'"):
-        solve_scenario(sc, "vi", tolerance=1e-8)
+        run_scenario(sc, "vi", tolerance=1e-8)
 
 
 # ----------------------------------------------------------------------------- the registry

@@ -74,7 +74,7 @@ def _check_route(args: argparse.Namespace, scenario) -> None:
 
 def cmd_map(args: argparse.Namespace) -> int:
     from ..maps import parse_config_spec
-    from ..workflow import solve_scenario
+    from ..workflow import run_scenario
     from ..viz import file_backend, image_formats
 
     file_backend()
@@ -93,7 +93,7 @@ def cmd_map(args: argparse.Namespace) -> int:
         return _saved_policy_map(args, scenario, axes, fixed, prog)
     _check_route(args, scenario)
     config = []  # the configuration, read off the MDP before the solve (a bad --servers fails early)
-    run = solve_scenario(scenario, args.method, constrained=False if args.ignore_constraints else None,
+    run = run_scenario(scenario, args.method, constrained=False if args.ignore_constraints else None,
                          force=args.force, threads=args.threads, progress=prog, need_mdp=args.slice is not None,
                          check=lambda mdp: config.append(parse_config_spec(mdp, args.servers)))
     if not run.built:

@@ -78,7 +78,7 @@ def _write_failed(message: str | None) -> int:
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
-    from ..workflow import solve_scenario
+    from ..workflow import run_scenario
 
     if args.dry_run:  # what wncs-lp validate says: the checks and the size, nothing built
         from .validate import cmd_validate
@@ -92,7 +92,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     scenario = load(args)
     prog = progress_for(args)
     t0 = time.perf_counter()
-    run = solve_scenario(scenario, args.method, constrained=False if args.ignore_constraints else None,
+    run = run_scenario(scenario, args.method, constrained=False if args.ignore_constraints else None,
                          force=args.force, threads=args.threads, progress=prog)
     if not run.built:
         return _matrix_free(args, scenario, run, t0)
@@ -131,27 +131,18 @@ def _unconstrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> 
     return _write_failed(failed) or (0 if sol.ok else 1)
 
 
-#: The discounted method of each --method (the average-cost vocabulary, read for --discount).
-_DISCOUNTED = {"auto": "pi", "pi": "pi", "vi": "vi", "rvi": "vi", "lp": "lp", "lp-highs": "lp", "lp-cvxpy": "lp"}
-
-
 def _discounted(args: argparse.Namespace) -> int:
-    """``--discount BETA``: the discounted problem, certified (:mod:`wncs_lp.solvers.discounted`)."""
-    from ..errors import WncsError
+    """``--discount BETA``: the discounted problem through the one route, certified
+    (:mod:`wncs_lp.solvers.discounted`; ``--method`` read by :data:`wncs_lp.methods.DISCOUNTED_FOR`)."""
     from ..export import initial_state
-    from ..solvers.discounted import solve_discounted
-    from ..solvers.route import build_scenario
+    from ..workflow import run_scenario
 
-    if args.method not in _DISCOUNTED:
-        raise WncsError(f"--discount solves with {', '.join(sorted(set(_DISCOUNTED.values())))} (--method "
-                        f"{', '.join(_DISCOUNTED)}); got --method {args.method}")
     scenario = load(args)
-    if scenario.constraints and not args.ignore_constraints:
-        raise WncsError(f"{scenario.source}: --discount solves the unconstrained problem, and this scenario has "
-                        "[[constraint]] tables; add --ignore-constraints to solve it without them")
     t0 = time.perf_counter()
-    mdp, t_build = build_scenario(scenario, force=args.force, progress=progress_for(args))
-    d = solve_discounted(mdp, args.discount, _DISCOUNTED[args.method])
+    run = run_scenario(scenario, args.method, discount=args.discount,
+                       constrained=False if args.ignore_constraints else None, force=args.force,
+                       progress=progress_for(args))
+    mdp, d, t_build = run.mdp, run.solution, run.build_seconds
     s0 = initial_state(mdp)
     payload = {**head(args, scenario, mdp), "criterion": "discounted", "beta": d.beta, "method": d.method,
                "status": d.status, "gap": d.gap, "initial_state": mdp.state_label(s0),

@@ -16,13 +16,13 @@ from .common import (NONNEGATIVE, Command, add_method_arg, add_scenario_args, ad
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    from ..workflow import solve_scenario
+    from ..workflow import run_scenario
     from ..verify import Tolerance, verify_all
     from ..verify.verdict import FAILS, RULE, combine
 
     scenario = load(args)
     t0 = time.perf_counter()
-    run = solve_scenario(scenario, args.method, constrained=False, force=args.force, threads=args.threads,
+    run = run_scenario(scenario, args.method, constrained=False, force=args.force, threads=args.threads,
                          need_mdp=True)
     mdp, sol = run.mdp, run.solution
     reports = verify_all(mdp, sol, tolerance=Tolerance(args.atol, args.rtol), examples=args.examples)

@@ -91,7 +91,7 @@ from .result import ConstrainedSolution
 
 __all__ = ["LP_MAX_PAIRS", "auto_method", "solve_lagrangian"]
 
-#: ``solve_constrained(method="auto")`` uses the LP up to this many pairs, this route beyond.
+#: A constrained ``method="auto"`` uses the LP up to this many pairs, this route beyond.
 #: Measured by ``benchmarks/constrained.py`` (send_rate[remote] <= 0.2 on p12/p123 with
 #: allow_idle, 2 cores, two runs; benchmarks/README.md, "Constrained solves"): the constrained
 #: LP took 0.4-0.5 s at 5,629 pairs, 4.1-4.6 s at 21,057, 15 s at 46,885, 39-50 s at 83,113 and

@@ -17,7 +17,7 @@ from ..errors import ArgumentError, PolicyError
 from ..mdp import MDP
 from ..methods import DEFAULT_METHOD
 from ..models.system import System
-from ..solvers import solve
+from ..solvers.registry import run_average
 from .base import Policy
 from .baselines import MaxAgePolicy, MaxWeightPolicy, RoundRobinPolicy
 from .optimal import OptimalPolicy
@@ -73,7 +73,7 @@ def make_basic_policy(
         raise PolicyError(f"policy {name!r} comes from the bounds room: wncs_lp.workflow.make_policy makes it")
     if name == OPTIMAL:
         if solution is None:
-            solution = solve(mdp, method=method, progress=progress)
+            solution = run_average(mdp, method=method, progress=progress)
         return OptimalPolicy(mdp, solution, system)
     if name == "suboptimal":
         return SuboptimalPolicy(system)

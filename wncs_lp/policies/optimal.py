@@ -11,7 +11,7 @@ from ..methods import DEFAULT_METHOD
 from ..models import build
 from ..models.system import System
 from ..scenario import Scenario
-from ..solvers import solve
+from ..solvers.registry import run_average
 from .base import Policy
 
 __all__ = ["OptimalPolicy", "CappedPolicy", "ClippedPolicy"]
@@ -63,7 +63,7 @@ class OptimalPolicy(Policy):
         ``method`` (:data:`wncs_lp.methods.METHODS`, default ``"auto"``) and wrap the solution."""
         system = system or System.from_scenario(scenario)
         mdp = mdp if mdp is not None else build(scenario)
-        return cls(mdp, solve(mdp, method=method, **solve_kw), system)
+        return cls(mdp, run_average(mdp, method=method, **solve_kw), system)
 
     @property
     def gain(self) -> float:

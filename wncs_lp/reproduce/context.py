@@ -19,7 +19,7 @@ from ..models import build
 from ..scenario import Scenario, load_scenario
 from ..methods import EXACT_METHOD_MAX_STATES, exact_method
 from ..solvers.result import Solution
-from ..workflow import solve_scenario
+from ..workflow import run_scenario
 from ..truncation import CAP_MASS_WARN, CapMass, cap_mass
 from ..verify.verdict import decide, subclaims_verdict  # the rules of the verdicts live together
 from ..viz import save_figure
@@ -563,7 +563,7 @@ class Context:
             self.log(f"solving {Path(scenario.source).name} caps {scenario.tau_caps} p={scenario.p:g} "
                      f"({mdp.n_states:,} states)")
             t0 = time.perf_counter()
-            sol = solve_scenario(scenario, exact_method(mdp.n_states), constrained=False, mdp=mdp).solution
+            sol = run_scenario(scenario, exact_method(mdp.n_states), constrained=False, mdp=mdp).solution
             P_pi = mdp.P[sol.policy]
             classes = recurrent_classes(P_pi)
             unichain = len(classes) == 1

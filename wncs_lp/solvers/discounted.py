@@ -50,16 +50,17 @@ import scipy.sparse.linalg as spla
 
 from ..errors import SolverError
 from ..mdp import MDP
-from .. import methods
+from .. import methods, moved
 from ..methods import DISCOUNTED, DISCOUNTED_CRITERION, Entry
 from ..policy_forms import policy_array
 from .certify import greedy_first
 from .result import describe_array, result_repr
 
-__all__ = ["DiscountedSolution", "solve_discounted", "discounted_value", "laurent_terms", "DISCOUNTED_METHODS",
+__all__ = ["DiscountedSolution", "run_discounted", "check_discount", "discounted_value", "laurent_terms",
+           "DISCOUNTED_METHODS",
            "DISCOUNTED_ENTRIES"]
 
-#: The methods :func:`solve_discounted` takes (the rows of :data:`wncs_lp.methods.DISCOUNTED`).
+#: The methods :func:`run_discounted` takes (the rows of :data:`wncs_lp.methods.DISCOUNTED`).
 DISCOUNTED_METHODS = tuple(DISCOUNTED)
 
 
@@ -106,6 +107,11 @@ class DiscountedSolution:
         """The action index of each state (a row of ``mdp.action_table``), QuantEcon's ``sigma``."""
         return None if self.pair_actions is None else np.asarray(self.pair_actions)[self.policy]
 
+    @property
+    def ok(self) -> bool:
+        """The certificate closed (``status == "optimal"``), as every solution of the toolkit says it."""
+        return self.status == "optimal"
+
     def __repr__(self) -> str:
         rows = [("status", self.status), ("beta", f"{self.beta:g}"), ("gap", f"{self.gap:.3g}"),
                 ("value", describe_array(self.value, "floats") + " (exact, of the policy)"),
@@ -115,8 +121,12 @@ class DiscountedSolution:
         return result_repr(f"DiscountedSolution of {self.policy.size:,} states by {self.method}", rows)
 
 
-def _check_beta(beta: Any) -> float:
-    b = float(beta)
+def check_discount(beta: Any) -> float:
+    """``beta`` as a float if it is a discount factor in [0, 1), else one :class:`SolverError` saying so."""
+    try:
+        b = float(beta)
+    except (TypeError, ValueError):
+        raise SolverError(f"the discount factor beta must be a number in [0, 1); got {beta!r}") from None
     if not 0.0 <= b < 1.0:
         raise SolverError(f"the discount factor beta must be in [0, 1); got {beta!r}")
     return b
@@ -139,7 +149,7 @@ def discounted_value(mdp: MDP, policy: Any = None, beta: float = 0.95, *, sigma:
     -------
     (n,) float array
     """
-    b = _check_beta(beta)
+    b = check_discount(beta)
     arr = policy_array(mdp, policy, sigma)
     if np.issubdtype(arr.dtype, np.integer):
         P_d, c_d = mdp.P[arr], np.asarray(mdp.cost)[arr]
@@ -228,9 +238,10 @@ DISCOUNTED_ENTRIES: dict[str, Entry] = {
 }
 
 
-def solve_discounted(mdp: MDP, beta: float, method: str = "pi", *, tol: float = 1e-9,
-                     max_iter: int | None = None) -> DiscountedSolution:
-    """Solve the discounted problem with discount factor ``beta``, certified (module docstring).
+def run_discounted(mdp: MDP, beta: float, method: str = "pi", *, tol: float = 1e-9,
+                   max_iter: int | None = None) -> DiscountedSolution:
+    """The discounted step of :func:`wncs_lp.solve` (``discount=beta``) on an MDP: the discounted
+    problem with discount factor ``beta``, certified (module docstring).
 
     Parameters
     ----------
@@ -254,7 +265,7 @@ def solve_discounted(mdp: MDP, beta: float, method: str = "pi", *, tol: float = 
     SolverError
         beta outside [0, 1), an unknown method, or an LP HiGHS could not solve.
     """
-    b = _check_beta(beta)
+    b = check_discount(beta)
     found = DISCOUNTED_ENTRIES[methods.method(method, criterion=DISCOUNTED_CRITERION).name]
     t0 = time.perf_counter()
     pol, its, status = found.run(mdp, b, tol, max_iter)
@@ -283,3 +294,8 @@ def laurent_terms(mdp: MDP, policy: Any, beta: float, *, gain: float, bias: np.n
     h = h - float(np.asarray(stationary) @ h)
     return {"beta": float(beta), "gain_error": float(np.abs((1 - beta) * v - gain).max()),
             "bias_error": float(np.abs(v - gain / (1 - beta) - h).max())}
+
+
+def __getattr__(name: str) -> Any:
+    """``solve_discounted``, replaced by :func:`wncs_lp.solve` (:mod:`wncs_lp.moved`): still found here, with a warning."""
+    return moved.old_name(__name__, name)

@@ -3,7 +3,7 @@
 a method for a scenario (:func:`scenario_row`), and what a solve hands on (:class:`ScenarioSolve`,
 :class:`WarmStart`).
 
-The route itself, :func:`wncs_lp.workflow.solve_scenario` (size guard -> build -> solve, and
+The route itself, :func:`wncs_lp.workflow.route.run_scenario` (size guard -> build -> solve, and
 ``auto``'s fallback to the matrix-free solver), lives on the workflow floor above the solvers and
 the constrained solvers, which it calls.
 """
@@ -68,7 +68,7 @@ class ScenarioSolve:
 
     Attributes
     ----------
-    solution : Solution, MatrixFreeSolution or ConstrainedSolution
+    solution : Solution, MatrixFreeSolution, ConstrainedSolution or DiscountedSolution
     mdp : MDP or None
         The MDP that was built (None on the matrix-free route: nothing was).
     method : str
@@ -116,8 +116,10 @@ class ScenarioSolve:
     def __repr__(self) -> str:
         size = f"{self.mdp.n_states:,} states" if self.mdp is not None else "no MDP built"
         via = self.method if self.method == self.requested else f"{self.requested} -> {self.method}"
-        return (f"ScenarioSolve({via} ({self.route}), {size}, status {self.solution.status!r}, gain "
-                f"{self.gain:.10g}, build {self.build_seconds:.2f} s, total {self.seconds:.2f} s)")
+        value = (f"gain {self.gain:.10g}" if hasattr(self.solution, "gain")
+                 else f"discounted, beta {self.solution.beta:g}")
+        return (f"ScenarioSolve({via} ({self.route}), {size}, status {self.solution.status!r}, {value}, "
+                f"build {self.build_seconds:.2f} s, total {self.seconds:.2f} s)")
 
 
 def as_scenario(scenario: Any) -> Any:
@@ -190,5 +192,5 @@ def build_scenario(scenario: Any, method: str | None = None, *, constrained: boo
 
 
 def __getattr__(name: str) -> Any:
-    """Names that moved to the workflow floor (:mod:`wncs_lp.moved`): still found here, with a warning."""
+    """Names that moved or were replaced (:mod:`wncs_lp.moved`): still found here, with a warning."""
     return moved.old_name(__name__, name)

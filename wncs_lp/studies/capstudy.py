@@ -23,7 +23,7 @@ evaluation.
 
 The caps are walked in order by the studies' grid runner (:func:`~wncs_lp.studies.runner.run_grid`,
 each cap handing the first cap's policy and its gain to the next), every solve through the one
-route (:func:`wncs_lp.workflow.solve_scenario`).
+route (:func:`wncs_lp.workflow.route.run_scenario`).
 """
 from __future__ import annotations
 
@@ -121,11 +121,11 @@ def _cap_row(scenario: Scenario, opts: dict[str, Any], cap: int, carry: dict[str
     through the one route: the enumerated MDP where it fits, else (``auto``) the matrix-free
     solver. The carry holds the first cap's optimal policy and the previous gain."""
     from ..models.system import System
-    from ..workflow import solve_scenario
+    from ..workflow import run_scenario
 
     t0 = time.perf_counter()
     sc = scenario.with_overrides({"tau_cap": cap})
-    run = solve_scenario(sc, opts["method"], constrained=False, force=opts["force"], threads=opts["threads"])
+    run = run_scenario(sc, opts["method"], constrained=False, force=opts["force"], threads=opts["threads"])
     sol = run.solution
     system = System.from_scenario(sc) if run.built else sol.system
     mass, states, pairs, policy = (_enumerated(run, system) if run.built else _matrix_free(sol, system, opts))
@@ -204,7 +204,7 @@ def cap_study(
         change from the previous cap is at most ``gain_rtol``.
     method : str
         Solver method (:data:`wncs_lp.methods.METHODS`), through the one route
-        (:func:`wncs_lp.workflow.solve_scenario`).
+        (:func:`wncs_lp.workflow.route.run_scenario`).
     force : bool
         Build past the size guard.
     threads : int, optional

@@ -59,7 +59,7 @@ from ..policies.factory import NEED_MDP, OPTIMAL
 from ..progress import eta
 from ..scenario import Scenario
 from ..solvers.route import build_scenario
-from ..workflow import make_policy, solve_scenario
+from ..workflow import make_policy, run_scenario
 from .executors import check_executor
 from .folder import FINGERPRINT, StudyFolder, read_table
 from .grid import parse_values, value_key
@@ -227,7 +227,7 @@ def _policy_row(name: str, sc: Scenario, system: System, mdp: Any, opts: dict[st
     try:
         solution = None
         if name == OPTIMAL:
-            run = solve_scenario(sc, opts["method"], constrained=False, mdp=mdp, warm=warm,
+            run = run_scenario(sc, opts["method"], constrained=False, mdp=mdp, warm=warm,
                                  threads=opts.get("threads"))
             solution, new_warm, out["warm_start"] = run.solution, run.warm(), run.warm_start
             if not solution.ok:

@@ -1,6 +1,6 @@
 r"""Trade-off curves: the constrained optimum as one constraint's bound is swept (a study).
 
-For every bound b of the grid, ``solve_constrained(mdp, constraints', method)`` where
+For every bound b of the grid, ``wncs_lp.solve(mdp, method, constraints=constraints')`` where
 constraints' is the list with constraint ``index`` given the bound b on ``side`` (its other
 bound, if any, and every other constraint unchanged). The curve b -> g*_C(b) is piecewise
 linear and convex in a ``max`` bound (non-increasing), its slope is -lambda(b) (the multiplier
@@ -410,7 +410,7 @@ def _solve_point(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side:
 
 
 def _warm_route(mdp: MDP, cons: Sequence[LinearConstraint], method: str) -> bool:
-    """Whether :func:`~wncs_lp.constrained.solve_constrained` would solve these by an LP that a
+    """Whether :func:`~wncs_lp.constrained.registry.run_constrained` would solve these by an LP that a
     warm HiGHS model can re-solve from the previous basis (the method's registry row, or the row
     ``auto``'s rule picks)."""
     return row_that_runs(method, mdp, cons).warm_start == BASIS
@@ -423,10 +423,10 @@ def _width(p: TradeoffPoint) -> float:
 
 def _one_solve(mdp: MDP, trial: tuple[LinearConstraint, ...], index: int, side: str, bound: float, label: str,
                method: str, warm: Any = None) -> TradeoffPoint:
-    from ..constrained import solve_constrained  # looked up at call time (tests count the solves)
+    from ..constrained import registry  # its run_constrained looked up at call time (tests count the solves)
 
     try:
-        sol = warm.solve(trial) if warm is not None else solve_constrained(mdp, trial, method)
+        sol = warm.solve(trial) if warm is not None else registry.run_constrained(mdp, trial, method)
     except InfeasibleConstraintsError as exc:
         reach = math.nan
         for lab, r, s in zip(exc.constraints, exc.reachable, exc.sides):
@@ -447,9 +447,9 @@ def _one_solve(mdp: MDP, trial: tuple[LinearConstraint, ...], index: int, side: 
 def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: str, method: str,
                unconstrained: str, threads: int | None = None) -> dict[str, Any]:
     """The optimum without the swept constraint, the quantity's value under it, and its reachable end."""
-    from ..constrained import evaluate_rows, reachable_range, solve_constrained
-    from ..solvers import solve
-    from ..solvers.registry import average_entry
+    from ..constrained import evaluate_rows, reachable_range
+    from ..constrained.registry import run_constrained
+    from ..solvers.registry import average_entry, run_average
 
     c = cons[index]
     others = cons[:index] + cons[index + 1:]
@@ -457,13 +457,13 @@ def _reference(mdp: MDP, cons: tuple[LinearConstraint, ...], index: int, side: s
         others = cons[:index] + (c.with_bounds(**{side: None}),) + cons[index + 1:]
     t0 = time.perf_counter()
     if others:
-        sol = solve_constrained(mdp, others, method)
+        sol = run_constrained(mdp, others, method)
         probs = np.asarray(sol.policy, dtype=float)
         g, lo, hi, how = sol.gain, sol.gain_lower, sol.gain_upper, f"constrained ({sol.method}) without the swept one"
     else:
         found = average_entry(unconstrained)
         extra = {"threads": threads} if threads is not None and found.takes_keyword("threads", on_mdp=True) else {}
-        sol = solve(mdp, method=unconstrained, **extra)
+        sol = run_average(mdp, method=unconstrained, **extra)
         probs = np.zeros(mdp.n_pairs)
         probs[np.asarray(sol.policy, dtype=np.int64)] = 1.0
         g, lo, hi, how = sol.gain, sol.gain_lower, sol.gain_upper, f"unconstrained ({sol.method})"
@@ -637,7 +637,7 @@ def tradeoff(
     side : {"max", "min"}
         Which bound of the constraint is swept (its other bound, if any, is kept).
     method : {"auto", "lp", "lp-highs", "lp-cvxpy", "lagrangian"}
-        Passed to :func:`~wncs_lp.constrained.solve_constrained` at every point.
+        Passed to :func:`~wncs_lp.constrained.registry.run_constrained` at every point.
     out : path, optional
         Output folder (see the module docstring): written after every point and resumed.
     progress : callable or bool, optional

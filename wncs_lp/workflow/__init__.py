@@ -3,12 +3,14 @@
 It stands above the solvers, the constrained solvers, the bounds and the policies, and below the
 studies, the reproduction and the command line:
 
-* :func:`solve_any` -- what :func:`wncs_lp.solve` runs: an MDP by :func:`wncs_lp.solvers.solve`,
-  anything else by :func:`solve_scenario`;
-* :func:`solve_scenario` (:mod:`~wncs_lp.workflow.route`) -- the one route from a scenario to a
-  solution: size guard, build, solve (:func:`wncs_lp.solvers.solve` or
-  :func:`wncs_lp.constrained.solve_constrained`), and ``auto``'s fallback to the matrix-free
-  solver when the stored matrix would not fit;
+* :func:`solve` (:mod:`~wncs_lp.workflow.route`) -- ``wncs_lp.solve``, the one public solve: an
+  MDP or a scenario, ``method=``, ``criterion=`` (average, constrained, discounted);
+* :func:`run_scenario` -- its route from a scenario to a solution: size guard, build, solve (the
+  step of the criterion: :func:`~wncs_lp.solvers.registry.run_average`,
+  :func:`~wncs_lp.constrained.registry.run_constrained`,
+  :func:`~wncs_lp.solvers.discounted.run_discounted`), and ``auto``'s fallback to the
+  matrix-free solver when the stored matrix would not fit; it hands back what was built and
+  why (:class:`ScenarioSolve`), which the command line and the studies read;
 * :func:`make_policy` (:mod:`~wncs_lp.workflow.policies`) -- the policy factory: a policy by name,
   the policies room's own (:func:`~wncs_lp.policies.factory.make_basic_policy`) or the bounds
   room's (:func:`~wncs_lp.bounds.named.named_policy`: ``relaxation``, ``lookahead``, ``index``);
@@ -21,8 +23,17 @@ registered beside their dispatchers (:mod:`wncs_lp.solvers.registry`,
 """
 from __future__ import annotations
 
+from typing import Any
+
+from .. import moved
 from ..solvers.route import ScenarioSolve, WarmStart, as_scenario, build_scenario
 from .policies import make_policy, policy_for
-from .route import solve_any, solve_scenario
+from .route import run_scenario, solve
 
-__all__ = ["solve_any", "solve_scenario", "make_policy", "policy_for", "ScenarioSolve", "WarmStart", "as_scenario", "build_scenario"]
+__all__ = ["solve", "run_scenario", "make_policy", "policy_for", "ScenarioSolve", "WarmStart", "as_scenario", "build_scenario"]
+
+
+def __getattr__(name: str) -> Any:
+    """``solve_scenario`` and ``solve_any``, replaced by :func:`solve` (:mod:`wncs_lp.moved`): still found here,
+    with a warning."""
+    return moved.old_name(__name__, name)

@@ -17,7 +17,7 @@ from ..policies.factory import (BOUND_POLICY_NAMES, NEED_MDP, OPTIMAL, POLICY_NA
                                 make_basic_policy, parse_assignment)
 from ..progress import as_progress
 from ..solvers.route import build_scenario
-from .route import solve_scenario
+from .route import run_scenario
 
 __all__ = ["make_policy", "policy_for"]
 
@@ -86,7 +86,7 @@ def policy_for(
 
     The MDP is built (after the size guard) when the policy needs it (``optimal``,
     ``best_static``) or ``need_mdp`` is true; ``optimal`` is solved by the one route
-    (:func:`wncs_lp.workflow.solve_scenario`), which without ``need_mdp`` may take the
+    (:func:`wncs_lp.workflow.route.run_scenario`), which without ``need_mdp`` may take the
     matrix-free method when the stored matrix would not fit (``auto``, or ``matrix-free`` asked
     for): the policy is then a :class:`~wncs_lp.policies.MatrixFreePolicy` and no MDP is built.
 
@@ -127,7 +127,7 @@ def policy_for(
     system = System.from_scenario(scenario, explore="auto" if lean else "full")
     mdp = solution = None
     if name == OPTIMAL:
-        run = solve_scenario(scenario, method, constrained=False, force=force, threads=threads, progress=prog,
+        run = run_scenario(scenario, method, constrained=False, force=force, threads=threads, progress=prog,
                              need_mdp=need_mdp)
         if not run.built:  # auto's matrix-free route (the stored matrix would not fit): its one byte a state
             return PolicySetup(system, None, MatrixFreePolicy.from_solution(run.solution),

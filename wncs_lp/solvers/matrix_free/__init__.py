@@ -58,12 +58,15 @@ types, save / load), :mod:`.capmass` (time at the cap), :mod:`.solve` (entry poi
 """
 from __future__ import annotations
 
+from typing import Any
+
+from ... import moved
 from .capmass import cap_cost, matrix_free_cap_mass, matrix_free_cap_masses
 from .iterate import BYTES_PER_STATE, matrix_free_bytes, matrix_free_evaluate, matrix_free_value_iteration, policy_table
 from .layout import DOMAINS, BoxLayout, drains_to_initial
 from .options import SCHEMES, MatrixFreeOptions
 from .result import MatrixFreeEvaluation, MatrixFreeSolution, load_solution
-from .solve import solve_mdp
+from .solve import run_on_mdp
 from .sweeper import reachable_mask
 
 __all__ = [
@@ -80,9 +83,14 @@ __all__ = [
     "cap_cost",
     "matrix_free_cap_mass",
     "matrix_free_cap_masses",
-    "solve_mdp",
+    "run_on_mdp",
     "matrix_free_bytes",
     "BYTES_PER_STATE",
     "DOMAINS",
     "SCHEMES",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """``solve_mdp``, replaced by :func:`wncs_lp.solve` (:mod:`wncs_lp.moved`): still found here, with a warning."""
+    return moved.old_name(__name__, name)

@@ -1,21 +1,22 @@
-"""The matrix-free solver on a built MDP, answered on the MDP (:func:`solve_mdp`, the registry's
-``matrix-free`` row for an MDP). A scenario is solved through the one route,
-:func:`wncs_lp.workflow.solve_scenario`."""
+"""The matrix-free solver on a built MDP, answered on the MDP (:func:`run_on_mdp`, the registry's
+``matrix-free`` row for an MDP: ``wncs_lp.solve(mdp, method="matrix-free")``). A scenario is
+solved through the one route, :func:`wncs_lp.workflow.route.run_scenario`."""
 from __future__ import annotations
 
 from dataclasses import replace
 from typing import Any
 
+from ... import moved
 from ...errors import SolverError
 from ...models.system import System
 from ..result import Solution
 from .iterate import matrix_free_value_iteration
 
-__all__ = ["solve_mdp"]
+__all__ = ["run_on_mdp"]
 
 
-def solve_mdp(mdp, **kw: Any) -> Solution:
-    """``solve(mdp, "matrix-free")``: the matrix-free solve of the MDP's scenario, returned on
+def run_on_mdp(mdp, **kw: Any) -> Solution:
+    """``wncs_lp.solve(mdp, "matrix-free")``: the matrix-free solve of the MDP's scenario, returned on
     the MDP (pair-index policy, bias on its states; :meth:`MatrixFreeSolution.on_mdp`)."""
     model = getattr(getattr(mdp, "states", None), "model", None)
     scenario = getattr(model, "scenario", None)
@@ -27,3 +28,8 @@ def solve_mdp(mdp, **kw: Any) -> Solution:
     out = sol.on_mdp(mdp)
     return replace(out, stats={**out.stats, "n_mdp_states": mdp.n_states})
 
+
+
+def __getattr__(name: str) -> Any:
+    """``solve_mdp``, replaced by :func:`wncs_lp.solve` (:mod:`wncs_lp.moved`): still found here, with a warning."""
+    return moved.old_name(__name__, name)
