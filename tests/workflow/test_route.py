@@ -64,6 +64,31 @@ def test_the_constrained_step_names_a_scenario_instead_of_an_attribute_error():
     assert plain.gain < got.gain  # the bound costs something
 
 
+def test_one_solve_takes_the_criterion_and_its_argument(small):
+    """criterion= and its argument: the discounted answer on a scenario is the one on its built MDP
+    (the exact value of the same policy: the route adds nothing), a constrained solve of an MDP
+    takes its bounds, and each mismatch is one clear error naming what was expected."""
+    sc, mdp = small
+    direct = wncs_lp.solve(mdp, "lp", discount=0.9)  # the discounted LP on HiGHS
+    routed = wncs_lp.solve(sc, discount=0.9)  # auto -> policy iteration, through the route
+    assert routed.method == "pi" and routed.ok and direct.ok
+    np.testing.assert_allclose(routed.value, direct.value, rtol=1e-9)
+    assert wncs_lp.solve(sc, "pi", criterion="discounted", discount=0.9).method == "pi"
+    budget = wncs_lp.load_scenario(wncs_lp.scenario_path("paper_p12_cloud_budget"), ["tau_cap=7"])
+    with pytest.raises(SolverError, match=r"discounted criterion solves the unconstrained problem.*constrained=False"):
+        wncs_lp.solve(budget, discount=0.9)
+    cons = wncs_lp.solve(wncs_lp.build(budget), "lp", constraints=budget.constraints)
+    assert cons.gain > wncs_lp.solve(budget, "lp", criterion="average").gain  # the bound costs something
+    for kw, message in [({"criterion": "lp"}, "unknown criterion 'lp'; expected one of 'average', 'discounted'"),
+                        ({"criterion": "discounted"}, "needs its discount factor: discount=beta"),
+                        ({"criterion": "constrained"}, "needs its bounds: constraints="),
+                        ({"discount": 0.9, "criterion": "average"}, "criterion 'average' takes none"),
+                        ({"constraints": [], "criterion": "discounted", "discount": 0.5}, "criterion 'discounted' takes none"),
+                        ({"discount": 1.0}, r"beta must be in \[0, 1\); got 1.0")]:
+        with pytest.raises(SolverError, match=message):
+            wncs_lp.solve(mdp, **kw)
+
+
 def test_the_route_reports_what_it_built(small):
     sc, mdp = small
     run = run_scenario(sc, "vi")
