@@ -206,6 +206,32 @@ def test_every_replaced_entry_point_still_runs_its_step_with_a_warning_naming_wn
         assert name not in vars(importlib.import_module(module))  # nothing left behind at the old place
 
 
+def test_renamed_names_and_moved_modules_are_found_at_their_old_paths_with_a_warning():
+    """``bounds.joint_chains.Certificate`` (now ``TableCertificate``, distinct from the solutions'
+    ``Certificate``) and every public name of ``wncs_lp.maps`` (now ``policy_grids``, the data
+    beside ``viz.maps``, the drawing) are found at the old path for one release, with a warning."""
+    import importlib
+
+    from wncs_lp import moved, policy_grids
+
+    for old, new in moved.RENAMED.items():
+        module, name = old.rsplit(".", 1)
+        home, renamed = new.rsplit(".", 1)
+        assert renamed != name
+        with pytest.warns(DeprecationWarning, match=re.escape(f"{old} is renamed {new}")):
+            found = getattr(importlib.import_module(module), name)
+        assert found is getattr(importlib.import_module(home), renamed)
+        assert name not in vars(importlib.import_module(module))
+    assert moved.MOVED_MODULES == {"wncs_lp.maps": "wncs_lp.policy_grids"}
+    names = policy_grids.__all__
+    assert {"policy_grid", "slice_grid", "region_stats", "matrix_free_grid", "action_name"} <= set(names)
+    for name in names:
+        with pytest.warns(DeprecationWarning, match=f"wncs_lp.maps.{name} has moved to wncs_lp.policy_grids.{name}"):
+            assert getattr(importlib.import_module("wncs_lp.maps"), name) is getattr(policy_grids, name)
+    with pytest.raises(AttributeError, match="has no attribute '_policy_array'"):
+        importlib.import_module("wncs_lp.maps")._policy_array  # private names did not move as public ones
+
+
 def test_one_public_solve():
     """``wncs_lp.solve`` is the workflow floor's function, the one public solve; the steps it runs are
     not exported by the top-level package."""

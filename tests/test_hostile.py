@@ -187,7 +187,7 @@ def test_dataclasses_replace_cannot_leave_derived_fields_stale(tmp_path):
 @pytest.fixture
 def no_work(monkeypatch):
     """Fail when a command starts working before it checked its output."""
-    import wncs_lp.maps  # noqa: F401 - imported before the patch, so it binds the real load_scenario
+    import wncs_lp.policy_grids  # noqa: F401 - imported before the patch, so it binds the real load_scenario
     import wncs_lp.models.guard as guard
     import wncs_lp.workflow as route
 

@@ -1,4 +1,4 @@
-"""Tests of the policy maps (wncs_lp/maps.py) and the ``wncs-lp map`` command."""
+"""Tests of the policy maps (wncs_lp/policy_grids.py) and the ``wncs-lp map`` command."""
 from __future__ import annotations
 
 import json
@@ -13,7 +13,7 @@ import pytest  # noqa: E402
 
 from wncs_lp.cli import main  # noqa: E402
 from wncs_lp.errors import ModelError  # noqa: E402
-from wncs_lp.maps import (  # noqa: E402
+from wncs_lp.policy_grids import (  # noqa: E402
     action_name,
     parse_config_spec,
     policy_grid,

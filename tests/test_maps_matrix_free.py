@@ -14,7 +14,7 @@ import pytest  # noqa: E402
 import wncs_lp as w  # noqa: E402
 from wncs_lp.cli import main  # noqa: E402
 from wncs_lp.errors import ModelError  # noqa: E402
-from wncs_lp.maps import matrix_free_grid, matrix_free_region_stats, policy_grid, region_stats  # noqa: E402
+from wncs_lp.policy_grids import matrix_free_grid, matrix_free_region_stats, policy_grid, region_stats  # noqa: E402
 from wncs_lp.policies import MatrixFreePolicy  # noqa: E402
 from wncs_lp.solvers.matrix_free import matrix_free_value_iteration  # noqa: E402
 from wncs_lp.viz import plot_matrix_free_map  # noqa: E402

@@ -587,7 +587,7 @@ def _action_comments(mdp: MDP, scenario: Any) -> list[str]:
         what = str(tuple(int(v) for v in row))
         if mdp.states is not None and getattr(mdp.states, "configs", None) is not None:
             try:
-                from .maps import action_name
+                from .policy_grids import action_name
 
                 what = f"{action_name(mdp, k, scenario=scenario)} {what}"
             except Exception:  # a name is a courtesy: the decoded tuple always stands

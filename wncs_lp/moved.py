@@ -2,6 +2,11 @@
 with a :class:`DeprecationWarning` that names the new one.
 
 * :data:`MOVED` -- a name now held by another module under the same name;
+* :data:`MOVED_MODULES` -- a module whose every public name now lives in another (``wncs_lp.maps``,
+  the policy maps as data, is :mod:`wncs_lp.policy_grids`, so that it is not read as the drawing of
+  :mod:`wncs_lp.viz.maps`);
+* :data:`RENAMED` -- a name that said two things, now one (``Certificate`` of the joint
+  relaxation's tables, beside the solutions' ``Certificate``, is ``TableCertificate``);
 * :data:`REPLACED` -- an old public entry point of a solve (``wncs_lp.solvers.solve``,
   ``solve_scenario``, ``solve_constrained``, ``solve_discounted``, ``matrix_free.solve_mdp``), now
   a step of the one public :func:`wncs_lp.solve` under a name that says so; the old name gives
@@ -19,7 +24,7 @@ import importlib
 import warnings
 from typing import Any
 
-__all__ = ["MOVED", "REPLACED", "old_name"]
+__all__ = ["MOVED", "MOVED_MODULES", "RENAMED", "REPLACED", "old_name"]
 
 #: Old ``module.name`` -> the module that now holds ``name``.
 MOVED = {
@@ -29,6 +34,16 @@ MOVED = {
     "wncs_lp.policies.factory.make_policy": "wncs_lp.workflow",
     "wncs_lp.policies.policy_from_file": "wncs_lp.export",
     "wncs_lp.policies.convert.policy_from_file": "wncs_lp.export",
+}
+
+#: Old module -> the module that now holds every public name it had.
+MOVED_MODULES = {
+    "wncs_lp.maps": "wncs_lp.policy_grids",
+}
+
+#: Old ``module.name`` -> the new ``module.name``.
+RENAMED = {
+    "wncs_lp.bounds.joint_chains.Certificate": "wncs_lp.bounds.joint_chains.TableCertificate",
 }
 
 _SCENARIO = ("wncs_lp.workflow.route", "run_scenario", "wncs_lp.solve(scenario, method=...)")
@@ -63,7 +78,16 @@ def old_name(module: str, name: str) -> Any:
         warnings.warn(f"{old} is deprecated: call {call} (the step it was is now {home}.{step}; the old name goes "
                       "in the next release)", DeprecationWarning, stacklevel=3)
         return getattr(importlib.import_module(home), step)
+    if old in RENAMED:
+        home, renamed = RENAMED[old].rsplit(".", 1)
+        warnings.warn(f"{old} is renamed {home}.{renamed}; use the new name (the old one goes in the next release)",
+                      DeprecationWarning, stacklevel=3)
+        return getattr(importlib.import_module(home), renamed)
     new = MOVED.get(old)
+    if new is None and module in MOVED_MODULES and not name.startswith("_"):
+        new = MOVED_MODULES[module]
+        if not hasattr(importlib.import_module(new), name):
+            new = None
     if new is None:
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
     warnings.warn(f"{module}.{name} has moved to {new}.{name}; import it from there (the old path goes in the "

@@ -2,7 +2,7 @@
 
 One row per state (a deterministic policy) or per state and action played (a randomised one):
 the decoded state (``tau_1`` ... ``tau_N`` and the configuration) where the MDP has decoded
-states, the action by its name (as on policy maps, :func:`wncs_lp.maps.action_name`), its index
+states, the action by its name (as on policy maps, :func:`wncs_lp.policy_grids.action_name`), its index
 (QuantEcon's ``sigma``), and the bias or the probability. The columns are built as whole arrays
 (a name is computed once per distinct action and configuration), so a table of 10^5 states takes
 a fraction of a second.
@@ -28,7 +28,7 @@ def _decoded(mdp: Any) -> bool:
 
 def _action_names(mdp: Any, actions: np.ndarray, configs: np.ndarray) -> np.ndarray:
     """The name of each (action index, configuration id), computed once per distinct pair."""
-    from .maps import action_name, map_names
+    from .policy_grids import action_name, map_names
 
     names = map_names(mdp)
     key = np.stack([np.asarray(actions, np.int64), np.asarray(configs, np.int64)], axis=1)
@@ -119,7 +119,7 @@ def layout_columns(system: Any, layout: Any, local_actions: np.ndarray, bias: np
     """The table of a matrix-free policy over a :class:`~wncs_lp.solvers.matrix_free.BoxLayout`:
     one row per layout state (``reachable`` says which are, when the solve knew), up to
     :data:`MAX_TABLE_ROWS` rows."""
-    from .maps import system_names
+    from .policy_grids import system_names
 
     n = int(layout.n_states)
     if n > MAX_TABLE_ROWS:

@@ -99,7 +99,7 @@ def test_describe_names_the_relaxation():
 
 
 def test_policy_maps_like_any_policy():
-    from wncs_lp.maps import policy_grid
+    from wncs_lp.policy_grids import policy_grid
 
     sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=8"])
     system, res, pol = _setup(sc)

@@ -76,7 +76,7 @@ from ..models.system import System
 from ..progress import Progress, as_progress
 from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
 from .joint_bundle import PriceBundle
-from .joint_chains import (Certificate, ChainSolution, JointData, Kernels, certify_tables, column,
+from .joint_chains import (ChainSolution, JointData, Kernels, TableCertificate, certify_tables, column,
                            kernels_available, policy_weights, solve_chain, stationary)
 from .joint_ipm import ipm_bytes, ipm_seconds, ipm_tables
 from .joint_lp import HalpernPDHG, JointLP, lp_shape, pin_tables
@@ -170,7 +170,7 @@ def _memory_estimate(shape: dict, caps: np.ndarray, n_c: int, n_p: int) -> int:
 @dataclass
 class _Best:
     lower_bound: float = -np.inf
-    certificate: Certificate | None = None
+    certificate: TableCertificate | None = None
     tables: list | None = None
     prices: np.ndarray | None = None
     gains: np.ndarray | None = None

@@ -32,14 +32,16 @@ import math
 import os
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
+from .. import moved
 from ..errors import SolverError
 from ..models.system import System
 
-__all__ = ["JointData", "Certificate", "ChainSolution", "Kernels", "certify_tables", "solve_chain",
+__all__ = ["JointData", "TableCertificate", "ChainSolution", "Kernels", "certify_tables", "solve_chain",
            "policy_weights", "stationary", "column", "kernels_available"]
 
 _UNIT = np.finfo(float).eps / 2  # unit round-off u = 2^-53
@@ -151,7 +153,7 @@ class JointData:
 
 # ---------------------------------------------------------------------------- the certificate
 @dataclass(frozen=True, eq=False)
-class Certificate:
+class TableCertificate:
     r"""A lower bound on g* from separable tables, checked constraint by constraint.
 
     Attributes
@@ -176,7 +178,7 @@ class Certificate:
     binding_pair: int
 
 
-def certify_tables(data: JointData, tables) -> Certificate:
+def certify_tables(data: JointData, tables) -> TableCertificate:
     r"""The certified lower bound g(h) of separable tables ``tables[k]`` of shape (|C|, tau_hat_k).
 
     Valid for *any* tables: with u_k(p) = max_tau [h_k(tau, C_p) - q_k(tau) - E h_k(tau', C')],
@@ -198,7 +200,7 @@ def certify_tables(data: JointData, tables) -> Certificate:
     n = data.n_processes
     tables = _checked_tables(data, tables)
     if not all(np.isfinite(h).all() for h in tables):
-        return Certificate(lower_bound=-np.inf, raw=-np.inf, roundoff=np.inf, u=np.full((n, data.n_pairs), np.inf),
+        return TableCertificate(lower_bound=-np.inf, raw=-np.inf, roundoff=np.inf, u=np.full((n, data.n_pairs), np.inf),
                            binding_pair=-1)
     u = np.empty((n, data.n_pairs))
     err = 0.0
@@ -213,7 +215,7 @@ def certify_tables(data: JointData, tables) -> Certificate:
     p = int(np.argmax(total))
     err += _gamma(n) * float(np.abs(u).max(axis=1).sum())
     raw = -float(total[p])
-    return Certificate(lower_bound=raw - err, raw=raw, roundoff=err, u=u, binding_pair=p)
+    return TableCertificate(lower_bound=raw - err, raw=raw, roundoff=err, u=u, binding_pair=p)
 
 
 def _checked_tables(data: JointData, tables) -> list[np.ndarray]:
@@ -407,3 +409,8 @@ def column(data: JointData, k: int, y: np.ndarray, weights: np.ndarray) -> tuple
     marginal, so that the policy's average priced cost is a + <x, mu_k> for every price mu_k."""
     x = (y[data.pair_c] * weights).sum(axis=1)
     return float((y * data.q[k][None, :]).sum()), x
+
+
+def __getattr__(name: str) -> Any:
+    """``Certificate``, renamed :class:`TableCertificate` (:mod:`wncs_lp.moved`): still found here, with a warning."""
+    return moved.old_name(__name__, name)

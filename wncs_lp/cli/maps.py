@@ -34,7 +34,7 @@ def _parse_fix(items: Sequence[str]) -> dict[int, int]:
 
 def _matrix_free_map(args: argparse.Namespace, scenario, run, axes, fixed, prog) -> int:
     """Draw the policy of a solve without a stored matrix (:func:`wncs_lp.viz.plot_matrix_free_map`)."""
-    from ..maps import matrix_free_region_stats
+    from ..policy_grids import matrix_free_region_stats
     from ..policies import MatrixFreePolicy
     from ..viz import plot_matrix_free_map, save_figure
 
@@ -73,7 +73,7 @@ def _check_route(args: argparse.Namespace, scenario) -> None:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
-    from ..maps import parse_config_spec
+    from ..policy_grids import parse_config_spec
     from ..workflow import run_scenario
     from ..viz import file_backend, image_formats
 
@@ -126,7 +126,7 @@ def cmd_map(args: argparse.Namespace) -> int:
 def _draw(args: argparse.Namespace, mdp, policy, config: int, axes, fixed, scenario, prog):
     """Draw the map (or the --slice) of ``policy`` in configuration ``config``, save it to --out;
     the axes drawn and the regions' statistics."""
-    from ..maps import region_stats
+    from ..policy_grids import region_stats
     from ..viz import plot_policy_map, plot_policy_slice, save_figure
 
     prog.phase(f"drawing the map and writing {args.out}")
@@ -146,7 +146,7 @@ def _saved_policy_map(args: argparse.Namespace, scenario, axes, fixed, prog) -> 
     as ``evaluate`` and ``simulate`` take it (nothing is solved)."""
     from ..errors import PolicyError
     from ..export import load_policy_npz
-    from ..maps import parse_config_spec
+    from ..policy_grids import parse_config_spec
     from ..solvers.route import build_scenario
 
     if not args.policy.lower().endswith(".npz"):

@@ -131,12 +131,12 @@ class ConstrainedSolution(Certified):
     def mixes(self, mdp, limit: int | None = 20) -> list[dict[str, Any]]:
         """The randomised states with their mix: ``[{state, label, mix: {action name: prob}}]``.
 
-        Actions are named as on policy maps (:func:`wncs_lp.maps.action_name`) when the MDP
+        Actions are named as on policy maps (:func:`wncs_lp.policy_grids.action_name`) when the MDP
         has decoded states, else by their label.
         """
         named = getattr(mdp, "states", None) is not None and getattr(mdp.states, "configs", None) is not None
         if named:
-            from ..maps import action_name, map_names
+            from ..policy_grids import action_name, map_names
 
             names = map_names(mdp)
         out = []

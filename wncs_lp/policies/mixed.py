@@ -255,7 +255,7 @@ class MixedPolicy(Policy):
     def mixes(self, limit: int | None = None) -> list[dict[str, Any]]:
         """The randomised states with their mix (actions of positive probability only).
 
-        Actions are named as on policy maps (:func:`wncs_lp.maps.action_name`), as in
+        Actions are named as on policy maps (:func:`wncs_lp.policy_grids.action_name`), as in
         :meth:`ConstrainedSolution.mixes <wncs_lp.constrained.result.ConstrainedSolution.mixes>`.
 
         Returns
@@ -263,7 +263,7 @@ class MixedPolicy(Policy):
         list of ``{"state": s, "label": str, "tau": [...], "config": c, "mix": {action name: prob}}``
         in state order (the first ``limit`` when given).
         """
-        from ..maps import action_name, map_names
+        from ..policy_grids import action_name, map_names
 
         names = map_names(self.mdp, self.system.scenario)
         out = []

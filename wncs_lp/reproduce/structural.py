@@ -11,7 +11,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..maps import NEIGHBOURS, action_name, region_stats, slice_grid
+from ..policy_grids import NEIGHBOURS, action_name, region_stats, slice_grid
 from ..verify import check_consistency, check_monotonicity, check_threshold, policy_context
 from ..verify.verdict import NEGLIGIBLE, across, cap_distance, combine, structural_verdict, verdict_of, witness_rank
 from ..viz import plot_policy_map, plot_policy_slice, subplots

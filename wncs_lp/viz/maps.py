@@ -1,4 +1,4 @@
-r"""Policy maps drawn: the paper's Figs. 3-4, 6-9 and 11-12 (the data is :mod:`wncs_lp.maps`).
+r"""Policy maps drawn: the paper's Figs. 3-4, 6-9 and 11-12 (the data is :mod:`wncs_lp.policy_grids`).
 
 * :func:`plot_policy_map` -- the action over (tau_i, tau_j) for one configuration (server state)
   with the other AoIs fixed;
@@ -23,7 +23,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..maps import (
+from ..policy_grids import (
     NEIGHBOURS,
     action_name,
     map_names,
@@ -454,12 +454,12 @@ def plot_matrix_free_map(
     at cap 30 and beyond): one marker per action, dark grey outside the configuration's AoI box.
     There is no stationary law at this scale, so transient states are not shaded, and the AoIs
     off the axes default to the lower end of the configuration's box
-    (:func:`~wncs_lp.maps.matrix_free_grid`); the title says which values were used.
+    (:func:`~wncs_lp.policy_grids.matrix_free_grid`); the title says which values were used.
 
     Parameters
     ----------
     policy : MatrixFreePolicy or MatrixFreeSolution
-    config : configuration (id, object or spec string, see :func:`~wncs_lp.maps.parse_config_spec`)
+    config : configuration (id, object or spec string, see :func:`~wncs_lp.policy_grids.parse_config_spec`)
     axes : (i, j)
         1-based processes on the x and y axes.
     fixed_tau : {k: tau_k}, optional
