@@ -265,7 +265,7 @@ def check_override_forms(raw: dict[str, Any], pairs: list[tuple[str, str]], tmpd
 def npz_bases(tmpdir: Path) -> dict[str, bytes]:
     """Small exported files to mutate: an MDP, a policy and a solve's solution (paper_p12, cap 7)."""
     from wncs_lp import build, scenario_path
-    from wncs_lp.export import save_npz, save_policy_npz, save_solution_npz
+    from wncs_lp.io import save_npz, save_policy_npz, save_solution_npz
     from wncs_lp import solve
 
     sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=7"])
@@ -350,7 +350,7 @@ def check_npz_case(kind: str, path: Path) -> str:
     import numpy as np
 
     from wncs_lp.errors import WncsError
-    from wncs_lp.export import load_npz, load_policy_npz
+    from wncs_lp.io import load_npz, load_policy_npz
     from wncs_lp import solve
 
     try:

@@ -139,7 +139,7 @@ def test_only_models_test_a_model_kind():
 # ----------------------------------------------------------------------------- loaded by name
 #: Where the package may load a module by a name in a string: the lazy public names (start-up time),
 #: the old paths of moved names, optional third-party packages, third-party versions in a report.
-LOADS_BY_NAME = {"wncs_lp/__init__.py", "wncs_lp/moved.py", "wncs_lp/interop.py", "wncs_lp/reproduce/__init__.py"}
+LOADS_BY_NAME = {"wncs_lp/__init__.py", "wncs_lp/moved.py", "wncs_lp/io/toolkits.py", "wncs_lp/reproduce/__init__.py"}
 TARGET_STRING = re.compile(r"^wncs_lp(\.\w+)+:\w+$")
 
 
@@ -167,7 +167,7 @@ def test_nothing_of_the_package_is_loaded_by_name():
                 if isinstance(n, ast.Constant) and isinstance(n.value, str) and TARGET_STRING.match(n.value)]
     assert not bad, bad
     # third-party only: no name of the package in what interop and the report's versions load
-    for rel in ("wncs_lp/interop.py", "wncs_lp/reproduce/__init__.py"):
+    for rel in ("wncs_lp/io/toolkits.py", "wncs_lp/reproduce/__init__.py"):
         assert "import_module(f\"wncs_lp" not in (ROOT / rel).read_text() and "__import__(\"wncs_lp" not in (
             ROOT / rel).read_text()
 
@@ -208,8 +208,9 @@ def test_every_replaced_entry_point_still_runs_its_step_with_a_warning_naming_wn
 
 def test_renamed_names_and_moved_modules_are_found_at_their_old_paths_with_a_warning():
     """``bounds.joint_chains.Certificate`` (now ``TableCertificate``, distinct from the solutions'
-    ``Certificate``) and every public name of ``wncs_lp.maps`` (now ``policy_grids``, the data
-    beside ``viz.maps``, the drawing) are found at the old path for one release, with a warning."""
+    ``Certificate``), every public name of ``wncs_lp.maps`` (now ``policy_grids``, the data beside
+    ``viz.maps``, the drawing) and of ``export`` and ``interop`` (now the ``io`` package, one module a
+    format) are found at the old path for one release, with a warning."""
     import importlib
 
     from wncs_lp import moved, policy_grids
@@ -222,12 +223,14 @@ def test_renamed_names_and_moved_modules_are_found_at_their_old_paths_with_a_war
             found = getattr(importlib.import_module(module), name)
         assert found is getattr(importlib.import_module(home), renamed)
         assert name not in vars(importlib.import_module(module))
-    assert moved.MOVED_MODULES == {"wncs_lp.maps": "wncs_lp.policy_grids"}
-    names = policy_grids.__all__
-    assert {"policy_grid", "slice_grid", "region_stats", "matrix_free_grid", "action_name"} <= set(names)
-    for name in names:
-        with pytest.warns(DeprecationWarning, match=f"wncs_lp.maps.{name} has moved to wncs_lp.policy_grids.{name}"):
-            assert getattr(importlib.import_module("wncs_lp.maps"), name) is getattr(policy_grids, name)
+    assert moved.MOVED_MODULES == {"wncs_lp.maps": "wncs_lp.policy_grids", "wncs_lp.export": "wncs_lp.io",
+                                   "wncs_lp.interop": "wncs_lp.io"}
+    assert {"policy_grid", "slice_grid", "region_stats", "matrix_free_grid", "action_name"} <= set(policy_grids.__all__)
+    for old, new in moved.MOVED_MODULES.items():
+        home = importlib.import_module(new)
+        for name in home.__all__:
+            with pytest.warns(DeprecationWarning, match=f"{old}.{name} has moved to {new}.{name}"):
+                assert getattr(importlib.import_module(old), name) is getattr(home, name)
     with pytest.raises(AttributeError, match="has no attribute '_policy_array'"):
         importlib.import_module("wncs_lp.maps")._policy_array  # private names did not move as public ones
 

@@ -16,7 +16,7 @@ import wncs_lp
 from wncs_lp.cli import main
 from wncs_lp.constrained import constraints_for
 from wncs_lp import solve
-from wncs_lp.export import (ExportError, constraint_reward_names, initial_state, load_policy_npz,
+from wncs_lp.io import (ExportError, constraint_reward_names, initial_state, load_policy_npz,
                             multi_objective_property, reward_models, save_drn)
 from wncs_lp.mdp import MDP
 

@@ -1,4 +1,4 @@
-"""``wncs_lp.export``: the documented .npz format round-trips exactly, from the API and the CLI."""
+"""``wncs_lp.io.npz``: the documented .npz format round-trips exactly, from the API and the CLI."""
 from __future__ import annotations
 
 import json
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from wncs_lp.cli import main
-from wncs_lp.export import FORMAT, FORMAT_VERSION, ExportError, load_npz, save_npz
+from wncs_lp.io import FORMAT, FORMAT_VERSION, ExportError, load_npz, save_npz
 from wncs_lp.mdp import MDP
 from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
@@ -98,7 +98,7 @@ def test_cli_export(tmp_path, capsys):
 
 
 # ----------------------------------------------------------------------------- issue 27: hostile files
-from wncs_lp.export import load_policy_npz, save_policy_npz, save_solution_npz  # noqa: E402
+from wncs_lp.io import load_policy_npz, save_policy_npz, save_solution_npz  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -238,7 +238,7 @@ def test_outputs_of_the_wrong_type_are_refused_before_any_work(command, tmp_path
 
 
 def test_a_failed_write_after_the_solve_keeps_the_result(tmp_path, monkeypatch, capsys):
-    import wncs_lp.export as export
+    import wncs_lp.io as export
 
     def full_disk(*a, **k):
         raise OSError(28, "No space left on device", str(tmp_path / "x.npz"))

@@ -1,4 +1,4 @@
-"""QuantEcon's ``DiscreteDP`` and pymdptoolbox's ``(P, R)`` (:mod:`wncs_lp.interop`), each solved by
+"""QuantEcon's ``DiscreteDP`` and pymdptoolbox's ``(P, R)`` (:mod:`wncs_lp.io.toolkits`), each solved by
 that package's own solver and checked against independent references: a direct linear solve of
 the discounted equations and one Bellman step (numpy), the average-cost optimum the toolkit
 certifies (through the exact inequality linking the discounted value to the gain and bias), and
@@ -13,7 +13,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import wncs_lp
-from wncs_lp.interop import InteropError, from_mdptoolbox_policy, to_mdptoolbox, to_quantecon
+from wncs_lp.io import InteropError, from_mdptoolbox_policy, to_mdptoolbox, to_quantecon
 from wncs_lp.mdp import MDP
 from wncs_lp.solvers.dp import evaluate_policy
 

@@ -1,4 +1,4 @@
-"""PRISM's explicit files (``wncs-lp export --format prism``, :func:`wncs_lp.export.save_prism`),
+"""PRISM's explicit files (``wncs-lp export --format prism``, :func:`wncs_lp.io.save_prism`),
 read back by a parser written from PRISM's manual (``tests/reference/model_files.py``) and checked
 in Storm, loaded through stormpy's sparse-model builder: the minimal long-run average cost is the
 toolkit's certified gain, and a constrained scenario's multi-objective optimum its certified
@@ -14,7 +14,7 @@ from reference.model_files import parse_prism, storm_mdp
 import wncs_lp
 from wncs_lp.cli import main
 from wncs_lp import solve
-from wncs_lp.export import initial_state, multi_objective_property, save_prism
+from wncs_lp.io import initial_state, multi_objective_property, save_prism
 from wncs_lp.mdp import MDP
 
 P12 = str(wncs_lp.scenario_path("paper_p12"))

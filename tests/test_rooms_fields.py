@@ -18,7 +18,7 @@ import pytest
 
 import reference.own_systems as ref
 import wncs_lp
-from wncs_lp import export, maps
+from wncs_lp import io as export, policy_grids as maps
 from wncs_lp.bounds import bound_policy, lower_bound
 from wncs_lp.errors import WncsError
 from wncs_lp.evaluate import evaluate

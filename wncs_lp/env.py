@@ -26,7 +26,7 @@ the start is every :math:`\tau_k` at its cap in the initial configuration (the s
 **An action outside the mask** (``j >= n_actions[C]``) is, by default (``invalid_action="first"``),
 taken as the configuration's action 0, with ``info["invalid_action"] = True``. An infeasible
 action then duplicates a feasible one, so the environment's optimal average reward is exactly
-:math:`-g^*` (the padding rule of :func:`wncs_lp.interop.to_mdptoolbox`). With
+:math:`-g^*` (the padding rule of :func:`wncs_lp.io.to_mdptoolbox`). With
 ``invalid_action="raise"`` it is an :class:`EnvError` instead.
 
 Reference values for reinforcement-learning baselines: :meth:`WncsEnv.optimum` (the certified
@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from .errors import WncsError
-from .interop import require_package
+from .io.toolkits import require_package
 from .models.system import System
 from .scenario import Scenario, load_scenario
 

@@ -6,7 +6,7 @@ caller can catch one class and always get a message naming what was wrong.
 from __future__ import annotations
 
 __all__ = ["printable", "WncsError", "ArgumentError", "ScenarioError", "ModelError", "SolverError", "PolicyError",
-           "InfeasibleConstraintsError",
+           "InfeasibleConstraintsError", "ExportError",
            "ScenarioWarning", "SizeLimitError"]
 
 
@@ -84,6 +84,11 @@ class SizeLimitError(WncsError):
 
 class SolverError(WncsError):
     """A solver failed or returned an answer that did not pass its accuracy checks."""
+
+
+class ExportError(WncsError):
+    """A file is not a readable ``wncs_lp`` export (:mod:`wncs_lp.io`), or a model cannot be written in
+    another tool's format as asked (a reward model that is not an identifier, negative rewards)."""
 
 
 class PolicyError(WncsError):

@@ -4,7 +4,8 @@ with a :class:`DeprecationWarning` that names the new one.
 * :data:`MOVED` -- a name now held by another module under the same name;
 * :data:`MOVED_MODULES` -- a module whose every public name now lives in another (``wncs_lp.maps``,
   the policy maps as data, is :mod:`wncs_lp.policy_grids`, so that it is not read as the drawing of
-  :mod:`wncs_lp.viz.maps`);
+  :mod:`wncs_lp.viz.maps`; ``wncs_lp.export`` and ``wncs_lp.interop`` are :mod:`wncs_lp.io`, one
+  module a format);
 * :data:`RENAMED` -- a name that said two things, now one (``Certificate`` of the joint
   relaxation's tables, beside the solutions' ``Certificate``, is ``TableCertificate``);
 * :data:`REPLACED` -- an old public entry point of a solve (``wncs_lp.solvers.solve``,
@@ -32,13 +33,15 @@ MOVED = {
     "wncs_lp.policies.factory.policy_for": "wncs_lp.workflow",
     "wncs_lp.policies.make_policy": "wncs_lp.workflow",
     "wncs_lp.policies.factory.make_policy": "wncs_lp.workflow",
-    "wncs_lp.policies.policy_from_file": "wncs_lp.export",
-    "wncs_lp.policies.convert.policy_from_file": "wncs_lp.export",
+    "wncs_lp.policies.policy_from_file": "wncs_lp.io",
+    "wncs_lp.policies.convert.policy_from_file": "wncs_lp.io",
 }
 
 #: Old module -> the module that now holds every public name it had.
 MOVED_MODULES = {
     "wncs_lp.maps": "wncs_lp.policy_grids",
+    "wncs_lp.export": "wncs_lp.io",
+    "wncs_lp.interop": "wncs_lp.io",
 }
 
 #: Old ``module.name`` -> the new ``module.name``.

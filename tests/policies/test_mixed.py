@@ -14,7 +14,7 @@ from wncs_lp.chain import PolicyChain  # noqa: E402
 from wncs_lp import solve  # noqa: E402
 from wncs_lp.errors import ModelError, PolicyError  # noqa: E402
 from wncs_lp.evaluate import evaluate  # noqa: E402
-from wncs_lp.export import ExportError, load_npz, load_policy_npz, save_npz, save_policy_npz  # noqa: E402
+from wncs_lp.io import ExportError, load_npz, load_policy_npz, save_npz, save_policy_npz  # noqa: E402
 from wncs_lp.policy_grids import mixed_states, policy_grid, policy_pairs, recurrent_mask, slice_grid  # noqa: E402
 from wncs_lp.models import build  # noqa: E402
 from wncs_lp.policies import MixedPolicy, OptimalPolicy, RandomPolicy, System  # noqa: E402

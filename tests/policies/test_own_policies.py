@@ -190,9 +190,9 @@ def test_an_unknown_label_names_the_state_and_the_allowed_labels(p12):
 
 # ----------------------------------------------------------------------------- a saved policy
 def test_a_saved_policy_reads_back_in_its_form(p12, tmp_path):
-    from wncs_lp.export import ExportError, save_policy_npz
+    from wncs_lp.io import ExportError, save_policy_npz
     from wncs_lp.policies import MixedPolicy, TablePolicy
-    from wncs_lp.export import policy_from_file
+    from wncs_lp.io import policy_from_file
 
     sc, _, mdp, sol = p12
     det = policy_from_file(save_policy_npz(tmp_path / "det.npz", mdp, sol.policy, scenario=sc), mdp)

@@ -24,20 +24,20 @@ def _format_of(args: argparse.Namespace) -> str:
 def _write(fmt: str, mdp, scenario, args: argparse.Namespace) -> tuple[Path, list[Path], str]:
     """Write the export; (the path reported, every file written, what the format is)."""
     if fmt == "drn":
-        from ..export import save_drn
+        from ..io import save_drn
 
         path = save_drn(mdp, args.out, scenario=scenario)
-        return path, [path], "Storm's explicit DRN; check it with R{\"cost\"}min=? [LRA], see wncs_lp.export"
+        return path, [path], "Storm's explicit DRN; check it with R{\"cost\"}min=? [LRA], see wncs_lp.io.drn"
     if fmt == "prism":
-        from ..export import save_prism
+        from ..io import save_prism
 
         files = list(save_prism(mdp, args.out, scenario=scenario).values())
         prefix = files[0].with_suffix("")
-        return prefix, files, f"PRISM's explicit files: prism -importmodel {prefix}.all -mdp; see wncs_lp.export"
-    from ..export import save_npz
+        return prefix, files, f"PRISM's explicit files: prism -importmodel {prefix}.all -mdp; see wncs_lp.io.prism"
+    from ..io import save_npz
 
     path = save_npz(mdp, args.out, scenario=scenario, compress=args.compress)
-    return path, [path], "wncs_lp.mdp-npz v1, see wncs_lp.export"
+    return path, [path], "wncs_lp.mdp-npz v1, see wncs_lp.io.npz"
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -69,7 +69,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         "seconds": time.perf_counter() - t0,
     }
     if scenario.constraints and fmt != "npz":
-        from ..export import constraint_reward_names, multi_objective_property
+        from ..io import constraint_reward_names, multi_objective_property
 
         payload["reward_models"] = ["cost", *constraint_reward_names(scenario)]
         payload["multi_objective"] = multi_objective_property(scenario)
@@ -91,7 +91,7 @@ def _configure_export(p: argparse.ArgumentParser) -> None:
                    help="output, in an existing folder: FILE.npz (.npz is appended when missing), FILE.drn, or "
                         "DIR/NAME for --format prism (writes NAME.tra, .sta, .lab, .srew, ...)")
     p.add_argument("--format", choices=FORMATS, default=None,
-                   help="npz: arrays with the decoded states (numpy.load reads it; wncs_lp.export.load_npz builds "
+                   help="npz: arrays with the decoded states (numpy.load reads it; wncs_lp.io.load_npz builds "
                         "the MDP back); drn: Storm's explicit format (storm --explicit-drn, "
                         "stormpy.build_model_from_drn), the cost as the reward model 'cost' and each "
                         "[[constraint]]'s quantity as one more; prism: PRISM's explicit files (prism -importmodel "

@@ -145,7 +145,7 @@ def _saved_policy_map(args: argparse.Namespace, scenario, axes, fixed, prog) -> 
     """``--policy FILE.npz``: draw a policy saved by ``wncs-lp solve --out`` on the scenario's MDP,
     as ``evaluate`` and ``simulate`` take it (nothing is solved)."""
     from ..errors import PolicyError
-    from ..export import load_policy_npz
+    from ..io import load_policy_npz
     from ..policy_grids import parse_config_spec
     from ..solvers.route import build_scenario
 

@@ -48,7 +48,7 @@ def _policy_file(args: argparse.Namespace, scenario, prog):
     """A policy saved by ``wncs-lp solve --out FILE.npz``, on the scenario's MDP (built here)."""
     import time
 
-    from ..export import policy_from_file
+    from ..io import policy_from_file
     from ..policies import PolicySetup
     from ..solvers.route import build_scenario
 

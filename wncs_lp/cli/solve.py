@@ -127,14 +127,14 @@ def _unconstrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> 
     print(f"truncation: under the optimal policy {cap.message()}")
     print(_interval_line(interval))
     if "out" in extra:
-        print(f"policy and bias written to {extra['out']} (format: see wncs_lp.export)")
+        print(f"policy and bias written to {extra['out']} (format: see wncs_lp.io.npz)")
     return _write_failed(failed) or (0 if sol.ok else 1)
 
 
 def _discounted(args: argparse.Namespace) -> int:
     """``--discount BETA``: the discounted problem through the one route, certified
     (:mod:`wncs_lp.solvers.discounted`; ``--method`` read by :data:`wncs_lp.methods.DISCOUNTED_FOR`)."""
-    from ..export import initial_state
+    from ..io import initial_state
     from ..workflow import run_scenario
 
     scenario = load(args)
@@ -170,7 +170,7 @@ def _print_auto(st: dict) -> None:
 
 
 def _save(args: argparse.Namespace, scenario, mdp, sol, prog):
-    from ..export import save_solution_npz
+    from ..io import save_solution_npz
 
     prog.phase(f"writing the policy and the bias to {args.out}")
     return save_solution_npz(args.out, mdp, sol, scenario=scenario)
@@ -217,7 +217,7 @@ def _constrained(args: argparse.Namespace, scenario, run, t0: float, prog) -> in
         print("the policy is deterministic (no bound forces a mix)")
     print(f"truncation: under the returned policy {cap.message()}")
     if "out" in extra:
-        print(f"policy written to {extra['out']} (format: see wncs_lp.export)")
+        print(f"policy written to {extra['out']} (format: see wncs_lp.io.npz)")
     return _write_failed(failed) or (0 if sol.ok else 1)
 
 
@@ -244,7 +244,7 @@ def _configure_solve(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None, metavar="FILE.npz",
                    help="also write the optimal policy and the bias (and the action per state, the state decoding "
                         "and the certificate) to this .npz file, in an existing folder; numpy.load reads it "
-                        "(format: wncs_lp.export.save_solution_npz); with the matrix-free method, its policy (one "
+                        "(format: wncs_lp.io.save_solution_npz); with the matrix-free method, its policy (one "
                         "byte a state) and certificate, read back by wncs_lp.solvers.matrix_free.load_solution")
     p.add_argument("--untruncated", action="store_true",
                    help="also simulate the optimal policy and the baselines greedy, max_age, max_weight, round_robin "
