@@ -106,9 +106,10 @@ def auto_method(mdp: MDP, constraints) -> str:
     """What ``method="auto"`` of a constrained solve runs: the LP on HiGHS (``"lp-highs"``) up to
     :data:`LP_MAX_PAIRS` pairs or with more than one constraint (the Lagrangian route handles
     one), else ``"lagrangian"``. HiGHS rather than Clarabel because the constrained LP must end on
-    a basis: 20 cold certified points on HiGHS (interior point + crossover) took 7.8 s against
-    84.5 s for Clarabel followed by the crossover on processes 1, 2 at cap 12, and 44.2 s against
-    329 s at cap 16 (``benchmarks/tradeoff_warm.py``)."""
+    a basis, which HiGHS's crossover gives directly where Clarabel's interior point needs a
+    crossover of its own after it (several times slower on a trade-off curve's cold points:
+    ``benchmarks/tradeoff_warm.py``, its figures in ``benchmarks/README.md`` and
+    ``docs/constraints.md``)."""
     return "lp-highs" if (mdp.n_pairs <= LP_MAX_PAIRS or len(constraints) > 1) else "lagrangian"
 
 #: Largest relative VI tolerance of a search step; the smallest (round-off floor).

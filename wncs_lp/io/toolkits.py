@@ -30,7 +30,7 @@ padded action to the first pair it duplicates).
 
 pymdptoolbox 4.0b3's input check builds dense n x n temporaries from sparse input with scipy
 >= 1.15 (its ``isStochastic`` broadcasts the row sums); that is harmless on small models and
-slow on large ones (5.8 s for 2,703 states and 7 actions).
+slow on large ones (its cost is measured in ``docs/interop.md``).
 """
 from __future__ import annotations
 
