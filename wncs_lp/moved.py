@@ -73,26 +73,27 @@ REPLACED = {
 
 
 def old_name(module: str, name: str) -> Any:
-    """``name`` of ``module`` where it moved (with a :class:`DeprecationWarning`), else the
-    :class:`AttributeError` a module without it raises."""
+    """``name`` of ``module`` where it moved or what replaced it (with a :class:`DeprecationWarning`),
+    else the :class:`AttributeError` a module without it raises."""
+    home, attr, message = _new_place(module, name)
+    target = importlib.import_module(home) if home else None  # the one load by name (module docstring)
+    if target is None or not hasattr(target, attr):
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    warnings.warn(message, DeprecationWarning, stacklevel=3)
+    return getattr(target, attr)
+
+
+def _new_place(module: str, name: str) -> tuple[str, str, str]:
+    """(the new module, the name there, the warning) of ``module.name``; ("", "", "") where nothing moved."""
     old = f"{module}.{name}"
     if old in REPLACED:
         home, step, call = REPLACED[old]
-        warnings.warn(f"{old} is deprecated: call {call} (the step it was is now {home}.{step}; the old name goes "
-                      "in the next release)", DeprecationWarning, stacklevel=3)
-        return getattr(importlib.import_module(home), step)
+        return home, step, (f"{old} is deprecated: call {call} (the step it was is now {home}.{step}; the old name "
+                            "goes in the next release)")
     if old in RENAMED:
         home, renamed = RENAMED[old].rsplit(".", 1)
-        warnings.warn(f"{old} is renamed {home}.{renamed}; use the new name (the old one goes in the next release)",
-                      DeprecationWarning, stacklevel=3)
-        return getattr(importlib.import_module(home), renamed)
-    new = MOVED.get(old)
-    if new is None and module in MOVED_MODULES and not name.startswith("_"):
-        new = MOVED_MODULES[module]
-        if not hasattr(importlib.import_module(new), name):
-            new = None
+        return home, renamed, f"{old} is renamed {home}.{renamed}; use the new name (the old one goes in the next release)"
+    new = MOVED.get(old) or (MOVED_MODULES.get(module) if not name.startswith("_") else None)
     if new is None:
-        raise AttributeError(f"module {module!r} has no attribute {name!r}")
-    warnings.warn(f"{module}.{name} has moved to {new}.{name}; import it from there (the old path goes in the "
-                  "next release)", DeprecationWarning, stacklevel=3)
-    return getattr(importlib.import_module(new), name)
+        return "", "", ""
+    return new, name, f"{old} has moved to {new}.{name}; import it from there (the old path goes in the next release)"
