@@ -9,7 +9,9 @@
   of ``moved.py`` (which warn and give the object of the new path);
 * no import, function-level ones included, climbs a floor: the rooms (a top-level folder of the
   package, or a top-level module) and their imports form no cycle;
-* method names are compared only in ``methods.py`` and the command line's parser.
+* method names are compared only in ``methods.py`` and the command line's parser;
+* one public solve (``wncs_lp.solve`` is ``workflow.route.solve``);
+* every moved, renamed or replaced public name is found at its old path, once, with a warning.
 """
 from __future__ import annotations
 
