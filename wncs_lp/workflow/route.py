@@ -43,7 +43,7 @@ from ..constrained.registry import run_constrained
 from ..errors import SolverError
 from ..mdp import MDP
 from ..methods import (AVERAGE as AVERAGE_COST, CONSTRAINED_CRITERION, DEFAULT_METHOD, DISCOUNTED_CRITERION,
-                       SCENARIO_INPUT, TABLE, Entry, check_criterion, discounted_method)
+                       SCENARIO_INPUT, TABLE, Entry, Method, check_criterion, discounted_method)
 from ..progress import Progress, as_progress
 from ..solvers.discounted import check_discount, run_discounted
 from ..solvers.registry import AVERAGE, run_average
@@ -226,20 +226,9 @@ def run_scenario(
         return _without_matrix(scenario, AVERAGE[row.name], row.name, "asked for", t0, force, threads, prog, kw)
     build_seconds = 0.0
     if mdp is None:
-        from ..models.guard import SizeLimitError
-
-        offer = tuple(TABLE.values()) if not (constrained or need_mdp) else None  # the caller takes matrix-free
-        try:
-            mdp, build_seconds = build_scenario(scenario, method, constrained=constrained, force=force, progress=prog,
-                                                offer=offer)
-        except SizeLimitError as refused:
-            if row.fallback is None or constrained or need_mdp:
-                raise
-            why = f"{row.name}: the stored matrix would not fit in memory"
-            try:
-                return _without_matrix(scenario, AVERAGE[row.fallback], row.name, why, t0, force, threads, prog, kw)
-            except SolverError:  # not a model the fallback takes: the guard's refusal stands
-                raise refused from None
+        mdp, build_seconds, fallen = _build(scenario, row, constrained, need_mdp, t0, force, threads, prog, kw)
+        if fallen is not None:
+            return fallen
     if check is not None:
         check(mdp)
     if constrained:
@@ -248,12 +237,40 @@ def run_scenario(
         sol = run_constrained(mdp, bounds, method, **kw)
         return ScenarioSolve(sol, mdp, sol.method, method, constrained=True, build_seconds=build_seconds,
                              seconds=time.perf_counter() - t0)
+    return _average(mdp, row, warm, threads, prog, kw, t0, build_seconds)
+
+
+def _build(scenario: Any, row: Method, constrained: bool, need_mdp: bool, t0: float, force: bool,
+           threads: int | None, prog: Progress, kw: dict[str, Any]) -> tuple[MDP | None, float, ScenarioSolve | None]:
+    """The MDP after the size guard and its build seconds; or, when the guard refuses the stored
+    matrix and the method names a fallback the caller takes, the fallback's solve instead."""
+    from ..models.guard import SizeLimitError
+
+    offer = tuple(TABLE.values()) if not (constrained or need_mdp) else None  # the caller takes matrix-free
+    try:
+        mdp, seconds = build_scenario(scenario, row.name, constrained=constrained, force=force, progress=prog,
+                                      offer=offer)
+        return mdp, seconds, None
+    except SizeLimitError as refused:
+        if row.fallback is None or constrained or need_mdp:
+            raise
+        why = f"{row.name}: the stored matrix would not fit in memory"
+        try:
+            return None, 0.0, _without_matrix(scenario, AVERAGE[row.fallback], row.name, why, t0, force, threads,
+                                              prog, kw)
+        except SolverError:  # not a model the fallback takes: the guard's refusal stands
+            raise refused from None
+
+
+def _average(mdp: MDP, row: Method, warm: WarmStart | None, threads: int | None, prog: Progress,
+             kw: dict[str, Any], t0: float, build_seconds: float) -> ScenarioSolve:
+    """The average-cost step on the built MDP, with the warm start and the threads its method takes."""
     extra = warm.keywords(mdp, row) if warm is not None else {}
     if threads is not None and AVERAGE[row.name].takes_keyword("threads", on_mdp=True):
         extra["threads"] = threads
-    prog.phase(f"solving with method {method}")
-    sol = run_average(mdp, method, progress=prog, **extra, **kw)
-    return ScenarioSolve(sol, mdp, method, method, build_seconds=build_seconds, seconds=time.perf_counter() - t0,
+    prog.phase(f"solving with method {row.name}")
+    sol = run_average(mdp, row.name, progress=prog, **extra, **kw)
+    return ScenarioSolve(sol, mdp, row.name, row.name, build_seconds=build_seconds, seconds=time.perf_counter() - t0,
                          warm_start=bool(set(extra) - {"threads"}))
 
 
