@@ -3,10 +3,8 @@ every public name of this module is still found here for one release, with a
 :class:`DeprecationWarning` naming the new path (:mod:`wncs_lp.moved`)."""
 from __future__ import annotations
 
-from typing import Any
-
 from . import moved
 
 
-def __getattr__(name: str) -> Any:
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

@@ -14,8 +14,8 @@ with a :class:`DeprecationWarning` that names the new one.
   that step, which behaves as the old function did, and the warning names the call that replaces
   it.
 
-A module that lost a name ends with ``def __getattr__(name): return moved.old_name(__name__, name)``
-(PEP 562). The new home is loaded by name here, and only here: it stands on a higher floor than
+A module that lost a name ends with ``__getattr__ = moved.old_names(__name__)`` (PEP 562). The
+new home is loaded by name here, and only here: it stands on a higher floor than
 the old one (the workflow floor above the solvers and the policies; the files' room above the
 policies), so a plain import from the old module would climb a floor and close a cycle.
 """
@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import importlib
 import warnings
-from typing import Any
+from typing import Any, Callable
 
-__all__ = ["MOVED", "MOVED_MODULES", "RENAMED", "REPLACED", "old_name"]
+__all__ = ["MOVED", "MOVED_MODULES", "RENAMED", "REPLACED", "old_name", "old_names"]
 
 #: Old ``module.name`` -> the module that now holds ``name``.
 MOVED = {
@@ -72,6 +72,14 @@ REPLACED = {
 }
 
 
+def old_names(module: str) -> Callable[[str], Any]:
+    """The ``__getattr__`` of a module that lost names: :func:`old_name` of that module."""
+    def __getattr__(name: str) -> Any:
+        return old_name(module, name)
+
+    return __getattr__
+
+
 def old_name(module: str, name: str) -> Any:
     """``name`` of ``module`` where it moved or what replaced it (with a :class:`DeprecationWarning`),
     else the :class:`AttributeError` a module without it raises."""
@@ -79,7 +87,7 @@ def old_name(module: str, name: str) -> Any:
     target = importlib.import_module(home) if home else None  # the one load by name (module docstring)
     if target is None or not hasattr(target, attr):
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
-    warnings.warn(message, DeprecationWarning, stacklevel=3)
+    warnings.warn(message, DeprecationWarning, stacklevel=3)  # the line that asked for the old name
     return getattr(target, attr)
 
 

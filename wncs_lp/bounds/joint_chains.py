@@ -32,7 +32,6 @@ import math
 import os
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -411,6 +410,5 @@ def column(data: JointData, k: int, y: np.ndarray, weights: np.ndarray) -> tuple
     return float((y * data.q[k][None, :]).sum()), x
 
 
-def __getattr__(name: str) -> Any:
-    """``Certificate``, renamed :class:`TableCertificate` (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

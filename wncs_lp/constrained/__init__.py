@@ -16,8 +16,6 @@ process's AoI or MSE, ...). The optimum is a *randomised* stationary policy, cer
 """
 from __future__ import annotations
 
-from typing import Any
-
 from .. import moved
 from ..methods import CONSTRAINED_METHODS  # one vocabulary: wncs_lp.methods
 from .convex import OccupationProgram
@@ -50,6 +48,5 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    """``solve_constrained``, replaced by :func:`wncs_lp.solve` (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

@@ -45,8 +45,6 @@ The exact rules are in ``docs/policies.md``.
 """
 from __future__ import annotations
 
-from typing import Any
-
 from .. import moved
 from ..models.system import OutcomeTables, System
 from ..policy_forms import pairs_to_sigma, policy_array, sigma_to_pairs
@@ -110,6 +108,5 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    """Names that moved to the workflow floor (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

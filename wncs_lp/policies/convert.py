@@ -64,6 +64,5 @@ def as_policy(policy: Any = None, mdp: MDP | None = None, *, sigma: Any = None, 
     return TablePolicy(system, mdp, arr, name=name)
 
 
-def __getattr__(name: str) -> Any:
-    """Names that moved up (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

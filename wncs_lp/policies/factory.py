@@ -140,6 +140,5 @@ class PolicySetup:
     status: Any = None
 
 
-def __getattr__(name: str) -> Any:
-    """Names that moved to the workflow floor (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

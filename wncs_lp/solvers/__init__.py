@@ -35,8 +35,6 @@ step on its bias (:func:`bracket`).
 """
 from __future__ import annotations
 
-from typing import Any
-
 from .. import moved
 from ..methods import METHODS
 from .certify import bellman_step, bracket, certificate_closed, greedy_first, q_values
@@ -84,6 +82,5 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    """Names that moved or were replaced (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

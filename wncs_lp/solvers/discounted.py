@@ -296,6 +296,5 @@ def laurent_terms(mdp: MDP, policy: Any, beta: float, *, gain: float, bias: np.n
             "bias_error": float(np.abs(v - gain / (1 - beta) - h).max())}
 
 
-def __getattr__(name: str) -> Any:
-    """``solve_discounted``, replaced by :func:`wncs_lp.solve` (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

@@ -191,6 +191,5 @@ def build_scenario(scenario: Any, method: str | None = None, *, constrained: boo
     return mdp, seconds
 
 
-def __getattr__(name: str) -> Any:
-    """Names that moved or were replaced (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

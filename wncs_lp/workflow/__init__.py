@@ -23,8 +23,6 @@ registered beside their dispatchers (:mod:`wncs_lp.solvers.registry`,
 """
 from __future__ import annotations
 
-from typing import Any
-
 from .. import moved
 from ..solvers.route import ScenarioSolve, WarmStart, as_scenario, build_scenario
 from .policies import make_policy, policy_for
@@ -33,7 +31,5 @@ from .route import run_scenario, solve
 __all__ = ["solve", "run_scenario", "make_policy", "policy_for", "ScenarioSolve", "WarmStart", "as_scenario", "build_scenario"]
 
 
-def __getattr__(name: str) -> Any:
-    """``solve_scenario`` and ``solve_any``, replaced by :func:`solve` (:mod:`wncs_lp.moved`): still found here,
-    with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

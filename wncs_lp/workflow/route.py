@@ -304,7 +304,5 @@ def _without_matrix(scenario: Any, found: Entry, requested: str, why: str, t0: f
     return ScenarioSolve(sol, None, found.row.name, requested, route=why, seconds=time.perf_counter() - t0)
 
 
-def __getattr__(name: str) -> Any:
-    """``solve_scenario`` and ``solve_any``, replaced by :func:`solve` (:mod:`wncs_lp.moved`): still found here,
-    with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

@@ -58,8 +58,6 @@ types, save / load), :mod:`.capmass` (time at the cap), :mod:`.solve` (entry poi
 """
 from __future__ import annotations
 
-from typing import Any
-
 from ... import moved
 from .capmass import cap_cost, matrix_free_cap_mass, matrix_free_cap_masses
 from .iterate import BYTES_PER_STATE, matrix_free_bytes, matrix_free_evaluate, matrix_free_value_iteration, policy_table
@@ -91,6 +89,5 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    """``solve_mdp``, replaced by :func:`wncs_lp.solve` (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)

@@ -30,6 +30,5 @@ def run_on_mdp(mdp, **kw: Any) -> Solution:
 
 
 
-def __getattr__(name: str) -> Any:
-    """``solve_mdp``, replaced by :func:`wncs_lp.solve` (:mod:`wncs_lp.moved`): still found here, with a warning."""
-    return moved.old_name(__name__, name)
+#: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
+__getattr__ = moved.old_names(__name__)
