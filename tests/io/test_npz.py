@@ -14,7 +14,7 @@ from wncs_lp.models import build
 from wncs_lp.scenario import load_scenario
 from wncs_lp import solve
 
-FORMULATIONS = Path(__file__).resolve().parent.parent / "formulations"
+FORMULATIONS = Path(__file__).resolve().parents[2] / "formulations"
 
 DOCUMENTED_KEYS = {
     "format", "format_version", "n_states", "s_indices", "a_indices", "cost", "pair_ptr", "P_data",
