@@ -303,7 +303,7 @@ def section_b1(ctx: Context) -> ExtraResult:
         f"objective the total average MSE; one `[[constraint]]` with `quantity = \"send_rate\"`, "
         f"`server = \"{SERVER}\"`, `max = b`, swept over b = {st.values[0]:g}..{st.values[-1]:g} "
         f"(step {st.values[1] - st.values[0]:g}) plus b = r0 / 2 (r0: the send rate of the unconstrained optimum) "
-        f"at each cap ({sizes}). Each point is `solve_constrained(mdp, [send_rate <= b], \"{st.method}\")` "
+        f"at each cap ({sizes}). Each point is `wncs_lp.solve(mdp, \"{st.method}\", constraints=[send_rate <= b])` "
         "(the occupation-measure LP up to its size, the Lagrangian route of certified value iteration beyond; a "
         f"point the first route does not certify is solved again by the LP up to {st.fallback_max_pairs:,} pairs: "
         "column 'solved by'), certified by [Lagrangian bound, exact cost of the returned randomised policy]. The "
