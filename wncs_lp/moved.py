@@ -100,7 +100,8 @@ def _new_place(module: str, name: str) -> tuple[str, str, str]:
                             "goes in the next release)")
     if old in RENAMED:
         home, renamed = RENAMED[old].rsplit(".", 1)
-        return home, renamed, f"{old} is renamed {home}.{renamed}; use the new name (the old one goes in the next release)"
+        return home, renamed, (f"{old} is renamed {home}.{renamed}; use the new name (the old one goes in the next "
+                               "release)")
     new = MOVED.get(old) or (MOVED_MODULES.get(module) if not name.startswith("_") else None)
     if new is None:
         return "", "", ""

@@ -120,7 +120,8 @@ def test_flat_beyond_the_threshold_at_the_unconstrained_optimum(p6, curve6, curv
 
 
 class _Counting:
-    """Wraps the constrained step (run_constrained): counts calls and raises KeyboardInterrupt at call number ``stop``."""
+    """Wraps the constrained step (run_constrained): counts calls and raises KeyboardInterrupt at call
+    number ``stop``."""
 
     def __init__(self, real, stop=None):
         self.real, self.stop, self.calls, self.bounds = real, stop, 0, []

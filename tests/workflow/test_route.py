@@ -83,7 +83,8 @@ def test_one_solve_takes_the_criterion_and_its_argument(small):
                         ({"criterion": "discounted"}, "needs its discount factor: discount=beta"),
                         ({"criterion": "constrained"}, "needs its bounds: constraints="),
                         ({"discount": 0.9, "criterion": "average"}, "criterion 'average' takes none"),
-                        ({"constraints": [], "criterion": "discounted", "discount": 0.5}, "criterion 'discounted' takes none"),
+                        ({"constraints": [], "criterion": "discounted", "discount": 0.5},
+                         "criterion 'discounted' takes none"),
                         ({"discount": 1.0}, r"beta must be in \[0, 1\); got 1.0")]:
         with pytest.raises(SolverError, match=message):
             wncs_lp.solve(mdp, **kw)

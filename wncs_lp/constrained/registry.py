@@ -73,7 +73,8 @@ def run_constrained(mdp: MDP, constraints: Iterable[Any], method: str = DEFAULT_
     found = constrained_entry(method)
     cons = constraints_for(mdp, constraints)
     if not cons:
-        raise SolverError("a constrained solve needs at least one constraint (use wncs_lp.solve for the unconstrained problem)")
+        raise SolverError("a constrained solve needs at least one constraint (use wncs_lp.solve for the unconstrained "
+                          "problem)")
     if found.choose is not None:  # auto: the method its rule picks, recorded as asked for
         sol = run_constrained(mdp, cons, found.choose(mdp, cons), **kw)
         sol.stats["method_requested"] = found.row.name

@@ -2,10 +2,11 @@
 per row of :data:`wncs_lp.methods.TABLE` (like cvxpy's solver map).
 
 :func:`run_average` (the average-cost step of :func:`wncs_lp.solve` on an MDP) dispatches through
-:data:`AVERAGE`; the scenario route (:func:`wncs_lp.workflow.route.run_scenario`) reads it for a scenario method (``matrix-free`` on the
-AoI box) and for the keywords a method takes. The constrained methods' functions are registered
-in :mod:`wncs_lp.constrained.registry`, beside their dispatcher; the discounted ones in
-:data:`wncs_lp.solvers.discounted.DISCOUNTED_ENTRIES`, beside theirs.
+:data:`AVERAGE`; the scenario route (:func:`wncs_lp.workflow.route.run_scenario`) reads it for a
+scenario method (``matrix-free`` on the AoI box) and for the keywords a method takes. The
+constrained methods' functions are registered in :mod:`wncs_lp.constrained.registry`, beside
+their step; the discounted ones in :data:`wncs_lp.solvers.discounted.DISCOUNTED_ENTRIES`, beside
+theirs.
 """
 from __future__ import annotations
 

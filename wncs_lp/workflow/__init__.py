@@ -28,7 +28,8 @@ from ..solvers.route import ScenarioSolve, WarmStart, as_scenario, build_scenari
 from .policies import make_policy, policy_for
 from .route import run_scenario, solve
 
-__all__ = ["solve", "run_scenario", "make_policy", "policy_for", "ScenarioSolve", "WarmStart", "as_scenario", "build_scenario"]
+__all__ = ["solve", "run_scenario", "make_policy", "policy_for", "ScenarioSolve", "WarmStart", "as_scenario",
+           "build_scenario"]
 
 
 #: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
