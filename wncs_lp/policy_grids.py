@@ -13,7 +13,8 @@ read as either):
   (6-neighbour);
 * :func:`parse_config_spec` -- a configuration from a short text (used by ``wncs-lp map``);
 * :func:`action_name`, :func:`short_action_name`, :func:`map_names` -- readable names, from the
-  model (:meth:`wncs_lp.models.base.Model.action_name`).
+  model (:meth:`wncs_lp.models.base.Model.action_name`);
+* :func:`map_view` -- what a map reads (:class:`MapView`), on either state space.
 
 Process indices (``axes``, ``fixed_tau``) are **1-based** like the paper's tau_1, tau_2, ...
 
@@ -27,34 +28,29 @@ policy's map shows its *most likely* action in each state (ties: the first pair,
 action listed first); :func:`mixed_states` gives the states where it mixes and
 :func:`state_mix` the mix of one. Its recurrent states are those of its own (randomised) chain.
 
-Configuration specs (``config`` arguments and ``wncs-lp map --servers``)
-------------------------------------------------------------------------
-* a configuration id (int) or object (as in ``mdp.states.configs``);
-* ``"idle"``: every server idle with empty pipelines (Section II);
-* ``"#17"``: configuration id 17;
-* a Python literal of the configuration tuple: Section II ``((up, job, d, down), ...)`` per
-  server, e.g. ``"(((), 0, 0, (0,)), ((), 3, 3, ()))"``; preemption ``(b, job, stack, down)``,
-  e.g. ``"((1, 0), (2, 2, 2), (), (None,))"``;
-* the configuration's description as printed in state labels, e.g.
-  ``"remote: idle; edge: job 3 d=3"`` or ``"b=10 | serving 2(d=2,g=2) | down [-]"``
-  (whitespace and case are ignored). For Section II, servers not named are idle, so
-  ``"edge: job 3 d=3"`` is enough.
+State spaces
+------------
+Every map reads its states through one interface, :mod:`wncs_lp.spaces`: an MDP's state table
+(:class:`~wncs_lp.spaces.EnumeratedSpace`) or a matrix-free solve's AoI box
+(:class:`~wncs_lp.spaces.BoxSpace`). :func:`policy_grid` and :func:`region_stats` take either
+(an MDP, a space, or a matrix-free solution or policy); :func:`map_view` is what both read.
+:func:`matrix_free_grid` and :func:`matrix_free_region_stats` are :func:`policy_grid` and
+:func:`region_stats` on the box with the box's own return values. A ``config`` argument is a
+configuration spec: its id, object, ``"idle"``, ``"#17"``, a literal or its description (the
+syntax: :mod:`wncs_lp.spaces`).
 """
 from __future__ import annotations
 
-import ast
-import difflib
-import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from .chain import PROB_SUM_TOL, policy_matrices, recurrent_classes
-from .errors import ModelError, PolicyError, WncsError
+from .errors import ModelError, PolicyError
 from .mdp import MDP
-from .models import model_type
-from .scenario import load_scenario
+from .spaces import BoxSpace, EnumeratedSpace, Space, config_id, map_names, space_of, system_names
 
 __all__ = [
     "NEIGHBOURS",
@@ -74,58 +70,11 @@ __all__ = [
     "system_config",
     "matrix_free_grid",
     "matrix_free_region_stats",
+    "MapView",
+    "map_view",
 ]
 
 # ============================================================================ names
-def _short_process(name: str, k: int) -> str:
-    m = re.fullmatch(r"(?i)process[-_ ]?(\w+)", name.strip())
-    return m.group(1) if m else name
-
-
-def map_names(mdp: MDP, scenario: Any = None) -> dict:
-    """Names and parameters for labels: ``processes``, ``servers``, ``p``, ``name``, ``model``.
-
-    From ``scenario`` when given, else from the scenario file the MDP was built from (``p`` only
-    when that file without overrides is this very model).
-    """
-    N = len(mdp.states.caps)
-    model = model_type(mdp)
-    info = {"processes": [str(k) for k in range(1, N + 1)], "servers": None, "p": None,
-            "name": Path(str(mdp.meta.get("source", mdp.name))).stem, "model": model}
-    sc = scenario
-    if sc is None and mdp.meta.get("source"):
-        try:  # names only; p only if the file without overrides is this very model
-            sc0 = load_scenario(mdp.meta["source"])
-            info["processes"] = [_short_process(p.name, k) for k, p in enumerate(sc0.processes, 1)]
-            info["servers"] = [s.name for s in sc0.servers]
-            if sc0.fingerprint() == mdp.meta.get("fingerprint"):
-                info["p"] = _one_p(sc0)
-        except (OSError, WncsError):  # the file moved or changed since the build: default names
-            pass
-    elif sc is not None:
-        info.update(_scenario_names(sc))
-    if info["servers"] is None:
-        info["servers"] = model.default_servers(mdp.states.configs)
-    return info
-
-
-def _scenario_names(sc: Any) -> dict:
-    return {"processes": [_short_process(p.name, k) for k, p in enumerate(sc.processes, 1)],
-            "servers": [s.name for s in sc.servers], "p": _one_p(sc), "name": Path(str(sc.source)).stem}
-
-
-def _one_p(sc: Any) -> float | None:
-    """The success probability of every link, or None when the links differ (per server or per
-    process: then no single p describes the system)."""
-    links = {float(v) for s in sc.servers for v in (*s.p_up, *s.p_down)}
-    return links.pop() if len(links) == 1 else None
-
-
-def system_names(system: Any) -> dict:
-    """:func:`map_names` of a :class:`~wncs_lp.models.system.System` (no MDP: matrix-free maps)."""
-    return {**_scenario_names(system.scenario), "model": type(system.model)}
-
-
 def action_name(mdp: MDP, action: int | Sequence[int], config: Any = None, *, scenario: Any = None,
                 names: dict | None = None) -> str:
     """A readable name of an action.
@@ -158,85 +107,21 @@ def short_action_name(mdp: MDP, a: int, names: dict) -> str:
 
 
 # ============================================================================ configurations
-def _norm(text: str) -> str:
-    return re.sub(r"\s+", " ", text.strip().lower())
-
-
-def _tuplify(x: Any) -> Any:
-    if isinstance(x, (list, tuple)):
-        return tuple(_tuplify(v) for v in x)
-    return x
-
-
 def parse_config_spec(mdp: MDP, spec: Any) -> int:
-    """The configuration id named by ``spec`` (see the module docstring for the syntax).
+    """The configuration id named by ``spec`` (the syntax: :mod:`wncs_lp.spaces`).
 
     Raises
     ------
     ModelError
         When the spec names no reachable configuration; the message lists close matches.
     """
-    space = mdp.states
-    if space is None or not hasattr(space, "configs"):
-        raise ModelError(f"{mdp!r} has no decoded state space; cannot select a configuration")
-    return _config_id(space.configs, space.describe_config, model_type(mdp), mdp.name, spec)
+    return space_of(mdp).config_id(spec)
 
 
 def system_config(system: Any, spec: Any) -> int:
     """:func:`parse_config_spec` over a :class:`~wncs_lp.models.system.System`'s configurations."""
     name = Path(str(system.scenario.source)).stem
-    return _config_id(list(system.automaton.configs), system.model.describe, type(system.model), name, spec)
-
-
-def _config_id(configs: list, describe: Any, model: Any, name: str, spec: Any) -> int:
-    def lookup(obj: Any) -> int:
-        try:
-            return configs.index(obj)
-        except ValueError:
-            return -1
-
-    if isinstance(spec, (int, np.integer)):
-        if not 0 <= int(spec) < len(configs):
-            raise ModelError(f"configuration id {spec} out of range 0..{len(configs) - 1}")
-        return int(spec)
-    if not isinstance(spec, str):
-        c = lookup(_tuplify(spec))
-        if c < 0:
-            raise ModelError(f"configuration {spec!r} is not reachable in {name}")
-        return c
-    text = spec.strip()
-    if text.lower() == "idle":
-        ids = [i for i, c in enumerate(configs) if model.is_idle(c)]
-        if len(ids) == 1:
-            return ids[0]
-        if not ids:
-            raise ModelError(f"{name}: no configuration with every server idle")
-        raise ModelError(f"{name}: 'idle' is ambiguous ({len(ids)} configurations); give the description, "
-                         f"e.g. {describe(configs[ids[0]])!r}")
-    if text.startswith("#") and text[1:].strip().isdigit():
-        return _config_id(configs, describe, model, name, int(text[1:]))
-    if text[:1] in "([":
-        try:
-            obj = _tuplify(ast.literal_eval(text))
-        except (ValueError, SyntaxError) as exc:
-            raise ModelError(f"configuration literal {text!r} is not a valid Python literal: {exc}") from None
-        c = lookup(obj)
-        if c < 0:
-            raise ModelError(f"configuration {obj!r} is not reachable in {name}")
-        return c
-    descs = [describe(c) for c in configs]
-    target = _norm(text)
-    normed = [_norm(d) for d in descs]
-    if target in normed:
-        return normed.index(target)
-    # a partial description (Section II: servers not named are idle)
-    idle_desc = next((d for c, d in zip(configs, descs) if model.is_idle(c)), None)
-    full = model.complete_partial(text, descs, idle_desc)
-    if full is not None and _norm(full) in normed:
-        return normed.index(_norm(full))
-    close = difflib.get_close_matches(target, normed, n=6, cutoff=0.5)
-    hint = "; ".join(repr(descs[normed.index(c)]) for c in close) or "none close"
-    raise ModelError(f"no reachable configuration matches {text!r} in {name}; close matches: {hint}")
+    return config_id(list(system.automaton.configs), system.model.describe, type(system.model), name, spec)
 
 
 # ============================================================================ grids
@@ -368,25 +253,24 @@ def _given_fixed(fixed_tau: Mapping[int, int] | None, caps: Sequence[int], axes:
     return fixed
 
 
-def _fixed(mdp: MDP, config: int, axes: Sequence[int], fixed_tau: Mapping[int, int] | None,
+def _fixed(space: Space, c: int, axes: Sequence[int], fixed_tau: Mapping[int, int] | None,
            weights: np.ndarray | None = None) -> dict[int, int]:
-    """Values of the AoIs not on the axes: given, or else the value carrying the most weight
-    (e.g. stationary probability, or number of recurrent states) in the configuration, ties and
-    weightless configurations broken by the number of reachable cells (then the smaller value)."""
-    space = mdp.states
-    caps = space.caps
-    N = len(caps)
-    fixed = _given_fixed(fixed_tau, caps, axes)
-    ids = space.lookup_grid(config)
-    G = ids >= 0
-    W = np.zeros(G.shape) if weights is None else np.where(G, np.asarray(weights, float)[np.maximum(ids, 0)], 0.0)
-    for k in range(1, N + 1):
-        if k in axes or k in fixed:
-            continue
-        other = tuple(i for i in range(N) if i != k - 1)
-        counts = G.sum(axis=other)
-        mass = W.sum(axis=other)
-        fixed[k] = int(np.lexsort((-counts, -mass))[0]) + 1
+    """Values of the AoIs not on the axes: given (within the configuration's range), or else the value
+    carrying the most weight (e.g. stationary probability, or number of recurrent states) in the
+    configuration, ties and weightless configurations broken by the number of its states (then the
+    smaller value; on an AoI box, whose values all hold as many states, its lower end)."""
+    fixed = _given_fixed(fixed_tau, space.caps, axes)
+    low, high = space.box(c)
+    for k, v in fixed.items():
+        if not low[k - 1] <= v <= high[k - 1]:
+            raise ModelError(f"fixed_tau: tau_{k} = {v} is not reachable with this configuration "
+                             f"(it holds tau_{k} in {low[k - 1]}..{high[k - 1]})")
+    if len(fixed) == space.n_processes - len(axes):
+        return fixed
+    counts, mass = space.value_counts(c, weights)
+    for k in range(1, space.n_processes + 1):
+        if k not in axes and k not in fixed:
+            fixed[k] = int(np.lexsort((-counts[k - 1], -mass[k - 1]))[0]) + 1
     return fixed
 
 
@@ -400,49 +284,109 @@ def _weights(mdp: MDP, pol: np.ndarray, stationary: Any) -> np.ndarray | None:
     return recurrent_mask(mdp, pol, None).astype(float)
 
 
-def _view(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[int], n_axes: int,
-          fixed_tau: Mapping[int, int] | None, stationary: Any) -> tuple[tuple[int, ...], int, np.ndarray, dict[int, int]]:
-    """What a map or a slice looks at: ``(axes, configuration id, chosen pair per state, the values of
-    the AoIs off the axes)``."""
-    N = len(mdp.states.caps)
-    axes = _check_axes(N, axes, n_axes)
-    c = parse_config_spec(mdp, config)
-    chain_pol = _chain_policy(mdp, policy_or_solution)
-    pol = policy_pairs(mdp, chain_pol)
-    fixed = _fixed(mdp, c, axes, fixed_tau,
-                   _weights(mdp, chain_pol, stationary) if len(fixed_tau or {}) < N - n_axes else None)
-    return axes, c, pol, fixed
+def _box_table(space: BoxSpace, policy: Any) -> np.ndarray:
+    """A matrix-free policy's local action per layout state (a MatrixFreePolicy, a MatrixFreeSolution or
+    the array), checked against the layout."""
+    table = np.asarray(getattr(policy, "table", getattr(policy, "local_actions", policy)))
+    if table.shape != (space.layout.n_states,) or not np.issubdtype(table.dtype, np.integer):
+        raise ModelError(f"a matrix-free policy is one local action index per layout state, shape "
+                         f"({space.layout.n_states},); got shape {table.shape} and dtype {table.dtype}")
+    return table
 
 
-def policy_grid(mdp: MDP, policy_or_solution: Any, config: Any, axes: Sequence[int] = (1, 2),
+@dataclass(frozen=True, eq=False)
+class MapView:
+    """What a policy map looks at, on either state space (:mod:`wncs_lp.spaces`).
+
+    Attributes
+    ----------
+    space : Space
+    config : int
+        The configuration id.
+    axes : tuple of int
+        The 1-based processes on the axes.
+    fixed : dict
+        The values of the AoIs off the axes (1-based process -> tau).
+    policy : array
+        The policy in the space's form: the chosen (most likely) pair per state, or the local
+        action per layout state.
+    probabilities : (L,) array or None
+        A randomised policy's pair probabilities (enumerated spaces only).
+    chain : array or None
+        What the policy's chain is built from (its probabilities or its pairs); None on an AoI box,
+        where no chain is formed.
+    """
+
+    space: Space
+    config: int
+    axes: tuple[int, ...]
+    fixed: dict
+    policy: np.ndarray
+    probabilities: np.ndarray | None
+    chain: np.ndarray | None
+
+    def recurrent(self, stationary: Any = None) -> np.ndarray | None:
+        """The states with positive stationary probability (:func:`recurrent_mask`); None on an AoI box
+        (no stationary law is known there) or with ``stationary=False``."""
+        if self.chain is None:
+            return None
+        return recurrent_mask(self.space.mdp, self.chain, stationary)
+
+
+def map_view(mdp_or_space: Any, policy_or_solution: Any, config: Any, axes: Sequence[int] = (1, 2),
+             fixed_tau: Mapping[int, int] | None = None, stationary: Any = None) -> MapView:
+    """The configuration, the values off the axes and the policy's form a map or a slice reads.
+
+    ``mdp_or_space``: an MDP, a :class:`~wncs_lp.spaces.Space`, or a matrix-free solution or
+    policy (its AoI box). ``axes``: two processes (a map) or three (a slice).
+    """
+    space = space_of(mdp_or_space)
+    axes = _check_axes(space.n_processes, axes, 3 if len(tuple(axes)) == 3 else 2)
+    c = space.config_id(config)
+    if isinstance(space, EnumeratedSpace):
+        mdp = space.mdp
+        chain = _chain_policy(mdp, policy_or_solution)
+        probs = chain if _is_probs(chain) else None
+        pol = policy_pairs(mdp, chain)
+        missing = len(fixed_tau or {}) < space.n_processes - len(axes)
+        fixed = _fixed(space, c, axes, fixed_tau, _weights(mdp, chain, stationary) if missing else None)
+        return MapView(space, c, axes, fixed, pol, probs, chain)
+    table = _box_table(space, policy_or_solution)
+    return MapView(space, c, axes, _fixed(space, c, axes, fixed_tau), table, None, None)
+
+
+def _actions(view: MapView, S: np.ndarray) -> np.ndarray:
+    """The policy's action index at state indices S (-1 kept for no state)."""
+    return np.where(S >= 0, view.space.actions_at(view.policy, np.maximum(S, 0)), -1)
+
+
+def policy_grid(mdp: Any, policy_or_solution: Any, config: Any, axes: Sequence[int] = (1, 2),
                 fixed_tau: Mapping[int, int] | None = None, stationary: Any = None
                 ) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
     """The chosen action over (tau_i, tau_j) for one configuration (the most likely one for a
     randomised policy).
 
-    The AoIs not on the axes take ``fixed_tau`` or, by default, the value with the most
-    stationary probability (``stationary`` given) or the most recurrent states of the policy's
-    chain in this configuration (ties: the most reachable cells).
+    ``mdp`` is an MDP or any state space of :mod:`wncs_lp.spaces` (a matrix-free solution or
+    policy: its AoI box; then the policy is its local action table). The AoIs not on the axes take
+    ``fixed_tau`` or, by default, the value with the most stationary probability (``stationary``
+    given) or the most recurrent states of the policy's chain in this configuration (ties: the
+    most reachable cells; on an AoI box, where no stationary law is known, the lower end of the
+    configuration's box).
 
     Returns
     -------
     actions : (cap_i, cap_j) int array
-        Action index (row of ``mdp.action_table``) at ``[tau_i - 1, tau_j - 1]``; -1 = unreachable.
+        Action index (the space's: a row of ``mdp.action_table``, or a local index into the
+        configuration's actions) at ``[tau_i - 1, tau_j - 1]``; -1 = no state (unreachable).
     states : (cap_i, cap_j) int array
         State ids (-1 = unreachable).
     fixed : dict
         The values used for the other AoIs (1-based process -> tau).
     """
-    space = mdp.states
-    N = len(space.caps)
-    axes, c, pol, fixed = _view(mdp, policy_or_solution, config, axes, 2, fixed_tau, stationary)
-    G = space.lookup_grid(c)
-    idx = [slice(None) if k in axes else fixed[k] - 1 for k in range(1, N + 1)]
-    S = G[tuple(idx)]
-    if axes[0] > axes[1]:
-        S = S.T
-    A = np.where(S >= 0, mdp.a_indices[pol[np.maximum(S, 0)]], -1)
-    return A, S, fixed
+    space = space_of(mdp)
+    view = map_view(space, policy_or_solution, config, _check_axes(space.n_processes, axes, 2), fixed_tau, stationary)
+    S = view.space.slice_states(view.config, view.axes, view.fixed)
+    return _actions(view, S), S, view.fixed
 
 
 def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes: Sequence[int] = (1, 2, 3),
@@ -461,32 +405,26 @@ def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes:
     fixed : dict
         The values of the AoIs not in ``axes``.
     """
-    space = mdp.states
+    space = space_of(mdp)
     caps = space.caps
     N = len(caps)
     if N < 3:
         raise ModelError(f"a slice tau_i + tau_j + tau_k = total needs 3 processes, this model has {N}")
-    axes, c, pol, fixed = _view(mdp, policy_or_solution, config, axes, 3, fixed_tau, stationary)
-    i, j, k = axes
+    view = map_view(space, policy_or_solution, config, _check_axes(N, axes, 3), fixed_tau, stationary)
+    i, j, k = view.axes
     ci, cj, ck = caps[i - 1], caps[j - 1], caps[k - 1]
     if not 3 <= total <= ci + cj + ck:
         raise ModelError(f"total = {total} outside 3..{ci + cj + ck} (the caps are {ci}, {cj}, {ck})")
-    G = space.lookup_grid(c)
-    A = np.full((ci, cj), -2, dtype=np.int64)
+    ti, tj = np.meshgrid(np.arange(1, ci + 1), np.arange(1, cj + 1), indexing="ij")
+    tk = total - ti - tj
+    on = (tk >= 1) & (tk <= ck)
+    tau = np.empty((int(on.sum()), N), np.int64)
+    for p in range(1, N + 1):
+        tau[:, p - 1] = ti[on] if p == i else tj[on] if p == j else tk[on] if p == k else view.fixed[p]
     S = np.full((ci, cj), -1, dtype=np.int64)
-    for a in range(1, ci + 1):
-        for b in range(1, cj + 1):
-            t = total - a - b
-            if not 1 <= t <= ck:
-                continue
-            tau = [0] * N
-            for p, v in fixed.items():
-                tau[p - 1] = v
-            tau[i - 1], tau[j - 1], tau[k - 1] = a, b, t
-            s = int(G[tuple(x - 1 for x in tau)])
-            S[a - 1, b - 1] = s
-            A[a - 1, b - 1] = mdp.a_indices[pol[s]] if s >= 0 else -1
-    return A, S, fixed
+    S[on] = view.space.lookup(tau, view.config)
+    A = np.where(on, _actions(view, S), -2)
+    return A, S, view.fixed
 
 
 # ============================================================================ regions
@@ -538,20 +476,20 @@ def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any
 
     names: dict[int, str] = {}
     fixed: dict[int, int] | None = None
-    if isinstance(labels_or_mdp, MDP):
-        mdp = labels_or_mdp
+    if isinstance(labels_or_mdp, (MDP, Space)):
+        space = space_of(labels_or_mdp)
         if policy_or_solution is None or config is None:
             raise ModelError("region_stats(mdp, ...) needs the policy (or solution) and the configuration")
         if total is None:
-            lab, _, fixed = policy_grid(mdp, policy_or_solution, config, axes or (1, 2), fixed_tau, stationary)
+            lab, _, fixed = policy_grid(space, policy_or_solution, config, axes or (1, 2), fixed_tau, stationary)
             connectivity = connectivity or "grid4"
         else:
-            lab, _, fixed = slice_grid(mdp, policy_or_solution, config, total, axes or (1, 2, 3), fixed_tau,
+            lab, _, fixed = slice_grid(space, policy_or_solution, config, total, axes or (1, 2, 3), fixed_tau,
                                        stationary)
             connectivity = connectivity or "tri6"
-        info = map_names(mdp, scenario)
-        cid = parse_config_spec(mdp, config)
-        names = {int(a): action_name(mdp, int(a), cid, names=info) for a in np.unique(lab[lab >= 0])}
+        info = space.names(scenario)
+        cid = space.config_id(config)
+        names = {int(a): space.action_name(cid, int(a), info) for a in np.unique(lab[lab >= 0])}
     else:
         lab = np.asarray(labels_or_mdp)
         connectivity = connectivity or "grid4"
@@ -604,13 +542,13 @@ def region_stats(labels_or_mdp: Any, policy_or_solution: Any = None, config: Any
 # ============================================================================ matrix-free policies
 def matrix_free_grid(policy: Any, config: Any, axes: Sequence[int] = (1, 2),
                      fixed_tau: Mapping[int, int] | None = None) -> tuple[np.ndarray, list, dict[int, int], int]:
-    """The chosen action over (tau_i, tau_j) of a matrix-free policy, for one configuration.
+    """The chosen action over (tau_i, tau_j) of a matrix-free policy, for one configuration:
+    :func:`policy_grid` on the policy's AoI box (:class:`~wncs_lp.spaces.BoxSpace`).
 
-    The policy is a :class:`~wncs_lp.policies.MatrixFreePolicy` (``system``, ``layout``,
-    ``table``: one local action index per state of the configuration's AoI box, no MDP). The
-    AoIs not on the axes take ``fixed_tau`` or, by default, the *lower end* of the box of this
-    configuration (the freshest value it can hold: there is no stationary law to choose by at
-    this scale; pass ``fixed_tau`` for another).
+    The policy is a :class:`~wncs_lp.policies.MatrixFreePolicy` or a matrix-free solution (one
+    local action index per state of the configuration's AoI box, no MDP). The AoIs not on the
+    axes take ``fixed_tau`` or, by default, the *lower end* of the box of this configuration (the
+    freshest value it can hold: there is no stationary law to choose by at this scale).
 
     Returns
     -------
@@ -624,41 +562,17 @@ def matrix_free_grid(policy: Any, config: Any, axes: Sequence[int] = (1, 2),
     config : int
         The configuration id.
     """
-    system, layout, table = policy.system, policy.layout, policy.table
-    caps = [int(c) for c in system.caps]
-    N = len(caps)
-    axes = _check_axes(N, axes, 2)
-    c = system_config(system, config)
-    lo, dims = layout.lo[c], layout.dims[c]
-    fixed = _given_fixed(fixed_tau, caps, axes)
-    for k, v in fixed.items():
-        if not lo[k - 1] + 1 <= v <= lo[k - 1] + dims[k - 1]:
-            raise ModelError(f"fixed_tau: tau_{k} = {v} is not reachable with this configuration "
-                             f"(it holds tau_{k} in {lo[k - 1] + 1}..{lo[k - 1] + dims[k - 1]})")
-    for k in range(1, N + 1):
-        if k not in axes and k not in fixed:
-            fixed[k] = int(lo[k - 1]) + 1
-    i, j = axes
-    ti, tj = np.meshgrid(np.arange(1, caps[i - 1] + 1), np.arange(1, caps[j - 1] + 1), indexing="ij")
-    tau = np.empty((ti.size, N), np.int64)
-    for k in range(1, N + 1):
-        tau[:, k - 1] = ti.ravel() if k == i else (tj.ravel() if k == j else fixed[k])
-    idx = layout.index(tau, np.full(ti.size, c, np.int64))
-    A = np.where(idx >= 0, table[np.maximum(idx, 0)].astype(np.int64), -1).reshape(ti.shape)
-    return A, list(system.automaton.actions[c]), fixed, c
+    space = space_of(policy)
+    A, _, fixed = policy_grid(space, policy, config, axes, fixed_tau)
+    c = space.config_id(config)
+    return A, list(space.system.automaton.actions[c]), fixed, c
 
 
 def matrix_free_region_stats(policy: Any, config: Any, axes: Sequence[int] = (1, 2),
                              fixed_tau: Mapping[int, int] | None = None) -> dict:
-    """:func:`region_stats` of a matrix-free policy's map (:func:`matrix_free_grid`), with the
-    actions named and ``configuration``, ``configuration_id`` and ``fixed_tau`` added."""
-    A, labels, fixed, c = matrix_free_grid(policy, config, axes, fixed_tau)
-    system = policy.system
-    conf = system.automaton.configs[c]
-    info = system_names(system)
-    out = region_stats(A, connectivity="grid4")
-    out["per_action"] = {info["model"].action_name(tuple(int(x) for x in np.atleast_1d(labels[int(k)])), conf, info): v
-                         for k, v in out["per_action"].items()}
-    out.update(configuration=system.model.describe(conf), configuration_id=int(c),
-               fixed_tau={str(k): v for k, v in sorted(fixed.items())})
-    return out
+    """:func:`region_stats` of a matrix-free policy's map on its AoI box, with ``configuration`` and
+    ``configuration_id`` added."""
+    space = space_of(policy)
+    out = region_stats(space, policy, config, axes=axes, fixed_tau=fixed_tau)
+    c = space.config_id(config)
+    return {**out, "configuration": space.describe(c), "configuration_id": int(c)}
