@@ -325,6 +325,29 @@ class MapView:
     probabilities: np.ndarray | None
     chain: np.ndarray | None
 
+    def grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(actions, states)`` over (tau_i, tau_j), ``[tau_i - 1, tau_j - 1]``; -1 where there is no state."""
+        S = self.space.slice_states(self.config, self.axes, self.fixed)
+        return _actions(self, S), S
+
+    def plane(self, total: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(actions, states)`` on the plane tau_i + tau_j + tau_k = total (three axes), indexed
+        ``[tau_i - 1, tau_j - 1]``: -1 where the plane holds no state, actions -2 off the plane."""
+        caps, N = self.space.caps, self.space.n_processes
+        i, j, k = self.axes
+        ci, cj, ck = caps[i - 1], caps[j - 1], caps[k - 1]
+        if not 3 <= total <= ci + cj + ck:
+            raise ModelError(f"total = {total} outside 3..{ci + cj + ck} (the caps are {ci}, {cj}, {ck})")
+        ti, tj = np.meshgrid(np.arange(1, ci + 1), np.arange(1, cj + 1), indexing="ij")
+        tk = total - ti - tj
+        on = (tk >= 1) & (tk <= ck)
+        tau = np.empty((int(on.sum()), N), np.int64)
+        for p in range(1, N + 1):
+            tau[:, p - 1] = ti[on] if p == i else tj[on] if p == j else tk[on] if p == k else self.fixed[p]
+        S = np.full((ci, cj), -1, dtype=np.int64)
+        S[on] = self.space.lookup(tau, self.config)
+        return np.where(on, _actions(self, S), -2), S
+
     def recurrent(self, stationary: Any = None) -> np.ndarray | None:
         """The states with positive stationary probability (:func:`recurrent_mask`); None on an AoI box
         (no stationary law is known there) or with ``stationary=False``."""
@@ -334,14 +357,18 @@ class MapView:
 
 
 def map_view(mdp_or_space: Any, policy_or_solution: Any, config: Any, axes: Sequence[int] = (1, 2),
-             fixed_tau: Mapping[int, int] | None = None, stationary: Any = None) -> MapView:
+             fixed_tau: Mapping[int, int] | None = None, stationary: Any = None, *, plane: bool = False) -> MapView:
     """The configuration, the values off the axes and the policy's form a map or a slice reads.
 
     ``mdp_or_space``: an MDP, a :class:`~wncs_lp.spaces.Space`, or a matrix-free solution or
-    policy (its AoI box). ``axes``: two processes (a map) or three (a slice).
+    policy (its AoI box). ``axes``: two processes (a map), or three with ``plane=True`` (a slice,
+    :meth:`MapView.plane`).
     """
     space = space_of(mdp_or_space)
-    axes = _check_axes(space.n_processes, axes, 3 if len(tuple(axes)) == 3 else 2)
+    N = space.n_processes
+    if plane and N < 3:
+        raise ModelError(f"a slice tau_i + tau_j + tau_k = total needs 3 processes, this model has {N}")
+    axes = _check_axes(N, axes, 3 if plane else 2)
     c = space.config_id(config)
     if isinstance(space, EnumeratedSpace):
         mdp = space.mdp
@@ -383,10 +410,8 @@ def policy_grid(mdp: Any, policy_or_solution: Any, config: Any, axes: Sequence[i
     fixed : dict
         The values used for the other AoIs (1-based process -> tau).
     """
-    space = space_of(mdp)
-    view = map_view(space, policy_or_solution, config, _check_axes(space.n_processes, axes, 2), fixed_tau, stationary)
-    S = view.space.slice_states(view.config, view.axes, view.fixed)
-    return _actions(view, S), S, view.fixed
+    view = map_view(mdp, policy_or_solution, config, axes, fixed_tau, stationary)
+    return (*view.grid(), view.fixed)
 
 
 def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes: Sequence[int] = (1, 2, 3),
@@ -405,26 +430,8 @@ def slice_grid(mdp: MDP, policy_or_solution: Any, config: Any, total: int, axes:
     fixed : dict
         The values of the AoIs not in ``axes``.
     """
-    space = space_of(mdp)
-    caps = space.caps
-    N = len(caps)
-    if N < 3:
-        raise ModelError(f"a slice tau_i + tau_j + tau_k = total needs 3 processes, this model has {N}")
-    view = map_view(space, policy_or_solution, config, _check_axes(N, axes, 3), fixed_tau, stationary)
-    i, j, k = view.axes
-    ci, cj, ck = caps[i - 1], caps[j - 1], caps[k - 1]
-    if not 3 <= total <= ci + cj + ck:
-        raise ModelError(f"total = {total} outside 3..{ci + cj + ck} (the caps are {ci}, {cj}, {ck})")
-    ti, tj = np.meshgrid(np.arange(1, ci + 1), np.arange(1, cj + 1), indexing="ij")
-    tk = total - ti - tj
-    on = (tk >= 1) & (tk <= ck)
-    tau = np.empty((int(on.sum()), N), np.int64)
-    for p in range(1, N + 1):
-        tau[:, p - 1] = ti[on] if p == i else tj[on] if p == j else tk[on] if p == k else view.fixed[p]
-    S = np.full((ci, cj), -1, dtype=np.int64)
-    S[on] = view.space.lookup(tau, view.config)
-    A = np.where(on, _actions(view, S), -2)
-    return A, S, view.fixed
+    view = map_view(mdp, policy_or_solution, config, axes, fixed_tau, stationary, plane=True)
+    return (*view.plane(total), view.fixed)
 
 
 # ============================================================================ regions

@@ -23,23 +23,9 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..policy_grids import (
-    NEIGHBOURS,
-    action_name,
-    map_names,
-    matrix_free_grid,
-    mixed_states,
-    parse_config_spec,
-    policy_grid,
-    policy_pairs,
-    policy_probabilities,
-    recurrent_mask,
-    short_action_name,
-    slice_grid,
-    state_mix,
-    system_names,
-)
 from ..mdp import MDP
+from ..policy_grids import NEIGHBOURS, action_name, map_view, mixed_states, state_mix
+from ..spaces import Space, space_of
 
 __all__ = ["ACTION_STYLES", "MIX_GID", "MIX_MARKER", "MIX_OFFSET", "MIX_LEGEND_MAX", "plot_policy_map",
            "plot_policy_slice", "plot_matrix_free_map"]
@@ -83,22 +69,12 @@ def _tau(k: int, info: dict) -> str:
     return rf"$\tau_{{{sub}}}$"
 
 
-def _title(info: dict, mdp: MDP, config: int, extra: str) -> str:
-    desc = mdp.states.describe_config(mdp.states.configs[config])
-    caps = mdp.states.caps
+def _title(info: dict, space: Space, config: int, extra: str) -> str:
+    caps = space.caps
     par = [f"cap {caps[0]}" if len(set(caps)) == 1 else "caps " + ",".join(map(str, caps))]
     if info.get("p") is not None:
         par.insert(0, f"p = {info['p']:g}")
-    return f"{info['name']}: policy in [{desc}]\n{extra}{', '.join(par)}"
-
-
-def _policy_forms(mdp: MDP, policy_or_solution: Any) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
-    """``(probs or None, chosen/most likely pairs, what the chain is built from)``."""
-    probs = policy_probabilities(mdp, policy_or_solution)
-    if probs is None:
-        pol = policy_pairs(mdp, policy_or_solution)
-        return None, pol, pol
-    return probs, policy_pairs(mdp, probs), probs
+    return f"{info['name']}: policy in [{space.describe(config)}]{space.note}\n{extra}{', '.join(par)}"
 
 
 def _mix_text(mdp: MDP, probs: np.ndarray, s: int, cid: int, info: dict) -> str:
@@ -150,7 +126,7 @@ def _grid_axes(ax, info: dict, i: int, j: int, ci: int, cj: int) -> None:
 
 
 def plot_policy_map(
-    mdp: MDP,
+    mdp: Any,
     policy_or_solution: Any,
     config: Any,
     axes: Sequence[int] = (1, 2),
@@ -170,11 +146,17 @@ def plot_policy_map(
     (transient), dark grey for unreachable cells. A randomised policy shows its most likely
     action, with a small black star on the states where it mixes (the mix is in the legend).
 
+    The same map of a matrix-free policy (no MDP: the paper's four processes at cap 30 and beyond)
+    is drawn from its AoI box (:class:`~wncs_lp.spaces.BoxSpace`): dark grey outside the
+    configuration's box, no shading (no stationary law is known at that scale), the AoIs off the
+    axes at the lower end of the box by default, "(matrix-free)" in the title.
+
     Parameters
     ----------
-    mdp : MDP
+    mdp : MDP, or a state space of :mod:`wncs_lp.spaces` (a matrix-free solution or policy: its box)
     policy_or_solution : Solution or (n,) int array of pair indices; or a randomised policy:
-        ConstrainedSolution, MixedPolicy or (L,) float array of pair probabilities
+        ConstrainedSolution, MixedPolicy or (L,) float array of pair probabilities; on an AoI box,
+        the MatrixFreeSolution, MatrixFreePolicy or local action table
     config : configuration (id, object or spec string, see :func:`parse_config_spec`)
     axes : (i, j)
         1-based processes on the x and y axes.
@@ -201,11 +183,11 @@ def plot_policy_map(
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    cid = parse_config_spec(mdp, config)
-    probs, pol, chain_pol = _policy_forms(mdp, policy_or_solution)
-    A, S, fixed = policy_grid(mdp, chain_pol, cid, axes, fixed_tau, stationary)
-    rec_mask = recurrent_mask(mdp, chain_pol, stationary)
-    info = map_names(mdp, scenario)
+    view = map_view(mdp, policy_or_solution, config, axes, fixed_tau, stationary)
+    space, cid, probs = view.space, view.config, view.probabilities
+    A, S = view.grid()
+    rec_mask = view.recurrent(stationary)
+    info = space.names(scenario)
     if ax is None:
         _, ax = plt.subplots(figsize=(8.6, 6.2), layout="constrained")  # room for the legend outside the panel
     ci, cj = A.shape
@@ -221,15 +203,16 @@ def plot_policy_map(
     handles = []
     for a in np.unique(A[A >= 0]):
         xs, ys = np.nonzero(A == a)
-        mk, col = _style(a)
+        mk, col = _style(space.style_key(cid, int(a)))
         ax.plot(xs + 1, ys + 1, linestyle="none", marker=mk, color=col, markersize=ms,
                 markerfacecolor=col if mk not in ("x", "+") else None, alpha=_FILLED_ALPHA,
                 markeredgewidth=1.4 if mk in ("x", "+") else 0.6)
         n = int(xs.size)
         handles.append(Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
-                              label=f"{action_name(mdp, int(a), cid, names=info)}  [{n} cells]"))
-    i, j = axes
+                              label=f"{space.action_name(cid, int(a), info)}  [{n} cells]"))
+    i, j = view.axes
     if probs is not None:
+        mdp = space.mdp
         mixed = np.isin(S, mixed_states(mdp, probs)) & (S >= 0)
         cells = []
         for x, y in zip(*np.nonzero(mixed)):
@@ -238,10 +221,10 @@ def plot_policy_map(
     if rec_mask is not None:
         handles.append(Patch(facecolor=_TRANSIENT_BG, edgecolor="0.5", label="zero stationary probability"))
     if (~reach).any():
-        handles.append(Patch(facecolor=_UNREACHABLE_BG, edgecolor="0.3", label="unreachable state"))
+        handles.append(Patch(facecolor=_UNREACHABLE_BG, edgecolor="0.3", label=space.outside))
     _grid_axes(ax, info, i, j, ci, cj)
-    extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(fixed.items()))
-    ax.set_title(title or _title(info, mdp, cid, (extra + ", ") if extra else ""), fontsize=10)
+    extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(view.fixed.items()))
+    ax.set_title(title or _title(info, space, cid, (extra + ", ") if extra else ""), fontsize=10)
     if legend:
         _place_legend(ax, handles, fontsize=8.5, title="action" if probs is None else "most likely action",
                       title_fontsize=9, frameon=True)
@@ -333,11 +316,12 @@ def plot_policy_slice(
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    cid = parse_config_spec(mdp, config)
-    probs, pol, chain_pol = _policy_forms(mdp, solution)
-    A, S, fixed = slice_grid(mdp, chain_pol, cid, total, axes, fixed_tau, stationary)
-    rec_mask = recurrent_mask(mdp, chain_pol, stationary)
-    info = map_names(mdp, scenario)
+    view = map_view(mdp, solution, config, axes, fixed_tau, stationary, plane=True)
+    space, cid, probs = view.space, view.config, view.probabilities
+    A, S = view.plane(total)
+    fixed = view.fixed
+    rec_mask = view.recurrent(stationary)
+    info = space.names(scenario)
     if ax is None:
         _, ax = plt.subplots(figsize=(9.0, 6.8), layout="constrained")  # room for the legend outside the panel
     i, j, k = axes
@@ -351,8 +335,9 @@ def plot_policy_slice(
     unr = A == -1
     if unr.any():
         ax.plot(X[unr], Y[unr], linestyle="none", marker=".", color="0.55", markersize=ms * 0.5, zorder=1)
-    handles = [_slice_region(ax, mdp, A, S, a, X, Y, rec_mask, ms, cid, info) for a in np.unique(A[A >= 0])]
+    handles = [_slice_region(ax, space, A, S, a, X, Y, rec_mask, ms, cid, info) for a in np.unique(A[A >= 0])]
     if probs is not None:
+        mdp = space.mdp
         mixed = np.isin(S, mixed_states(mdp, probs)) & (A >= 0)
         off = 0.5 * MIX_OFFSET / total  # the lattice spacing is 1 / total
         cells = [(float(X[a, b]) + off, float(Y[a, b]) + off, int(S[a, b]), (a + 1, b + 1, int(total - a - b - 2)))
@@ -370,7 +355,7 @@ def plot_policy_slice(
     ax.set_axis_off()
     extra = ", ".join(f"{_tau(p, info)} = {v}" for p, v in sorted(fixed.items()))
     head = f"plane {_tau(i, info)} + {_tau(j, info)} + {_tau(k, info)} = {total}, " + (extra + ", " if extra else "")
-    ax.set_title(title or _title(info, mdp, cid, head), fontsize=10, pad=30)
+    ax.set_title(title or _title(info, space, cid, head), fontsize=10, pad=30)
     if legend:
         _place_legend(ax, handles, fontsize=8.5, title="action" if probs is None else "most likely action",
                       title_fontsize=9)
@@ -391,7 +376,7 @@ def _plane_outline(ax, px: np.ndarray, py: np.ndarray) -> None:
             pass
 
 
-def _slice_region(ax, mdp: MDP, A: np.ndarray, S: np.ndarray, a: int, X: np.ndarray, Y: np.ndarray,
+def _slice_region(ax, space: Space, A: np.ndarray, S: np.ndarray, a: int, X: np.ndarray, Y: np.ndarray,
                   rec_mask: np.ndarray | None, ms: float, cid: int, info: dict):
     """Draw action a's points (faded where transient) and label each of its connected regions
     (6-neighbour on the triangular lattice) of at least 3 points; returns its legend handle."""
@@ -413,11 +398,12 @@ def _slice_region(ax, mdp: MDP, A: np.ndarray, S: np.ndarray, a: int, X: np.ndar
         sel = comp == r
         if sel.sum() < 3:
             continue
-        ax.text(X[sel].mean(), Y[sel].mean(), short_action_name(mdp, int(a), info), ha="center", va="center",
+        short = info["model"].short_action(space.action_label(cid, int(a)), info)
+        ax.text(X[sel].mean(), Y[sel].mean(), short, ha="center", va="center",
                 fontsize=9, fontweight="bold", color=col, zorder=4,
                 bbox=dict(boxstyle="round,pad=0.2", facecolor="white", edgecolor=col, alpha=0.85))
     return Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
-                  label=f"{action_name(mdp, int(a), cid, names=info)}  [{int(m.sum())} points]")
+                  label=f"{space.action_name(cid, int(a), info)}  [{int(m.sum())} points]")
 
 
 def _corner_labels(ax, on: np.ndarray, X: np.ndarray, Y: np.ndarray, corners, info: dict) -> None:
@@ -447,9 +433,10 @@ def plot_matrix_free_map(
     title: str | None = None,
     legend: bool = True,
 ) -> Any:
-    r"""Draw a matrix-free policy over (tau_i, tau_j) for one configuration (no MDP needed).
+    r"""Draw a matrix-free policy over (tau_i, tau_j) for one configuration (no MDP needed):
+    :func:`plot_policy_map` on the policy's AoI box (:class:`~wncs_lp.spaces.BoxSpace`).
 
-    The map of :func:`plot_policy_map` for a policy of
+    The map of a policy of
     :func:`~wncs_lp.solvers.matrix_free.matrix_free_value_iteration` (the paper's four processes
     at cap 30 and beyond): one marker per action, dark grey outside the configuration's AoI box.
     There is no stationary law at this scale, so transient states are not shaded, and the AoIs
@@ -473,50 +460,4 @@ def plot_matrix_free_map(
     -------
     matplotlib.axes.Axes
     """
-    import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
-
-    if not hasattr(policy, "table"):  # a MatrixFreeSolution
-        from ..policies import MatrixFreePolicy
-
-        policy = MatrixFreePolicy.from_solution(policy)
-    A, labels, fixed, cid = matrix_free_grid(policy, config, axes, fixed_tau)
-    system = policy.system
-    info = system_names(system)
-    conf = system.automaton.configs[cid]
-    # one style per action label across configurations (sorted labels), like the MDP's action rows
-    every = sorted({tuple(int(x) for x in np.atleast_1d(a)) for acts in system.automaton.actions for a in acts})
-    style_of = {lab: every.index(lab) for lab in every}
-    if ax is None:
-        _, ax = plt.subplots(figsize=(8.6, 6.2), layout="constrained")  # room for the legend outside the panel
-    ci, cj = A.shape
-    bg = np.ones((cj, ci, 3))
-    reach = A >= 0
-    bg[(~reach).T] = np.array([0x7F, 0x7F, 0x7F]) / 255
-    ax.imshow(bg, origin="lower", extent=(0.5, ci + 0.5, 0.5, cj + 0.5), interpolation="nearest", aspect="auto")
-    ms = max(3.0, min(9.0, 160.0 / max(ci, cj)))
-    handles = []
-    for a in np.unique(A[reach]):
-        lab = tuple(int(x) for x in np.atleast_1d(labels[int(a)]))
-        xs, ys = np.nonzero(A == a)
-        mk, col = _style(style_of[lab])
-        ax.plot(xs + 1, ys + 1, linestyle="none", marker=mk, color=col, markersize=ms,
-                markerfacecolor=col if mk not in ("x", "+") else None, alpha=_FILLED_ALPHA,
-                markeredgewidth=1.4 if mk in ("x", "+") else 0.6)
-        name = info["model"].action_name(lab, conf, info)
-        handles.append(Line2D([], [], linestyle="none", marker=mk, color=col, markersize=7,
-                              label=f"{name}  [{int(xs.size)} cells]"))
-    if (~reach).any():
-        handles.append(Patch(facecolor=_UNREACHABLE_BG, edgecolor="0.3", label="outside this configuration's box"))
-    i, j = axes
-    _grid_axes(ax, info, i, j, ci, cj)
-    caps = [int(c) for c in system.caps]
-    par = ([f"p = {info['p']:g}"] if info.get("p") is not None else []) + [
-        f"cap {caps[0]}" if len(set(caps)) == 1 else "caps " + ",".join(map(str, caps))]
-    extra = ", ".join(f"{_tau(k, info)} = {v}" for k, v in sorted(fixed.items()))
-    ax.set_title(title or f"{info['name']}: policy in [{system.model.describe(conf)}] (matrix-free)\n"
-                 f"{extra + ', ' if extra else ''}{', '.join(par)}", fontsize=10)
-    if legend:
-        _place_legend(ax, handles, fontsize=8.5, title="action", title_fontsize=9, frameon=True)
-    return ax
+    return plot_policy_map(space_of(policy), policy, config, axes, fixed_tau, ax, title=title, legend=legend)
