@@ -5,7 +5,9 @@ the decoded state (``tau_1`` ... ``tau_N`` and the configuration) where the MDP 
 states, the action by its name (as on policy maps, :func:`wncs_lp.policy_grids.action_name`), its index
 (QuantEcon's ``sigma``), and the bias or the probability. The columns are built as whole arrays
 (a name is computed once per distinct action and configuration), so a table of 10^5 states takes
-a fraction of a second.
+a fraction of a second. The state columns and the action names are read through the one state-space
+interface (:mod:`wncs_lp.spaces`), so an MDP's table and a matrix-free layout's table
+(:func:`layout_columns`) are built by the same code.
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from .errors import WncsError
+from .spaces import BoxSpace, Space, space_of
 
 __all__ = ["policy_columns", "mixed_policy_records", "layout_columns", "MAX_TABLE_ROWS"]
 
@@ -26,37 +29,46 @@ def _decoded(mdp: Any) -> bool:
     return st is not None and getattr(st, "configs", None) is not None and getattr(st, "tau", None) is not None
 
 
-def _action_names(mdp: Any, actions: np.ndarray, configs: np.ndarray) -> np.ndarray:
+def _action_names(space: Space, actions: np.ndarray, configs: np.ndarray) -> np.ndarray:
     """The name of each (action index, configuration id), computed once per distinct pair."""
-    from .policy_grids import action_name, map_names
-
-    names = map_names(mdp)
+    names = space.names()
     key = np.stack([np.asarray(actions, np.int64), np.asarray(configs, np.int64)], axis=1)
     uniq, inv = np.unique(key, axis=0, return_inverse=True)
-    table = np.array([action_name(mdp, int(a), int(c), names=names) for a, c in uniq], dtype=object)
+    table = np.array([space.action_name(int(c), int(a), names) for a, c in uniq], dtype=object)
     return table[np.asarray(inv).ravel()]
+
+
+def _space_columns(space: Space, states: np.ndarray, actions: np.ndarray | None) -> dict[str, Any]:
+    """The columns every table of a state space has: ``state``, ``tau_k``, ``configuration`` and,
+    given the action index per row, ``action`` (its name)."""
+    cols: dict[str, Any] = {"state": states}
+    tau = space.tau_of(states)
+    for k in range(tau.shape[1]):
+        cols[f"tau_{k + 1}"] = tau[:, k]
+    cid = np.asarray(space.config_of(states))
+    desc = np.array([space.describe(c) for c in range(len(space.configs))], dtype=object)
+    cols["configuration"] = desc[cid]
+    if actions is not None:
+        cols["action"] = _action_names(space, actions, cid)
+    return cols
 
 
 def _state_part(mdp: Any, states: np.ndarray) -> tuple[list[str], dict[str, Any]]:
     """The state columns: ``state``, then ``tau_k`` and ``configuration`` (decoded MDPs) or ``label``."""
-    cols: dict[str, Any] = {"state": states}
     if _decoded(mdp):
-        sp = mdp.states
-        tau = np.asarray(sp.tau)[states]
-        for k in range(tau.shape[1]):
-            cols[f"tau_{k + 1}"] = tau[:, k]
-        cid = np.asarray(sp.config)[states]
-        desc = np.array([sp.describe_config(c) for c in sp.configs], dtype=object)
-        cols["configuration"] = desc[cid]
-    elif mdp is not None:
-        cols["label"] = np.array([mdp.state_label(int(s)) for s in states], dtype=object)
+        cols = _space_columns(space_of(mdp), states, None)
+    else:
+        cols = {"state": states}
+        if mdp is not None:
+            cols["label"] = np.array([mdp.state_label(int(s)) for s in states], dtype=object)
     return list(cols), cols
 
 
 def _action_part(mdp: Any, pairs: np.ndarray, states: np.ndarray) -> dict[str, Any]:
     a = np.asarray(mdp.a_indices)[pairs]
     if _decoded(mdp) and mdp.action_table is not None:
-        return {"action": _action_names(mdp, a, np.asarray(mdp.states.config)[states]), "sigma": a}
+        space = space_of(mdp)
+        return {"action": _action_names(space, a, space.config_of(states)), "sigma": a}
     return {"action": np.array([str(mdp.action_label(int(l))) for l in pairs], dtype=object), "sigma": a}
 
 
@@ -119,31 +131,13 @@ def layout_columns(system: Any, layout: Any, local_actions: np.ndarray, bias: np
     """The table of a matrix-free policy over a :class:`~wncs_lp.solvers.matrix_free.BoxLayout`:
     one row per layout state (``reachable`` says which are, when the solve knew), up to
     :data:`MAX_TABLE_ROWS` rows."""
-    from .policy_grids import system_names
-
     n = int(layout.n_states)
     if n > MAX_TABLE_ROWS:
         raise WncsError(f"a table of {n:,} layout states is too large (at most {MAX_TABLE_ROWS:,} rows): take "
                         "solution.on_mdp(mdp).to_frame(mdp) on a smaller cap, or the policy maps")
-    N = int(layout.n_processes)
-    tau = np.empty((n, N), dtype=np.int64)
-    cfg = np.empty(n, dtype=np.int64)
-    for c in range(layout.n_configs):
-        a, b = int(layout.off[c]), int(layout.off[c + 1])
-        tau[a:b] = layout.config_taus(c)
-        cfg[a:b] = c
     local = np.asarray(local_actions, dtype=np.int64)
-    names = system_names(system)
-    model, auto = names["model"], system.automaton
-    key = np.stack([cfg, local], axis=1)
-    uniq, inv = np.unique(key, axis=0, return_inverse=True)
-    table = np.array([model.action_name(tuple(int(x) for x in np.atleast_1d(auto.actions[c][j])), auto.configs[c],
-                                        names) for c, j in uniq], dtype=object)
-    desc = np.array([system.model.describe(c) for c in auto.configs], dtype=object)
-    cols: dict[str, Any] = {"state": np.arange(n, dtype=np.int64)}
-    for k in range(N):
-        cols[f"tau_{k + 1}"] = tau[:, k]
-    cols.update(configuration=desc[cfg], action=table[np.asarray(inv).ravel()], local_action=local)
+    cols = _space_columns(BoxSpace(system, layout), np.arange(n, dtype=np.int64), local)
+    cols["local_action"] = local
     out = list(cols)
     if bias is not None and np.asarray(bias).size == n:
         cols["bias"] = np.asarray(bias, dtype=float)
