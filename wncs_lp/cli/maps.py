@@ -32,31 +32,6 @@ def _parse_fix(items: Sequence[str]) -> dict[int, int]:
     return out
 
 
-def _matrix_free_map(args: argparse.Namespace, scenario, run, axes, fixed, prog) -> int:
-    """Draw the policy of a solve without a stored matrix (:func:`wncs_lp.viz.plot_matrix_free_map`)."""
-    from ..policy_grids import matrix_free_region_stats
-    from ..policies import MatrixFreePolicy
-    from ..viz import plot_matrix_free_map, save_figure
-
-    sol = run.solution
-    pol = MatrixFreePolicy.from_solution(sol)
-    prog.phase(f"drawing the map and writing {args.out}")
-    ax = plot_matrix_free_map(pol, args.servers, axes=axes, fixed_tau=fixed)
-    save_figure(ax.figure, args.out, dpi=args.dpi, bbox_inches="tight")
-    stats = matrix_free_region_stats(pol, args.servers, axes, fixed)
-    payload = {"scenario": scenario.source, "overrides": args.overrides, "out": args.out,
-               "configuration": stats["configuration"], "configuration_id": stats["configuration_id"],
-               "axes": list(axes), "gain": sol.gain, "gain_lower": sol.gain_lower, "gain_upper": sol.gain_upper,
-               "status": sol.status, "method": run.method, "matrix_free_reason": run.route, "regions": stats}
-    if args.json:
-        emit_json(payload)
-    else:
-        print(f"map of [{payload['configuration']}] written to {args.out} ({run.method}, {run.route}; "
-              f"g* in [{sol.gain_lower:.10g}, {sol.gain_upper:.10g}])")
-        _print_regions(stats)
-    return 0 if sol.ok else 1
-
-
 def _check_route(args: argparse.Namespace, scenario) -> None:
     """What a map without a stored matrix cannot draw, refused before the solve."""
     from ..errors import SolverError
@@ -74,6 +49,7 @@ def _check_route(args: argparse.Namespace, scenario) -> None:
 
 def cmd_map(args: argparse.Namespace) -> int:
     from ..policy_grids import parse_config_spec
+    from ..spaces import space_of
     from ..workflow import run_scenario
     from ..viz import file_backend, image_formats
 
@@ -96,26 +72,25 @@ def cmd_map(args: argparse.Namespace) -> int:
     run = run_scenario(scenario, args.method, constrained=False if args.ignore_constraints else None,
                          force=args.force, threads=args.threads, progress=prog, need_mdp=args.slice is not None,
                          check=lambda mdp: config.append(parse_config_spec(mdp, args.servers)))
-    if not run.built:
-        return _matrix_free_map(args, scenario, run, axes, fixed, prog)
-    mdp, sol, config = run.mdp, run.solution, config[0]
-    axes, stats = _draw(args, mdp, sol, config, axes, fixed, scenario, prog)
-    payload = {
-        "scenario": scenario.source,
-        "overrides": args.overrides,
-        "out": args.out,
-        "configuration": mdp.states.describe_config(mdp.states.configs[config]),
-        "configuration_id": config,
-        "axes": list(axes),
-        "slice_total": args.slice,
-        "gain": sol.gain,
-        "constrained": run.constrained,
-        "regions": stats,
-    }
+    sol = run.solution
+    if run.built:  # the MDP's state table
+        space, config = space_of(run.mdp), config[0]
+        route = {"slice_total": args.slice, "gain": sol.gain, "constrained": run.constrained}
+    else:  # no stored matrix: the matrix-free solve's AoI box
+        space = space_of(sol)
+        config = space.config_id(args.servers)
+        route = {"gain": sol.gain, "gain_lower": sol.gain_lower, "gain_upper": sol.gain_upper, "method": run.method,
+                 "matrix_free_reason": run.route}
+    axes, stats = _draw(args, space, sol, config, axes, fixed, scenario, prog)
+    payload = {"scenario": scenario.source, "overrides": args.overrides, "out": args.out,
+               "configuration": space.describe(config), "configuration_id": config, "axes": list(axes), **route,
+               "regions": stats}
     if args.json:
         emit_json({**payload, "status": str(sol.status)})
     else:
-        print(f"map of [{payload['configuration']}] written to {args.out}")
+        how = "" if run.built else (f" ({run.method}, {run.route}; g* in [{sol.gain_lower:.10g}, "
+                                    f"{sol.gain_upper:.10g}])")
+        print(f"map of [{payload['configuration']}] written to {args.out}{how}")
         if not sol.ok:  # the label "optimal" is earned only where the certificate closed
             print(f"note: the solve is not certified (status {sol.status}: {sol.status.message}); the map shows "
                   "its policy, not a certified optimum")
@@ -123,9 +98,10 @@ def cmd_map(args: argparse.Namespace) -> int:
     return 0 if sol.ok else 1
 
 
-def _draw(args: argparse.Namespace, mdp, policy, config: int, axes, fixed, scenario, prog):
-    """Draw the map (or the --slice) of ``policy`` in configuration ``config``, save it to --out;
-    the axes drawn and the regions' statistics."""
+def _draw(args: argparse.Namespace, space, policy, config: int, axes, fixed, scenario, prog):
+    """Draw the map (or the --slice) of ``policy`` in configuration ``config`` of ``space`` (an MDP's
+    state table or a matrix-free AoI box, :mod:`wncs_lp.spaces`), save it to --out; the axes drawn
+    and the regions' statistics (with the configuration they are of)."""
     from ..policy_grids import region_stats
     from ..viz import plot_policy_map, plot_policy_slice, save_figure
 
@@ -133,10 +109,11 @@ def _draw(args: argparse.Namespace, mdp, policy, config: int, axes, fixed, scena
     total = {} if args.slice is None else {"total": args.slice}
     if args.slice is not None:
         axes = axes if len(axes) == 3 else (1, 2, 3)
-        ax = plot_policy_slice(mdp, policy, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
+        ax = plot_policy_slice(space, policy, config, args.slice, axes=axes, fixed_tau=fixed, scenario=scenario)
     else:
-        ax = plot_policy_map(mdp, policy, config, axes=axes, fixed_tau=fixed, scenario=scenario)
-    stats = region_stats(mdp, policy, config, axes=axes, fixed_tau=fixed, scenario=scenario, **total)
+        ax = plot_policy_map(space, policy, config, axes=axes, fixed_tau=fixed, scenario=scenario)
+    stats = region_stats(space, policy, config, axes=axes, fixed_tau=fixed, scenario=scenario, **total)
+    stats.update(configuration=space.describe(config), configuration_id=int(config))
     save_figure(ax.figure, args.out, dpi=args.dpi, bbox_inches="tight")
     return axes, stats
 
@@ -146,19 +123,20 @@ def _saved_policy_map(args: argparse.Namespace, scenario, axes, fixed, prog) -> 
     as ``evaluate`` and ``simulate`` take it (nothing is solved)."""
     from ..errors import PolicyError
     from ..io import load_policy_npz
-    from ..policy_grids import parse_config_spec
     from ..solvers.route import build_scenario
+    from ..spaces import space_of
 
     if not args.policy.lower().endswith(".npz"):
         raise PolicyError(f"--policy {args.policy!r}: map draws a policy saved by wncs-lp solve --out FILE.npz "
                           "(without --policy: the optimal policy, solved here)")
     mdp, _ = build_scenario(scenario, force=args.force, progress=prog)
-    config = parse_config_spec(mdp, args.servers)
+    space = space_of(mdp)
+    config = space.config_id(args.servers)
     prog.phase(f"reading the policy of {args.policy}")
     probs = load_policy_npz(args.policy, mdp)
-    axes, stats = _draw(args, mdp, probs, config, axes, fixed, scenario, prog)
+    axes, stats = _draw(args, space, probs, config, axes, fixed, scenario, prog)
     payload = {"scenario": scenario.source, "overrides": args.overrides, "out": args.out, "policy": args.policy,
-               "configuration": mdp.states.describe_config(mdp.states.configs[config]), "configuration_id": config,
+               "configuration": space.describe(config), "configuration_id": config,
                "axes": list(axes), "slice_total": args.slice, "regions": stats}
     if args.json:
         emit_json(payload)
