@@ -70,6 +70,7 @@ MODULES = [
     ("wncs_lp.studies.executors", "Where a study's points run (processes, Dask)"),
     ("wncs_lp.studies.folder", "A study's output folder"),
     ("wncs_lp.verify", "Structural verifiers"),
+    ("wncs_lp.spaces", "State spaces (an MDP's states or a matrix-free AoI box)"),
     ("wncs_lp.policy_grids", "Policy maps (data)"),
     ("wncs_lp.viz", "Figures"),
     ("wncs_lp.io", "Files and other tools' formats"),

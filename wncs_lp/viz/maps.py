@@ -5,7 +5,9 @@ r"""Policy maps drawn: the paper's Figs. 3-4, 6-9 and 11-12 (the data is :mod:`w
 * :func:`plot_policy_slice` -- three processes on the plane tau_i + tau_j + tau_k = total, drawn
   as a triangle in barycentric coordinates (Figs. 6-7).
 
-Both take ``ax=None`` (a new figure is made) and return the Axes. Process indices (``axes``,
+:func:`plot_policy_map` draws an MDP's policy or, on its AoI box (:mod:`wncs_lp.spaces`), a
+matrix-free one (:func:`plot_matrix_free_map` is that call). Both take ``ax=None`` (a new figure
+is made) and return the Axes. Process indices (``axes``,
 ``fixed_tau``) are **1-based** like the paper's tau_1, tau_2, ...
 
 Randomised policies (a ``ConstrainedSolution``, a ``MixedPolicy``, (L,) pair probabilities) are
