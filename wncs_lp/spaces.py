@@ -323,8 +323,7 @@ class BoxSpace(Space):
         self.system, self.layout = system, layout
         self.caps = tuple(int(x) for x in system.caps)
         self.configs = list(system.automaton.configs)
-        every = sorted({_label(a) for acts in system.automaton.actions for a in acts})
-        self._style = {lab: k for k, lab in enumerate(every)}  # like the MDP's sorted action rows
+        self._style: dict | None = None  # label -> marker index, made when a map first asks
 
     def describe(self, c: int) -> str:
         return self.system.model.describe(self.configs[int(c)])
@@ -353,6 +352,9 @@ class BoxSpace(Space):
         return np.asarray(policy)[states].astype(np.int64)
 
     def style_key(self, c: int, a: int) -> int:
+        if self._style is None:  # the sorted labels of every configuration, like the MDP's action rows
+            every = sorted({_label(x) for acts in self.system.automaton.actions for x in acts})
+            self._style = {lab: k for k, lab in enumerate(every)}
         return self._style[self.action_label(c, a)]
 
     def box(self, c: int) -> tuple[np.ndarray, np.ndarray]:
