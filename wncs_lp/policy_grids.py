@@ -42,7 +42,6 @@ syntax: :mod:`wncs_lp.spaces`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -50,7 +49,7 @@ import numpy as np
 from .chain import PROB_SUM_TOL, policy_matrices, recurrent_classes
 from .errors import ModelError, PolicyError
 from .mdp import MDP
-from .spaces import BoxSpace, EnumeratedSpace, Space, config_id, map_names, space_of, system_names
+from .spaces import BoxSpace, EnumeratedSpace, Space, map_names, space_of, system_config, system_names
 
 __all__ = [
     "NEIGHBOURS",
@@ -116,12 +115,6 @@ def parse_config_spec(mdp: MDP, spec: Any) -> int:
         When the spec names no reachable configuration; the message lists close matches.
     """
     return space_of(mdp).config_id(spec)
-
-
-def system_config(system: Any, spec: Any) -> int:
-    """:func:`parse_config_spec` over a :class:`~wncs_lp.models.system.System`'s configurations."""
-    name = Path(str(system.scenario.source)).stem
-    return config_id(list(system.automaton.configs), system.model.describe, type(system.model), name, spec)
 
 
 # ============================================================================ grids

@@ -53,7 +53,8 @@ from .mdp import MDP
 from .models import model_type
 from .scenario import load_scenario
 
-__all__ = ["Space", "EnumeratedSpace", "BoxSpace", "space_of", "map_names", "system_names", "config_id"]
+__all__ = ["Space", "EnumeratedSpace", "BoxSpace", "space_of", "map_names", "system_names", "config_id",
+           "system_config"]
 
 
 # ============================================================================ names
@@ -173,6 +174,12 @@ def config_id(configs: list, describe: Any, model: Any, name: str, spec: Any) ->
     close = difflib.get_close_matches(target, normed, n=6, cutoff=0.5)
     hint = "; ".join(repr(descs[normed.index(c)]) for c in close) or "none close"
     raise ModelError(f"no reachable configuration matches {text!r} in {name}; close matches: {hint}")
+
+
+def system_config(system: Any, spec: Any) -> int:
+    """:func:`config_id` over a :class:`~wncs_lp.models.system.System`'s configurations."""
+    name = Path(str(system.scenario.source)).stem
+    return config_id(list(system.automaton.configs), system.model.describe, type(system.model), name, spec)
 
 
 def _label(x: Any) -> tuple:
@@ -332,8 +339,7 @@ class BoxSpace(Space):
         return system_names(self.system)
 
     def config_id(self, spec: Any) -> int:
-        name = Path(str(self.system.scenario.source)).stem
-        return config_id(self.configs, self.system.model.describe, type(self.system.model), name, spec)
+        return system_config(self.system, spec)
 
     def lookup(self, tau: np.ndarray, c: int) -> np.ndarray:
         tau = np.asarray(tau, np.int64)
