@@ -448,15 +448,8 @@ def plot_matrix_free_map(
     Parameters
     ----------
     policy : MatrixFreePolicy or MatrixFreeSolution
-    config : configuration (id, object or spec string, see :func:`~wncs_lp.policy_grids.parse_config_spec`)
-    axes : (i, j)
-        1-based processes on the x and y axes.
-    fixed_tau : {k: tau_k}, optional
-    ax : matplotlib Axes, optional
-    title : str, optional
-    legend : bool
-        Draw the legend: right of the panel; below it when another panel of the figure is on its
-        right (a 1 x 2 layout); inside it when there are panels both on its right and below.
+    config, axes, fixed_tau, ax, title, legend
+        As in :func:`plot_policy_map`.
 
     Returns
     -------
