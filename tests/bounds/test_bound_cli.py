@@ -62,5 +62,5 @@ def test_preemption_is_refused_with_exit_2(capsys):
 
 
 def test_unknown_relaxation_exit_2(capsys):
-    rc, out = _json(capsys, "bound", P12, "--relaxation", "4", "--json")
+    rc, out = _json(capsys, "bound", P12, "--relaxation", "5", "--json")
     assert rc == 2 and "expected one of 1, 2, 3" in out["error"]

@@ -33,7 +33,7 @@ def test_names_and_short_names():
     assert parse_relaxation(3) == "grouped-private-servers"
     assert [parse_relaxation(r) for r in RELAXATIONS] == list(RELAXATIONS)
     with pytest.raises(WncsError, match="expected one of 1, 2, 3"):
-        parse_relaxation("4")
+        parse_relaxation("5")
 
 
 def test_auto_is_a_valid_bound_and_says_which_fired(p12):

@@ -18,6 +18,7 @@ from ..scenario import Scenario
 from .grouped import grouped_bound
 from .inputs import bound_system
 from .joint import joint_bound, joint_reach, joint_size
+from .pairs import pairs_bound
 from .private import private_bound
 from .result import BoundResult
 
@@ -25,8 +26,8 @@ __all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "lower_bound
            "runs_grouped"]
 
 #: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
-RELAXATIONS = ("auto", "private-servers", "joint-configuration", "grouped-private-servers")
-_SHORT = {"1": "private-servers", "2": "joint-configuration", "3": "grouped-private-servers"}
+RELAXATIONS = ("auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs")
+_SHORT = {"1": "private-servers", "2": "joint-configuration", "3": "grouped-private-servers", "4": "joint-pairs"}
 
 
 #: Relaxation 2's search under ``"auto"`` unless given: ``max_iter`` bundle steps (a count, so the
@@ -58,7 +59,7 @@ def parse_relaxation(name: str | int) -> str:
     """
     text = _SHORT.get(str(name).strip(), str(name).strip())
     if text not in RELAXATIONS:
-        raise WncsError(f"unknown relaxation {name!r}; expected one of 1, 2, 3, {', '.join(RELAXATIONS)}")
+        raise WncsError(f"unknown relaxation {name!r}; expected one of 1, 2, 3, 4, {', '.join(RELAXATIONS)}")
     return text
 
 
@@ -68,7 +69,11 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     Parameters
     ----------
     scenario_or_system : Scenario or System
-    relaxation : {"auto", "private-servers", "joint-configuration", "grouped-private-servers"} or 1 / 2 / 3
+    relaxation : {"auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs"} or 1 / 2 / 3 / 4
+        ``"joint-pairs"`` (relaxation 4, :mod:`~wncs_lp.bounds.pairs`): relaxation 2 solved, then
+        its tables and prices carried to pairs of processes whose ages are kept jointly; never
+        looser than relaxation 2, not run by ``"auto"`` (its bundle steps take a minute each at
+        eight processes, cap 20; ``docs/bounds.md``).
         ``"auto"``: the largest certified bound of relaxation 1, relaxation 2 when the instance is
         within its reach, and relaxation 3 (pairs, :mod:`~wncs_lp.bounds.grouped`)
         when there are at least three processes and relaxation 2 was not solved by its interior
@@ -100,7 +105,7 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         return private_bound(scenario_or_system, **options)
     if name == "grouped-private-servers":
         return grouped_bound(scenario_or_system, **options)
-    if name == "joint-configuration":
+    if name in ("joint-configuration", "joint-pairs"):
         system = _as_system(scenario_or_system)
         if system.is_lazy:
             raise WncsError(f"relaxation joint-configuration asked for, but {LAZY_NOTE}")
@@ -109,7 +114,7 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
                        f"LP nonzeros, {size['configurations']:,} joint configurations)",
                        ["relaxation 3 (--relaxation 3: pairs sharing private servers)",
                         "relaxation 1 (--relaxation 1: seconds at any size)"])
-        return joint_bound(system, **options)
+        return joint_bound(system, **options) if name == "joint-configuration" else pairs_bound(system, **options)
     return _auto(_as_system(scenario_or_system), {**AUTO_SEARCH, **options})
 
 
@@ -157,7 +162,8 @@ def _check_options(name: str, options: dict) -> None:
     """Refuse, naming it, a keyword the relaxation does not take (under ``"auto"``: none of them
     does), and a ``tol``, ``time_limit`` or ``max_iter`` out of range, before any work."""
     fns = {"private-servers": [private_bound], "grouped-private-servers": [grouped_bound],
-           "joint-configuration": [joint_bound], "auto": [private_bound, grouped_bound, joint_bound]}[name]
+           "joint-configuration": [joint_bound], "joint-pairs": [pairs_bound, joint_bound],
+           "auto": [private_bound, grouped_bound, joint_bound]}[name]
     import inspect
 
     takes = {p for fn in fns for p, v in inspect.signature(fn).parameters.items() if v.kind is v.KEYWORD_ONLY

@@ -26,8 +26,8 @@ def cmd_bound(args: argparse.Namespace) -> int:
     limit = {} if relaxation in ("private-servers", "grouped-private-servers") else {
         k: v for k, v in (("time_limit", args.time_limit), ("max_iter", args.max_steps)) if v is not None}
     if args.groups is not None:
-        if relaxation != "grouped-private-servers":
-            raise WncsError("--groups is an option of --relaxation 3 (grouped private servers)")
+        if relaxation not in ("grouped-private-servers", "joint-pairs"):
+            raise WncsError("--groups is an option of --relaxation 3 (grouped private servers) and 4 (pairs)")
         limit["groups"] = _parse_groups(args.groups)
     res = lower_bound(system, relaxation, tol=args.tol, progress=prog, **limit)
     report = None
@@ -125,14 +125,16 @@ def _print(scenario, res, report, lazy: bool = False) -> None:
 
 def _configure(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
-    p.add_argument("--relaxation", default="auto", metavar="1|2|3|auto",
+    p.add_argument("--relaxation", default="auto", metavar="1|2|3|4|auto",
                    help="1 = private servers with averaged capacity (seconds at any number of processes), "
                         "2 = joint configuration with separable value functions (tighter, when installed), "
                         "3 = private servers shared by pairs of processes (relaxation 1 on groups), "
+                        "4 = relaxation 2 with pairs of processes' ages kept jointly (tighter than 2, slower), "
                         "auto = the largest certified bound of those that apply (default)")
     p.add_argument("--groups", default=None, metavar="1,5;2,6;...",
-                   help="--relaxation 3: the groups of processes (1-based, ';' between groups; default: the "
-                        "pairs that interact most at relaxation 1's multipliers)")
+                   help="--relaxation 3 or 4: the groups of processes (1-based, ';' between groups; default: the "
+                        "pairs that interact most at relaxation 1's multipliers (3), interchangeable processes "
+                        "paired, else the best pairing at relaxation 2's prices (4))")
     p.add_argument("--tol", type=real_option(0.0, 1.0, lo_open=True, hi_open=True), default=1e-6,
                    help="relative tolerance of the multiplier search (default 1e-6); the bound is certified "
                         "whatever it is")

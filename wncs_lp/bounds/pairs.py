@@ -1,0 +1,491 @@
+r"""Relaxation 4: relaxation 2 with the processes' ages kept jointly in pairs -- a tighter
+certified lower bound on g*.
+
+The relaxation
+--------------
+Relaxation 2 (:mod:`wncs_lp.bounds.joint`) keeps the joint server configuration C and one value
+table per process, h(s) = sum_k h_k(tau_k, C). Relaxation 4 takes a partition of the processes
+into **groups** G of one or two processes and one table per group on the group's ages jointly,
+
+.. math::  h(\tau, C) = \sum_G h_G(\tau_G, C),
+
+in the average-cost approximate LP
+
+.. math::
+
+    \max_{g, h}\; g \quad\text{s.t.}\quad g + \sum_G h_G(\tau_G, C)
+    \le \sum_k q_k(\tau_k) + \sum_o P(o|C,a) \sum_G h_G(\tau'_G, C'_o) \quad \forall (\tau, C, a).
+
+Any feasible (g, h) has g <= g* (sum the constraint over the stationary law of an optimal
+policy: a Bellman sub-solution). For fixed (C, a) the constraint is a sum over groups of terms in
+tau_G alone (q_G = sum_{k in G} q_k), so it holds for every tau iff sum_G u_G(C, a) <= -g with
+
+.. math::
+
+    u_G(C, a) = \max_{\tau_G} \Big[h_G(\tau_G, C) - q_G(\tau_G)
+                - \sum_o P(o|C,a)\, h_G(\tau'_G(o), C'_o)\Big].
+
+Hence for **any** tables, g(h) = -max_(C,a) sum_G u_G(C, a) <= g*
+(:func:`certify_group_tables`, the only thing the bound rests on). Tables h_G = sum_{k in G} h_k
+give exactly relaxation 2's constraints, so relaxation 4's optimum is never below relaxation 2's,
+and the search below starts from relaxation 2's tables.
+
+Its Lagrangian
+--------------
+Dualising the shared (C, a) marginal with prices mu_G(C, a) summing to zero over the groups gives
+L(mu) = sum_G g_G(mu_G), g_G the optimal gain of group G's **priced chain** on (tau_G, C) with
+pair cost q_G(tau_G) + mu_G(C, a): an MDP of prod_{k in G} tau_hat_k |C| states, solved by
+relative value iteration (:func:`solve_group_chain`). Its bias tables certify at least the sum of
+the chains' lower Bellman brackets: with lower_G = min (T h_G - h_G), u_G(p) <= mu_G(p) - lower_G,
+so g(h) >= sum_G lower_G.
+
+At relaxation 2's prices summed over each group's members, mu_G = sum_{k in G} mu_k, the group's
+chain is worth at least the sum of its members' chains (one controller choosing (C, a) for both
+instead of each its own; the sum of the members' sub-solutions is a sub-solution of the group's
+chain), so relaxation 4 starts at relaxation 2's bound or above, and the proximal bundle of
+:mod:`~wncs_lp.bounds.joint_bundle` (groups in place of processes) raises L from there.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SolverError
+from ..models.system import System
+from .joint_chains import JointData
+
+__all__ = ["pairs_bound", "GroupChains", "GroupCertificate", "certify_group_tables", "solve_group_chain", "group_cut",
+           "candidate_partitions",
+           "pair_partition"]
+
+_UNIT = np.finfo(float).eps / 2
+
+
+def _gamma(n: int) -> float:
+    return n * _UNIT / (1.0 - n * _UNIT)
+
+
+def _mod():
+    from . import pairs_kernels
+
+    return pairs_kernels
+
+
+@dataclass(frozen=True, eq=False)
+class GroupChains:
+    """The groups of a partition and the arrays their chains run on.
+
+    Attributes
+    ----------
+    data : JointData
+    groups : tuple of tuples
+        The partition (0-based; groups of one or two processes, members increasing).
+    c1, c2 : tuple of int
+        Per group the caps of its first and second member (c2 = 1 for a group of one).
+    s1, s2 : tuple of (E,) int arrays
+        Per group the saturation columns (:attr:`JointData.sat`) of its members (zeros for a
+        missing second member).
+    q : tuple of (c1 * c2,) arrays
+        q_G(T) = q_{k1}(t1) + q_{k2}(t2) at the flat index T = t1 * c2 + t2.
+    """
+
+    data: JointData
+    groups: tuple
+    c1: tuple
+    c2: tuple
+    s1: tuple
+    s2: tuple
+    q: tuple
+
+    @classmethod
+    def build(cls, data: JointData, groups) -> "GroupChains":
+        groups = _checked_groups(data.n_processes, groups)
+        c1, c2, s1, s2, q = [], [], [], [], []
+        zero = np.zeros(data.n_outcomes, dtype=np.int64)
+        for g in groups:
+            a = g[0]
+            c1.append(int(data.caps[a]))
+            s1.append(data.sat_of(a))
+            if len(g) == 2:
+                b = g[1]
+                c2.append(int(data.caps[b]))
+                s2.append(data.sat_of(b))
+                q.append((data.q[a][:, None] + data.q[b][None, :]).ravel())
+            else:
+                c2.append(1)
+                s2.append(zero)
+                q.append(np.asarray(data.q[a], float).copy())
+        return cls(data, groups, tuple(c1), tuple(c2), tuple(s1), tuple(s2), tuple(q))
+
+    @property
+    def n_groups(self) -> int:
+        return len(self.groups)
+
+    def shape(self, i: int) -> tuple[int, int]:
+        """(|C|, c1 * c2): group i's table, flat over its ages."""
+        return self.data.n_configs, self.c1[i] * self.c2[i]
+
+    def args(self, i: int) -> tuple:
+        d = self.data
+        return (self.c1[i], self.c2[i], d.act_ptr, d.out_ptr, d.out_nxt, d.out_prob, self.s1[i], self.s2[i])
+
+    def from_separable(self, tables) -> list[np.ndarray]:
+        """Group tables h_G(t1, t2, C) = h_{k1}(t1, C) + h_{k2}(t2, C) of per-process tables."""
+        out = []
+        for g in self.groups:
+            h = np.asarray(tables[g[0]], float)
+            if len(g) == 2:
+                h = (h[:, :, None] + np.asarray(tables[g[1]], float)[:, None, :]).reshape(h.shape[0], -1)
+            out.append(np.ascontiguousarray(h))
+        return out
+
+    def as_grids(self, tables) -> tuple:
+        """Flat tables (|C|, c1 * c2) as (|C|, tau_hat_{k1}[, tau_hat_{k2}]) arrays (GroupTables' layout)."""
+        return tuple(np.asarray(h).reshape((self.data.n_configs,) + ((c1,) if len(g) == 1 else (c1, c2)))
+                     for h, g, c1, c2 in zip(tables, self.groups, self.c1, self.c2))
+
+
+def _checked_groups(n: int, groups) -> tuple:
+    try:
+        gs = tuple(tuple(sorted(int(k) for k in g)) for g in groups)
+    except (TypeError, ValueError):
+        raise SolverError(f"groups must be a partition of the processes 0..{n - 1} into groups of one or two, "
+                          f"got {groups!r}") from None
+    flat = sorted(k for g in gs for k in g)
+    if flat != list(range(n)) or any(len(g) not in (1, 2) for g in gs):
+        raise SolverError(f"groups must be a partition of the processes 0..{n - 1} into groups of one or two, "
+                          f"got {[list(g) for g in gs]}")
+    return gs
+
+
+def pair_partition(order) -> tuple:
+    """The partition pairing consecutive processes of ``order`` ((a b) (c d) ...; a last one alone)."""
+    order = [int(k) for k in order]
+    return tuple(tuple(sorted(order[i:i + 2])) for i in range(0, len(order), 2))
+
+
+# ---------------------------------------------------------------------------- the certificate
+@dataclass(frozen=True, eq=False)
+class GroupCertificate:
+    """A lower bound on g* from group tables, checked constraint by constraint.
+
+    Attributes
+    ----------
+    lower_bound : float
+        ``raw - roundoff``.
+    raw : float
+        g(h) = -max_p sum_G u_G(p) in floating point.
+    roundoff : float
+        A bound on the floating-point error of ``raw``.
+    u : (n_groups, |C x A|) array
+    binding_pair : int
+    """
+
+    lower_bound: float
+    raw: float
+    roundoff: float
+    u: np.ndarray
+    binding_pair: int
+
+
+def certify_group_tables(chains: GroupChains, tables) -> GroupCertificate:
+    r"""The certified lower bound g(h) of group tables ``tables[i]`` of shape (|C|, c1 * c2).
+
+    Valid for *any* tables (module docstring): u_G(p) = max over the group's ages of
+    h_G - q_G - E h_G, g(h) = -max_p sum_G u_G(p), minus a bound on the round-off (Higham's gamma
+    bounds on the sums and the outcome tables' defect from stochastic times max |h|). Each
+    table is first shifted by a constant, which changes no constraint beyond that defect.
+    """
+    d = chains.data
+    n_g = chains.n_groups
+    if len(tables) != n_g:
+        raise SolverError(f"relaxation 4's certificate needs {n_g} group tables, got {len(tables)}")
+    hs = []
+    for i, h in enumerate(tables):
+        h = np.asarray(h, dtype=float)
+        if h.shape != chains.shape(i):
+            raise SolverError(f"group table {i} (processes {[k + 1 for k in chains.groups[i]]}) has shape {h.shape}; "
+                              f"expected {chains.shape(i)} (configurations x ages of the group)")
+        hs.append(h)
+    if not all(np.isfinite(h).all() for h in hs):
+        return GroupCertificate(-np.inf, -np.inf, np.inf, np.full((n_g, d.n_pairs), np.inf), -1)
+    u = np.empty((n_g, d.n_pairs))
+    err = 0.0
+    m = d.max_outcomes
+    mod = _mod()
+    for i, h in enumerate(hs):
+        h = np.ascontiguousarray(h - 0.5 * (h.max() + h.min()))
+        hk = float(np.abs(h).max())
+        mod.residuals(h, chains.q[i], *chains.args(i), u[i])
+        err += _gamma(m + 2) * (2.0 * hk + float(np.abs(chains.q[i]).max())) + d.prob_defect * hk
+    total = u.sum(axis=0)
+    p = int(np.argmax(total))
+    err += _gamma(n_g) * float(np.abs(u).max(axis=1).sum())
+    raw = -float(total[p])
+    return GroupCertificate(raw - err, raw, err, u, p)
+
+
+# ---------------------------------------------------------------------------- a group's priced chain
+@dataclass(frozen=True, eq=False)
+class GroupChainSolution:
+    h: np.ndarray
+    lower: float
+    upper: float
+    policy: np.ndarray
+    sweeps: int
+
+
+def solve_group_chain(chains: GroupChains, i: int, price: np.ndarray, h0: np.ndarray | None, *, tol: float,
+                      max_sweeps: int = 100_000, relax: float = 0.9, threads: int = 1,
+                      stop=None) -> GroupChainSolution:
+    """Relative value iteration on group i's priced chain until upper - lower <= tol * max(|lower|, 1)
+    (damped: h <- h + relax (T h - h), recentred)."""
+    mod = _mod()
+    shape = chains.shape(i)
+    h = np.zeros(shape) if h0 is None else np.array(h0, dtype=float, copy=True)
+    th = np.empty(shape)
+    pol = np.empty(shape, dtype=np.int64)
+    price = np.ascontiguousarray(price, dtype=float)
+    args = (chains.q[i], price, *chains.args(i), th, pol)
+    fn = mod.bellman_ser if threads <= 1 else mod.bellman_par
+    lo, hi = -np.inf, np.inf
+    sweeps = 0
+    while sweeps < max_sweeps:
+        fn(h, *args)
+        sweeps += 1
+        dlt = th - h
+        lo, hi = float(dlt.min()), float(dlt.max())
+        if hi - lo <= tol * max(abs(lo), 1.0) or (stop is not None and sweeps % 16 == 0 and stop()):
+            break
+        h += relax * dlt
+        h -= h[0, 0]
+    return GroupChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)
+
+
+def group_cut(chains: GroupChains, i: int, policy: np.ndarray, y0: np.ndarray | None = None, *,
+              tol: float = 1e-9, max_sweeps: int = 20_000) -> tuple[float, np.ndarray, np.ndarray]:
+    """The cut of group i's deterministic policy: (a, x, y), y a stationary law (lazy power
+    iteration from ``y0``), a = <y, q_G>, x its (C, a) marginal: the policy's average priced cost
+    is a + <x, mu_G> for every price mu_G."""
+    mod = _mod()
+    d = chains.data
+    shape = chains.shape(i)
+    y = np.full(shape, 1.0 / (shape[0] * shape[1])) if y0 is None else np.array(y0, dtype=float, copy=True)
+    y /= y.sum()
+    yn = np.empty(shape)
+    c1, c2, _, out_ptr, out_nxt, out_prob, s1, s2 = chains.args(i)
+    for _ in range(max_sweeps):
+        mod.push(y, policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, yn)
+        res = float(np.abs(yn - y).sum())
+        y = 0.5 * (y + yn)
+        y /= y.sum()
+        if res <= tol:
+            break
+    x = np.bincount(policy.ravel(), weights=y.ravel(), minlength=d.n_pairs)
+    return float((y * chains.q[i][None, :]).sum()), x, y
+
+
+# ---------------------------------------------------------------------------- the search
+#: ``pairs_bound``'s candidates when ``groups="auto"``: at most this many processes pair every way.
+ALL_PAIRINGS_MAX = 4
+
+
+def candidate_partitions(n: int, classes=()) -> list[tuple]:
+    """``groups="auto"``'s candidates: interchangeable processes paired with each other first (the
+    paper's four types twice: same-type pairs gave 9045.39 at relaxation 2's prices against
+    9003.55 for the pairing best at processes 1-4, ``docs/bounds.md``); what is left paired every way
+    when at most :data:`ALL_PAIRINGS_MAX` processes are left, else consecutively."""
+    fixed, rest = [], []
+    for cl in (classes or [(k,) for k in range(n)]):
+        cl = list(cl)
+        while len(cl) >= 2:
+            fixed.append((cl.pop(0), cl.pop(0)))
+        rest += cl
+    rest.sort()
+    if len(rest) > ALL_PAIRINGS_MAX:
+        return [tuple(fixed) + pair_partition(rest)]
+    return [tuple(sorted(fixed + list(p))) for p in _pairings(rest)]
+
+
+def _pairings(items: list) -> list[tuple]:
+    """Every partition of ``items`` into pairs (and one single when their number is odd)."""
+    if len(items) <= 1:
+        return [tuple((k,) for k in items)]
+    out = []
+    if len(items) % 2 == 1:  # the single: each item in turn
+        for i, k in enumerate(items):
+            out += [((k,),) + p for p in _pairings(items[:i] + items[i + 1:])]
+        return out
+    a = items[0]
+    for i in range(1, len(items)):
+        out += [((a, items[i]),) + p for p in _pairings(items[1:i] + items[i + 1:])]
+    return out
+
+
+@dataclass
+class _Search:
+    chains: GroupChains
+    tol: float
+    threads: int
+    deadline: float
+    h: list
+    laws: list
+    best_bound: float = -np.inf
+    best_tables: list | None = None
+    best_prices: np.ndarray | None = None
+    best_gains: np.ndarray | None = None
+    found_at: str = ""
+    evaluations: int = 0
+    sweeps: int = 0
+
+    def out_of_time(self) -> bool:
+        return time.monotonic() >= self.deadline
+
+    def offer(self, tables, prices, gains, where: str) -> float:
+        cert = certify_group_tables(self.chains, tables)
+        if cert.lower_bound > self.best_bound:
+            self.best_bound, self.best_tables, self.found_at = cert.lower_bound, list(tables), where
+            self.best_prices, self.best_gains = prices, gains
+        return cert.lower_bound
+
+    def evaluate(self, prices: np.ndarray, where: str) -> tuple[float, list]:
+        """Every group's priced chain (warm-started), their tables certified and offered:
+        (L(prices) = sum of the chains' lower brackets, the cuts of their greedy policies)."""
+        ch = self.chains
+        sols = [solve_group_chain(ch, i, prices[i], self.h[i], tol=max(1e-11, 0.02 * self.tol), threads=self.threads,
+                                  stop=self.out_of_time) for i in range(ch.n_groups)]
+        self.h = [s.h for s in sols]
+        self.evaluations += 1
+        self.sweeps += sum(s.sweeps for s in sols)
+        gains = np.array([s.lower for s in sols])
+        self.offer(self.h, prices.copy(), gains, where)
+        cuts = []
+        for i, s in enumerate(sols):
+            a, x, y = group_cut(ch, i, s.policy, self.laws[i])
+            self.laws[i] = y
+            cuts.append((i, a, x))
+        return float(gains.sum()), cuts
+
+
+def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4, max_iter: int = 30,
+                time_limit: float | None = 600.0, threads: int = 1, progress=None, **joint_options):
+    """A certified lower bound on g* from relaxation 4 (relaxation 2 with pairs of processes' ages
+    kept jointly; module docstring).
+
+    Parameters
+    ----------
+    system : System
+    groups : "auto" or sequence of groups
+        A partition of the processes (0-based) into groups of one or two; ``"auto"``: each
+        candidate of :func:`candidate_partitions` evaluated at relaxation 2's prices, the best
+        certified kept for the search.
+    start : BoundResult, optional
+        Relaxation 2's result on this system (its tables over the joint configuration and its
+        prices); default: ``joint_bound(system, **joint_options)``.
+    tol : float
+        The chains' relative accuracy is ``0.02 tol``; the bundle stops when its model predicts
+        less than ``tol |L|`` more.
+    max_iter : int
+        Bundle steps after the start (each: every group's chain solved, warm-started, and the
+        certificate); 0: the start only.
+    time_limit : float or None
+        Seconds of wall clock for the search after the start (None: none); the bound is
+        certified whatever stops it, and Ctrl-C returns the best so far.
+    threads : int
+        numba threads of the chains' Bellman sweeps.
+    progress : bool or Progress, optional
+
+    Returns
+    -------
+    BoundResult
+        ``relaxation="joint-pairs"``; ``lower_bound`` the group check of ``tables`` (a
+        :class:`GroupTables` over the joint configuration, column the identity), never below
+        relaxation 2's own (its tables, summed per group, are offered first);
+        ``multipliers`` the prices (groups, |C x A|); ``process_gains`` each group's chain's lower
+        bracket there.
+    """
+    from ..progress import as_progress
+    from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
+    from .inputs import bound_system
+    from .joint import joint_bound
+    from .joint_bundle import PriceBundle
+    from .joint_symmetry import process_symmetry
+    from .result import BoundResult, GroupTables, ValueTables
+
+    t0 = time.monotonic()
+    prog = as_progress(progress)
+    system = bound_system(system)
+    if start is None:
+        start = joint_bound(system, tol=tol, progress=prog, **joint_options)
+    if not isinstance(start.tables, ValueTables) or start.relaxation != "joint-configuration":
+        raise SolverError(f"relaxation 4 starts from relaxation 2's result (joint-configuration), got {start.relaxation}")
+    data = JointData.from_system(system)
+    mu1 = np.asarray(start.multipliers, float)
+    if mu1.shape != (data.n_processes, data.n_pairs):
+        raise SolverError(f"relaxation 2's prices have shape {mu1.shape}; expected {(data.n_processes, data.n_pairs)}")
+    sep = [np.asarray(h, float) for h in start.tables.h]
+    if groups == "auto":
+        cands = candidate_partitions(data.n_processes, process_symmetry(system, data).classes)
+    else:
+        cands = [groups]
+    deadline = np.inf if time_limit is None else time.monotonic() + float(time_limit)
+    stats: dict = {"relaxation_2_bound": float(start.lower_bound), "candidates": {}}
+    status, it, search = MAX_ITER, 0, None
+    try:
+        for cand in cands:
+            ch = GroupChains.build(data, cand)
+            s = _Search(ch, float(tol), int(threads), deadline, [None] * ch.n_groups, [None] * ch.n_groups)
+            s.offer(ch.from_separable(sep), None, None, "relaxation 2's tables")
+            prices = np.array([mu1[list(g)].sum(axis=0) for g in ch.groups])
+            prog.phase(f"relaxation 4: groups {[[k + 1 for k in g] for g in ch.groups]} at relaxation 2's prices")
+            value, cuts = s.evaluate(prices, "the group chains at relaxation 2's prices")
+            stats["candidates"][str([[k + 1 for k in g] for g in ch.groups])] = s.best_bound
+            if search is None or s.best_bound > search[0].best_bound:
+                search = (s, value, cuts, prices)
+        s, value, cuts, prices = search
+        prog.tick(f"relaxation 4: groups {[[k + 1 for k in g] for g in s.chains.groups]}, certified {s.best_bound:.10g}")
+        if max_iter > 0 and not s.out_of_time():
+            X = np.array([x for _, _, x in cuts])
+            spread = float(((X - X.mean(axis=0)) ** 2).sum())
+            bundle = PriceBundle(prices, value, t=1e-2 * max(abs(value), 1.0) / max(spread, 1e-12))
+            for c in cuts:
+                bundle.add_cut(*c)
+            while it < max_iter and not s.out_of_time():
+                mu = bundle.candidate()
+                if bundle.converged(tol) or bundle.predicted <= tol * max(abs(bundle.value), 1.0):
+                    status = OPTIMAL
+                    break
+                value, cuts = s.evaluate(mu, "the bundle")
+                it += 1
+                for c in cuts:
+                    bundle.add_cut(*c)
+                bundle.report(mu, value)
+                prog.tick(f"relaxation 4: bundle {it}: certified {s.best_bound:.10g}, L(centre) {bundle.value:.10g}")
+            stats.update(bundle_serious=bundle.serious_steps, bundle_null=bundle.null_steps,
+                         bundle_predicted=bundle.predicted)
+    except KeyboardInterrupt:
+        status = INTERRUPTED
+        if search is None:
+            raise
+        s = search[0]
+    ch = s.chains
+    cert = certify_group_tables(ch, s.best_tables)
+    stats.update(evaluations=s.evaluations, chain_sweeps=s.sweeps, bundle_steps=it, found_in=s.found_at,
+                 roundoff=cert.roundoff, raw_bound=cert.raw, binding_pair=cert.binding_pair,
+                 groups=[list(g) for g in ch.groups], certified=bool(np.isfinite(cert.lower_bound)))
+    n_c = data.n_configs
+    tables = GroupTables(groups=ch.groups, h=ch.as_grids(s.best_tables),
+                         column=tuple(np.arange(n_c) for _ in ch.groups))
+    how = ("group check of the tables h_G(tau_G, C) over all sum_G prod tau_hat_G |C x A| = "
+           f"{sum(c1 * c2 for c1, c2 in zip(ch.c1, ch.c2)) * data.n_pairs:,} constraints: g(h) = -max_(C,a) sum_G "
+           f"max_tau_G [h_G - q_G - E h_G] = {cert.raw:.12g}, minus a round-off bound {cert.roundoff:.2g}; the tables "
+           f"came from {s.found_at}; how they were found does not enter the bound")
+    gains = s.best_gains if s.best_gains is not None else np.full(ch.n_groups, np.nan)
+    prices = s.best_prices if s.best_prices is not None else np.zeros((ch.n_groups, data.n_pairs))
+    prog.done(f"relaxation 4: certified lower bound {cert.lower_bound:.10g} ({status})")
+    return BoundResult(relaxation="joint-pairs", lower_bound=float(cert.lower_bound), relaxation_upper=float("inf"),
+                       status=status, certified_by=how, multipliers=prices, process_gains=gains, tables=tables,
+                       seconds=time.monotonic() - t0, iterations=int(s.evaluations), stats=stats)

@@ -1,0 +1,110 @@
+"""numba kernels of relaxation 4 (:mod:`wncs_lp.bounds.pairs`), imported only when numba is available.
+
+A group's chain lives on (C, t1, t2): the joint configuration and the AoI indices t = tau - 1 of
+its two members, flat as ``T = t1 * c2 + t2`` (a group of one process is a pair whose second
+member has cap c2 = 1 and never moves: ``s2`` all 0). Under outcome o the indices move to
+``min(t + 1, s[o])``, s the member's column of :attr:`JointData.sat`, so for a fixed first index
+the successors of the second are a shifted contiguous slice and one repeated value (as in
+:mod:`~wncs_lp.bounds.joint_kernels`). Pairs p = (C, a) are configuration-major; the outcomes of
+pair p are ``out_ptr[p]:out_ptr[p+1]``.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(inline="always")
+def _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
+    """acc[T] += sum_o P(o|p) h[C'_o, T'_o(T)]."""
+    for o in range(out_ptr[p], out_ptr[p + 1]):
+        pr = out_prob[o]
+        cn = out_nxt[o]
+        m1 = s1[o]
+        m2 = s2[o]
+        for t1 in range(c1):
+            n1 = t1 + 1 if t1 < m1 else m1
+            base = n1 * c2
+            row = t1 * c2
+            for t2 in range(m2):
+                acc[row + t2] += pr * h[cn, base + t2 + 1]
+            v = pr * h[cn, base + m2]
+            for t2 in range(m2, c2):
+                acc[row + t2] += v
+
+
+@njit(inline="always")
+def _bellman_config(c, h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol, acc, best):
+    n_t = c1 * c2
+    for t in range(n_t):
+        best[t] = np.inf
+    for p in range(act_ptr[c], act_ptr[c + 1]):
+        for t in range(n_t):
+            acc[t] = price[p]
+        _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
+        for t in range(n_t):
+            if acc[t] < best[t]:
+                best[t] = acc[t]
+                pol[c, t] = p
+    for t in range(n_t):
+        th[c, t] = best[t] + q[t]
+
+
+@njit(cache=True)
+def bellman_ser(h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol):
+    """th = T h of the group's priced chain (pair cost q(T) + price[p]); pol = the first minimising pair."""
+    acc = np.empty(c1 * c2)
+    best = np.empty(c1 * c2)
+    for c in range(act_ptr.size - 1):
+        _bellman_config(c, h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol, acc, best)
+
+
+@njit(cache=True, parallel=True)
+def bellman_par(h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol):
+    """:func:`bellman_ser` with the configurations split over numba's threads."""
+    n_c = act_ptr.size - 1
+    for c in prange(n_c):
+        acc = np.empty(c1 * c2)
+        best = np.empty(c1 * c2)
+        _bellman_config(c, h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol, acc, best)
+
+
+@njit(cache=True)
+def residuals(h, q, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, u):
+    """u[p] = max_T [h(C_p, T) - q(T) - sum_o P(o|p) h(C'_o, T'_o)]: the certificate's per-pair maximum."""
+    n_t = c1 * c2
+    acc = np.empty(n_t)
+    for c in range(act_ptr.size - 1):
+        for p in range(act_ptr[c], act_ptr[c + 1]):
+            for t in range(n_t):
+                acc[t] = 0.0
+            _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
+            m = -np.inf
+            for t in range(n_t):
+                r = h[c, t] - q[t] - acc[t]
+                if r > m:
+                    m = r
+            u[p] = m
+
+
+@njit(cache=True)
+def push(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, y_out):
+    """y_out = y P_pi for the deterministic policy ``pol[c, T]`` (a pair of configuration c)."""
+    n_c, n_t = y.shape
+    for c in range(n_c):
+        for t in range(n_t):
+            y_out[c, t] = 0.0
+    for c in range(n_c):
+        for t in range(n_t):
+            w = y[c, t]
+            if w == 0.0:
+                continue
+            p = pol[c, t]
+            t1 = t // c2
+            t2 = t - t1 * c2
+            for o in range(out_ptr[p], out_ptr[p + 1]):
+                m1 = s1[o]
+                m2 = s2[o]
+                n1 = t1 + 1 if t1 < m1 else m1
+                n2 = t2 + 1 if t2 < m2 else m2
+                y_out[out_nxt[o], n1 * c2 + n2] += w * out_prob[o]
