@@ -1,0 +1,137 @@
+"""Issue 33: relaxation 4 (pairs of processes' ages kept jointly) against relaxation 2 and g*.
+
+    python benchmarks/bounds_pairs.py --instances three:5,paper_p1234:12,paper_p1234:20 --out /tmp/pairs.csv
+    python benchmarks/bounds_pairs.py --instances bounds_p1234_twice:20 --r2 shipped --policy --out /tmp/pairs8.csv
+
+For every instance (each in this process, one after the other): relaxation 2 (``lower_bound(x, 2)``,
+its interior point where predicted to fit; ``--r2 shipped``: the report's shipped tables of B3,
+``b3_reference.json``, certified on the system and their priced chains solved, as
+``joint_bound_from_tables`` does), then relaxation 4 from it (``lower_bound(x, 4, start=r2)``,
+defaults unless ``--max-iter``), with the CPU seconds of each (this process's, so the load of the
+shared machine does not enter) and the peak memory so far; g* where known (``KNOWN``, and the
+toolkit's exact solver for the small ``three`` instance); with ``--policy`` the gains of relaxation
+4's greedy policy and its two-step lookahead (exact where the AoI box has at most
+``--exact-max-states`` states, else Monte Carlo ``--reps`` x ``--slots``, seed 0, with the tables as
+control variate) and their certified gaps against relaxation 4's bound. Every row records the
+1-minute load average when the instance started.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import sys
+import time
+import warnings
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from wncs_lp.bounds import lower_bound, policy_gaps  # noqa: E402
+from wncs_lp.bounds.joint import joint_bound_from_tables  # noqa: E402
+from wncs_lp.bounds.joint_chains import JointData  # noqa: E402
+from wncs_lp.bounds.joint_symmetry import process_symmetry, spread_orbit_tables  # noqa: E402
+from wncs_lp.files import atomic_write_csv  # noqa: E402
+from wncs_lp.models.system import System  # noqa: E402
+from wncs_lp.reproduce.beyondexact import reference  # noqa: E402
+from wncs_lp.scenario import load_scenario, scenario_from_dict  # noqa: E402
+
+#: Certified optima (matrix-free value iteration, bracket 1e-9; benchmarks/bounds.py's ``KNOWN``).
+KNOWN = {("paper_p1234", 12): 1169.1063487, ("paper_p1234", 20): 1572.4473862, ("paper_p1234", 30): 1628.3374066}
+COLUMNS = ["instance", "cap", "load", "g_star", "r2_bound", "r2_cpu", "r2_from", "groups", "r4_start", "r4_bound",
+           "r4_cpu", "r4_status", "bundle_steps", "peak_mib", "r2_looseness", "r4_looseness", "policy", "gain",
+           "gain_upper", "gap_r4", "how"]
+
+
+def three(cap: int):
+    """Three processes on an edge and a remote server (tests/bounds/joint_reference.py's)."""
+    return scenario_from_dict({
+        "model": {"kind": "wncs", "tau_cap": cap}, "channel": {"success_probability": 0.9},
+        "process": [{"A": [[1.1]]}, {"A": [[1.05]]}, {"A": [[1.2]], "weight": 2.0}],
+        "server": [{"name": "edge", "uplink_delay": 0, "downlink_delay": 0, "processing_time": [1, 2, 1]},
+                   {"name": "remote", "uplink_delay": 1, "downlink_delay": 1, "processing_time": [1, 1, 2]}],
+    }, source="<three processes>")
+
+
+def shipped_r2(system, name: str, cap: int):
+    """Relaxation 2 from the report's shipped tables (each class representative's on its orbits)."""
+    entry = reference("tables", f"{name}.toml", cap)
+    if entry is None:
+        raise SystemExit(f"no shipped relaxation-2 tables for {name} at cap {cap}")
+    with resources.files("wncs_lp.reproduce").joinpath("data", entry["file"]).open("rb") as fh:
+        z = np.load(fh)
+        classes = json.loads(str(z["classes"]))
+        per_orbit = [np.asarray(z[f"h{i}"], dtype=float) for i in range(len(classes))]
+    data = JointData.from_system(system)
+    tables = spread_orbit_tables(process_symmetry(system, data), data, per_orbit)
+    return joint_bound_from_tables(system, tables, source=f"the shipped tables {entry['file']}")
+
+
+def run(name: str, cap: int, args) -> list[dict]:
+    load = os.getloadavg()[0]
+    if name == "three":
+        from wncs_lp.models import build
+        from wncs_lp.solvers import solve
+
+        sc = three(cap)
+        g_star = float(solve(build(sc)).gain_upper)
+    else:
+        sc = load_scenario(ROOT / "formulations" / f"{name}.toml", {"tau_cap": cap})
+        g_star = KNOWN.get((name, cap))
+    system = System.from_scenario(sc)
+    t = time.process_time()
+    r2 = shipped_r2(system, name, cap) if args.r2 == "shipped" else lower_bound(system, 2)
+    r2_cpu = time.process_time() - t
+    t = time.process_time()
+    opts = {} if args.max_iter is None else {"max_iter": args.max_iter}
+    r4 = lower_bound(system, 4, start=r2, progress=args.progress, **opts)
+    r4_cpu = time.process_time() - t
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    loose = (lambda b: None if g_star is None else (g_star - b) / g_star)
+    base = {"instance": name, "cap": cap, "load": round(load, 2), "g_star": g_star, "r2_bound": r2.lower_bound,
+            "r2_cpu": round(r2_cpu, 2), "r2_from": args.r2,
+            "groups": ";".join(",".join(str(k + 1) for k in g) for g in r4.tables.groups),
+            "r4_start": max(r4.stats["candidates"].values()), "r4_bound": r4.lower_bound, "r4_cpu": round(r4_cpu, 2),
+            "r4_status": r4.status, "bundle_steps": r4.stats.get("bundle_steps"), "peak_mib": round(peak),
+            "r2_looseness": loose(r2.lower_bound), "r4_looseness": loose(r4.lower_bound)}
+    rows = [base]
+    if args.policy:
+        rep = policy_gaps(r4, system, ["bound", "lookahead"], exact_max_states=args.exact_max_states,
+                          slots=args.slots, reps=args.reps, seed=0)
+        for r in rep.rows:
+            rows.append({**base, "policy": r.policy, "gain": r.gain, "gain_upper": r.gain_upper, "gap_r4": r.gap,
+                         "how": rep.how})
+    return rows
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--instances", default="three:5,paper_p1234:12,paper_p1234:20")
+    p.add_argument("--r2", choices=("solve", "shipped"), default="solve")
+    p.add_argument("--max-iter", type=int, default=None)
+    p.add_argument("--policy", action="store_true")
+    p.add_argument("--exact-max-states", type=int, default=0)
+    p.add_argument("--slots", type=int, default=40_000)
+    p.add_argument("--reps", type=int, default=20)
+    p.add_argument("--progress", action="store_true")
+    p.add_argument("--out", default=None)
+    args = p.parse_args(argv)
+    warnings.simplefilter("ignore")
+    rows = []
+    for item in args.instances.split(","):
+        name, cap = item.split(":")
+        for r in run(name, int(cap), args):
+            rows.append(r)
+            print(json.dumps(r, default=str), flush=True)
+            if args.out:
+                atomic_write_csv(args.out, rows, COLUMNS)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
