@@ -4,7 +4,7 @@ the enumerated MDP).
 
 * :func:`lower_bound` -- the entry point: a :class:`BoundResult` from the relaxation asked for
   (``"private-servers"`` = 1, ``"joint-configuration"`` = 2, ``"grouped-private-servers"`` = 3,
-  or ``"auto"``);
+  ``"joint-pairs"`` = 4, or ``"auto"``);
 * :func:`~wncs_lp.bounds.private.private_bound` -- relaxation 1, private servers with averaged
   capacity (:mod:`wncs_lp.bounds.private`);
 * :func:`~wncs_lp.bounds.grouped.grouped_bound` -- relaxation 3, relaxation 1 with groups of
@@ -14,6 +14,9 @@ the enumerated MDP).
   line passes ``tol`` and ``progress``; a :class:`~wncs_lp.errors.WncsError` it raises makes
   ``auto`` fall back to relaxation 1) and optionally ``joint_reach(system)``, ``None`` when the
   instance is within its reach, else the reason in words;
+* relaxation 4 (``"joint-pairs"``), relaxation 2 with pairs of processes' ages kept jointly in
+  its tables (tighter, never looser than relaxation 2): :func:`~wncs_lp.bounds.pairs.pairs_bound`
+  (:mod:`wncs_lp.bounds.pairs`), greedy and lookahead policies on its :class:`GroupTables`;
 * :func:`bound_policy` / :class:`BoundPolicy` / :class:`GroupBoundPolicy` -- the greedy policy on a
   bound's value tables; for relaxations 1 and 3 :class:`ProjectedBoundPolicy`, the same lookahead
   read through the projections on the private systems (:mod:`wncs_lp.bounds.projected`: memory
@@ -26,7 +29,7 @@ the enumerated MDP).
 
 Every bound is certified by the Bellman brackets of the chains it solves, never by an LP
 solver's status; the result type of every relaxation is :class:`BoundResult`, whose value
-tables (:class:`ValueTables`, or :class:`GroupTables` for relaxation 3) drive the greedy policy
+tables (:class:`ValueTables`, or :class:`GroupTables` for relaxations 3 and 4) drive the greedy policy
 of the bound.
 """
 from __future__ import annotations

@@ -88,7 +88,7 @@ def _print(scenario, res, report, lazy: bool = False) -> None:
               "the capacity taken as an inequality)")
     print(f"certified lower bound: g* >= {res.lower_bound:.10g}")
     print(f"  certified by: {res.certified_by}")
-    if res.relaxation == "grouped-private-servers":
+    if res.relaxation in ("grouped-private-servers", "joint-pairs"):
         print("  groups: " + "; ".join(", ".join(scenario.processes[k].name for k in g) for g in res.tables.groups))
     if res.relaxation in ("private-servers", "grouped-private-servers"):
         names = ", ".join(f"{s.name} {lam:.8g}" for s, lam in zip(scenario.servers, res.multipliers))
