@@ -69,7 +69,8 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     Parameters
     ----------
     scenario_or_system : Scenario or System
-    relaxation : {"auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs"} or 1 / 2 / 3 / 4
+    relaxation : {"auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs"}
+        or 1 / 2 / 3 / 4.
         ``"joint-pairs"`` (relaxation 4, :mod:`~wncs_lp.bounds.pairs`): relaxation 2 solved, then
         its tables and prices carried to pairs of processes whose ages are kept jointly; never
         looser than relaxation 2, not run by ``"auto"`` (its bundle steps take a minute each at

@@ -421,7 +421,8 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
     if start is None:
         start = joint_bound(system, tol=tol, progress=prog, **joint_options)
     if not isinstance(start.tables, ValueTables) or start.relaxation != "joint-configuration":
-        raise SolverError(f"relaxation 4 starts from relaxation 2's result (joint-configuration), got {start.relaxation}")
+        raise SolverError("relaxation 4 starts from relaxation 2's result (joint-configuration), "
+                          f"got {start.relaxation}")
     data = JointData.from_system(system)
     mu1 = np.asarray(start.multipliers, float)
     if mu1.shape != (data.n_processes, data.n_pairs):
@@ -446,7 +447,8 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
             if search is None or s.best_bound > search[0].best_bound:
                 search = (s, value, cuts, prices)
         s, value, cuts, prices = search
-        prog.tick(f"relaxation 4: groups {[[k + 1 for k in g] for g in s.chains.groups]}, certified {s.best_bound:.10g}")
+        prog.tick(f"relaxation 4: groups {[[k + 1 for k in g] for g in s.chains.groups]}, "
+                  f"certified {s.best_bound:.10g}")
         if max_iter > 0 and not s.out_of_time():
             X = np.array([x for _, _, x in cuts])
             spread = float(((X - X.mean(axis=0)) ** 2).sum())
