@@ -69,8 +69,12 @@ def _gamma(n: int) -> float:
 
 
 def _mod():
-    from . import pairs_kernels
-
+    """The numba kernels (relaxation 4's chains and check have no numpy path: without numba they
+    would be hundreds of times slower)."""
+    try:
+        from . import pairs_kernels
+    except ImportError as exc:
+        raise SolverError(f"relaxation 4 needs numba (pip install 'wncs_lp[fast]'): {exc}") from None
     return pairs_kernels
 
 
