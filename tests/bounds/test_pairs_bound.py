@@ -19,7 +19,7 @@ from wncs_lp.errors import SolverError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
 from wncs_lp.models.system import System
-from wncs_lp.solvers import solve
+from wncs_lp import solve
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
 
@@ -133,6 +133,13 @@ def test_names_groups_and_candidates():
     assert sorted(candidate_partitions(4)) == [((0, 1), (2, 3)), ((0, 2), (1, 3)), ((0, 3), (1, 2))]
     assert len(candidate_partitions(3)) == 3
     data = JointData.from_system(System.from_scenario(three_processes(4)))
+    chains = GroupChains.build(data, ((0, 1), (2,)))
+    with pytest.raises(SolverError, match="2 group tables"):
+        certify_group_tables(chains, [np.zeros(chains.shape(0))])
+    with pytest.raises(SolverError, match=r"group table 1 \(processes \[3\]\) has shape"):
+        certify_group_tables(chains, [np.zeros(chains.shape(0)), np.zeros((data.n_configs, 3))])
+    bad_tables = [np.zeros(chains.shape(0)), np.full(chains.shape(1), np.nan)]
+    assert certify_group_tables(chains, bad_tables).lower_bound == -np.inf  # certifies nothing
     for bad in ([(0, 1)], [(0, 1, 2)], [(0, 1), (1, 2)], [("a",), (1, 2)]):
         with pytest.raises(SolverError, match="partition"):
             GroupChains.build(data, bad)
