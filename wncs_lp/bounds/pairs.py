@@ -47,7 +47,6 @@ chain), so relaxation 4 starts at relaxation 2's bound or above, and the proxima
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -55,7 +54,14 @@ import numpy as np
 
 from ..errors import SolverError
 from ..models.system import System
+from ..progress import as_progress
+from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
+from .inputs import bound_system
+from .joint import joint_bound
+from .joint_bundle import PriceBundle
 from .joint_chains import JointData
+from .joint_symmetry import process_symmetry
+from .result import BoundResult, GroupTables, ValueTables
 
 __all__ = ["pairs_bound", "GroupChains", "GroupCertificate", "certify_group_tables", "solve_group_chain", "group_cut",
            "candidate_partitions",
@@ -401,6 +407,8 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
     threads : int
         numba threads of the chains' Bellman sweeps.
     progress : bool or Progress, optional
+    **joint_options
+        Relaxation 2's options (:func:`~wncs_lp.bounds.joint.joint_bound`) when ``start`` is not given.
 
     Returns
     -------
@@ -411,14 +419,6 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
         ``multipliers`` the prices (groups, |C x A|); ``process_gains`` each group's chain's lower
         bracket there.
     """
-    from ..progress import as_progress
-    from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
-    from .inputs import bound_system
-    from .joint import joint_bound
-    from .joint_bundle import PriceBundle
-    from .joint_symmetry import process_symmetry
-    from .result import BoundResult, GroupTables, ValueTables
-
     t0 = time.monotonic()
     prog = as_progress(progress)
     system = bound_system(system)
