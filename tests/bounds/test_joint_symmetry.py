@@ -115,3 +115,53 @@ def test_orbit_tables_round_trip(twice):
     back = spread_orbit_tables(sym, data, orbit_tables(sym, data, tables))
     for h, b in zip(tables, back):
         np.testing.assert_allclose(b, h, rtol=0, atol=1e-9 * np.abs(h).max())
+
+
+@pytest.fixture(scope="module")
+def lumped(twice):
+    """The reduced LP solved tightly, and the lumped chains of its representatives."""
+    from wncs_lp.bounds.joint_symmetry import lumped_chains
+
+    _, data, sym, _ = twice
+    return ipm_tables(data, symmetry=sym, tol=1e-9), lumped_chains(sym, data)
+
+
+def test_lumped_lagrangian_at_the_coupling_duals_is_the_whole_lp_optimum(twice, lumped):
+    """L(nu) at the reduced LP's coupling duals is the whole LP's optimum (HiGHS on the LP without
+    symmetry), and the lumped chains' biases, spread to every process, certify it, below g*."""
+    from wncs_lp.bounds.joint_chains import Kernels
+    from wncs_lp.bounds.joint_symmetry import spread_orbit_tables
+
+    _, data, sym, g_star = twice
+    run, chains = lumped
+    assert [c.n_configs for c in chains.chains] == [o.n_configs for o in symmetric_lp(sym, data).orbits]
+    value, sols = chains.lagrangian(run.prices, Kernels("auto"), tol=1e-12)
+    whole = ipm_tables(data, tol=1e-9).objective
+    assert value == pytest.approx(whole, rel=1e-6)
+    bound = certify_tables(data, spread_orbit_tables(sym, data, [s.h for s in sols])).lower_bound
+    assert bound == pytest.approx(whole, rel=1e-6) and bound <= g_star
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_lumped_lagrangian_is_below_the_lp_and_its_tables_certify_it(twice, lumped, seed):
+    """At any prices (the optimal ones perturbed) L(nu) is at most the LP's optimum, and the spread
+    biases certify at least L(nu) (less the chains' brackets)."""
+    from wncs_lp.bounds.joint_chains import Kernels
+    from wncs_lp.bounds.joint_symmetry import spread_orbit_tables
+
+    _, data, sym, _ = twice
+    run, chains = lumped
+    rng = np.random.default_rng(seed)
+    prices = [p + rng.normal(scale=0.3 * np.abs(p).max(), size=p.size) for p in run.prices]
+    value, sols = chains.lagrangian(prices, Kernels("auto"), tol=1e-12)
+    assert value < run.objective - 1e-6 * abs(run.objective)
+    bound = certify_tables(data, spread_orbit_tables(sym, data, [s.h for s in sols])).lower_bound
+    widths = sum(w * (s.upper - s.lower) for w, s in zip(chains.weights, sols))
+    assert bound >= value - widths - 1e-9 * abs(value)
+
+
+def test_ipm_route_reads_the_lumped_chains(twice):
+    system, _, _, g_star = twice
+    res = joint_bound(system, method="ipm", max_iter=0, ipm_tol=1e-8)
+    assert "lumped chains" in [h[1] for h in res.stats["history"]][-1]
+    assert res.stats["lumped_lagrangian"] == pytest.approx(res.lower_bound, rel=1e-6) and res.lower_bound <= g_star

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..solvers.highs import solve_highs
 from .joint_chains import JointData
-from .joint_symmetry import ProcessSymmetry, spread_tables, symmetric_lp
+from .joint_symmetry import ProcessSymmetry, coupling_prices, spread_tables, symmetric_lp
 
 __all__ = ["IpmRun", "ipm_tables", "ipm_bytes", "ipm_seconds", "IPM_TIME_MODEL"]
 
@@ -42,6 +42,9 @@ class IpmRun:
     ----------
     tables : list of (|C|, tau_hat_k) arrays, or None
         The balance rows' duals (None when HiGHS held no dual solution).
+    prices : list of arrays, or None
+        The coupling rows' duals per class representative, on its orbits of pairs
+        (:func:`~wncs_lp.bounds.joint_symmetry.coupling_prices`: the prices of the lumped chains).
     status : str
         HiGHS's model status name (``kOptimal``, ``kTimeLimit``, ...): a report, not a certificate.
     objective : float
@@ -56,6 +59,7 @@ class IpmRun:
     """
 
     tables: list | None
+    prices: list | None
     status: str
     objective: float
     iterations: int
@@ -121,11 +125,12 @@ def ipm_tables(data: JointData, *, symmetry: ProcessSymmetry | None = None, tol:
     stop = None if cpu_limit is None else (lambda: time.process_time() - cpu0 > cpu_limit)
     _, _, z, stats = solve_highs(A, b, c, tol=float(tol), max_iter=2**31 - 1, verbose=verbose, settings=settings,
                                  interrupt=stop)
-    tables = None
+    tables = prices = None
     if np.isfinite(z).all():
         lam = np.zeros(lp.keep.size)
         lam[lp.keep] = -z  # solve_highs returns Clarabel's sign, z = -row_dual
         tables = spread_tables(sym, data, lp, lam)
-    return IpmRun(tables=tables, status=str(stats["solver_status"]), objective=float(stats["obj_scaled"]),
+        prices = coupling_prices(lp, lam)
+    return IpmRun(tables=tables, prices=prices, status=str(stats["solver_status"]), objective=float(stats["obj_scaled"]),
                   iterations=int(stats["ipm_iterations"]), seconds=time.monotonic() - t0,
                   cpu_seconds=time.process_time() - cpu0, shape=(int(A.shape[0]), int(A.shape[1]), int(A.nnz)))

@@ -57,10 +57,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ..models.system import System
-from .joint_chains import JointData
+from .joint_chains import ChainSolution, JointData, Kernels, solve_chain
 
 __all__ = ["ProcessSymmetry", "process_symmetry", "symmetric_lp", "symmetric_lp_shape", "spread_tables",
-           "orbit_tables", "spread_orbit_tables"]
+           "orbit_tables", "spread_orbit_tables", "LumpedChains", "lumped_chains", "coupling_prices"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -259,6 +259,9 @@ class SymmetricLP:
         Per representative (in ``orbits`` order), its balance rows in the full row vector,
         (H_r-orbit of configurations) x tau.
     orbits : list of _Orbits
+    coupling_rows : list of slices
+        Per representative, its coupling rows in the full row vector (one per H_r-orbit of pairs):
+        their duals are the prices of :class:`LumpedChains`.
     """
 
     A: sp.csc_matrix
@@ -267,6 +270,7 @@ class SymmetricLP:
     keep: np.ndarray
     table_rows: list
     orbits: list
+    coupling_rows: list
 
 
 def symmetric_lp(sym: ProcessSymmetry, data: JointData) -> SymmetricLP:
@@ -329,7 +333,9 @@ def symmetric_lp(sym: ProcessSymmetry, data: JointData) -> SymmetricLP:
     b = np.zeros(n_rows)
     b[-1] = 1.0
     table_rows = [slice(b_off[i], b_off[i] + o.n_configs * int(data.caps[o.rep])) for i, o in enumerate(orbs)]
-    return SymmetricLP(A=A[keep].tocsc(), b=b[keep], c=cost, keep=keep, table_rows=table_rows, orbits=orbs)
+    coupling_rows = [slice(c_off[i], c_off[i] + o.n_pairs) for i, o in enumerate(orbs)]
+    return SymmetricLP(A=A[keep].tocsc(), b=b[keep], c=cost, keep=keep, table_rows=table_rows, orbits=orbs,
+                       coupling_rows=coupling_rows)
 
 
 def _kept_rows(sym: ProcessSymmetry, data: JointData, orbs: list, b_off: list) -> np.ndarray:
@@ -385,3 +391,106 @@ def orbit_tables(sym: ProcessSymmetry, data: JointData, tables) -> list[np.ndarr
         np.add.at(m, o.config_orbit, h)
         out.append(m / np.bincount(o.config_orbit, minlength=o.n_configs)[:, None])
     return out
+
+
+# ---------------------------------------------------------------------------- the reduced Lagrangian
+@dataclass(frozen=True, eq=False)
+class LumpedChains:
+    r"""The priced chains of the class representatives on their orbits: the reduced LP's Lagrangian.
+
+    Dualising the coupling rows of :func:`symmetric_lp` with prices nu_r(O) (one per H_r-orbit O
+    of pairs of representative r) leaves, per representative, the lumped chain of r on
+    (tau, H_r-orbit of configurations) with pair cost q_r(tau) - nu_r(O) / w_r (w_r = |class|),
+    and the marginal X alone on the G-orbits Q of pairs:
+
+    .. math::
+
+        L(\nu) = \sum_r w_r\, g_r(q_r - \nu_r / w_r)
+                 + \min_Q \sum_r \sum_{O \subseteq Q} \frac{|O|}{|Q|} \nu_r(O) \le \text{the LP's optimum},
+
+    g_r the optimal gain of the lumped chain (weak duality: the chains' biases, times w_r, are
+    balance duals, nu_r(O) + w_r g_r the coupling duals, and the H_r-orbits inside Q cover Q).
+    The lumped chain is exact: for H_r-invariant prices the whole chain of process r on
+    (tau, C) has the same gain and its bias is the lumped one read on the orbits (H_r fixes r's
+    deliveries and the outcome probabilities). Spread to every process
+    (:func:`spread_orbit_tables`), the biases are tables whose certificate
+    (:func:`~wncs_lp.bounds.joint_chains.certify_tables`) is at least L(nu) less the chains'
+    bracket widths: for a pair p of G-orbit Q, the members k of r's class see r's prices on the
+    H_r-orbits of the images of p, which average to the weights |O| / |Q|. At the LP's optimal
+    coupling duals L(nu) is the optimum.
+
+    These chains are as small as the reduced LP's blocks (the paper's four process types four
+    times at cap 40: 1,009-1,348 orbits of configurations x 40 AoI values each, against 19,845 x
+    40 for one whole chain), so every evaluation of L costs far less than the N whole chains.
+
+    Attributes
+    ----------
+    chains : tuple of JointData
+        One per class (``sym.classes`` order): a one-process automaton on r's orbits, its pairs
+        grouped by orbit of configurations (each orbit's first pair's outcomes, configurations
+        read as their orbits, r's deliveries).
+    order : tuple of int arrays
+        Pair i of chain c is the LP's orbit ``order[c][i]`` (the order of ``lp.orbits[c]``).
+    q_orbit, share : tuple of arrays
+        The G-orbit Q of each chain pair and |O| / |Q|.
+    weights : tuple of int
+        w_r, the size of each class.
+    n_q : int
+        The number of G-orbits of pairs.
+    """
+
+    chains: tuple
+    order: tuple
+    q_orbit: tuple
+    share: tuple
+    weights: tuple
+    n_q: int
+
+    def lagrangian(self, prices, kern: Kernels, *, tol: float, h0=None, stop=None) -> tuple[float, list[ChainSolution]]:
+        """(L(nu) from the chains' lower brackets, each chain's solution) at prices ``prices[c]``
+        (one array per class, on the LP's orbits as :func:`coupling_prices` gives them)."""
+        value = 0.0
+        marginal = np.zeros(self.n_q)
+        sols = []
+        for c, (ld, w) in enumerate(zip(self.chains, self.weights)):
+            nu = np.asarray(prices[c], dtype=float)[self.order[c]]
+            sol = solve_chain(ld, 0, -nu / w, None if h0 is None else h0[c], kern, tol=tol, stop=stop)
+            sols.append(sol)
+            value += w * sol.lower
+            np.add.at(marginal, self.q_orbit[c], self.share[c] * nu)
+        return float(value + marginal.min()), sols
+
+
+def lumped_chains(sym: ProcessSymmetry, data: JointData) -> LumpedChains:
+    """The lumped priced chains of ``sym``'s class representatives (:class:`LumpedChains`)."""
+    n_q, qorb = _orbits([sym.pair_maps[g] for g in sym.generators()], data.n_pairs)
+    q_size = np.bincount(qorb, minlength=n_q)
+    lens = np.diff(data.out_ptr)
+    chains, orders, q_of, shares = [], [], [], []
+    for cl in sym.classes:
+        o = _rep_orbits(sym, data, cl)
+        r = cl[0]
+        conf = o.config_orbit[data.pair_c[o.pair_first]]
+        order = np.argsort(conf, kind="stable")  # pairs grouped by orbit of configurations
+        counts = np.bincount(conf, minlength=o.n_configs)
+        first = o.pair_first[order]
+        n_out = lens[first]
+        idx = np.repeat(data.out_ptr[first] - np.cumsum(n_out) + n_out, n_out) + np.arange(int(n_out.sum()))
+        chains.append(JointData(caps=data.caps[[r]].copy(), q=(data.q[r],),
+                                act_ptr=np.r_[0, np.cumsum(counts)].astype(np.int64),
+                                pair_c=np.repeat(np.arange(o.n_configs), counts).astype(np.int64),
+                                out_ptr=np.r_[0, np.cumsum(n_out)].astype(np.int64),
+                                out_nxt=np.ascontiguousarray(o.config_orbit[data.out_nxt[idx]]),
+                                out_prob=np.ascontiguousarray(data.out_prob[idx]),
+                                out_delta=np.ascontiguousarray(data.out_delta[idx, r][:, None])))
+        orders.append(order)
+        q_of.append(qorb[first])
+        shares.append(o.pair_size[order] / q_size[qorb[first]])
+    return LumpedChains(chains=tuple(chains), order=tuple(orders), q_orbit=tuple(q_of), share=tuple(shares),
+                        weights=tuple(len(cl) for cl in sym.classes), n_q=int(n_q))
+
+
+def coupling_prices(lp: SymmetricLP, lam: np.ndarray) -> list[np.ndarray]:
+    """The coupling rows' duals of each representative (``lam`` on the full rows, as
+    :func:`spread_tables` takes it): the prices of :meth:`LumpedChains.lagrangian`."""
+    return [np.asarray(lam[sl], dtype=float).copy() for sl in lp.coupling_rows]
