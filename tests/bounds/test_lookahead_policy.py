@@ -177,3 +177,17 @@ def test_depth_three_against_a_brute_force():
     for r in range(25):
         v = brute_three_step(system, groups, res.tables.h, res.tables.column, tau[r], int(cfg[r]), 2)
         assert v[acts[r]] <= v.min() + 1e-9 * max(1.0, abs(v.min())), (tau[r], cfg[r], v, acts[r])
+
+
+def test_the_lookahead_by_name_restricts_its_candidates_only_on_large_systems(monkeypatch):
+    """Exact (every action) where no configuration has more than AUTO_CANDIDATES_FROM actions; the
+    AUTO_CANDIDATES best greedy actions beyond."""
+    from wncs_lp.bounds import lookahead
+
+    sc = load_scenario(scenario_path("paper_p12"), ["tau_cap=6"])
+    system = System.from_scenario(sc)
+    assert lookahead.auto_candidates(system) is None and make_policy("lookahead", system).candidates is None
+    monkeypatch.setattr(lookahead, "AUTO_CANDIDATES_FROM", system.max_actions - 1)
+    monkeypatch.setattr(lookahead, "AUTO_CANDIDATES", 2)
+    pol = make_policy("lookahead", system)
+    assert pol.candidates == 2 and pol.name.startswith("lookahead-k2[bound[")

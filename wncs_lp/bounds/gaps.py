@@ -42,7 +42,7 @@ from ..policies.factory import BOUND_POLICY_NAMES, make_basic_policy
 from ..progress import as_progress
 from ..simulate import simulate
 from .index import IndexPolicy, whittle_indices
-from .lookahead import LookaheadPolicy
+from .lookahead import LookaheadPolicy, auto_candidates
 from .named import named_policy
 from .policy import bound_policy
 from .projected import PROJECTED, ProjectedValue
@@ -145,7 +145,7 @@ def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Po
     if name == "bound":
         return bound_policy(bound, system)
     if name == "lookahead":
-        return LookaheadPolicy(bound_policy(bound, system))
+        return LookaheadPolicy(bound_policy(bound, system), auto_candidates(system))
     if name == "index":
         return IndexPolicy(system, whittle_indices(system, bound if bound.relaxation == "private-servers" else None))
     if name in BOUND_POLICY_NAMES:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from ..models.system import System
 from ..policies import Policy
 from .index import index_policy
-from .lookahead import LookaheadPolicy
+from .lookahead import LookaheadPolicy, auto_candidates
 from .lower import lower_bound
 from .policy import bound_policy
 
@@ -24,4 +24,4 @@ def named_policy(name: str, system: System) -> Policy:
     if name == "index":
         return index_policy(system)
     greedy = bound_policy(lower_bound(system, "auto"), system)
-    return LookaheadPolicy(greedy) if name == "lookahead" else greedy
+    return LookaheadPolicy(greedy, auto_candidates(system)) if name == "lookahead" else greedy
