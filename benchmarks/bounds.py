@@ -6,6 +6,7 @@
     python benchmarks/bounds.py --instances bounds_p1234_twice:20 --bounds-only
     python benchmarks/bounds.py --ipm-scan --out /tmp/ipm.csv                # relaxation 2's interior point: time model
     python benchmarks/bounds.py --write-b3-tables bounds_mix6:10             # the report's shipped tables (B3)
+    python benchmarks/bounds.py --candidates bounds_lab16:2000               # the lookahead's candidate rule
 
 For every instance (default: the calibration instances -- the 5-process shape and the 6-process
 mix at cap 10, processes 1-4 at caps 12, 20, 30, whose g* is known -- and the paper's four types
@@ -27,6 +28,12 @@ twice, 8 processes, at cap 20), each in its own process (its peak memory is its 
 ``--ipm-scan`` solves relaxation 2's LP by the interior point alone on a list of instances (each in
 its own process: CPU and wall seconds, iterations, peak memory, LP size) and fits the time model
 of ``wncs_lp.bounds.joint_ipm.IPM_TIME_MODEL`` (CPU time, so the load of the machine does not enter).
+
+``--candidates NAME:STATES`` measures the rule of ``wncs_lp.bounds.lookahead.auto_candidates``: on
+STATES states of one simulated path of relaxation 1's greedy policy (seed 1, after 500 slots), the
+two-step lookahead on its tables with every action and with the k best greedy candidates
+(k = 32, 16, 8, 4, 2): the CPU seconds of each and the share of states where it takes the full
+lookahead's action.
 
 One CSV row per quantity and a table on stdout. The machine is shared: every row records the
 1-minute load average when it started (2 cores; above ~1 another job competed).
@@ -88,7 +95,8 @@ def _rel(value, ref):
 
 
 def _system(name, cap):
-    return System.from_scenario(wncs_lp.load_scenario(wncs_lp.scenario_path(name), [f"tau_cap={cap}"]))
+    """The scenario's System at cap ``cap`` (None: the scenario's own)."""
+    return System.from_scenario(wncs_lp.load_scenario(wncs_lp.scenario_path(name), [] if cap is None else [f"tau_cap={cap}"]))
 
 
 def _timed(fn, *args, **kw):
@@ -207,6 +215,33 @@ def ipm_one(name, cap, tol):
                                               "classes": plan["classes"], "tol": tol})}]
 
 
+# ------------------------------------------------------------------------------ the lookahead's candidates
+def candidates_one(name, states):
+    """The lookahead restricted to k greedy candidates against the full one on simulated states."""
+    from wncs_lp.bounds.lookahead import LookaheadPolicy
+    from wncs_lp.simulate import simulate
+
+    system = _system(name, None)
+    base = bound_policy(lower_bound(system, "private-servers"), system)
+    path = simulate(base, slots=states, reps=1, burn_in=500, path=states, seed=1).path
+    tau, cfg = np.asarray(path.tau), np.asarray(path.config)
+    l0 = load1()
+    rows, full, full_cpu = [], None, None
+    for k in (None, 32, 16, 8, 4, 2):
+        pol = LookaheadPolicy(base, candidates=k, threads=1)
+        pol.act(tau[:1], cfg[:1])  # the kernel compiled before the clock starts
+        c0 = time.process_time()
+        act = pol.act(tau, cfg)
+        cpu = time.process_time() - c0
+        full, full_cpu = (act, cpu) if k is None else (full, full_cpu)
+        rows.append({"instance": name, "cap": int(max(system.caps)), "processes": system.n_processes,
+                     "servers": system.n_servers, "row": f"lookahead candidates {k or 'all'}",
+                     "how": f"{tau.shape[0]} states", "value": float(np.mean(act == full)),
+                     "cpu_seconds": round(cpu, 3), "load1": l0, "peak_gib": peak_gib(),
+                     "note": f"CPU {cpu / full_cpu:.3f} of the full lookahead's; value: share of states agreeing"})
+    return rows
+
+
 def fit_time_model(rows):
     """Least squares in logs: cpu = coef (nnz / 1e6)^a (cap / 10)^b (cap: the mean cap)."""
     X = np.array([[1.0, np.log(json.loads(r["note"])["lp_nnz_count"] / 1e6), np.log(r["cap"] / 10)] for r in rows])
@@ -299,6 +334,8 @@ def main(argv=None) -> int:
                     help="IPX's tolerance in --ipm-scan and --write-b3-tables (auto's: 1e-4)")
     ap.add_argument("--write-b3-tables", default=None, metavar="NAME:CAP,...",
                     help="compute relaxation 2's tables by the interior point and ship them with the report (B3)")
+    ap.add_argument("--candidates", default=None, metavar="NAME:STATES",
+                    help="the lookahead with k greedy candidates against the full one on STATES simulated states")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--ipm-child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -307,6 +344,13 @@ def main(argv=None) -> int:
         name, cap = (args.child or args.ipm_child).split(":")
         rows = run_instance(name, int(cap), args) if args.child else ipm_one(name, int(cap), args.ipm_tol)
         print("ROWS " + json.dumps(rows, default=float), flush=True)
+        return 0
+    if args.candidates:
+        name, states = args.candidates.split(":")
+        rows = candidates_one(name, int(states))
+        print(table(rows), flush=True)
+        if args.out:
+            write_csv(args.out, rows)
         return 0
     if args.write_b3_tables:
         for item in args.write_b3_tables.split(","):

@@ -132,9 +132,10 @@ def test_a_stopped_search_is_still_at_least_relaxation_1():
     where a pair's gain is at least its members', so the bound is never below relaxation 1's."""
     system = System.from_scenario(load_scenario(scenario_path("paper_p123"), ["tau_cap=12"]))
     r1 = private_bound(system)
-    for kw in ({"max_iter": 1}, {"time_limit": 0.0}):
+    for kw in ({"max_iter": 1}, {"time_limit": 0.0}, {"cpu_limit": 0.0}):
         res = grouped_bound(system, [(1, 2), (0,)], **kw)
         assert res.status == "max_iter" and res.lower_bound >= r1.lower_bound * (1 - 1e-9)
+        assert res.stats["stopped_by_time"] == ("max_iter" not in kw)
 
 
 def _all_pairings(items):

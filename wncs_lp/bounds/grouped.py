@@ -94,7 +94,7 @@ def _priced_gain(chains: _Chains, chain: PrivateChain, lam: np.ndarray, tol: flo
 
 def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float], *, solve_tol: float = 1e-10,
                  chains: _Chains | None = None, progress: Any = False,
-                 deadline: float = np.inf) -> tuple[tuple[tuple[int, ...], ...], dict]:
+                 deadline: float = np.inf, expired: Any = None) -> tuple[tuple[tuple[int, ...], ...], dict]:
     """Pairs of processes of largest total interaction at the multipliers ``lam``.
 
     Parameters
@@ -112,6 +112,8 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
     deadline : float
         ``time.perf_counter()`` after which no more pair chains are solved (the pairs not
         measured by then count as not interacting).
+    expired : callable, optional
+        ``expired()`` True: the same as the deadline passed (e.g. a limit in CPU time).
 
     Returns
     -------
@@ -125,7 +127,7 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
     kind = [chain_key(chains.model.private_scenario(k)) for k in range(n)]
     weights, seen = {}, {}
     for k, l in itertools.combinations(range(n), 2):
-        if time.perf_counter() >= deadline:
+        if time.perf_counter() >= deadline or (expired is not None and expired()):
             break
         key = tuple(sorted((kind[k], kind[l])))
         if key not in seen:
@@ -204,7 +206,7 @@ def group_table(chain: PrivateChain, bias: np.ndarray) -> np.ndarray:
 
 def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[Sequence[int]] = "pairs", *,
                   tol: float = 1e-6, max_iter: int = 80, solve_tol: float = 1e-10, time_limit: float | None = None,
-                  relaxation_1: BoundResult | None = None, progress: Any = False) -> BoundResult:
+                  cpu_limit: float | None = None, relaxation_1: BoundResult | None = None, progress: Any = False) -> BoundResult:
     """The grouped private-servers lower bound on g* (relaxation 3), certified.
 
     Parameters
@@ -219,6 +221,10 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     time_limit : float, optional
         Seconds at most (after relaxation 1): choosing the pairs stops measuring pairs, and the
         multiplier search stops, when it is reached; the bound is certified whatever stops it.
+    cpu_limit : float, optional
+        The same in seconds of this process's CPU time (after relaxation 1; whichever limit comes
+        first): a limit a loaded machine does not bring forward, so the bound is the same there as on
+        a quiet one (``lower_bound(x, "auto")`` uses it).
     relaxation_1 : BoundResult, optional
         Relaxation 1's result on this system, to start from (computed when not given).
     progress : bool or Progress
@@ -256,13 +262,18 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
         raise WncsError(f"unknown groups {groups!r}; expected 'pairs' or a partition of the processes")
     r1 = relaxation_1 if relaxation_1 is not None else private_bound(system, tol=tol, solve_tol=solve_tol)
     deadline = time.perf_counter() + (float(time_limit) if time_limit is not None else np.inf)
+    cpu_end = time.process_time() + (float(cpu_limit) if cpu_limit is not None else np.inf)
+
+    def expired() -> bool:
+        return time.process_time() >= cpu_end
+
     lam1 = np.asarray(r1.multipliers, float)
     chains = _Chains(model)
     stats: dict[str, Any] = {"relaxation_1_bound": r1.lower_bound, "capacity": r1.stats["capacity"]}
     if groups == "pairs":
         prog.phase(f"grouped bound: the interaction of every pair of {n} processes at relaxation 1's multipliers")
         groups, weights = choose_pairs(system, lam1, r1.process_gains, solve_tol=solve_tol, chains=chains,
-                                       progress=prog, deadline=deadline)
+                                       progress=prog, deadline=deadline, expired=expired)
         stats["pair_interaction"] = {f"{k + 1},{l + 1}": round(float(v), 9) for (k, l), v in weights.items()}
     group_chains = [chains.of(g) for g in groups]
     columns = tuple(_columns(system, model, c, g) for c, g in zip(group_chains, groups))
@@ -272,7 +283,7 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     prog.phase(f"grouped bound: groups {[tuple(k + 1 for k in g) for g in groups]}, "
                f"{len(distinct)} distinct private chains of {[c.mdp.n_states for c in distinct]} states")
     search = search_multipliers(system, distinct, which, r1.stats["capacity"], tol, max_iter, solve_tol, prog,
-                                lam0=lam1, deadline=deadline, policies0=[chains.policies.get(id(c)) for c in distinct])
+                                lam0=lam1, deadline=deadline, expired=expired, policies0=[chains.policies.get(id(c)) for c in distinct])
     solves = search["solves"]
     tables = GroupTables(groups=groups,
                          h=tuple(group_table(distinct[which[i]], solves[which[i]].bias) for i in range(len(groups))),
@@ -281,7 +292,7 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
                  chain_states=[int(c.mdp.n_states) for c in distinct], cuts=search["cuts"],
                  priced_solves=search["solves_done"] + (len(chains.by_key) if "pair_interaction" in stats else 0),
                  priced_status=sorted({s.status for s in solves}), box=search["box"],
-                 stopped_by_time=bool(time.perf_counter() >= deadline))
+                 stopped_by_time=bool(time.perf_counter() >= deadline or expired()))
     return BoundResult(
         relaxation=RELAXATION, lower_bound=search["lb"], relaxation_upper=search["upper"],
         status=OPTIMAL if search["converged"] else MAX_ITER, certified_by=_certified_by(groups, r1.stats["capacity"]),

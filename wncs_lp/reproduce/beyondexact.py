@@ -191,7 +191,7 @@ def _compute(ctx: Context, sc, inst: Instance, st: BeyondExactSettings) -> dict[
     res3 = None
     # relaxation 3 where auto runs it, and on the calibration instances (every relaxation against g*)
     if system.n_processes >= 3 and (inst.calibration or not by_ipm):
-        res3 = grouped_bound(system, relaxation_1=first, time_limit=AUTO_GROUPED_TIME_LIMIT)
+        res3 = grouped_bound(system, relaxation_1=first, cpu_limit=AUTO_GROUPED_TIME_LIMIT)
         if not by_ipm:
             found.append(res3)
     best = auto_pick(found + [first])
