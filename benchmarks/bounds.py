@@ -26,7 +26,9 @@ twice, 8 processes, at cap 20), each in its own process (its peak memory is its 
 * the certified gaps (upper - LB) / LB against auto's bound.
 
 ``--ipm-scan`` solves relaxation 2's LP by the interior point alone on a list of instances (each in
-its own process: CPU and wall seconds, iterations, peak memory, LP size) and fits the time model
+its own process: CPU and wall seconds, iterations, peak memory, LP size; the value its duals' tables
+certify, and in the note the value the lumped chains at its coupling duals certify)
+and fits the time model
 of ``wncs_lp.bounds.joint_ipm.IPM_TIME_MODEL`` (CPU time, so the load of the machine does not enter).
 
 ``--candidates NAME:STATES`` measures the rule of ``wncs_lp.bounds.lookahead.auto_candidates``: on
@@ -96,7 +98,8 @@ def _rel(value, ref):
 
 def _system(name, cap):
     """The scenario's System at cap ``cap`` (None: the scenario's own)."""
-    return System.from_scenario(wncs_lp.load_scenario(wncs_lp.scenario_path(name), [] if cap is None else [f"tau_cap={cap}"]))
+    edits = [] if cap is None else [f"tau_cap={cap}"]
+    return System.from_scenario(wncs_lp.load_scenario(wncs_lp.scenario_path(name), edits))
 
 
 def _timed(fn, *args, **kw):
@@ -196,9 +199,9 @@ def _in_child(flag, item, args_list):
 def ipm_one(name, cap, tol):
     """Relaxation 2's LP by IPX alone (symmetry-reduced): size, CPU and wall time, peak memory."""
     from wncs_lp.bounds.joint import ipm_plan
-    from wncs_lp.bounds.joint_chains import JointData, certify_tables
+    from wncs_lp.bounds.joint_chains import JointData, Kernels, certify_tables
     from wncs_lp.bounds.joint_ipm import ipm_tables
-    from wncs_lp.bounds.joint_symmetry import process_symmetry
+    from wncs_lp.bounds.joint_symmetry import lumped_chains, process_symmetry, spread_orbit_tables
 
     system = _system(name, cap)
     data = JointData.from_system(system)
@@ -207,12 +210,19 @@ def ipm_one(name, cap, tol):
     l0 = load1()
     run = ipm_tables(data, symmetry=sym, tol=tol)
     cert = certify_tables(data, run.tables).lower_bound if run.tables is not None else float("nan")
+    lumped, lumped_cpu = float("nan"), float("nan")
+    if run.prices is not None:  # the lumped chains at the coupling duals, their tables certified
+        c0 = time.process_time()
+        _, sols = lumped_chains(sym, data).lagrangian(run.prices, Kernels("auto"), tol=1e-8)
+        lumped = certify_tables(data, spread_orbit_tables(sym, data, [s.h for s in sols])).lower_bound
+        lumped_cpu = round(time.process_time() - c0, 2)
     return [{"instance": name, "cap": cap, "processes": system.n_processes, "servers": system.n_servers,
              "row": "IPX", "how": run.status, "value": cert, "value_upper": run.objective,
              "seconds": round(run.seconds, 2), "cpu_seconds": round(run.cpu_seconds, 2), "peak_gib": peak_gib(),
              "load1": l0, "note": json.dumps({"iterations": run.iterations, "lp_nnz_count": plan["lp_nnz"],
                                               "lp_shape": run.shape, "predicted_seconds": round(plan["predicted_seconds"], 1),
-                                              "classes": plan["classes"], "tol": tol})}]
+                                              "classes": plan["classes"], "tol": tol,
+                                              "lumped_chains_bound": lumped, "lumped_chains_cpu": lumped_cpu})}]
 
 
 # ------------------------------------------------------------------------------ the lookahead's candidates

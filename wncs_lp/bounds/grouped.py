@@ -206,7 +206,8 @@ def group_table(chain: PrivateChain, bias: np.ndarray) -> np.ndarray:
 
 def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[Sequence[int]] = "pairs", *,
                   tol: float = 1e-6, max_iter: int = 80, solve_tol: float = 1e-10, time_limit: float | None = None,
-                  cpu_limit: float | None = None, relaxation_1: BoundResult | None = None, progress: Any = False) -> BoundResult:
+                  cpu_limit: float | None = None, relaxation_1: BoundResult | None = None,
+                  progress: Any = False) -> BoundResult:
     """The grouped private-servers lower bound on g* (relaxation 3), certified.
 
     Parameters
@@ -283,7 +284,8 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     prog.phase(f"grouped bound: groups {[tuple(k + 1 for k in g) for g in groups]}, "
                f"{len(distinct)} distinct private chains of {[c.mdp.n_states for c in distinct]} states")
     search = search_multipliers(system, distinct, which, r1.stats["capacity"], tol, max_iter, solve_tol, prog,
-                                lam0=lam1, deadline=deadline, expired=expired, policies0=[chains.policies.get(id(c)) for c in distinct])
+                                lam0=lam1, deadline=deadline, expired=expired,
+                                policies0=[chains.policies.get(id(c)) for c in distinct])
     solves = search["solves"]
     tables = GroupTables(groups=groups,
                          h=tuple(group_table(distinct[which[i]], solves[which[i]].bias) for i in range(len(groups))),

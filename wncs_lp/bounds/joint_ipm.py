@@ -131,6 +131,7 @@ def ipm_tables(data: JointData, *, symmetry: ProcessSymmetry | None = None, tol:
         lam[lp.keep] = -z  # solve_highs returns Clarabel's sign, z = -row_dual
         tables = spread_tables(sym, data, lp, lam)
         prices = coupling_prices(lp, lam)
-    return IpmRun(tables=tables, prices=prices, status=str(stats["solver_status"]), objective=float(stats["obj_scaled"]),
+    return IpmRun(tables=tables, prices=prices, status=str(stats["solver_status"]),
+                  objective=float(stats["obj_scaled"]),
                   iterations=int(stats["ipm_iterations"]), seconds=time.monotonic() - t0,
                   cpu_seconds=time.process_time() - cpu0, shape=(int(A.shape[0]), int(A.shape[1]), int(A.nnz)))
