@@ -167,3 +167,20 @@ def test_ipm_route_reads_the_lumped_chains(twice):
     assert "lumped chains" in phases[-1]
     assert "start" not in phases  # the bundle's start is not solved when the interior point returns tables
     assert res.stats["lumped_lagrangian"] == pytest.approx(res.lower_bound, rel=1e-6) and res.lower_bound <= g_star
+
+
+def test_lumped_ascent_climbs_from_relaxation_1_and_stays_below_the_lp():
+    """The projected supergradient steps on the lumped chains (no interchangeable processes here:
+    one chain per process): certified, above relaxation 1's bound (its start), at most the whole
+    LP's optimum (HiGHS) and the exact g* (the solver)."""
+    from wncs_lp.bounds.private import private_bound
+    from wncs_lp import load_scenario, scenario_path
+
+    sc = load_scenario(scenario_path("paper_p1234"), ["tau_cap=6"])
+    system = System.from_scenario(sc)
+    res = joint_bound(system, method="ascent", max_iter=40, time_limit=None)
+    lp_optimum = ipm_tables(JointData.from_system(system), tol=1e-9).objective
+    r1 = private_bound(system).lower_bound
+    assert res.stats["ascent_steps"] == 40 and res.stats["ascent_value"] > res.stats["ascent_start"]
+    assert r1 < res.lower_bound <= lp_optimum * (1 + 1e-9) and lp_optimum <= solve(build(sc)).gain_upper
+    assert res.lower_bound == pytest.approx(res.stats["ascent_value"], rel=1e-6)

@@ -437,6 +437,10 @@ class LumpedChains:
         w_r, the size of each class.
     n_q : int
         The number of G-orbits of pairs.
+    reps : tuple of int
+        Each class's representative r.
+    pair : tuple of int arrays
+        A pair of the whole automaton in each orbit (chain order).
     """
 
     chains: tuple
@@ -445,6 +449,20 @@ class LumpedChains:
     share: tuple
     weights: tuple
     n_q: int
+    reps: tuple
+    pair: tuple
+
+    def prices_from(self, mu: np.ndarray) -> list[np.ndarray]:
+        """The prices nu (LP order, as :meth:`lagrangian` takes them) of whole-system prices ``mu`` (N,
+        |C x A|), each process's chain priced q_k + mu_k, read at each orbit's pair: nu_r = -w_r mu_r.
+        For symmetric zero-sum prices (relaxation 1's, :func:`~wncs_lp.bounds.joint.relaxation1_start`)
+        every G-orbit's weighted sum is zero, and L(nu) is the whole Lagrangian at mu."""
+        out = []
+        for c, w in enumerate(self.weights):
+            nu = np.empty(self.order[c].size)
+            nu[self.order[c]] = -w * np.asarray(mu[self.reps[c]], dtype=float)[self.pair[c]]
+            out.append(nu)
+        return out
 
     def lagrangian(self, prices, kern: Kernels, *, tol: float, h0=None, stop=None) -> tuple[float, list[ChainSolution]]:
         """(L(nu) from the chains' lower brackets, each chain's solution) at prices ``prices[c]``
@@ -466,7 +484,7 @@ def lumped_chains(sym: ProcessSymmetry, data: JointData) -> LumpedChains:
     n_q, qorb = _orbits([sym.pair_maps[g] for g in sym.generators()], data.n_pairs)
     q_size = np.bincount(qorb, minlength=n_q)
     lens = np.diff(data.out_ptr)
-    chains, orders, q_of, shares = [], [], [], []
+    chains, orders, q_of, shares, pairs = [], [], [], [], []
     for cl in sym.classes:
         o = _rep_orbits(sym, data, cl)
         r = cl[0]
@@ -484,10 +502,12 @@ def lumped_chains(sym: ProcessSymmetry, data: JointData) -> LumpedChains:
                                 out_prob=np.ascontiguousarray(data.out_prob[idx]),
                                 out_delta=np.ascontiguousarray(data.out_delta[idx, r][:, None])))
         orders.append(order)
+        pairs.append(first)
         q_of.append(qorb[first])
         shares.append(o.pair_size[order] / q_size[qorb[first]])
     return LumpedChains(chains=tuple(chains), order=tuple(orders), q_orbit=tuple(q_of), share=tuple(shares),
-                        weights=tuple(len(cl) for cl in sym.classes), n_q=int(n_q))
+                        weights=tuple(len(cl) for cl in sym.classes), n_q=int(n_q),
+                        reps=tuple(cl[0] for cl in sym.classes), pair=tuple(pairs))
 
 
 def coupling_prices(lp: SymmetricLP, lam: np.ndarray) -> list[np.ndarray]:
