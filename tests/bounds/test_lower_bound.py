@@ -79,3 +79,19 @@ def test_auto_takes_relaxation_1_when_relaxation_2_stopped_below_it(monkeypatch,
     assert res.relaxation == "private-servers" and res.lower_bound == base.lower_bound
     assert res.stats["auto_bounds"] == {"joint-configuration": base.lower_bound - 1.0, "private-servers": base.lower_bound}
     assert "largest certified bound" in res.stats["auto_reason"]
+
+
+def test_auto_beyond_the_whole_lp_takes_relaxation_2_on_the_lumped_chains(monkeypatch):
+    """With relaxation 2's whole LP out of reach, auto still evaluates its Lagrangian at relaxation 1's
+    prices on the lumped chains: certified, at least relaxation 1's bound, below the exact g*."""
+    from wncs_lp.bounds import joint
+
+    sc = load_scenario(scenario_path("paper_p1234"), ["tau_cap=6"])
+    system = System.from_scenario(sc)
+    monkeypatch.setattr(joint, "REACH_MAX_NNZ", 1)
+    res = lower_bound(system, "auto")
+    assert "joint-configuration" in res.stats["auto_bounds"]
+    assert "Lagrangian at relaxation 1's prices" in res.stats["auto_reason"]
+    r2 = res.stats["auto_bounds"]["joint-configuration"]
+    assert r2 >= res.stats["auto_bounds"]["private-servers"] * (1 - 1e-6)
+    assert res.lower_bound <= solve(build(sc)).gain_upper
