@@ -22,8 +22,8 @@ from .pairs import pairs_bound
 from .private import private_bound
 from .result import BoundResult
 
-__all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "lower_bound", "parse_relaxation", "auto_pick",
-           "runs_grouped"]
+__all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "AUTO_ASCENT_STEPS", "AUTO_ASCENT_MAX_BYTES",
+           "lower_bound", "parse_relaxation", "auto_pick", "runs_grouped"]
 
 #: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
 RELAXATIONS = ("auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs")
@@ -89,7 +89,8 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         looser than relaxation 2, not run by ``"auto"`` (its bundle steps take a minute each at
         eight processes, cap 20; ``docs/bounds.md``).
         ``"auto"``: the largest certified bound of relaxation 1, relaxation 2 when the instance is
-        within its reach, and relaxation 3 (pairs, :mod:`~wncs_lp.bounds.grouped`)
+        within its reach (beyond it, on an enumerated system, its Lagrangian at relaxation 1's
+        prices on the lumped chains: :data:`AUTO_ASCENT_STEPS`), and relaxation 3 (pairs, :mod:`~wncs_lp.bounds.grouped`)
         when there are at least three processes and relaxation 2 was not solved by its interior
         point (where it was, it was the tighter: processes 1-4, cap 20, 1547.6 against 1441.2);
         on a tie the first of 2, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
