@@ -31,7 +31,11 @@ Sections (one CSV row per measurement, a table on stdout):
   least (the value vector read and written, the policy byte written: 17 bytes a state) and the
   GB/s that makes, beside the copy bandwidth: ``floor_ratio`` = seconds per pass / (bytes per
   pass / copy bandwidth), the factor over the bandwidth floor. The ``ratio`` column of a
-  baseline row is baseline seconds / this tree's seconds.
+  baseline row is baseline seconds / this tree's seconds (its note adds the CPU and passes
+  ratios). After the solve the worker times one pass of each kind on the solution (improvement
+  sweep over every action and, where the tree has them, over the candidate actions;
+  certificate; evaluation sweep): wall and CPU seconds, CPU ns a state and the factor over the
+  bandwidth floor, in the row's note.
 
 The machine is shared: every row records the 1-minute load average when it started (2 cores;
 a load above ~1 means another job competed for them), and the CPU seconds of the worker.
