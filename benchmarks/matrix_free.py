@@ -256,7 +256,8 @@ def pass_profile(sol, threads, bw, repeats=2):
     sw = Sweeper(op, threads, None)
     n = sol.layout.n_states
     h, pol = sol.bias, sol.local_actions  # no copies (memory): the solution is not used after
-    kinds = [("improvement", 17, lambda: sw.all_actions(h, None, pol, None, Reduce.MIN, Write.IN_PLACE, True, 0.8, 0.0)),
+    kinds = [("improvement", 17,
+              lambda: sw.all_actions(h, None, pol, None, Reduce.MIN, Write.IN_PLACE, True, 0.8, 0.0)),
              ("certificate", 9, lambda: sw.all_actions(h, None, pol, None, Reduce.MIN, Write.NONE, True, 0.8, 0.0)),
              ("evaluation", 17, lambda: sw.fixed(h, None, pol, Write.IN_PLACE, 0.8, 0.0))]
     if "cand" in inspect.signature(sw.all_actions).parameters:

@@ -5,7 +5,8 @@
 
 Per instance: the model built once (``wncs_lp.build``); then, ``--repeat`` times in turn, the
 stored-matrix value iteration (``wncs_lp.solve(mdp, "vi")``, certified to a relative bracket of
-1e-9; and with two evaluation sweeps per improvement sweep, the matrix-free default), the matrix-free solver (certified to 1e-9, no matrix) and Storm's long-run average
+1e-9; and with two evaluation sweeps per improvement sweep, the matrix-free default), the
+matrix-free solver (certified to 1e-9, no matrix) and Storm's long-run average
 (``R{"cost"}min=? [LRA]`` through stormpy, on the same MDP: :func:`peers.storm_lra`; its
 default precision 1e-6 relative, uncertified; the conversion to Storm's matrix is not counted).
 Each row records its wall and CPU seconds and the 1-minute load; ``ratio`` = our seconds /
@@ -33,7 +34,8 @@ from wncs_lp.files import atomic_write_csv  # noqa: E402
 from wncs_lp.solvers.matrix_free import matrix_free_value_iteration  # noqa: E402
 
 COLUMNS = ["instance", "cap", "states", "transitions", "repeat", "method", "seconds", "cpu_seconds", "ratio",
-           "cpu_ratio", "gain", "gain_lower", "gain_upper", "sweeps", "storm_in_bracket", "storm_rel_error", "load1", "status", "note"]
+           "cpu_ratio", "gain", "gain_lower", "gain_upper", "sweeps", "storm_in_bracket", "storm_rel_error", "load1",
+           "status", "note"]
 
 
 def storm_cpu_clock() -> dict:
@@ -88,7 +90,8 @@ def run(instances, repeat, threads):
                 sol, wall, cpu = timed(fn)
                 inside = sol.gain_lower <= st["gain"] <= sol.gain_upper
                 rows.append(dict(common, repeat=r, method=method, seconds=round(wall, 3), cpu_seconds=round(cpu, 3),
-                                 ratio=round(wall / storm_s, 3), cpu_ratio=round(cpu / storm_cpu, 3), gain=sol.gain, gain_lower=sol.gain_lower,
+                                 ratio=round(wall / storm_s, 3), cpu_ratio=round(cpu / storm_cpu, 3), gain=sol.gain,
+                                 gain_lower=sol.gain_lower,
                                  gain_upper=sol.gain_upper, sweeps=sol.stats.get("sweeps"), storm_in_bracket=inside,
                                  storm_rel_error=abs(st["gain"] - sol.gain) / abs(sol.gain), load1=ld,
                                  status=sol.status))
