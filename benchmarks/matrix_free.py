@@ -31,7 +31,11 @@ Sections (one CSV row per measurement, a table on stdout):
   least (the value vector read and written, the policy byte written: 17 bytes a state) and the
   GB/s that makes, beside the copy bandwidth: ``floor_ratio`` = seconds per pass / (bytes per
   pass / copy bandwidth), the factor over the bandwidth floor. The ``ratio`` column of a
-  baseline row is baseline seconds / this tree's seconds.
+  baseline row is baseline seconds / this tree's seconds (its note adds the CPU and passes
+  ratios). After the solve the worker times one pass of each kind on the solution (improvement
+  sweep over every action and, where the tree has them, over the candidate actions;
+  certificate; evaluation sweep): wall and CPU seconds, CPU ns a state and the factor over the
+  bandwidth floor, in the row's note.
 
 The machine is shared: every row records the 1-minute load average when it started (2 cores;
 a load above ~1 means another job competed for them), and the CPU seconds of the worker.
@@ -235,6 +239,43 @@ def copy_bandwidth(nbytes=400 << 20, repeats=5) -> float:
     return 2 * a.nbytes / best / 1e9
 
 
+def pass_profile(sol, threads, bw, repeats=2):
+    """Seconds (wall and CPU) of one pass of each kind on the solution's bias and policy, best of
+    ``repeats``: the improvement sweep over every action and over the candidate actions (where the
+    tree has them), the certificate pass and the fixed-policy (evaluation) sweep; each kind's
+    bytes a state at least (value read + written and policy byte: 17; a certificate only reads
+    the value and writes the policy byte: 9) against the copy bandwidth."""
+    import inspect
+
+    import numpy as np
+
+    from wncs_lp.solvers.matrix_free.operator import Operator, Reduce, Write
+    from wncs_lp.solvers.matrix_free.sweeper import Sweeper
+
+    op = Operator.build(sol.system, sol.layout)
+    sw = Sweeper(op, threads, None)
+    n = sol.layout.n_states
+    h, pol = sol.bias, sol.local_actions  # no copies (memory): the solution is not used after
+    kinds = [("improvement", 17,
+              lambda: sw.all_actions(h, None, pol, None, Reduce.MIN, Write.IN_PLACE, True, 0.8, 0.0)),
+             ("certificate", 9, lambda: sw.all_actions(h, None, pol, None, Reduce.MIN, Write.NONE, True, 0.8, 0.0)),
+             ("evaluation", 17, lambda: sw.fixed(h, None, pol, Write.IN_PLACE, 0.8, 0.0))]
+    if "cand" in inspect.signature(sw.all_actions).parameters:
+        cand = sw.used_actions(pol, np.zeros(sol.layout.n_configs, np.uint64))
+        kinds.insert(1, ("improvement, candidates", 17, lambda: sw.all_actions(
+            h, None, pol, None, Reduce.MIN, Write.IN_PLACE, True, 0.8, 0.0, cand)))
+    out = {}
+    for label, per_state, fn in kinds:
+        wall = cpu = float("inf")
+        for _ in range(repeats):
+            c0, t0 = time.process_time(), time.perf_counter()
+            fn()
+            wall, cpu = min(wall, time.perf_counter() - t0), min(cpu, time.process_time() - c0)
+        out[label] = {"wall": round(wall, 4), "cpu": round(cpu, 4), "ns_cpu_per_state": round(cpu / n * 1e9, 2),
+                      "floor_ratio": round(wall / (per_state * n / (bw * 1e9)), 2)}
+    return out
+
+
 def sweeps_worker(name, cap, threads, options):
     import numpy as np  # noqa: F401  (the worker's own tree is the one imported)
 
@@ -262,6 +303,9 @@ def sweeps_worker(name, cap, threads, options):
               note=f"setup {st['seconds_setup']:.1f} s; {st.get('value_vectors')} value vector(s); "
                    f"{st.get('extrapolations')} extrapolation(s); options {options or 'defaults'}; "
                    f"package {Path(wncs_lp.__file__).parent.parent}")
+    prof = pass_profile(sol, st["threads"], bw)
+    out["note"] += "; one pass of each kind (wall s, CPU s, CPU ns a state, x floor): " + "; ".join(
+        f"{k} {v['wall']} s, {v['cpu']} s, {v['ns_cpu_per_state']} ns, {v['floor_ratio']}x" for k, v in prof.items())
     print(json.dumps(out), flush=True)
 
 
@@ -279,15 +323,18 @@ def sweeps(instances, threads, options, baseline):
             for r in worker_rows(cmd, cwd=tree, env=env):
                 r["tree"] = label
                 if label == "this":
-                    mine = float(r["seconds"])
+                    mine = (float(r["seconds"]), float(r["cpu_seconds"]), int(r["passes"]))
                 elif mine:
-                    r["ratio"] = round(float(r["seconds"]) / mine, 2)
+                    r["ratio"] = round(float(r["seconds"]) / mine[0], 2)
+                    r["note"] = (f"baseline / this: wall {r['ratio']}, CPU {float(r['cpu_seconds']) / mine[1]:.2f}, "
+                                 f"passes {int(r['passes']) / mine[2]:.2f}; ") + r["note"]
                 rows.append(r)
                 print(f"  {label:8s} {r['seconds']} s, {r['passes']} passes ({r['sweeps']} sweeps + "
                       f"{r['eval_sweeps']} evaluation), {r['seconds_per_pass']} s a pass = {r['gb_per_s']} GB/s "
                       f"of the floor's bytes against {r['copy_gb_per_s']} GB/s copy ({r['floor_ratio']}x the "
                       f"floor), g* {float(r['gain']):.10f} [{float(r['gain_lower']):.10f}, "
-                      f"{float(r['gain_upper']):.10f}], peak {r['peak_rss_gib']} GiB, load {r['load1']}", flush=True)
+                      f"{float(r['gain_upper']):.10f}], peak {r['peak_rss_gib']} GiB, load {r['load1']}, "
+                      f"CPU {r['cpu_seconds']} s\n    {r['note']}", flush=True)
     return rows
 
 

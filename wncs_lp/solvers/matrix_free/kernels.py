@@ -35,9 +35,13 @@ as ``*_serial``, for one: :func:`wncs_lp.solvers.threads.twins`):
   states with ``mask`` set when ``use_mask``), ``IN_PLACE`` updates h in place (Gauss-Seidel:
   ``h += relax (T h - h - shift)``; such a pass computes no bracket, as its d(s) are taken on a
   moving h: it returns (inf, -inf), and its update is one fused loop), ``OUT`` writes ``h_out``
-  (Jacobi); ``write_pol`` stores the minimiser in ``pol`` (uint8).
+  (Jacobi); ``write_pol`` stores the minimiser in ``pol`` (uint8). With ``use_cand`` only the
+  actions whose bit is set in ``cand[c]`` are tried (in-place improvement sweeps only: a
+  certificate always takes the minimum over every action).
 * :func:`fixed_policy` -- the same for one action per state (``pol``), which must be in range
   for its configuration (checked by the callers: :func:`.layout.check_local_actions`).
+* :func:`used_actions` -- per configuration, the bit set of the actions a policy takes in its box
+  (the candidates of the improvement sweeps).
 * :func:`reach_all` -- marks the successors of the marked states to a fixed point.
 
 With threads, a Gauss-Seidel sweep is asynchronous across the chunks (a plane may
@@ -104,8 +108,8 @@ def _plane(c, tc, N, lo_, dims, strides, off, act_ptr, out_ptr, e_m, e_base, e_s
 
 @njit(cache=True, nogil=True, boundscheck=False, fastmath={"contract"})
 def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m, e_base,
-               e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask, iscr, fscr,
-               los, his):
+               e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask, cand, use_cand,
+               iscr, fscr, los, his):
     P, split, sat, A, rs, rm, arg = iscr[0], iscr[1], iscr[2], iscr[3], iscr[4], iscr[5], iscr[6]
     acc, best, dd = fscr[0], fscr[1], fscr[2]
     lo = np.inf
@@ -129,6 +133,10 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                 P[o] = A[o] + rs[o] * (t1 if t1 < m else m)
             first = True
             for j in range(na):
+                # an improvement sweep may try only the configuration's candidate actions (bit j of
+                # cand[c]; actions past 63 are always tried)
+                if use_cand and j < 64 and (cand[c] >> uint64(j)) & uint64(1) == uint64(0):
+                    continue
                 w = 1.0
                 if mode == Reduce.WEIGHTED:
                     w = W[c, j]
@@ -307,7 +315,7 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
 
 def _all_actions_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
                       e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
-                      maxO, maxL, los, his):
+                      cand, use_cand, maxO, maxL, los, his):
     for ci in prange(ip.size - 1):
         los[ci] = np.inf
         his[ci] = -np.inf
@@ -316,7 +324,7 @@ def _all_actions_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, 
         for it in range(ip[ci], ip[ci + 1]):
             _all_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
                        off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, W, mode, write,
-                       write_pol, relax, shift, mask, use_mask, iscr, fscr, los, his)
+                       write_pol, relax, shift, mask, use_mask, cand, use_cand, iscr, fscr, los, his)
 
 
 def _fixed_policy_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
@@ -336,6 +344,18 @@ def _fixed_policy_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off,
 all_actions, all_actions_serial = twins(_all_actions_body, "all_actions")
 #: One fixed action per state, by chunks.
 fixed_policy, fixed_policy_serial = twins(_fixed_policy_body, "fixed_policy")
+
+
+def _used_actions_body(pol, off, cand):
+    for c in prange(off.size - 1):
+        bits = uint64(0)
+        for s in range(off[c], off[c + 1]):
+            bits |= uint64(1) << uint64(min(pol[s], 63))
+        cand[c] = bits
+
+
+#: Per configuration, the bit set of the actions ``pol`` takes somewhere in its box.
+used_actions, used_actions_serial = twins(_used_actions_body, "used_actions")
 
 
 # ----------------------------------------------------------------------------- reachability

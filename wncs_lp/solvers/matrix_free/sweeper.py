@@ -51,6 +51,7 @@ class Sweeper:
         self.use_mask = mask is not None
         self._dummy_h = np.zeros(1)
         self._dummy_W = np.zeros((1, 1))
+        self._no_cand = np.zeros(1, np.uint64)
 
     def _run(self, fn_par, fn_ser, *args) -> tuple[float, float]:
         if self.threads > 1:
@@ -60,19 +61,34 @@ class Sweeper:
         return float(self.los.min()), float(self.his.max())
 
     def all_actions(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, W: np.ndarray | None,
-                    reduce: Reduce, write: Write, write_pol: bool, relax: float, shift: float) -> tuple[float, float]:
+                    reduce: Reduce, write: Write, write_pol: bool, relax: float, shift: float,
+                    cand: np.ndarray | None = None) -> tuple[float, float]:
         """A pass of every action: the Bellman operator (``Reduce.MIN``, its minimiser into ``pol``
         with ``write_pol``) or the weights ``W`` (``Reduce.WEIGHTED``); returns min / max of T h - h
-        (``(inf, -inf)`` for an in-place pass, which computes no bracket)."""
+        (``(inf, -inf)`` for an in-place pass, which computes no bracket). With ``cand`` (one uint64
+        bit set of actions per configuration, :meth:`used_actions`) only those actions are tried:
+        for in-place improvement sweeps only, never for a pass whose bracket is a certificate."""
+        if cand is not None and write != Write.IN_PLACE:
+            raise SolverError("candidate actions are for in-place improvement sweeps only (a certificate tries all)")
         o = self.op
         return self._run(
             self.K.all_actions, self.K.all_actions_serial,
             self.items, self.ip, o.tile_tc, self.tile_cfg, o.N, o.lo, o.dims, o.strides, o.off,
             o.act_ptr, o.out_ptr, o.e_prob, o.e_m, o.e_base, o.e_stride, o.q, h,
             self._dummy_h if h_out is None else h_out, pol, self._dummy_W if W is None else W, int(reduce),
-            int(write), bool(write_pol), float(relax), float(shift), self.mask, self.use_mask, o.max_out,
-            o.max_row, self.los, self.his,
+            int(write), bool(write_pol), float(relax), float(shift), self.mask, self.use_mask,
+            self._no_cand if cand is None else cand, cand is not None, o.max_out, o.max_row, self.los, self.his,
         )
+
+    def used_actions(self, pol: np.ndarray, cand: np.ndarray) -> np.ndarray:
+        """Into ``cand`` (uint64, one per configuration): the bit set of the actions ``pol`` takes
+        somewhere in the configuration's box (actions past 63 as bit 63)."""
+        fn = self.K.used_actions if self.threads > 1 else self.K.used_actions_serial
+        if self.threads > 1:
+            run_parallel(fn, self.threads, pol, self.op.off, cand)
+        else:
+            fn(pol, self.op.off, cand)
+        return cand
 
     def fixed(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, write: Write, relax: float,
               shift: float) -> tuple[float, float]:
