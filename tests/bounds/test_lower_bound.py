@@ -95,3 +95,10 @@ def test_auto_beyond_the_whole_lp_takes_relaxation_2_on_the_lumped_chains(monkey
     r2 = res.stats["auto_bounds"]["joint-configuration"]
     assert r2 >= res.stats["auto_bounds"]["private-servers"] * (1 - 1e-6)
     assert res.lower_bound <= solve(build(sc)).gain_upper
+
+
+@pytest.mark.parametrize("option", [{"groups": [[0, 1]]}, {"cpu_limit": 10.0}, {"solve_tol": 1e-9}])
+def test_auto_refuses_by_name_an_option_only_relaxations_1_or_3_take(p12, option):
+    # auto hands its options to relaxation 2; relaxation 3's groups reached it as a TypeError before
+    with pytest.raises(WncsError, match=next(iter(option))):
+        lower_bound(p12, "auto", **option)

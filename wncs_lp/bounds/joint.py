@@ -34,14 +34,14 @@ about |C x A| cuts per process.
 
 **Up to** :data:`IPM_MAX_NNZ` **nonzeros** (``method="auto"``, ``"ipm"``) the LP is solved whole by
 HiGHS's interior point, IPX, without crossover (:mod:`~wncs_lp.bounds.joint_ipm`): its row duals
-are tables, certified like any others. That reaches the relaxation's optimum (processes 1-4:
--1.58% of g* at cap 20, where the bundle below stalled at -3.7%). The tables returned are then
+are tables, certified like any others. That reaches the relaxation's optimum, where the bundle
+below stalls short of it (docs/bounds.md, "Measured"). The tables returned are then
 the priced chains' at the prices of those duals (:func:`_chains_at_ipm_prices`): they certify
 as much, and unlike the raw duals -- free wherever the LP's optimum puts no mass -- they satisfy
-every chain's Bellman equation, so their greedy policy acts well (processes 1-4 cap 20: 0.11%
-above g* instead of 21.6%). A few bundle steps from the
-prices those tables give are not taken (at processes 1-4 cap 20 the certified bound was within
-1e-6 of IPX's own objective: nothing left to gain); the bundle runs only when IPX returns no
+every chain's Bellman equation, so their greedy policy acts well (the two policies are compared
+in docs/bounds.md). A few bundle steps from the prices those tables give are not taken (the
+certified bound agrees with IPX's own objective to its tolerance: nothing left to gain); the
+bundle runs only when IPX returns no
 tables (its time limit: HiGHS then holds no solution).
 **Beyond**, or with ``method="bundle"``:
 
@@ -125,10 +125,9 @@ def joint_size(system: System) -> dict:
     -----
     The rule: relaxation 2 is within reach when the LP has at most :data:`REACH_MAX_NNZ`
     nonzeros and the estimated peak memory is at most :data:`REACH_MAX_BYTES`, and numba is
-    available. One PDHG iteration streams the LP matrix twice, a few thousand iterations are
-    what a bound within ~0.3% of the relaxation's optimum took (benchmarks/bounds_joint.py), so
-    40M nonzeros is about 10 minutes on two cores; the paper's four process types twice (8
-    processes) at cap 20 is 8.6M. Without numba the loops run in numpy / scipy, several times
+    available. One PDHG iteration streams the LP matrix twice and a few thousand iterations are
+    what a bound near the relaxation's optimum takes, so the nonzero limit is about ten minutes
+    of a first-order search on two cores (docs/bounds.md, "How far it scales"). Without numba the loops run in numpy / scipy, several times
     slower: the rule then says no, and ``lower_bound(relaxation="auto")`` should fall back to
     relaxation 1.
     """
@@ -441,9 +440,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         IPX (the bundle only if IPX returned no tables, stopped by ``time_limit``); ``"bundle"``:
         the bundle from the start; ``"pdhg"``: PDHG with repairs only; ``"pdhg+bundle"``: PDHG
         then bundle. From relaxation
-        1's prices the bundle alone beat the PDHG where measured (processes 1-4 cap 20: 1514.4
-        with PDHG first in 471 s, 1516.9 with the bundle alone in 395 s); the interior point beat
-        both (1547.6). ``"ascent"``: projected supergradient steps on the lumped chains of the
+        1's prices the bundle alone beat the PDHG where measured, and the interior point beat both
+        (docs/bounds.md, "Measured"). ``"ascent"``: projected supergradient steps on the lumped chains of the
         LP reduced by interchangeable processes (:mod:`~wncs_lp.bounds.joint_ascent`), ``max_iter``
         of them, from relaxation 1's prices; neither the LP nor the N whole chains are built, so it
         runs where the interior point does not fit (sixteen processes).
@@ -629,10 +627,10 @@ def _chains_at_ipm_prices(run: _Run, tables: list, stats: dict,
     these certify as much (within ``tol``).
 
     The duals only need to be tight where the LP's optimum puts mass: elsewhere an interior
-    point leaves them anywhere inside the slack, and the greedy policy on them acted 21.6% above
-    g* at processes 1-4 cap 20 (exact evaluation). The chains' tables satisfy each priced
-    chain's Bellman equation everywhere: at the same prices their policy was 0.11% above g*,
-    and they certified 1547.629 against the duals' 1547.601 (0.1 s of chain sweeps).
+    point leaves them anywhere inside the slack, and a greedy policy on them may act far from
+    optimal there. The chains' tables satisfy each priced chain's Bellman equation everywhere,
+    so their greedy policy acts well, and they certify at least as much within ``tol``
+    (docs/bounds.md, "The tables returned and their policy", measures both).
     """
     ipm_bound = run.best.lower_bound
     # kept even when the duals certified a hair more (within tol): the chains' tables are kept for their policy

@@ -34,8 +34,8 @@ _SHORT = {"1": "private-servers", "2": "joint-configuration", "3": "grouped-priv
 #: bound and its policy are the same on every machine) and no wall-clock limit. Relaxation 2 takes
 #: its interior point only where that is predicted to fit (``joint.IPM_BUDGET`` seconds of CPU, a
 #: measured model), guarded by a multiple of the prediction in CPU time (``joint.IPM_GUARD``), so a
-#: loaded machine does not cut a solve that would finish (the 6-process mix at cap 10: 318 s under
-#: load 4-8, beyond the 240 s a 300 s wall-clock guard had left it). Its bound is certified
+#: loaded machine does not cut a solve that would finish (a wall-clock guard had cut one on a
+#: loaded machine: docs/bounds.md, "How the tables are found"). Its bound is certified
 #: whatever stops the search, and it starts at relaxation 1's (``lower_bound(x, 2)`` keeps its own
 #: defaults, 1000 steps and 10 minutes).
 AUTO_SEARCH = {"max_iter": 30, "time_limit": None}
@@ -175,11 +175,13 @@ def auto_pick(found: list[BoundResult], notes: list[str] = ()) -> BoundResult:
 
 
 def _check_options(name: str, options: dict) -> None:
-    """Refuse, naming it, a keyword the relaxation does not take (under ``"auto"``: none of them
-    does), and a ``tol``, ``time_limit`` or ``max_iter`` out of range, before any work."""
+    """Refuse, naming it, a keyword the relaxation does not take (under ``"auto"``, one relaxation 2
+    does not take: auto hands its options to relaxation 2 and only ``tol`` and ``progress`` to
+    relaxations 1 and 3, so their own options, e.g. ``groups``, are refused there), and a ``tol``,
+    ``time_limit`` or ``max_iter`` out of range, before any work."""
     fns = {"private-servers": [private_bound], "grouped-private-servers": [grouped_bound],
            "joint-configuration": [joint_bound], "joint-pairs": [pairs_bound, joint_bound],
-           "auto": [private_bound, grouped_bound, joint_bound]}[name]
+           "auto": [joint_bound]}[name]
     import inspect
 
     takes = {p for fn in fns for p, v in inspect.signature(fn).parameters.items() if v.kind is v.KEYWORD_ONLY
