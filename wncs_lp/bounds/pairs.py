@@ -438,48 +438,21 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
         cands = [groups]
     deadline = np.inf if time_limit is None else time.monotonic() + float(time_limit)
     stats: dict = {"relaxation_2_bound": float(start.lower_bound), "candidates": {}}
-    status, it, search = MAX_ITER, 0, None
+    status, it, found = MAX_ITER, 0, []  # found: the best start so far, which an interrupt keeps
     try:
-        for cand in cands:
-            ch = GroupChains.build(data, cand)
-            s = _Search(ch, float(tol), int(threads), deadline, [None] * ch.n_groups, [None] * ch.n_groups)
-            s.offer(ch.from_separable(sep), None, None, "relaxation 2's tables")
-            prices = np.array([mu1[list(g)].sum(axis=0) for g in ch.groups])
-            prog.phase(f"relaxation 4: groups {[[k + 1 for k in g] for g in ch.groups]} at relaxation 2's prices")
-            value, cuts = s.evaluate(prices, "the group chains at relaxation 2's prices")
-            stats["candidates"][str([[k + 1 for k in g] for g in ch.groups])] = s.best_bound
-            if search is None or s.best_bound > search[0].best_bound:
-                search = (s, value, cuts, prices)
-        s, value, cuts, prices = search
-        prog.tick(f"relaxation 4: groups {[[k + 1 for k in g] for g in s.chains.groups]}, "
-                  f"certified {s.best_bound:.10g}")
+        _best_start(data, cands, sep, mu1, tol, threads, deadline, prog, stats, found)
+        s = found[0][0]
         if max_iter > 0 and not s.out_of_time():
-            X = np.array([x for _, _, x in cuts])
-            spread = float(((X - X.mean(axis=0)) ** 2).sum())
-            bundle = PriceBundle(prices, value, t=1e-2 * max(abs(value), 1.0) / max(spread, 1e-12))
-            for c in cuts:
-                bundle.add_cut(*c)
-            while it < max_iter and not s.out_of_time():
-                mu = bundle.candidate()
-                if bundle.converged(tol) or bundle.predicted <= tol * max(abs(bundle.value), 1.0):
-                    status = OPTIMAL
-                    break
-                value, cuts = s.evaluate(mu, "the bundle")
-                it += 1
-                for c in cuts:
-                    bundle.add_cut(*c)
-                bundle.report(mu, value)
-                prog.tick(f"relaxation 4: bundle {it}: certified {s.best_bound:.10g}, L(centre) {bundle.value:.10g}")
-            stats.update(bundle_serious=bundle.serious_steps, bundle_null=bundle.null_steps,
-                         bundle_predicted=bundle.predicted)
+            status, it = _bundle_steps(s, *found[0][1:], tol, max_iter, prog, stats)
     except KeyboardInterrupt:
         status = INTERRUPTED
-        if search is None:
+        if not found:
             raise
-        s = search[0]
+        s = found[0][0]
     ch = s.chains
     cert = certify_group_tables(ch, s.best_tables)
-    stats.update(evaluations=s.evaluations, chain_sweeps=s.sweeps, bundle_steps=it, found_in=s.found_at,
+    stats.update(evaluations=s.evaluations, chain_sweeps=s.sweeps, bundle_steps=stats.get("bundle_steps", it),
+                 found_in=s.found_at,
                  roundoff=cert.roundoff, raw_bound=cert.raw, binding_pair=cert.binding_pair,
                  groups=[list(g) for g in ch.groups], certified=bool(np.isfinite(cert.lower_bound)))
     n_c = data.n_configs
@@ -495,3 +468,50 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
     return BoundResult(relaxation="joint-pairs", lower_bound=float(cert.lower_bound), relaxation_upper=float("inf"),
                        status=status, certified_by=how, multipliers=prices, process_gains=gains, tables=tables,
                        seconds=time.monotonic() - t0, iterations=int(s.evaluations), stats=stats)
+
+
+def _best_start(data: JointData, cands: list, sep: list, mu1: np.ndarray, tol: float, threads: int,
+                deadline: float, prog, stats: dict, found: list) -> None:
+    """Phase 1: each candidate partition's chains at relaxation 2's prices summed per group (its
+    tables summed per group offered first); the best certified so far kept in ``found`` as
+    ``[(search, L, cuts, prices)]``."""
+    for cand in cands:
+        ch = GroupChains.build(data, cand)
+        s = _Search(ch, float(tol), int(threads), deadline, [None] * ch.n_groups, [None] * ch.n_groups)
+        s.offer(ch.from_separable(sep), None, None, "relaxation 2's tables")
+        prices = np.array([mu1[list(g)].sum(axis=0) for g in ch.groups])
+        prog.phase(f"relaxation 4: groups {[[k + 1 for k in g] for g in ch.groups]} at relaxation 2's prices")
+        value, cuts = s.evaluate(prices, "the group chains at relaxation 2's prices")
+        stats["candidates"][str([[k + 1 for k in g] for g in ch.groups])] = s.best_bound
+        if not found or s.best_bound > found[0][0].best_bound:
+            found[:] = [(s, value, cuts, prices)]
+    prog.tick(f"relaxation 4: groups {[[k + 1 for k in g] for g in found[0][0].chains.groups]}, "
+              f"certified {found[0][0].best_bound:.10g}")
+
+
+def _bundle_steps(s: "_Search", value: float, cuts: list, prices: np.ndarray, tol: float, max_iter: int,
+                  prog, stats: dict) -> tuple[str, int]:
+    """Phase 2: the proximal bundle on the group prices from the start, until its stopping test,
+    ``max_iter`` steps or the deadline: (status, steps)."""
+    status, it = MAX_ITER, 0
+    X = np.array([x for _, _, x in cuts])
+    spread = float(((X - X.mean(axis=0)) ** 2).sum())
+    bundle = PriceBundle(prices, value, t=1e-2 * max(abs(value), 1.0) / max(spread, 1e-12))
+    for c in cuts:
+        bundle.add_cut(*c)
+    try:
+        while it < max_iter and not s.out_of_time():
+            mu = bundle.candidate()
+            if bundle.converged(tol) or bundle.predicted <= tol * max(abs(bundle.value), 1.0):
+                status = OPTIMAL
+                break
+            value, cuts = s.evaluate(mu, "the bundle")
+            it += 1
+            for c in cuts:
+                bundle.add_cut(*c)
+            bundle.report(mu, value)
+            prog.tick(f"relaxation 4: bundle {it}: certified {s.best_bound:.10g}, L(centre) {bundle.value:.10g}")
+    finally:
+        stats.update(bundle_serious=bundle.serious_steps, bundle_null=bundle.null_steps,
+                     bundle_predicted=bundle.predicted, bundle_steps=it)
+    return status, it
