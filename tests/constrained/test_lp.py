@@ -12,7 +12,7 @@ import pytest
 
 import wncs_lp
 from wncs_lp.chain import PolicyChain
-from wncs_lp.constrained import LinearConstraint, constraints_for, with_cost
+from wncs_lp.constrained import LinearConstraint, with_cost
 from wncs_lp import solve
 from wncs_lp.errors import InfeasibleConstraintsError, SolverError
 from wncs_lp.evaluate import evaluate

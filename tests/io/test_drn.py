@@ -14,7 +14,6 @@ from reference.model_files import parse_drn, storm_dtmc
 
 import wncs_lp
 from wncs_lp.cli import main
-from wncs_lp.constrained import constraints_for
 from wncs_lp import solve
 from wncs_lp.io import (ExportError, constraint_reward_names, initial_state, load_policy_npz,
                             multi_objective_property, reward_models, save_drn)

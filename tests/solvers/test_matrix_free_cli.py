@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import json
 
-import pytest
-
 import wncs_lp
 from wncs_lp.cli import main
 
