@@ -39,8 +39,8 @@ from .. import moved
 from ..errors import SolverError
 from ..models.system import System
 
-__all__ = ["JointData", "TableCertificate", "ChainSolution", "Kernels", "certify_tables", "solve_chain",
-           "policy_weights", "stationary", "column", "kernels_available"]
+__all__ = ["JointData", "TableCertificate", "ChainSolution", "Kernels", "certify_tables", "certificate_of",
+           "solve_chain", "damped_rvi", "policy_weights", "stationary", "column", "kernels_available"]
 
 _UNIT = np.finfo(float).eps / 2  # unit round-off u = 2^-53
 
@@ -195,20 +195,34 @@ def certify_tables(data: JointData, tables) -> TableCertificate:
     SolverError
         ``tables`` is not one (|C|, tau_hat_k) array per process.
     """
-    n = data.n_processes
     tables = _checked_tables(data, tables)
+    return certificate_of(data, tables, data.q,
+                          lambda k, h: (h[data.pair_c] - data.q[k][None, :] - data.expect(k, h)).max(axis=1))
+
+
+def certificate_of(data: JointData, tables: list[np.ndarray], costs, residual_max) -> TableCertificate:
+    """The certificate of tables split into parts over the joint configuration (one per process for
+    relaxation 2, one per group for relaxation 4): for each (C, a) pair every part's largest
+    residual u_i(p) = max over its ages of [h_i - q_i - E h_i], g(h) = -max_p sum_i u_i(p), less a
+    bound on its round-off.
+
+    Each table is first shifted by a constant (which changes no constraint beyond the outcome
+    tables' defect from stochastic, accounted for) to make its magnitudes, and so the round-off,
+    small; ``residual_max(i, h)`` returns the (|C x A|,) residuals of part i on the shifted table
+    ``h``. Tables with a non-finite entry certify nothing (``lower_bound`` = -inf).
+    """
+    n = len(tables)
     if not all(np.isfinite(h).all() for h in tables):
         return TableCertificate(lower_bound=-np.inf, raw=-np.inf, roundoff=np.inf, u=np.full((n, data.n_pairs), np.inf),
-                           binding_pair=-1)
+                                binding_pair=-1)
     u = np.empty((n, data.n_pairs))
     err = 0.0
     m = data.max_outcomes
-    for k in range(n):
-        h = tables[k] - 0.5 * (tables[k].max() + tables[k].min())
+    for i, table in enumerate(tables):
+        h = table - 0.5 * (table.max() + table.min())
         hk = float(np.abs(h).max())
-        r = h[data.pair_c] - data.q[k][None, :] - data.expect(k, h)
-        u[k] = r.max(axis=1)
-        err += _gamma(m + 2) * (2.0 * hk + float(np.abs(data.q[k]).max())) + data.prob_defect * hk
+        u[i] = residual_max(i, h)
+        err += _gamma(m + 2) * (2.0 * hk + float(np.abs(costs[i]).max())) + data.prob_defect * hk
     total = u.sum(axis=0)
     p = int(np.argmax(total))
     err += _gamma(n) * float(np.abs(u).max(axis=1).sum())
@@ -353,10 +367,21 @@ def solve_chain(data: JointData, k: int, price: np.ndarray, h0: np.ndarray | Non
     th = np.empty(shape)
     pol = np.empty(shape, dtype=np.int64)
     price = np.ascontiguousarray(price, dtype=float)
+    lo, hi, sweeps = damped_rvi(lambda x: kern.bellman(data, k, x, price, th, pol), h, th, tol=tol,
+                                max_sweeps=max_sweeps, relax=relax, stop=stop)
+    return ChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)
+
+
+def damped_rvi(bellman, h: np.ndarray, th: np.ndarray, *, tol: float, max_sweeps: int, relax: float,
+               stop=None) -> tuple[float, float, int]:
+    """The relative value iteration of the relaxations' priced chains, in place on ``h``:
+    ``bellman(h)`` writes T h into ``th``; h <- h + relax (T h - h), recentred at h[0, 0], until
+    max (T h - h) - min (T h - h) <= tol * max(|min|, 1), ``max_sweeps`` or ``stop()`` (polled
+    every 16 sweeps). Returns (min, max, sweeps): the bracket of the chain's gain at the last h."""
     lo, hi = -np.inf, np.inf
     sweeps = 0
     while sweeps < max_sweeps:
-        kern.bellman(data, k, h, price, th, pol)
+        bellman(h)
         sweeps += 1
         d = th - h
         lo, hi = float(d.min()), float(d.max())
@@ -364,7 +389,7 @@ def solve_chain(data: JointData, k: int, price: np.ndarray, h0: np.ndarray | Non
             break
         h += relax * d
         h -= h[0, 0]
-    return ChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)
+    return lo, hi, sweeps
 
 
 def policy_weights(data: JointData, k: int, policy: np.ndarray) -> np.ndarray:

@@ -59,20 +59,13 @@ from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
 from .inputs import bound_system
 from .joint import joint_bound
 from .joint_bundle import PriceBundle
-from .joint_chains import JointData
+from .joint_chains import ChainSolution, JointData, TableCertificate, certificate_of, damped_rvi
 from .joint_symmetry import process_symmetry
 from .result import BoundResult, GroupTables, ValueTables
 
-__all__ = ["pairs_bound", "GroupChains", "GroupCertificate", "certify_group_tables", "solve_group_chain", "group_cut",
+__all__ = ["pairs_bound", "GroupChains", "certify_group_tables", "solve_group_chain", "group_cut",
            "candidate_partitions",
            "pair_partition"]
-
-_UNIT = np.finfo(float).eps / 2
-
-
-def _gamma(n: int) -> float:
-    return n * _UNIT / (1.0 - n * _UNIT)
-
 
 def _mod():
     """The numba kernels (relaxation 4's chains and check have no numpy path: without numba they
@@ -178,30 +171,7 @@ def pair_partition(order) -> tuple:
 
 
 # ---------------------------------------------------------------------------- the certificate
-@dataclass(frozen=True, eq=False)
-class GroupCertificate:
-    """A lower bound on g* from group tables, checked constraint by constraint.
-
-    Attributes
-    ----------
-    lower_bound : float
-        ``raw - roundoff``.
-    raw : float
-        g(h) = -max_p sum_G u_G(p) in floating point.
-    roundoff : float
-        A bound on the floating-point error of ``raw``.
-    u : (n_groups, |C x A|) array
-    binding_pair : int
-    """
-
-    lower_bound: float
-    raw: float
-    roundoff: float
-    u: np.ndarray
-    binding_pair: int
-
-
-def certify_group_tables(chains: GroupChains, tables) -> GroupCertificate:
+def certify_group_tables(chains: GroupChains, tables) -> TableCertificate:
     r"""The certified lower bound g(h) of group tables ``tables[i]`` of shape (|C|, c1 * c2).
 
     Valid for *any* tables (module docstring): u_G(p) = max over the group's ages of
@@ -220,37 +190,18 @@ def certify_group_tables(chains: GroupChains, tables) -> GroupCertificate:
             raise SolverError(f"group table {i} (processes {[k + 1 for k in chains.groups[i]]}) has shape {h.shape}; "
                               f"expected {chains.shape(i)} (configurations x ages of the group)")
         hs.append(h)
-    if not all(np.isfinite(h).all() for h in hs):
-        return GroupCertificate(-np.inf, -np.inf, np.inf, np.full((n_g, d.n_pairs), np.inf), -1)
-    u = np.empty((n_g, d.n_pairs))
-    err = 0.0
-    m = d.max_outcomes
-    mod = _mod()
-    for i, h in enumerate(hs):
-        h = np.ascontiguousarray(h - 0.5 * (h.max() + h.min()))
-        hk = float(np.abs(h).max())
-        mod.residuals(h, chains.q[i], *chains.args(i), u[i])
-        err += _gamma(m + 2) * (2.0 * hk + float(np.abs(chains.q[i]).max())) + d.prob_defect * hk
-    total = u.sum(axis=0)
-    p = int(np.argmax(total))
-    err += _gamma(n_g) * float(np.abs(u).max(axis=1).sum())
-    raw = -float(total[p])
-    return GroupCertificate(raw - err, raw, err, u, p)
+    def residual_max(i: int, h: np.ndarray) -> np.ndarray:
+        u = np.empty(d.n_pairs)
+        _mod().residuals(np.ascontiguousarray(h), chains.q[i], *chains.args(i), u)
+        return u
+
+    return certificate_of(d, hs, chains.q, residual_max)
 
 
 # ---------------------------------------------------------------------------- a group's priced chain
-@dataclass(frozen=True, eq=False)
-class GroupChainSolution:
-    h: np.ndarray
-    lower: float
-    upper: float
-    policy: np.ndarray
-    sweeps: int
-
-
 def solve_group_chain(chains: GroupChains, i: int, price: np.ndarray, h0: np.ndarray | None, *, tol: float,
                       max_sweeps: int = 100_000, relax: float = 0.9, threads: int = 1,
-                      stop=None) -> GroupChainSolution:
+                      stop=None) -> ChainSolution:
     """Relative value iteration on group i's priced chain until upper - lower <= tol * max(|lower|, 1)
     (damped: h <- h + relax (T h - h), recentred)."""
     mod = _mod()
@@ -261,18 +212,8 @@ def solve_group_chain(chains: GroupChains, i: int, price: np.ndarray, h0: np.nda
     price = np.ascontiguousarray(price, dtype=float)
     args = (chains.q[i], price, *chains.args(i), th, pol)
     fn = mod.bellman_ser if threads <= 1 else mod.bellman_par
-    lo, hi = -np.inf, np.inf
-    sweeps = 0
-    while sweeps < max_sweeps:
-        fn(h, *args)
-        sweeps += 1
-        dlt = th - h
-        lo, hi = float(dlt.min()), float(dlt.max())
-        if hi - lo <= tol * max(abs(lo), 1.0) or (stop is not None and sweeps % 16 == 0 and stop()):
-            break
-        h += relax * dlt
-        h -= h[0, 0]
-    return GroupChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)
+    lo, hi, sweeps = damped_rvi(lambda x: fn(x, *args), h, th, tol=tol, max_sweeps=max_sweeps, relax=relax, stop=stop)
+    return ChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)
 
 
 def group_cut(chains: GroupChains, i: int, policy: np.ndarray, y0: np.ndarray | None = None, *,
