@@ -40,7 +40,7 @@ from ..errors import SolverError
 from ..models.system import System
 
 __all__ = ["JointData", "TableCertificate", "ChainSolution", "Kernels", "certify_tables", "certificate_of",
-           "solve_chain", "damped_rvi", "policy_weights", "stationary", "column", "kernels_available"]
+           "solve_chain", "damped_rvi", "policy_weights", "stationary", "lazy_power", "column", "kernels_available"]
 
 _UNIT = np.finfo(float).eps / 2  # unit round-off u = 2^-53
 
@@ -412,12 +412,19 @@ def stationary(data: JointData, k: int, weights: np.ndarray, kern: Kernels, y0: 
     cap = int(data.caps[k])
     shape = (data.n_configs, cap)
     y = np.full(shape, 1.0 / (shape[0] * cap)) if y0 is None else np.array(y0, dtype=float, copy=True)
-    y /= y.sum()
-    yn = np.empty(shape)
+    return lazy_power(lambda x, out: kern.push(data, k, x, weights, out), y, tol=tol, max_sweeps=max_sweeps)
+
+
+def lazy_power(push, y: np.ndarray, *, tol: float, max_sweeps: int) -> tuple[np.ndarray, float, int]:
+    """Power iteration of the lazy chain (P + I) / 2 from ``y`` (normalised first), the stationary
+    laws of both relaxations' priced chains: ``push(y, out)`` writes y P into ``out``; until
+    ||y P - y||_1 <= tol or ``max_sweeps``. Returns (y, ||y P - y||_1, sweeps)."""
+    y = y / y.sum()
+    yn = np.empty_like(y)
     res = np.inf
     sweeps = 0
     while sweeps < max_sweeps:
-        kern.push(data, k, y, weights, yn)
+        push(y, yn)
         sweeps += 1
         res = float(np.abs(yn - y).sum())
         y = 0.5 * (y + yn)

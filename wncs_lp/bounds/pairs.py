@@ -59,7 +59,7 @@ from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
 from .inputs import bound_system
 from .joint import joint_bound
 from .joint_bundle import PriceBundle
-from .joint_chains import ChainSolution, JointData, TableCertificate, certificate_of, damped_rvi
+from .joint_chains import ChainSolution, JointData, TableCertificate, certificate_of, damped_rvi, lazy_power
 from .joint_symmetry import process_symmetry
 from .result import BoundResult, GroupTables, ValueTables
 
@@ -225,16 +225,9 @@ def group_cut(chains: GroupChains, i: int, policy: np.ndarray, y0: np.ndarray | 
     d = chains.data
     shape = chains.shape(i)
     y = np.full(shape, 1.0 / (shape[0] * shape[1])) if y0 is None else np.array(y0, dtype=float, copy=True)
-    y /= y.sum()
-    yn = np.empty(shape)
     c1, c2, _, out_ptr, out_nxt, out_prob, s1, s2 = chains.args(i)
-    for _ in range(max_sweeps):
-        mod.push(y, policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, yn)
-        res = float(np.abs(yn - y).sum())
-        y = 0.5 * (y + yn)
-        y /= y.sum()
-        if res <= tol:
-            break
+    y, _, _ = lazy_power(lambda x, out: mod.push(x, policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, out), y,
+                         tol=tol, max_sweeps=max_sweeps)
     x = np.bincount(policy.ravel(), weights=y.ravel(), minlength=d.n_pairs)
     return float((y * chains.q[i][None, :]).sum()), x, y
 
