@@ -49,10 +49,10 @@ AUTO_GROUPED_TIME_LIMIT = 300.0
 
 #: Beyond relaxation 2's reach (its whole LP), ``"auto"`` still evaluates relaxation 2's Lagrangian on
 #: the lumped chains (:func:`~wncs_lp.bounds.joint.joint_bound` with ``method="ascent"``) this many
-#: steps from relaxation 1's prices: one, the start, never below relaxation 1. At sixteen processes the
-#: start was the best point of 100 steps and tighter than relaxation 3 (16 sensors of the lab shape:
-#: 1304.61 against 1296.15, 99 s of CPU; the paper's four types four times: 121711.25 against
-#: 121699.34), and its tables' greedy and lookahead policies as good as relaxation 3's.
+#: steps from relaxation 1's prices: one, the start, never below relaxation 1. Where measured at
+#: sixteen processes the start was the best point of 100 steps, tighter than relaxation 3, and its
+#: tables' policies as good as relaxation 3's (docs/bounds.md, "Relaxation 2 and the lookahead at
+#: sixteen processes").
 AUTO_ASCENT_STEPS = 1
 #: ... where its arrays are estimated to fit this many bytes.
 AUTO_ASCENT_MAX_BYTES = 3 * 2**30
@@ -123,7 +123,7 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     if name in ("joint-configuration", "joint-pairs"):
         system = _as_system(scenario_or_system)
         if system.is_lazy:
-            raise WncsError(f"relaxation joint-configuration asked for, but {LAZY_NOTE}")
+            raise WncsError(f"relaxation {name} asked for, but {LAZY_NOTE}")
         size = joint_size(system)  # estimate first: refuse, with the cheaper routes, what would not fit
         require_memory(size["memory_bytes"], f"relaxation 2 on {system.n_processes} processes ({size['lp_nnz']:,} "
                        f"LP nonzeros, {size['configurations']:,} joint configurations)",
