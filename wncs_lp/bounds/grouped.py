@@ -94,7 +94,7 @@ def _priced_gain(chains: _Chains, chain: PrivateChain, lam: np.ndarray, tol: flo
 
 def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float], *, solve_tol: float = 1e-10,
                  chains: _Chains | None = None, progress: Any = False,
-                 deadline: float = np.inf, expired: Any = None) -> tuple[tuple[tuple[int, ...], ...], dict]:
+                 expired: Any = None) -> tuple[tuple[tuple[int, ...], ...], dict]:
     """Pairs of processes of largest total interaction at the multipliers ``lam``.
 
     Parameters
@@ -109,11 +109,9 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
     chains : optional
         The cache of group chains to build into (the caller's, so the chosen pairs are not built twice).
     progress : bool or Progress
-    deadline : float
-        ``time.perf_counter()`` after which no more pair chains are solved (the pairs not
-        measured by then count as not interacting).
     expired : callable, optional
-        ``expired()`` True: the same as the deadline passed (e.g. a limit in CPU time).
+        ``expired()`` True (a time limit passed): no more pair chains are solved (the pairs not
+        measured by then count as not interacting).
 
     Returns
     -------
@@ -127,7 +125,7 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
     kind = [chain_key(chains.model.private_scenario(k)) for k in range(n)]
     weights, seen = {}, {}
     for k, l in itertools.combinations(range(n), 2):
-        if time.perf_counter() >= deadline or (expired is not None and expired()):
+        if expired is not None and expired():
             break
         key = tuple(sorted((kind[k], kind[l])))
         if key not in seen:
@@ -265,8 +263,8 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     deadline = time.perf_counter() + (float(time_limit) if time_limit is not None else np.inf)
     cpu_end = time.process_time() + (float(cpu_limit) if cpu_limit is not None else np.inf)
 
-    def expired() -> bool:
-        return time.process_time() >= cpu_end
+    def expired() -> bool:  # either limit, wall clock or CPU time
+        return time.perf_counter() >= deadline or time.process_time() >= cpu_end
 
     lam1 = np.asarray(r1.multipliers, float)
     chains = _Chains(model)
@@ -274,7 +272,7 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     if groups == "pairs":
         prog.phase(f"grouped bound: the interaction of every pair of {n} processes at relaxation 1's multipliers")
         groups, weights = choose_pairs(system, lam1, r1.process_gains, solve_tol=solve_tol, chains=chains,
-                                       progress=prog, deadline=deadline, expired=expired)
+                                       progress=prog, expired=expired)
         stats["pair_interaction"] = {f"{k + 1},{l + 1}": round(float(v), 9) for (k, l), v in weights.items()}
     group_chains = [chains.of(g) for g in groups]
     columns = tuple(_columns(system, model, c, g) for c, g in zip(group_chains, groups))
@@ -284,7 +282,7 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     prog.phase(f"grouped bound: groups {[tuple(k + 1 for k in g) for g in groups]}, "
                f"{len(distinct)} distinct private chains of {[c.mdp.n_states for c in distinct]} states")
     search = search_multipliers(system, distinct, which, r1.stats["capacity"], tol, max_iter, solve_tol, prog,
-                                lam0=lam1, deadline=deadline, expired=expired,
+                                lam0=lam1, expired=expired,
                                 policies0=[chains.policies.get(id(c)) for c in distinct])
     solves = search["solves"]
     tables = GroupTables(groups=groups,
@@ -294,7 +292,7 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
                  chain_states=[int(c.mdp.n_states) for c in distinct], cuts=search["cuts"],
                  priced_solves=search["solves_done"] + (len(chains.by_key) if "pair_interaction" in stats else 0),
                  priced_status=sorted({s.status for s in solves}), box=search["box"],
-                 stopped_by_time=bool(time.perf_counter() >= deadline or expired()))
+                 stopped_by_time=expired())
     return BoundResult(
         relaxation=RELAXATION, lower_bound=search["lb"], relaxation_upper=search["upper"],
         status=OPTIMAL if search["converged"] else MAX_ITER, certified_by=_certified_by(groups, r1.stats["capacity"]),

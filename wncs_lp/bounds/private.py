@@ -380,13 +380,12 @@ def private_bound(
 
 
 def search_multipliers(system: System, chains: list, which: np.ndarray, sense: str, tol: float, max_iter: int,
-                       solve_tol: float, prog, lam0: np.ndarray | None = None, deadline: float = np.inf,
-                       policies0: list | None = None, expired: Any = None) -> dict:
+                       solve_tol: float, prog, lam0: np.ndarray | None = None, policies0: list | None = None,
+                       expired: Any = None) -> dict:
     """Kelley's cutting planes on the multipliers, inside a box that doubles while the answer
     touches it. ``which[i]`` is the chain of the i-th member (a process, or a group of them);
-    the first point is ``lam0`` (default 0; the box grows to hold it); the search also stops at
-    ``deadline`` (``time.perf_counter()``; after at least one point) or when ``expired()`` (optional) is
-    True; ``policies0[j]`` (or None)
+    the first point is ``lam0`` (default 0; the box grows to hold it); the search also stops when
+    ``expired()`` (optional: a time limit, after at least one point) is True; ``policies0[j]`` (or None)
     starts chain j's first policy iteration."""
     mult = np.bincount(which, minlength=len(chains)).astype(float)
     M = system.n_servers
@@ -416,7 +415,7 @@ def search_multipliers(system: System, chains: list, which: np.ndarray, sense: s
                 break
             lo, hi = (2 * lo if free else lo), 2 * hi
             upper, lam = _master(cuts, mult, lo, hi)
-        if time.perf_counter() >= deadline or (expired is not None and expired()):
+        if expired is not None and expired():
             break
     interior = converged or not _on_boundary(lam, lo, hi, free)
     return {"lb": best["lb"], "lambda": best["lambda"], "solves": best["solves"], "converged": converged,
