@@ -29,6 +29,5 @@ def run_on_mdp(mdp, **kw: Any) -> Solution:
     return replace(out, stats={**out.stats, "n_mdp_states": mdp.n_states})
 
 
-
 #: Names that moved or were replaced: found here for one release, with a warning (:mod:`wncs_lp.moved`).
 __getattr__ = moved.old_names(__name__)

@@ -83,11 +83,10 @@ class Sweeper:
     def used_actions(self, pol: np.ndarray, cand: np.ndarray) -> np.ndarray:
         """Into ``cand`` (uint64, one per configuration): the bit set of the actions ``pol`` takes
         somewhere in the configuration's box (actions past 63 as bit 63)."""
-        fn = self.K.used_actions if self.threads > 1 else self.K.used_actions_serial
         if self.threads > 1:
-            run_parallel(fn, self.threads, pol, self.op.off, cand)
+            run_parallel(self.K.used_actions, self.threads, pol, self.op.off, cand)
         else:
-            fn(pol, self.op.off, cand)
+            self.K.used_actions_serial(pol, self.op.off, cand)
         return cand
 
     def fixed(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, write: Write, relax: float,
