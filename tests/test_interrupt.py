@@ -98,6 +98,88 @@ def test_interrupted_reproduction_resumes(quick_reproduction):
     assert run.report["provenance"]["cache"]["hits"] >= 1  # the steps finished before Ctrl-C were reused
 
 
+def test_a_signal_inside_a_finalizer_or_weakref_callback_is_delivered_after_it():
+    """A KeyboardInterrupt raised inside ``__del__`` or a weak reference's callback is printed as
+    "Exception ignored in ..." and lost (seen in CI: SIGTERM landing in a WeakKeyDictionary's
+    callback): the handler finds such a frame, returns, and the signal comes again after it."""
+    import gc
+    import weakref
+
+    from wncs_lp import stopping
+
+    got: list[tuple[str, bool]] = []
+
+    def handler(signum, frame):  # as the command line's handler does
+        if stopping.not_raisable(frame):
+            got.append(("later", True))
+            stopping.deliver_later(signum)
+            return
+        got.append(("raised", False))
+
+    class Dying:
+        def __del__(self):
+            signal.raise_signal(signal.SIGUSR1)  # the handler runs here, inside the finalizer
+
+    class Target:
+        pass
+
+    weak = {"__name__": "weakref", "signal": signal}  # a callback of the standard library's weakref module
+    exec("def remove(ref):\n    signal.raise_signal(signal.SIGUSR1)\n", weak)
+    old = signal.signal(signal.SIGUSR1, handler)
+    try:
+        assert not stopping.in_finalizer(sys._getframe())
+        for make in (lambda t: Dying(), lambda t: weakref.ref(t, weak["remove"])):
+            got.clear()
+            stopping.clear()
+            target = Target()
+            keep = make(target)
+            del target, keep
+            gc.collect()
+            t = time.monotonic()
+            while len(got) < 2 and time.monotonic() - t < 5:
+                time.sleep(0.01)
+            assert got == [("later", True), ("raised", False)]
+    finally:
+        signal.signal(signal.SIGUSR1, old)
+        stopping.clear()
+
+
+def test_an_interrupt_lost_in_an_unknown_callback_is_sent_again_without_a_traceback(capsys):
+    """A callback the handler cannot recognise: the interrupt it raises there is lost to Python;
+    redeliver_lost() prints nothing and sends the signal again, which then raises where it can."""
+    import gc
+    import weakref
+
+    from wncs_lp import stopping
+
+    def handler(signum, frame):
+        stopping.request(signum)
+        raise KeyboardInterrupt
+
+    class Target:
+        pass
+
+    def callback(ref):
+        signal.raise_signal(signal.SIGUSR1)
+
+    old = signal.signal(signal.SIGUSR1, handler)
+    stopping.clear()
+    try:
+        with pytest.raises(KeyboardInterrupt), stopping.redeliver_lost():
+            target = Target()
+            ref = weakref.ref(target, callback)
+            del target  # the callback runs here; its KeyboardInterrupt is lost
+            gc.collect()
+            t = time.monotonic()
+            while time.monotonic() - t < 5:  # the second delivery raises in this loop
+                time.sleep(0.01)
+        assert ref() is None
+        assert "Exception ignored" not in capsys.readouterr().err
+    finally:
+        signal.signal(signal.SIGUSR1, old)
+        stopping.clear()
+
+
 def test_a_signal_inside_the_kernel_compiler_waits_for_the_compilation_to_end():
     """An exception raised inside numba's compiler can leave it holding its lock (the command then
     hangs): the command line's handler, finding a numba or llvmlite frame on the stack, returns

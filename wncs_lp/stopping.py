@@ -21,6 +21,13 @@ a Ctrl-C waits for the backend to finish (minutes on a large LP). Two tools here
   llvmlite's Python code it could leave their lock held and the command hanging. The command
   line's handler (:func:`in_compiler`) hands it to :func:`deliver_later`, which sends it again
   once the compilation is over: the stop then takes the rest of the compilation (seconds).
+* **Not where an exception is lost**: a signal that arrives inside a finalizer (``__del__``)
+  or a weak reference's callback (run by the garbage collector at any allocation) would raise
+  where Python cannot propagate it: it prints "Exception ignored in ..." with a traceback and
+  the stop is lost until the next :func:`check`. :func:`not_raisable` finds those frames too
+  (``__del__``, the standard library's weak containers), and the handler delivers the signal
+  later, as for the compiler; for any other callback, :func:`redeliver_lost` catches the lost
+  interrupt (no traceback printed) and sends the signal again.
 """
 from __future__ import annotations
 
@@ -30,7 +37,7 @@ from contextlib import contextmanager
 from typing import Callable, Iterator
 
 __all__ = ["request", "requested", "clear", "check", "deferred", "stop_asked", "in_thread", "in_compiler",
-           "deliver_later", "STOP_SIGNALS"]
+           "in_finalizer", "not_raisable", "deliver_later", "redeliver_lost", "STOP_SIGNALS"]
 
 #: The signals that stop a command.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -167,13 +174,35 @@ def in_compiler(frame) -> bool:
     return False
 
 
-def deliver_later(signum: int, poll: float = 0.02) -> None:
-    """Send ``signum`` to this process again once the main thread has left the compiler.
+#: Modules whose functions the garbage collector calls as weak reference callbacks: an exception
+#: raised in one is printed as "Exception ignored in ..." and dropped.
+FINALIZER_MODULES = ("weakref", "_weakrefset")
 
-    For a signal handler that found the main thread compiling (:func:`in_compiler`): it returns
-    without raising, and a watcher thread re-sends the signal when no compiler frame is left on
-    the main thread's stack, so the handler then raises where it is safe -- within a moment of
-    the compilation's end. A stop already handled meanwhile (:func:`clear`) sends nothing.
+
+def in_finalizer(frame) -> bool:
+    """The frame or one of its callers is a finalizer (``__del__``) or a weak reference's
+    callback: an exception raised there is not propagated, only printed."""
+    while frame is not None:
+        if (frame.f_code.co_name == "__del__" or frame.f_globals.get("__name__", "") in FINALIZER_MODULES
+                or frame.f_code is _lost_interrupt.__code__):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def not_raisable(frame) -> bool:
+    """A signal handler called on this frame must not raise: the main thread is compiling
+    (:func:`in_compiler`) or finalizing (:func:`in_finalizer`)."""
+    return in_compiler(frame) or in_finalizer(frame)
+
+
+def deliver_later(signum: int, poll: float = 0.02) -> None:
+    """Send ``signum`` to this process again once the main thread can take an exception.
+
+    For a signal handler that found the main thread compiling or finalizing
+    (:func:`not_raisable`): it returns without raising, and a watcher thread re-sends the signal
+    when no such frame is left on the main thread's stack, so the handler then raises where it is
+    safe -- within a moment. A stop already handled meanwhile (:func:`clear`) sends nothing.
     """
     import os
     import sys
@@ -185,7 +214,7 @@ def deliver_later(signum: int, poll: float = 0.02) -> None:
 
     def watch() -> None:
         while _later:
-            if not in_compiler(sys._current_frames().get(main)):
+            if not not_raisable(sys._current_frames().get(main)):
                 if _later:
                     _later.clear()
                     os.kill(os.getpid(), signum)
@@ -193,3 +222,30 @@ def deliver_later(signum: int, poll: float = 0.02) -> None:
             threading.Event().wait(poll)
 
     threading.Thread(target=watch, daemon=True, name="wncs-lp-stop-later").start()
+
+
+@contextmanager
+def redeliver_lost() -> Iterator[None]:
+    """Within the block, a ``KeyboardInterrupt`` that Python could not propagate (raised by a stop
+    request's handler inside a finalizer or callback it did not recognise) prints nothing and
+    its signal is sent again (:func:`deliver_later`), so the stop is not lost. Other
+    unraisable exceptions go to the hook in place before."""
+    import sys
+
+    _hooks.append(sys.unraisablehook)
+    sys.unraisablehook = _lost_interrupt
+    try:
+        yield
+    finally:
+        sys.unraisablehook = _hooks.pop()
+
+
+_hooks: list = []  # the unraisable hooks redeliver_lost() replaced, innermost last
+
+
+def _lost_interrupt(unraisable) -> None:
+    # not_raisable() knows this function: a signal sent again while it runs waits for its end
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _requested:
+        deliver_later(_requested[0])
+        return
+    _hooks[-1](unraisable)

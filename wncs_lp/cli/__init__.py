@@ -59,8 +59,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
 
     def on_signal(signum, frame):  # stop the whole command (files are written atomically), then say so
-        if stopping.in_compiler(frame):  # an exception inside numba's compiler can hang it: a moment later
-            stopping.request(signum)  # the next check between steps stops the command, if it comes first
+        if stopping.not_raisable(frame):  # inside numba's compiler it can hang it, in a finalizer it is lost:
+            stopping.request(signum)  # a moment later, or at the next check between steps if that comes first
             stopping.deliver_later(signum)
             return
         stopping.request(signum)
@@ -75,7 +75,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             break
     stopping.clear()
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), stopping.redeliver_lost():
             # the commands print a degenerate scenario's warnings themselves, in words (common.load)
             warnings.filterwarnings("ignore", category=ScenarioWarning)
             code = int(args.func(args) or 0)
