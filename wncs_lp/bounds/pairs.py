@@ -63,7 +63,7 @@ from .joint_chains import ChainSolution, JointData, TableCertificate, certificat
 from .joint_symmetry import ProcessSymmetry, process_symmetry
 from .result import BoundResult, GroupTables, ValueTables
 
-__all__ = ["pairs_bound", "GroupChains", "certify_group_tables", "solve_group_chain", "group_cut",
+__all__ = ["pairs_bound", "pairs_size", "GroupChains", "GroupLumps", "certify_group_tables", "solve_group_chain", "group_cut",
            "candidate_partitions",
            "pair_partition"]
 
@@ -438,9 +438,27 @@ class _Search:
         return float(gains.sum()), cuts
 
 
+def pairs_size(system: System, groups="auto", *, symmetric: bool = True) -> dict:
+    """What relaxation 4 would build, before it is built: ``sweep_work``, the outcomes x ages of
+    one Bellman sweep over every candidate partition's (lumped) group chains -- the unit of its CPU
+    time -- and ``memory_bytes``, its largest arrays (each candidate's whole tables, certified on
+    the whole system, four copies: the tables, the best so far, their spread and the check's)."""
+    system = bound_system(system)
+    data = JointData.from_system(system)
+    sym = process_symmetry(system, data)
+    cands = candidate_partitions(data.n_processes, sym.classes) if groups == "auto" else [groups]
+    work = mem = 0
+    for cand in cands:
+        gs = _checked_groups(data.n_processes, cand)
+        lumps = GroupLumps.build(data, gs, sym if symmetric else None)
+        work += sum(lc.data.n_outcomes * lc.c1[0] * lc.c2[0] for lc in lumps.chains)
+        mem = max(mem, 4 * 8 * data.n_configs * sum(int(np.prod(data.caps[list(g)])) for g in gs))
+    return {"sweep_work": int(work), "memory_bytes": int(mem), "candidates": len(cands)}
+
+
 def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4, max_iter: int = 30,
-                time_limit: float | None = 600.0, threads: int = 1, symmetric: bool = True, progress=None,
-                **joint_options):
+                time_limit: float | None = 600.0, threads: int = 1, symmetric: bool = True, min_gain: float = 0.0,
+                progress=None, **joint_options):
     """A certified lower bound on g* from relaxation 4 (relaxation 2 with pairs of processes' ages
     kept jointly; module docstring).
 
@@ -469,6 +487,9 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
         Search over prices invariant under the permutations of interchangeable processes that map
         every group onto itself, each group's chain lumped by them (:class:`GroupLumps`: the same
         maximum of L, smaller chains); False: every pair priced on its own, the whole chains.
+    min_gain : float
+        The bundle runs only when the start raised relaxation 2's bound by more than
+        ``min_gain |bound|`` (``"auto"``'s test of whether the pairs pay); 0: always.
     progress : bool or Progress, optional
     **joint_options
         Relaxation 2's options (:func:`~wncs_lp.bounds.joint.joint_bound`) when ``start`` is not given.
@@ -506,7 +527,9 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
     try:
         _best_start(data, sym, cands, sep, mu1, tol, threads, deadline, prog, stats, found)
         s = found[0][0]
-        if max_iter > 0 and not s.out_of_time():
+        pays = s.best_bound - start.lower_bound > min_gain * abs(start.lower_bound)
+        stats["start_pays"] = bool(pays)
+        if max_iter > 0 and pays and not s.out_of_time():
             status, it = _bundle_steps(s, *found[0][1:], tol, max_iter, prog, stats)
     except KeyboardInterrupt:
         status = INTERRUPTED
