@@ -44,6 +44,12 @@ chain is worth at least the sum of its members' chains (one controller choosing 
 instead of each its own; the sum of the members' sub-solutions is a sub-solution of the group's
 chain), so relaxation 4 starts at relaxation 2's bound or above, and the proximal bundle of
 :mod:`~wncs_lp.bounds.joint_bundle` (groups in place of processes) raises L from there.
+
+Where interchangeable processes are paired with each other, L is invariant under the permutations
+of process names that map every group onto itself; L being concave, its maximum is reached at
+prices invariant under them, and at such prices each group's chain lumps by the permutations that
+fix its members (:class:`GroupLumps`): the search runs on the lumped chains and on prices per orbit
+of pairs, and its tables, spread back, are certified on the whole system.
 """
 from __future__ import annotations
 
