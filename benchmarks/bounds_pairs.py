@@ -23,6 +23,11 @@ records ``whole_bound``, ``whole_cpu`` and ``cpu_ratio`` = whole / symmetric CPU
 number of bundle steps: give ``--max-iter``; the time limit is lifted for both):
 
     python benchmarks/bounds_pairs.py --instances bounds_p1234_twice:20 --r2 shipped --max-iter 5 --whole
+
+``--no-time-limit`` lets only ``--max-iter`` stop the search, as ``auto`` runs it (8 steps):
+
+    python benchmarks/bounds_pairs.py --instances bounds_p1234_twice:20 --r2 shipped --max-iter 8 \
+        --no-time-limit --policy
 """
 from __future__ import annotations
 
@@ -99,7 +104,7 @@ def run(name: str, cap: int, args) -> list[dict]:
     r2_cpu = time.process_time() - t
     t = time.process_time()
     opts = {} if args.max_iter is None else {"max_iter": args.max_iter}
-    if args.whole:
+    if args.whole or args.no_time_limit:
         opts["time_limit"] = None
     r4 = pairs_bound(system, start=r2, progress=args.progress, **opts)
     r4_cpu = time.process_time() - t
@@ -137,6 +142,7 @@ def main(argv=None) -> int:
     p.add_argument("--slots", type=int, default=40_000)
     p.add_argument("--reps", type=int, default=20)
     p.add_argument("--progress", action="store_true")
+    p.add_argument("--no-time-limit", action="store_true", help="only --max-iter stops the search (as under auto)")
     p.add_argument("--whole", action="store_true", help="also the search without the symmetry reduction, and the ratio")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
