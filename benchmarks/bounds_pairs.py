@@ -16,6 +16,18 @@ toolkit's exact solver for the small ``three`` instance); with ``--policy`` the 
 ``--exact-max-states`` states, else Monte Carlo ``--reps`` x ``--slots``, seed 0, with the tables as
 control variate) and their certified gaps against relaxation 4's bound. Every row records the
 1-minute load average when the instance started.
+
+``--whole`` also runs the same search without the symmetry reduction (``symmetric=False``: every
+pair priced on its own, the whole group chains) in the same process after the symmetric one, and
+records ``whole_bound``, ``whole_cpu`` and ``cpu_ratio`` = whole / symmetric CPU seconds (the same
+number of bundle steps: give ``--max-iter``; the time limit is lifted for both):
+
+    python benchmarks/bounds_pairs.py --instances bounds_p1234_twice:20 --r2 shipped --max-iter 5 --whole
+
+``--no-time-limit`` lets only ``--max-iter`` stop the search, as ``auto`` runs it (8 steps):
+
+    python benchmarks/bounds_pairs.py --instances bounds_p1234_twice:20 --r2 shipped --max-iter 8 \
+        --no-time-limit --policy
 """
 from __future__ import annotations
 
@@ -48,7 +60,7 @@ from wncs_lp.scenario import load_scenario, scenario_from_dict  # noqa: E402
 KNOWN = {("paper_p1234", 12): 1169.1063487, ("paper_p1234", 20): 1572.4473862, ("paper_p1234", 30): 1628.3374066}
 COLUMNS = ["instance", "cap", "load", "g_star", "r2_bound", "r2_cpu", "r2_from", "groups", "r4_start", "r4_bound",
            "r4_cpu", "r4_status", "bundle_steps", "peak_mib", "r2_looseness", "r4_looseness", "policy", "gain",
-           "gain_upper", "gap_r4", "how"]
+           "gain_upper", "gap_r4", "how", "whole_bound", "whole_cpu", "cpu_ratio"]
 
 
 def three(cap: int):
@@ -92,8 +104,16 @@ def run(name: str, cap: int, args) -> list[dict]:
     r2_cpu = time.process_time() - t
     t = time.process_time()
     opts = {} if args.max_iter is None else {"max_iter": args.max_iter}
+    if args.whole or args.no_time_limit:
+        opts["time_limit"] = None
     r4 = pairs_bound(system, start=r2, progress=args.progress, **opts)
     r4_cpu = time.process_time() - t
+    whole = {}
+    if args.whole:
+        t = time.process_time()
+        w = pairs_bound(system, start=r2, progress=args.progress, symmetric=False, **opts)
+        w_cpu = time.process_time() - t
+        whole = {"whole_bound": w.lower_bound, "whole_cpu": round(w_cpu, 2), "cpu_ratio": round(w_cpu / r4_cpu, 3)}
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     loose = (lambda b: None if g_star is None else (g_star - b) / g_star)
     base = {"instance": name, "cap": cap, "load": round(load, 2), "g_star": g_star, "r2_bound": r2.lower_bound,
@@ -101,7 +121,7 @@ def run(name: str, cap: int, args) -> list[dict]:
             "groups": ";".join(",".join(str(k + 1) for k in g) for g in r4.tables.groups),
             "r4_start": max(r4.stats["candidates"].values()), "r4_bound": r4.lower_bound, "r4_cpu": round(r4_cpu, 2),
             "r4_status": r4.status, "bundle_steps": r4.stats.get("bundle_steps"), "peak_mib": round(peak),
-            "r2_looseness": loose(r2.lower_bound), "r4_looseness": loose(r4.lower_bound)}
+            "r2_looseness": loose(r2.lower_bound), "r4_looseness": loose(r4.lower_bound), **whole}
     rows = [base]
     if args.policy:
         rep = policy_gaps(r4, system, ["bound", "lookahead"], exact_max_states=args.exact_max_states,
@@ -122,6 +142,8 @@ def main(argv=None) -> int:
     p.add_argument("--slots", type=int, default=40_000)
     p.add_argument("--reps", type=int, default=20)
     p.add_argument("--progress", action="store_true")
+    p.add_argument("--no-time-limit", action="store_true", help="only --max-iter stops the search (as under auto)")
+    p.add_argument("--whole", action="store_true", help="also the search without the symmetry reduction, and the ratio")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     warnings.simplefilter("ignore")

@@ -64,3 +64,12 @@ def test_preemption_is_refused_with_exit_2(capsys):
 def test_unknown_relaxation_exit_2(capsys):
     rc, out = _json(capsys, "bound", P12, "--relaxation", "5", "--json")
     assert rc == 2 and "expected one of 1, 2, 3" in out["error"]
+
+
+def test_a_search_stopped_at_its_budget_exits_0(capsys):
+    """``--time-limit`` stops relaxation 4's search at its start (status max_iter): the bound is
+    certified all the same (below the exact g*), so the command succeeds."""
+    rc, out = _json(capsys, "bound", P12, "--set", "tau_cap=8", "--relaxation", "4", "--time-limit", "1e-6", "--json")
+    g_star = solve(build(load_scenario(P12, ["tau_cap=8"]))).gain_upper
+    assert out["bound"]["status"] == "max_iter" and rc == 0
+    assert out["bound"]["lower_bound"] <= g_star

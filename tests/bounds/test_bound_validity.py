@@ -8,6 +8,7 @@ from __future__ import annotations
 import pytest
 
 from wncs_lp.bounds import lower_bound
+from wncs_lp.bounds.lower import AUTO_PAIRS_MIN_GAIN
 from wncs_lp.bounds.joint import ipm_plan
 from wncs_lp.bounds.joint_chains import JointData
 from wncs_lp.bounds.joint_symmetry import process_symmetry
@@ -59,7 +60,8 @@ def case(request):
 def test_every_bound_is_below_g_star(case):
     _, _, g_star, auto, grouped = case
     bounds = {**auto.stats["auto_bounds"], grouped.relaxation: grouped.lower_bound}
-    assert set(bounds) == {"private-servers", "joint-configuration", "grouped-private-servers"}
+    assert {"private-servers", "joint-configuration", "grouped-private-servers"} <= set(bounds)
+    assert set(bounds) <= {"private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs"}
     for name, value in bounds.items():
         assert value <= g_star, (name, value, g_star)
     assert auto.lower_bound == max(auto.stats["auto_bounds"].values())
@@ -72,6 +74,18 @@ def test_relaxations_2_and_3_never_looser_than_relaxation_1(case):
     assert auto.stats.get("ipm_tables") is True or auto.relaxation != "joint-configuration"
     assert bounds["joint-configuration"] >= r1 - 1e-4 * abs(r1)  # the interior point's tolerance
     assert grouped.lower_bound >= r1 - 1e-9 * abs(r1)
+
+
+def test_auto_keeps_relaxation_4_only_where_its_start_pays(case):
+    """Relaxation 4 runs after relaxation 2's interior point; kept (and then valid above) only
+    where its start raised relaxation 2's bound by more than AUTO_PAIRS_MIN_GAIN, said otherwise."""
+    _, _, _, auto, _ = case
+    bounds = auto.stats["auto_bounds"]
+    if "joint-pairs" in bounds:
+        assert bounds["joint-pairs"] > bounds["joint-configuration"] * (1 + AUTO_PAIRS_MIN_GAIN)
+        assert auto.relaxation == "joint-pairs"
+    else:
+        assert "relaxation 4" in auto.stats["auto_reason"]
 
 
 def test_the_shapes_are_not_degenerate(case):

@@ -60,7 +60,8 @@ def test_auto_takes_the_better_certified_bound():
     system = System.from_scenario(three_processes(tau_cap=4))
     r1, r2 = private_bound(system), lower_bound(system, 2)
     auto = lower_bound(system, "auto")
-    assert auto.lower_bound == pytest.approx(max(r1.lower_bound, r2.lower_bound), rel=1e-6)
+    assert auto.lower_bound >= max(r1.lower_bound, r2.lower_bound) * (1 - 1e-6)
+    assert auto.lower_bound == max(auto.stats["auto_bounds"].values())
     assert auto.stats["auto_choice"] == auto.relaxation and auto.stats["auto_reason"]
 
 

@@ -18,11 +18,12 @@ from ..scenario import Scenario
 from .grouped import grouped_bound
 from .inputs import bound_system
 from .joint import joint_bound, joint_reach, joint_size
-from .pairs import pairs_bound
+from .pairs import pairs_bound, pairs_size
 from .private import private_bound
 from .result import BoundResult
 
 __all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "AUTO_ASCENT_STEPS", "AUTO_ASCENT_MAX_BYTES",
+           "AUTO_PAIRS_STEPS", "AUTO_PAIRS_BUDGET", "AUTO_PAIRS_CPU_PER_WORK", "AUTO_PAIRS_MAX_BYTES", "AUTO_PAIRS_MIN_GAIN",
            "lower_bound", "parse_relaxation", "auto_pick", "runs_grouped"]
 
 #: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
@@ -57,6 +58,21 @@ AUTO_ASCENT_STEPS = 1
 #: ... where its arrays are estimated to fit this many bytes.
 AUTO_ASCENT_MAX_BYTES = 3 * 2**30
 
+#: Relaxation 4 (pairs) under ``"auto"``: only where relaxation 2 was solved by its interior point
+#: (its tables at its optimum: pairs are the way further), from three processes on, and where its
+#: start plus :data:`AUTO_PAIRS_STEPS` bundle steps are predicted to take at most
+#: :data:`AUTO_PAIRS_BUDGET` seconds of CPU (``pairs_size``'s sweep work times
+#: :data:`AUTO_PAIRS_CPU_PER_WORK`, measured: docs/bounds.md, "Relaxation 4") and its tables to fit
+#: :data:`AUTO_PAIRS_MAX_BYTES`. It pays only where relaxation 2 leaves a gap the pairs see, which
+#: the start measures: the bundle runs, and the result competes with the others, only when the
+#: start raised relaxation 2's bound by more than :data:`AUTO_PAIRS_MIN_GAIN` (relative).
+#: A count of steps, no wall clock: the same bound on every machine.
+AUTO_PAIRS_STEPS = 8
+AUTO_PAIRS_BUDGET = 240.0
+AUTO_PAIRS_CPU_PER_WORK = 6e-7
+AUTO_PAIRS_MAX_BYTES = 2**30
+AUTO_PAIRS_MIN_GAIN = 1e-4
+
 #: Why relaxation 2 does not run on a lazily explored system.
 LAZY_NOTE = ("the system's configuration automaton is explored lazily (too large to enumerate), and relaxation 2's "
              "tables live on every joint configuration; relaxations 1 and 3 need only the private ones")
@@ -86,14 +102,15 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         or 1 / 2 / 3 / 4.
         ``"joint-pairs"`` (relaxation 4, :mod:`~wncs_lp.bounds.pairs`): relaxation 2 solved, then
         its tables and prices carried to pairs of processes whose ages are kept jointly; never
-        looser than relaxation 2, not run by ``"auto"`` (its bundle steps take a minute each at
-        eight processes, cap 20; ``docs/bounds.md``).
+        looser than relaxation 2; run by ``"auto"`` after relaxation 2's interior point where
+        predicted to fit and where its start pays (:data:`AUTO_PAIRS_STEPS`).
         ``"auto"``: the largest certified bound of relaxation 1, relaxation 2 when the instance is
         within its reach (beyond it, on an enumerated system, its Lagrangian at relaxation 1's
         prices on the lumped chains: :data:`AUTO_ASCENT_STEPS`), and relaxation 3 (pairs, :mod:`~wncs_lp.bounds.grouped`)
         when there are at least three processes and relaxation 2 was not solved by its interior
         point (where it was, it was the tighter: processes 1-4, cap 20, 1547.6 against 1441.2);
-        on a tie the first of 2, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
+        relaxation 4 (pairs) after relaxation 2's interior point where it fits and its start pays
+        (:data:`AUTO_PAIRS_STEPS`); on a tie the first of 2, 4, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
         ``stats["auto_bounds"]`` say which was taken, why, and what each gave. Relaxation 2's
         search then stops as :data:`AUTO_SEARCH` says unless ``max_iter`` / ``time_limit`` are given.
     **options
@@ -142,6 +159,11 @@ def _auto(system: System, options: dict) -> BoundResult:
         found.append(res2)
     if note:
         notes.append(note)
+    res4, note = _try_pairs(system, res2, options)
+    if res4 is not None:
+        found.append(res4)
+    if note:
+        notes.append(note)
     res1 = _try(private_bound, system, _private_options(options))
     if res1 is not None and runs_grouped(system, res2):
         limit = options.get("time_limit")
@@ -164,9 +186,9 @@ def runs_grouped(system: System, joint_result: BoundResult | None) -> bool:
 
 
 def auto_pick(found: list[BoundResult], notes: list[str] = ()) -> BoundResult:
-    """``"auto"``'s choice among certified bounds listed in the order 2, 3, 1: the largest (the
+    """``"auto"``'s choice among certified bounds listed in the order 2, 4, 3, 1: the largest (the
     first of equals), with ``stats["auto_choice"]``, ``"auto_reason"`` and ``"auto_bounds"``."""
-    best = max(found, key=lambda r: r.lower_bound)  # max keeps the first of equals: 2, 3, 1
+    best = max(found, key=lambda r: r.lower_bound)  # max keeps the first of equals: 2, 4, 3, 1
     bounds = {r.relaxation: r.lower_bound for r in found}
     reason = "; ".join([f"the largest certified bound of {', '.join(f'{k} {v:.10g}' for k, v in bounds.items())}"]
                        + list(notes))
@@ -238,6 +260,28 @@ def _try_lumped(system: System, options: dict, why_not: str) -> tuple[BoundResul
     except WncsError as exc:
         return None, f"beyond relaxation 2's reach: {why_not}; its lumped chains could not run: {exc}"
     return res, f"relaxation 2's whole LP is out of reach ({why_not}): its Lagrangian at relaxation 1's prices instead"
+
+
+def _try_pairs(system: System, res2: BoundResult | None, options: dict) -> tuple[BoundResult | None, str]:
+    """Relaxation 4 from relaxation 2's result where :data:`AUTO_PAIRS_STEPS`' rule takes it:
+    (its result, why) or (None, why not; "" where it does not apply)."""
+    if res2 is None or res2.stats.get("ipm_tables") is not True or system.n_processes < 3:
+        return None, ""
+    size = pairs_size(system)
+    steps = AUTO_PAIRS_STEPS
+    predicted = AUTO_PAIRS_CPU_PER_WORK * size["sweep_work"] * (1 + steps / size["candidates"])
+    if predicted > AUTO_PAIRS_BUDGET or size["memory_bytes"] > AUTO_PAIRS_MAX_BYTES:
+        return None, (f"relaxation 4 not run: predicted {predicted:.0f} s of CPU (budget {AUTO_PAIRS_BUDGET:.0f}), "
+                      f"{size['memory_bytes'] / 2**30:.2f} GiB (at most {AUTO_PAIRS_MAX_BYTES / 2**30:.0f})")
+    keep = {k: v for k, v in options.items() if k in ("tol", "progress")}
+    try:
+        res = pairs_bound(system, start=res2, max_iter=steps, time_limit=None, min_gain=AUTO_PAIRS_MIN_GAIN, **keep)
+    except WncsError as exc:
+        return None, f"relaxation 4 could not run: {exc}"
+    if not res.stats.get("start_pays"):
+        return None, (f"relaxation 4's start {res.lower_bound:.10g} raised relaxation 2's bound by at most "
+                      f"{AUTO_PAIRS_MIN_GAIN:g} of it: not kept")
+    return res, f"relaxation 4 from relaxation 2's optimum: {steps} bundle steps (predicted {predicted:.0f} s of CPU)"
 
 
 def _as_system(obj: Scenario | System) -> System:

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..display import Display, fmt
 from ..files import json_ready
-from ..status import OPTIMAL
+from ..status import MAX_ITER, OPTIMAL
 
 __all__ = ["ValueTables", "GroupTables", "BoundResult"]
 
@@ -133,6 +133,14 @@ class BoundResult(Display):
     def ok(self) -> bool:
         """The relaxation was solved to its tolerance (the bound holds either way)."""
         return self.status == OPTIMAL
+
+    @property
+    def certified(self) -> bool:
+        """A finite certified bound came out: the relaxation solved to its tolerance, or its search
+        stopped at its own budget (``max_iter``, ``time_limit``) with the best tables certified.
+        The certificate never depends on how the search ended; only an interrupted or failed run
+        is not this."""
+        return self.status in (OPTIMAL, MAX_ITER) and bool(np.isfinite(self.lower_bound))
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready scalars and short lists (not the value tables)."""
