@@ -195,6 +195,7 @@ class _Run:
     history: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     symmetry: bool = True
+    cpu_limit: float | None = None
 
     def clock(self, name: str, since: float) -> None:
         self.seconds[name] = self.seconds.get(name, 0.0) + time.monotonic() - since
@@ -409,7 +410,7 @@ def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int,
 # ---------------------------------------------------------------------------- entry point
 def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = 600.0, max_iter: int = 1000,
                 pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "auto", ipm_tol: float | None = None,
-                warm_start: bool = True, symmetry: bool = True,
+                warm_start: bool = True, symmetry: bool = True, ascent_cpu_limit: float | None = None,
                 kernel: str = "auto", threads: int = 1,
                 progress: bool | Progress | None = None) -> BoundResult:
     """A certified lower bound on g* from relaxation 2 (joint configuration, per-process AoI).
@@ -461,6 +462,9 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         (:mod:`~wncs_lp.bounds.joint_symmetry`; checked on the automaton, found in a few seconds;
         the paper's four process types twice at cap 20: 12.5M -> 1.3M nonzeros). The reduced LP
         has the same optimum; its tables are certified on the whole system like any others.
+    ascent_cpu_limit : float, optional
+        Seconds of this process's CPU time after which the lumped searches (``"ascent"``,
+        ``"smooth"``) begin no more steps: a guard beside ``max_iter`` (the best point met is kept).
     kernel : {"auto", "numba", "numpy"}
     threads : int
         numba threads (default 1: numba's OpenMP layer does not survive a fork).
@@ -487,7 +491,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     system = bound_system(system)  # a System checked, its own cost tables honoured
     data = JointData.from_system(system)
     run = _Run(system=system, data=data, kern=Kernels(kernel, threads), prog=prog, tol=float(tol),
-               deadline=t0 + (float(time_limit) if time_limit is not None else np.inf), t0=t0, symmetry=bool(symmetry))
+               deadline=t0 + (float(time_limit) if time_limit is not None else np.inf), t0=t0, symmetry=bool(symmetry),
+               cpu_limit=ascent_cpu_limit)
     prog.phase(f"relaxation 2: {data.n_processes} processes, {data.n_configs:,} configurations, "
                f"{data.n_pairs:,} pairs, caps {tuple(int(c) for c in data.caps)}")
     stats: dict = {"method": method, "kernel": run.kern.name, "threads": run.kern.threads}
@@ -683,10 +688,10 @@ def _ascent_phase(run: _Run, warm: tuple | None, stats: dict, steps: int, smooth
         # the smoothed chains' values enter L-BFGS's line searches: brackets much tighter than the bound's
         asc = smoothed_ascent(lumped, lumped.prices_from(mu), run.kern, evaluations=steps,
                               tol=min(run.chain_tol, 1e-9), chain_tol=run.chain_tol,
-                              stop=run.out_of_time, progress=run.prog)
+                              cpu_limit=run.cpu_limit, stop=run.out_of_time, progress=run.prog)
     else:
         asc = lumped_ascent(lumped, lumped.prices_from(mu), run.kern, iterations=steps, tol=run.chain_tol,
-                            stop=run.out_of_time, progress=run.prog)
+                            cpu_limit=run.cpu_limit, stop=run.out_of_time, progress=run.prog)
     run.clock("ascent", t)
     run.evaluations += len(asc.history)
     run.chain_sweeps += sum(s.sweeps for s in asc.solutions)
