@@ -3,6 +3,7 @@
     python benchmarks/scale.py --out benchmarks/scale.csv                       # the shipped instances
     python benchmarks/scale.py --instances bounds_lab16 --relaxation 1 --out /tmp/s.csv
     python benchmarks/scale.py --instances lab:32,p1234:8 --compare greedy --out /tmp/s.csv
+    python benchmarks/scale.py --search ascent,smooth --steps 40 --instances bounds_lab16 --out /tmp/r2.csv
 
 Every instance runs as ``wncs-lp bound INSTANCE --policy --json`` in its own process (so its peak
 resident memory is its own: ``ru_maxrss`` of the child), with the command's defaults unless told:
@@ -13,6 +14,12 @@ confidence limit. Instances: the shipped scenarios
 processes on three servers, explored lazily), and generated ones: ``lab:N`` (N sensors of the lab
 shape, cap 20) and ``p1234:R`` (the paper's four processes R times, cap 40), written to a
 temporary folder.
+
+``--search`` compares relaxation 2's searches on the lumped chains instead (``joint_bound(system,
+method=M, max_iter=--steps, time_limit=None)`` for each method M, in turn in one process; relaxation
+1 and the symmetry check are in every row's time): the certified bound, the gain over the start
+(relaxation 1's prices on the lumped chains) and the CPU seconds, with each method's ratio of CPU
+and of gain to the first's.
 
 One CSV row per policy (and one for the bound) with the seconds of the whole command, its CPU
 seconds, its peak memory and the 1-minute load average when it started: the machine is shared
@@ -96,6 +103,30 @@ def run(instance: str, args, folder: Path) -> list[dict]:
     return rows
 
 
+SEARCH_COLUMNS = ["instance", "method", "steps", "lower_bound", "start", "gain", "cpu_seconds", "cpu_ratio",
+                  "gain_ratio", "load1"]
+
+
+def search(instance: str, methods: list[str], steps: int, folder: Path) -> list[dict]:
+    """Relaxation 2's lumped searches on one instance, in turn (module docstring)."""
+    from wncs_lp.bounds.joint import joint_bound
+
+    path = _generated(instance, folder) if ":" in instance else scenario_path(instance)
+    rows = []
+    for m in methods:
+        load = round(os.getloadavg()[0], 2)
+        t0 = time.process_time()
+        res = joint_bound(load_scenario(path), method=m, max_iter=steps, time_limit=None)
+        cpu = time.process_time() - t0
+        start = res.stats["ascent_start"]
+        rows.append({"instance": instance, "method": m, "steps": steps, "lower_bound": res.lower_bound, "start": start,
+                     "gain": res.lower_bound - start, "cpu_seconds": round(cpu, 1), "load1": load})
+    for r in rows:
+        r["cpu_ratio"] = round(r["cpu_seconds"] / max(rows[0]["cpu_seconds"], 1e-9), 3)
+        r["gain_ratio"] = round(r["gain"] / rows[0]["gain"], 3) if rows[0]["gain"] > 0 else ""
+    return rows
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--instances", default=",".join(DEFAULT))
@@ -106,8 +137,18 @@ def main() -> int:
     ap.add_argument("--slots", type=int, default=40_000)
     ap.add_argument("--reps", type=int, default=20)
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--search", default="", help="relaxation 2's lumped searches to compare (e.g. ascent,smooth)")
+    ap.add_argument("--steps", type=int, default=40, help="steps (smoothed evaluations) of each --search method")
     args = ap.parse_args()
     rows = []
+    if args.search:
+        with tempfile.TemporaryDirectory() as tmp:
+            for inst in args.instances.split(","):
+                rows += search(inst.strip(), args.search.split(","), args.steps, Path(tmp))
+                for r in rows[-len(args.search.split(",")):]:
+                    print("  ".join(f"{k}={r[k]}" for k in SEARCH_COLUMNS if r.get(k) not in (None, "")), flush=True)
+                atomic_write_csv(args.out, rows, SEARCH_COLUMNS, extras="ignore")
+        return 0
     with tempfile.TemporaryDirectory() as tmp:
         for inst in args.instances.split(","):
             got = run(inst.strip(), args, Path(tmp))

@@ -76,6 +76,7 @@ from ..models.system import System
 from ..progress import Progress, as_progress
 from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
 from .joint_ascent import lumped_ascent
+from .joint_smooth import smoothed_ascent
 from .joint_bundle import PriceBundle
 from .joint_chains import (ChainSolution, JointData, Kernels, TableCertificate, certify_tables, column,
                            kernels_available, policy_weights, solve_chain, stationary)
@@ -90,7 +91,7 @@ __all__ = ["joint_bound", "joint_bound_from_tables", "ipm_fits", "ipm_plan", "jo
            "REACH_MAX_NNZ", "REACH_MAX_BYTES", "IPM_BUDGET", "IPM_GUARD"]
 
 #: ``method`` values of :func:`joint_bound`.
-JOINT_METHODS = ("auto", "ipm", "bundle", "pdhg", "pdhg+bundle", "ascent")
+JOINT_METHODS = ("auto", "ipm", "bundle", "pdhg", "pdhg+bundle", "ascent", "smooth")
 #: ``method="auto"`` solves the LP by the interior point when its predicted CPU time
 #: (:func:`~wncs_lp.bounds.joint_ipm.ipm_seconds`, a model measured on this machine's runs) is at
 #: most this many seconds and its memory estimate fits :data:`REACH_MAX_BYTES`; beyond, the bundle.
@@ -194,6 +195,7 @@ class _Run:
     history: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     symmetry: bool = True
+    cpu_limit: float | None = None
 
     def clock(self, name: str, since: float) -> None:
         self.seconds[name] = self.seconds.get(name, 0.0) + time.monotonic() - since
@@ -408,7 +410,7 @@ def _bundle_phase(run: _Run, max_iter: int, seed_cuts: list) -> tuple[bool, int,
 # ---------------------------------------------------------------------------- entry point
 def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None = 600.0, max_iter: int = 1000,
                 pdhg_iter: int = 20_000, pdhg_patience: int = 4, method: str = "auto", ipm_tol: float | None = None,
-                warm_start: bool = True, symmetry: bool = True,
+                warm_start: bool = True, symmetry: bool = True, ascent_cpu_limit: float | None = None,
                 kernel: str = "auto", threads: int = 1,
                 progress: bool | Progress | None = None) -> BoundResult:
     """A certified lower bound on g* from relaxation 2 (joint configuration, per-process AoI).
@@ -433,7 +435,7 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         PDHG iterations at most.
     pdhg_patience : int
         The PDHG hands over after this many repairs in a row that did not raise the bound.
-    method : {"auto", "ipm", "bundle", "pdhg", "pdhg+bundle", "ascent"}
+    method : {"auto", "ipm", "bundle", "pdhg", "pdhg+bundle", "ascent", "smooth"}
         ``"auto"`` (default): ``"ipm"`` when :func:`ipm_fits` (predicted within :data:`IPM_BUDGET`
         seconds of CPU and the memory), else ``"bundle"`` (``stats["auto_method"]`` says which,
         ``stats["ipm_plan"]`` why); ``"ipm"``: the LP by
@@ -444,7 +446,11 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         (docs/bounds.md, "Measured"). ``"ascent"``: projected supergradient steps on the lumped chains of the
         LP reduced by interchangeable processes (:mod:`~wncs_lp.bounds.joint_ascent`), ``max_iter``
         of them, from relaxation 1's prices; neither the LP nor the N whole chains are built, so it
-        runs where the interior point does not fit (sixteen processes).
+        runs where the interior point does not fit (sixteen processes). ``"smooth"``: L-BFGS on the
+        entropy-smoothed Lagrangian of the same lumped chains at decreasing temperatures
+        (:mod:`~wncs_lp.bounds.joint_smooth`), ``max_iter`` smoothed evaluations at most, from
+        relaxation 1's prices: where it runs to convergence, within its smoothing error of the LP's
+        optimum, which the supergradient steps do not reach.
     ipm_tol : float, optional
         IPX's optimality tolerance (default ``tol``: at processes 1-4 cap 20, 1e-4 took 36
         iterations and certified 6e-6 (relative) less than 1e-6 in 47).
@@ -456,6 +462,9 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
         (:mod:`~wncs_lp.bounds.joint_symmetry`; checked on the automaton, found in a few seconds;
         the paper's four process types twice at cap 20: 12.5M -> 1.3M nonzeros). The reduced LP
         has the same optimum; its tables are certified on the whole system like any others.
+    ascent_cpu_limit : float, optional
+        Seconds of this process's CPU time after which the lumped searches (``"ascent"``,
+        ``"smooth"``) begin no more steps: a guard beside ``max_iter`` (the best point met is kept).
     kernel : {"auto", "numba", "numpy"}
     threads : int
         numba threads (default 1: numba's OpenMP layer does not survive a fork).
@@ -482,7 +491,8 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     system = bound_system(system)  # a System checked, its own cost tables honoured
     data = JointData.from_system(system)
     run = _Run(system=system, data=data, kern=Kernels(kernel, threads), prog=prog, tol=float(tol),
-               deadline=t0 + (float(time_limit) if time_limit is not None else np.inf), t0=t0, symmetry=bool(symmetry))
+               deadline=t0 + (float(time_limit) if time_limit is not None else np.inf), t0=t0, symmetry=bool(symmetry),
+               cpu_limit=ascent_cpu_limit)
     prog.phase(f"relaxation 2: {data.n_processes} processes, {data.n_configs:,} configurations, "
                f"{data.n_pairs:,} pairs, caps {tuple(int(c) for c in data.caps)}")
     stats: dict = {"method": method, "kernel": run.kern.name, "threads": run.kern.threads}
@@ -658,10 +668,11 @@ def _lumped_at_ipm_prices(run: _Run, sym: ProcessSymmetry, prices: list, stats: 
     stats.update(ipm_tables_bound=ipm_bound, ipm_chains_bound=run.history[-1][2], lumped_lagrangian=value)
 
 
-def _ascent_phase(run: _Run, warm: tuple | None, stats: dict, steps: int) -> None:
-    """Projected supergradient steps on the lumped chains (:mod:`~wncs_lp.bounds.joint_ascent`)
-    from relaxation 1's prices (zero prices without them), ``steps`` of them at most; the best
-    prices' biases, spread to every process, offered to the certificate."""
+def _ascent_phase(run: _Run, warm: tuple | None, stats: dict, steps: int, smooth: bool = False) -> None:
+    """Projected supergradient steps on the lumped chains (:mod:`~wncs_lp.bounds.joint_ascent`),
+    or with ``smooth`` L-BFGS on their smoothed Lagrangian (:mod:`~wncs_lp.bounds.joint_smooth`),
+    from relaxation 1's prices (zero prices without them), ``steps`` steps (smoothed evaluations) at
+    most; the best prices' biases, spread to every process, offered to the certificate."""
     t = time.monotonic()
     sym = process_symmetry(run.system, run.data) if run.symmetry else ProcessSymmetry.none(run.data.n_processes)
     lumped = lumped_chains(sym, run.data)
@@ -670,14 +681,21 @@ def _ascent_phase(run: _Run, warm: tuple | None, stats: dict, steps: int) -> Non
         _offer(run, warm[0], None, "relaxation 1's tables")
     mu = warm[1] if warm is not None else np.zeros((run.data.n_processes, run.data.n_pairs))
     t = time.monotonic()
-    run.prog.phase(f"relaxation 2: lumped ascent on {len(lumped.chains)} chains of "
+    kind = "smoothed ascent" if smooth else "lumped ascent"
+    run.prog.phase(f"relaxation 2: {kind} on {len(lumped.chains)} chains of "
                    f"{[c.n_configs for c in lumped.chains]} orbits of configurations, {steps} steps at most")
-    asc = lumped_ascent(lumped, lumped.prices_from(mu), run.kern, iterations=steps, tol=run.chain_tol,
-                        stop=run.out_of_time, progress=run.prog)
+    if smooth:
+        # the smoothed chains' values enter L-BFGS's line searches: brackets much tighter than the bound's
+        asc = smoothed_ascent(lumped, lumped.prices_from(mu), run.kern, evaluations=steps,
+                              tol=min(run.chain_tol, 1e-9), chain_tol=run.chain_tol,
+                              cpu_limit=run.cpu_limit, stop=run.out_of_time, progress=run.prog)
+    else:
+        asc = lumped_ascent(lumped, lumped.prices_from(mu), run.kern, iterations=steps, tol=run.chain_tol,
+                            cpu_limit=run.cpu_limit, stop=run.out_of_time, progress=run.prog)
     run.clock("ascent", t)
     run.evaluations += len(asc.history)
     run.chain_sweeps += sum(s.sweeps for s in asc.solutions)
-    _offer(run, spread_orbit_tables(sym, run.data, [s.h for s in asc.solutions]), None, "the lumped ascent")
+    _offer(run, spread_orbit_tables(sym, run.data, [s.h for s in asc.solutions]), None, f"the {kind}")
     stats.update(ascent_steps=len(asc.history), ascent_start=asc.history[0], ascent_value=asc.value,
                  ascent_cpu_seconds=round(asc.cpu_seconds, 3),
                  classes=[list(c) for c in sym.classes if len(c) > 1])
@@ -705,8 +723,8 @@ def _phases(run: _Run, warm: tuple | None, method: str, stats: dict, pdhg_iter: 
         gap = stats["ipm_objective"] - max(run.best.lower_bound, stats.get("ipm_tables_bound", -np.inf))
         finished = stats["ipm_status"] in ("kOptimal", "kUnknown")
         return finished and gap <= run.tol * max(abs(run.best.lower_bound), 1.0), 0
-    if method == "ascent":
-        _ascent_phase(run, warm, stats, max_iter)
+    if method in ("ascent", "smooth"):
+        _ascent_phase(run, warm, stats, max_iter, smooth=method == "smooth")
         return False, 0
     start = _start(run, warm)
     if method in ("pdhg+bundle", "pdhg"):

@@ -39,7 +39,7 @@ import numpy as np
 from .joint_chains import ChainSolution, Kernels, column, policy_weights, stationary
 from .joint_symmetry import LumpedChains
 
-__all__ = ["AscentRun", "lumped_ascent"]
+__all__ = ["AscentRun", "lumped_ascent", "projector"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,7 +66,7 @@ class AscentRun:
     cpu_seconds: float
 
 
-def _projector(lumped: LumpedChains):
+def projector(lumped: LumpedChains):
     """The projection removing each G-orbit's weighted sum from a step (LP order)."""
     q_lp, share_lp = [], []
     for order, q, sh in zip(lumped.order, lumped.q_orbit, lumped.share):
@@ -116,7 +116,7 @@ def lumped_ascent(lumped: LumpedChains, prices0: list, kern: Kernels, *, iterati
     progress : Progress, optional
     """
     cpu0 = time.process_time()
-    project = _projector(lumped)
+    project = projector(lumped)
     prices = [np.array(p, dtype=float, copy=True) for p in prices0]
     best, best_prices, best_sols = -np.inf, prices, None
     h0, laws, history, since = None, [None] * len(prices), [], 0

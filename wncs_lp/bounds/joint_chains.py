@@ -316,6 +316,23 @@ class Kernels:
         idx = np.where(val <= best[data.pair_c], np.arange(data.n_pairs)[:, None], data.n_pairs)
         pol[:] = np.minimum.reduceat(idx, starts, axis=0)
 
+    def soft_bellman(self, data: JointData, k: int, h: np.ndarray, price: np.ndarray, eta: float, th: np.ndarray,
+                     weights: np.ndarray):
+        """th = T_eta h, the soft minimum over pairs at temperature ``eta`` of process k's priced chain
+        (:mod:`~wncs_lp.bounds.joint_smooth`); weights[p, t] = the softmin policy's probabilities."""
+        cap = int(data.caps[k])
+        if self.mod is not None:
+            self.mod.soft_bellman(h, data.q[k], price, cap, data.act_ptr, data.out_ptr, data.out_nxt, data.out_prob,
+                                  data.sat_of(k), float(eta), th, weights)
+            return
+        val = price[:, None] + data.expect(k, h)
+        starts = data.act_ptr[:-1]
+        best = np.minimum.reduceat(val, starts, axis=0)
+        e = np.exp((best[data.pair_c] - val) / eta)
+        tot = np.add.reduceat(e, starts, axis=0)
+        th[:] = data.q[k][None, :] + best - eta * np.log(tot)
+        weights[:] = e / tot[data.pair_c]
+
     def push(self, data: JointData, k: int, y: np.ndarray, weights: np.ndarray, y_out: np.ndarray):
         """y_out = y P_pi for the randomised policy ``weights[p, t]``."""
         cap = int(data.caps[k])

@@ -24,21 +24,27 @@ from numba import njit, prange
 
 # ---------------------------------------------------------------------------- priced chains
 @njit(inline="always")
+def _pair_value(p, h, price, cap, out_ptr, out_nxt, out_prob, sat, acc):
+    """acc[t] = price[p] + sum_o P(o|p) h(next(o), nt(t)): pair p's value at every AoI index."""
+    for t in range(cap):
+        acc[t] = price[p]
+    for o in range(out_ptr[p], out_ptr[p + 1]):
+        pr = out_prob[o]
+        cn = out_nxt[o]
+        m = sat[o]
+        for t in range(m):
+            acc[t] += pr * h[cn, t + 1]
+        v = pr * h[cn, m]
+        for t in range(m, cap):
+            acc[t] += v
+
+
+@njit(inline="always")
 def _bellman_config(c, h, q, price, cap, act_ptr, out_ptr, out_nxt, out_prob, sat, th, pol, acc, best):
     for t in range(cap):
         best[t] = np.inf
     for p in range(act_ptr[c], act_ptr[c + 1]):
-        for t in range(cap):
-            acc[t] = price[p]
-        for o in range(out_ptr[p], out_ptr[p + 1]):
-            pr = out_prob[o]
-            cn = out_nxt[o]
-            m = sat[o]
-            for t in range(m):
-                acc[t] += pr * h[cn, t + 1]
-            v = pr * h[cn, m]
-            for t in range(m, cap):
-                acc[t] += v
+        _pair_value(p, h, price, cap, out_ptr, out_nxt, out_prob, sat, acc)
         for t in range(cap):
             if acc[t] < best[t]:
                 best[t] = acc[t]
@@ -90,6 +96,40 @@ def push(y, weights, cap, act_ptr, out_ptr, out_nxt, out_prob, sat, y_out):
                 for t in range(m, cap):
                     s += f[t]
                 y_out[cn, m] += pr * s
+
+
+@njit(cache=True)
+def soft_bellman(h, q, price, cap, act_ptr, out_ptr, out_nxt, out_prob, sat, eta, th, weights):
+    """The entropy-smoothed Bellman operator of process k's priced chain: th(c, t) = q(t) - eta log
+    sum_p exp(-v_p(t) / eta), v_p = price[p] + E h(next); weights[p, t] = the softmin policy."""
+    n_max = 0
+    for c in range(act_ptr.size - 1):
+        n_max = max(n_max, act_ptr[c + 1] - act_ptr[c])
+    acc = np.empty((n_max, cap))
+    best = np.empty(cap)
+    tot = np.empty(cap)
+    for c in range(act_ptr.size - 1):
+        p0 = act_ptr[c]
+        for t in range(cap):
+            best[t] = np.inf
+            tot[t] = 0.0
+        for p in range(p0, act_ptr[c + 1]):
+            a = acc[p - p0]
+            _pair_value(p, h, price, cap, out_ptr, out_nxt, out_prob, sat, a)
+            for t in range(cap):
+                if a[t] < best[t]:
+                    best[t] = a[t]
+        for p in range(p0, act_ptr[c + 1]):
+            a = acc[p - p0]
+            for t in range(cap):
+                e = np.exp((best[t] - a[t]) / eta)
+                weights[p, t] = e
+                tot[t] += e
+        for p in range(p0, act_ptr[c + 1]):
+            for t in range(cap):
+                weights[p, t] /= tot[t]
+        for t in range(cap):
+            th[c, t] = q[t] + best[t] - eta * np.log(tot[t])
 
 
 # ---------------------------------------------------------------------------- the LP operator
