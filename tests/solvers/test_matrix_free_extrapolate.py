@@ -27,7 +27,7 @@ def geometric(k, h_star, v):
     return h_star + LAM ** k * v
 
 
-def drive(ex, widths, h_star, v):
+def drive(ex, widths, h_star, v, rel=1e-6):
     """Certificates every CYCLE iterations of the one-mode iteration, with the given widths
     (saving h one iteration before a certificate when asked); returns (h, iters, notes) at the
     first step, or at the end."""
@@ -37,7 +37,7 @@ def drive(ex, widths, h_star, v):
         if ex.want_save():
             ex.save(geometric(it - 1, h_star, v), it - 1)
         h = geometric(it, h_star, v)
-        note = ex.step(h, it, w)
+        note = ex.step(h, it, w, rel)
         notes.append(note)
         if ex.pending is not None:
             return h, it, notes
@@ -60,10 +60,11 @@ def test_one_step_removes_a_single_mode(mode):
 
 
 def test_ratios_within_the_tolerance_give_their_mean_rate(mode):
-    # the widths' ratios a cycle vary within 3% of their geometric mean 0.3: the step uses that mean
+    # the widths' ratios a cycle vary around their geometric mean 0.3 (their logs within 1%): the
+    # step uses that mean
     h_star, v = mode
     ex = Extrapolator(h_star.size, True)
-    ratios = [0.3 * 1.03, 0.3 / 1.03] * 6
+    ratios = [0.3 * 1.01, 0.3 / 1.01] * 6
     widths = list(np.cumprod(ratios))
     h, it, notes = drive(ex, widths, h_star, v)
     assert h is not None and ex.count == 1, notes
@@ -74,6 +75,14 @@ def test_ratios_within_the_tolerance_give_their_mean_rate(mode):
     h_expected = geometric(it, h_star, v)
     h_expected = h_expected + f * (h_expected - prev)
     assert np.allclose(h, h_expected, rtol=1e-12, atol=1e-12)
+
+
+def test_no_step_before_the_bracket_is_narrow(mode):
+    # steady ratios, but the bracket still wider than max_rel of the gain: the transient regime
+    h_star, v = mode
+    ex = Extrapolator(h_star.size, True)
+    h, _, _ = drive(ex, [LAM ** (CYCLE * c) for c in range(1, 10)], h_star, v, rel=10 * ex.max_rel)
+    assert h is None and ex.count == 0
 
 
 def test_alternating_ratios_make_no_step(mode):
@@ -91,7 +100,7 @@ def test_a_step_no_better_than_the_forecast_is_a_miss(mode):
     h, it, _ = drive(ex, widths, h_star, v)
     runs, before = ex.runs, ex.pending[3]
     # the next certificate finds the width of the step, above the steady rate's forecast
-    note = ex.step(h, it + CYCLE, before)
+    note = ex.step(h, it + CYCLE, before, 1e-6)
     assert ex.missed == 1 and ex.runs == 2 * runs and ex.enabled and "did not pay" in note
     # the next step waits for a window twice as long
     ex.records = []
@@ -100,7 +109,7 @@ def test_a_step_no_better_than_the_forecast_is_a_miss(mode):
     ex.records = []
     h, it, _ = drive(ex, widths, h_star, v)
     assert ex.count == 2
-    ex.step(h, it + CYCLE, ex.pending[3])
+    ex.step(h, it + CYCLE, ex.pending[3], 1e-6)
     assert ex.missed == 2 and not ex.enabled  # max_misses reached: no more steps this run
 
 
@@ -109,7 +118,7 @@ def test_a_step_paid_when_below_the_forecast(mode):
     ex = Extrapolator(h_star.size, True)
     widths = [LAM ** (CYCLE * c) for c in range(1, 10)]
     h, it, _ = drive(ex, widths, h_star, v)
-    note = ex.step(h, it + CYCLE, 1e-3 * widths[-1])
+    note = ex.step(h, it + CYCLE, 1e-3 * widths[-1], 1e-6)
     assert ex.missed == 0 and "paid" in note and ex.pending is None
 
 

@@ -12,12 +12,14 @@ class Extrapolator:
     Near convergence the bracket width of these iterations shrinks by a steady factor lambda per
     iteration (one slow mode of the chain: e.g. 0.86 an improvement sweep for processes 1-4 at
     cap 12), i.e. h_k ~ h* + a lambda^k v. lambda is the mean rate of the last ``runs`` widths'
-    ratios once each of them is within ``agree`` (relative) of it. (The asynchronous in-place
-    sweeps of two threads make successive ratios alternate between ~0.25 and ~0.7 a certificate;
-    a looser rule that stepped on their mean rate was measured to lose there: processes 1-4 at
-    cap 20, both steps missed. So the threaded solves seldom step.) Then h is moved to
-    h + f (h - h_prev), f = lambda / (1 - lambda), which removes that mode; h_prev is h one
-    iteration before (a second value vector, copied in the cycle that may end in an
+    ratios once each of them is within ``agree`` (relative) of it, and only once the bracket is
+    within ``max_rel`` of the gain (the asymptotic regime: steps on early stretches of steady
+    ratios, relative widths 2e-4 to 1e-2 on processes 1-3 and 1-4, did not pay). (The
+    asynchronous in-place sweeps of two threads make successive ratios alternate between ~0.25
+    and ~0.7 a certificate; a looser rule that stepped on their mean rate was measured to lose
+    there: processes 1-4 at cap 20, both steps missed. So the threaded solves seldom step.)
+    Then h is moved to h + f (h - h_prev), f = lambda / (1 - lambda), which removes that mode;
+    h_prev is h one iteration before (a second value vector, copied in the cycle that may end in an
     extrapolation).
 
     The step also multiplies the faster modes still in h (a mode mu by 1 - f (1/mu - 1), large
@@ -32,10 +34,12 @@ class Extrapolator:
     certificate.)
     """
 
-    def __init__(self, n: int, enabled: bool, agree: float = 0.05, runs: int = 3, max_misses: int = 3):
+    def __init__(self, n: int, enabled: bool, agree: float = 0.02, runs: int = 3, max_misses: int = 3,
+                 max_rel: float = 1e-4):
         self.prev = np.empty(n) if enabled else None
         self.max_misses = max_misses
         self.agree = agree
+        self.max_rel = max_rel
         self.runs = runs
         self.records: list[tuple[int, float]] = []
         self.count = 0
@@ -92,9 +96,9 @@ class Extrapolator:
         self.pending = None
         self.prev = None
 
-    def step(self, h: np.ndarray, iters: int, width: float) -> str | None:
-        """Record the width after ``iters`` iterations; check a pending extrapolation or make
-        one. Returns a message for the progress line, or None."""
+    def step(self, h: np.ndarray, iters: int, width: float, rel: float) -> str | None:
+        """Record the width after ``iters`` iterations (``rel``: relative to the gain); check a
+        pending extrapolation or make one. Returns a message for the progress line, or None."""
         if not self.enabled or not np.isfinite(width) or width <= 0:
             return None
         if self.pending is not None:
@@ -115,7 +119,7 @@ class Extrapolator:
         if len(self.records) < self.runs + 1 or self.saved_at != iters - 1:
             return None
         rates = self._rates(self.records[-(self.runs + 1):])
-        if rates is None or not self._steady(rates):
+        if rel > self.max_rel or rates is None or not self._steady(rates):
             return None
         rate = float(np.mean(rates))
         lam = float(np.exp(rate))

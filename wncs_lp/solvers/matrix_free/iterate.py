@@ -108,6 +108,7 @@ class BoxSweeps(IterationScheme):
         self.vectors = 1 + (self.h_out is not None) + self.ex.enabled
         self.iters = 0  # improvement sweeps (the extrapolation's clock)
         self._out: np.ndarray | None = None  # where the last certificate pass wrote the next iterate
+        self._mid = 0.0  # the midpoint of the last certificate
 
     def pass_(self, h: np.ndarray, h_out: np.ndarray | None, write: Write, relax: float, shift: float) -> tuple[float, float]:
         """One pass over the layout; (min, max) of T h - h on the h it read (an in-place pass
@@ -143,8 +144,11 @@ class BoxSweeps(IterationScheme):
     def certify(self, shift: float) -> tuple[float, float]:
         self._out = self.ex.prev if self.name == "warm" else self.h_out if self.name == "jacobi" else None
         if self._out is None:
-            return self.pass_(self.h, None, Write.NONE, self.relax, shift)
-        return self.pass_(self.h, self._out, Write.OUT, JACOBI_TAU, shift)
+            lo, hi = self.pass_(self.h, None, Write.NONE, self.relax, shift)
+        else:
+            lo, hi = self.pass_(self.h, self._out, Write.OUT, JACOBI_TAU, shift)
+        self._mid = 0.5 * (lo + hi)
+        return lo, hi
 
     def advance(self) -> None:
         out, self._out = self._out, None
@@ -169,7 +173,7 @@ class BoxSweeps(IterationScheme):
     def after_check(self, width: float, progress: Progress) -> bool:
         if self.name == "jacobi":
             return False
-        note = self.ex.step(self.h, self.iters, width)
+        note = self.ex.step(self.h, self.iters, width, width / max(abs(self._mid), 1e-300))
         if note is not None:
             progress.phase(f"[{self.label}] {note}")
         return False  # a step is judged at the next regular certificate (Extrapolator)
