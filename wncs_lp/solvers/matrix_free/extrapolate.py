@@ -10,43 +10,26 @@ class Extrapolator:
     """One-mode (Lyusternik / Aitken) extrapolation of a geometrically converging iteration.
 
     Near convergence the bracket width of these iterations shrinks by a steady factor lambda per
-    iteration (one slow mode of the chain: e.g. 0.86 an improvement sweep for processes 1-4 at
-    cap 12), i.e. h_k ~ h* + a lambda^k v. lambda is the mean rate of the last ``runs`` widths'
-    ratios once each of them is within ``agree`` (relative) of it, and only once the bracket is
-    within ``max_rel`` of the gain (the asymptotic regime: steps on early stretches of steady
-    ratios, relative widths 2e-4 to 1e-2 on processes 1-3 and 1-4, did not pay). (The
-    asynchronous in-place sweeps of two threads make successive ratios alternate between ~0.25
-    and ~0.7 a certificate; a looser rule that stepped on their mean rate was measured to lose
-    there: processes 1-4 at cap 20, both steps missed. So the threaded solves seldom step.)
-    Then h is moved to h + f (h - h_prev), f = lambda / (1 - lambda), which removes that mode;
-    h_prev is h one iteration before (a second value vector, copied in the cycle that may end in an
-    extrapolation).
-
-    The step also multiplies the faster modes still in h (a mode mu by 1 - f (1/mu - 1), large
-    for a small mu), and the iteration damps those within a few sweeps. So the step is judged
-    at the next regular certificate, a cycle of sweeps later, not at once (judged at once, the
-    first steps on processes 1-4 were undone for a width 6x larger that the next sweeps would
-    have removed): it paid if the width is below the one the steady rate predicted without it.
-    If it did not, the next step waits for a window twice as long; after ``max_misses`` misses
-    extrapolation is off for the run. A step is never undone by the sweeps: every certificate
-    bounds g* whatever h is, so a poor step costs sweeps, never validity. (:meth:`settle`
-    undoes a step no certificate has seen, so that a run's h is the one of its last
-    certificate.)
+    iteration (one slow mode of the chain: e.g. 0.968 a sweep for the greedy policy of processes
+    1-4 at cap 12), i.e. h_k ~ h* + a lambda^k v. Once ``runs`` successive rates agree within
+    ``agree`` (relative), lambda is their value and h is moved to
+    h + f (h - h_prev), f = lambda / (1 - lambda), which removes that mode; h_prev is h one
+    iteration before (a second value vector, copied in the cycle that may end in an
+    extrapolation). The certificate is computed on the new h at once; if its width is not below
+    the one before, h is restored ((h + f h_prev) / (1 + f)) and extrapolation is switched off
+    for the run. So a poor extrapolation costs one pass, never validity.
     """
 
-    def __init__(self, n: int, enabled: bool, agree: float = 0.02, runs: int = 3, max_misses: int = 3,
-                 max_rel: float = 1e-4):
+    def __init__(self, n: int, enabled: bool, agree: float = 0.02, runs: int = 3, max_undo: int = 3):
         self.prev = np.empty(n) if enabled else None
-        self.max_misses = max_misses
+        self.max_undo = max_undo
         self.agree = agree
-        self.max_rel = max_rel
         self.runs = runs
         self.records: list[tuple[int, float]] = []
         self.count = 0
-        self.missed = 0
+        self.reverted = 0
         self.saved_at = -1
-        # (f, the width the steady rate predicts a cycle later without the step, its iteration)
-        self.pending: tuple[float, float, int] | None = None
+        self.pending: tuple[float, float] | None = None  # (f, width before) of an unchecked step
 
     @property
     def enabled(self) -> bool:
@@ -61,7 +44,7 @@ class Extrapolator:
         return rates
 
     def _steady(self, rates) -> bool:
-        r = float(np.mean(rates))
+        r = rates[-1]
         return max(abs(x - r) for x in rates) <= self.agree * abs(r)
 
     def want_save(self) -> bool:
@@ -88,45 +71,44 @@ class Extrapolator:
             d *= k
             hb += d
 
-    def settle(self, h: np.ndarray, iters: int) -> None:
-        """At the end of a run (after ``iters`` iterations): undo a step made after the last
-        certificate, so that h is the iterate of that certificate."""
-        if self.pending is not None and self.pending[2] == iters:
+    def settle(self, h: np.ndarray) -> None:
+        """At the end of a run: undo an extrapolation that no pass has certified yet, so that h
+        is the iterate of the last certificate."""
+        if self.pending is not None:
             self._axpy(h, self.pending[0], undo=True)
-        self.pending = None
+            self.pending = None
         self.prev = None
 
-    def step(self, h: np.ndarray, iters: int, width: float, rel: float) -> str | None:
-        """Record the width after ``iters`` iterations (``rel``: relative to the gain); check a
-        pending extrapolation or make one. Returns a message for the progress line, or None."""
+    def step(self, h: np.ndarray, iters: int, width: float) -> str | None:
+        """Record the width after ``iters`` iterations; check a pending extrapolation or make
+        one. Returns a message for the progress line, or None."""
         if not self.enabled or not np.isfinite(width) or width <= 0:
             return None
         if self.pending is not None:
-            f, rate, at, before = self.pending
+            f, before = self.pending
             self.pending = None
-            forecast = before * float(np.exp(rate * (iters - at)))
-            if width < forecast:
+            if width < before:
                 self.records = [(iters, width)]
-                return f"extrapolation paid (width {width:.3g}, {forecast:.3g} forecast without it)"
-            self.missed += 1
-            self.records = [(iters, width)]
-            if self.missed >= self.max_misses:
+                return f"extrapolation kept (width {before:.3g} -> {width:.3g})"
+            self._axpy(h, f, undo=True)
+            self.reverted += 1
+            self.records = []
+            if self.reverted >= self.max_undo:
                 self.prev = None
-                return f"extrapolation did not pay (width {width:.3g}, {forecast:.3g} forecast); no more for this run"
+                return f"extrapolation undone (width {before:.3g} -> {width:.3g}); no more for this run"
             self.runs *= 2  # wait for a longer steady stretch before the next try
-            return f"extrapolation did not pay (width {width:.3g}, {forecast:.3g} forecast without it)"
+            return f"extrapolation undone (width {before:.3g} -> {width:.3g})"
         self.records.append((iters, width))
         if len(self.records) < self.runs + 1 or self.saved_at != iters - 1:
             return None
         rates = self._rates(self.records[-(self.runs + 1):])
-        if rel > self.max_rel or rates is None or not self._steady(rates):
+        if rates is None or not self._steady(rates):
             return None
-        rate = float(np.mean(rates))
-        lam = float(np.exp(rate))
+        lam = float(np.exp(rates[-1]))
         if not (0.0 < lam < 0.9999):
             return None
         f = lam / (1.0 - lam)
         self._axpy(h, f, undo=False)
-        self.pending = (f, rate, iters, width)
+        self.pending = (f, width)
         self.count += 1
         return f"extrapolated (rate {lam:.4f} an iteration)"

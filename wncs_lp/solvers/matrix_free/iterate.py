@@ -108,7 +108,6 @@ class BoxSweeps(IterationScheme):
         self.vectors = 1 + (self.h_out is not None) + self.ex.enabled
         self.iters = 0  # improvement sweeps (the extrapolation's clock)
         self._out: np.ndarray | None = None  # where the last certificate pass wrote the next iterate
-        self._mid = 0.0  # the midpoint of the last certificate
 
     def pass_(self, h: np.ndarray, h_out: np.ndarray | None, write: Write, relax: float, shift: float) -> tuple[float, float]:
         """One pass over the layout; (min, max) of T h - h on the h it read (an in-place pass
@@ -144,11 +143,8 @@ class BoxSweeps(IterationScheme):
     def certify(self, shift: float) -> tuple[float, float]:
         self._out = self.ex.prev if self.name == "warm" else self.h_out if self.name == "jacobi" else None
         if self._out is None:
-            lo, hi = self.pass_(self.h, None, Write.NONE, self.relax, shift)
-        else:
-            lo, hi = self.pass_(self.h, self._out, Write.OUT, JACOBI_TAU, shift)
-        self._mid = 0.5 * (lo + hi)
-        return lo, hi
+            return self.pass_(self.h, None, Write.NONE, self.relax, shift)
+        return self.pass_(self.h, self._out, Write.OUT, JACOBI_TAU, shift)
 
     def advance(self) -> None:
         out, self._out = self._out, None
@@ -173,10 +169,10 @@ class BoxSweeps(IterationScheme):
     def after_check(self, width: float, progress: Progress) -> bool:
         if self.name == "jacobi":
             return False
-        note = self.ex.step(self.h, self.iters, width, width / max(abs(self._mid), 1e-300))
+        note = self.ex.step(self.h, self.iters, width)
         if note is not None:
             progress.phase(f"[{self.label}] {note}")
-        return False  # a step is judged at the next regular certificate (Extrapolator)
+        return self.ex.pending is not None or (note is not None and "undone" in note)
 
     def fall_back(self) -> str | None:
         if self.name == "jacobi":
@@ -192,7 +188,7 @@ class BoxSweeps(IterationScheme):
         self.ex.pending = None
 
     def settle(self) -> None:
-        self.ex.settle(self.h, self.iters)
+        self.ex.settle(self.h)
 
     def roundoff(self) -> float:
         return gamma(self.st.op.roundoff_terms) * (self.st.op.cost_scale + 2.0 * max_abs(self.h))
@@ -357,7 +353,7 @@ def _common_stats(out: IterationOutcome, opts: MatrixFreeOptions, sweeps: BoxSwe
             "rel_gap": (hi - lo) / max(abs(gain), 1e-300), "converged": out.converged,
             "roundoff_delta": delta, "span_computed": out.hi - out.lo, "stop": out.stop,
             "seconds_setup": t_setup, "fallback": out.fallback, "history": out.history,
-            "extrapolations": sweeps.ex.count, "extrapolations_missed": sweeps.ex.missed}
+            "extrapolations": sweeps.ex.count, "extrapolations_undone": sweeps.ex.reverted}
 
 
 # ============================================================================ evaluation
