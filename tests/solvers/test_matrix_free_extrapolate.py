@@ -29,13 +29,13 @@ def geometric(k, h_star, v):
 
 def drive(ex, widths, h_star, v):
     """Certificates every CYCLE iterations of the one-mode iteration, with the given widths
-    (saving h one iteration before a certificate when asked); returns (h, iters, notes) at the
-    first step, or at the end."""
+    (saving h at the start of a cycle when asked); returns (h, iters, notes) at the first step,
+    or (None, None, notes) at the end."""
     notes = []
     for c, w in enumerate(widths, start=1):
         it = c * CYCLE
-        if ex.want_save():
-            ex.save(geometric(it - 1, h_star, v), it - 1)
+        if ex.want_save():  # at the start of the cycle
+            ex.save(geometric(it - CYCLE, h_star, v), it - CYCLE)
         h = geometric(it, h_star, v)
         note = ex.step(h, it, w)
         notes.append(note)
@@ -115,3 +115,13 @@ def test_solves_that_extrapolate_close_on_the_stored_gain(p1234, start):
     s = 1e-9 * ref.gain
     assert sol.gain_lower - s <= ref.gain <= sol.gain_upper + s
     assert ref.gain_lower - s <= sol.gain <= ref.gain_upper + s
+
+
+def test_no_step_on_a_copy_from_an_older_cycle(mode):
+    # h_prev saved several cycles before the certificate: its m would be unknown to the rates
+    h_star, v = mode
+    ex = Extrapolator(h_star.size, True)
+    ex.save(geometric(0, h_star, v), 0)
+    for c in range(1, 10):
+        ex.step(geometric(c * CYCLE, h_star, v), c * CYCLE, LAM ** (CYCLE * c))
+    assert ex.count == 0
