@@ -357,7 +357,7 @@ def test_size_guard_knows_the_matrix_free_memory():
 def test_an_unfinished_run_returns_the_iterate_of_its_certificate(options):
     sc = paper("paper_p1234", "tau_cap=7")
     mdp = built(sc)
-    for budget in (1, 2, 7, 23, 61):
+    for budget in (1, 2, 7, 23, 41, 47):  # the default closes after 56
         sol = matrix_free_value_iteration(sc, max_iter=budget, **options)
         assert sol.status == "max_iter" and sol.iterations <= budget
         lo, hi = bracket(mdp, sol.on_mdp(mdp).bias)

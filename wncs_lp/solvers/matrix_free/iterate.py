@@ -133,7 +133,7 @@ class BoxSweeps(IterationScheme):
     def improve(self, sweeps: int, shift: float) -> int:
         evals = 0
         for i in range(sweeps):
-            if i == sweeps - 1 and self.ex.want_save():
+            if i == 0 and self.ex.want_save():
                 self.ex.save(self.h, self.iters)
             self.pass_(self.h, None, Write.IN_PLACE, self.relax, shift)
             self.iters += 1
@@ -143,8 +143,11 @@ class BoxSweeps(IterationScheme):
     def certify(self, shift: float) -> tuple[float, float]:
         self._out = self.ex.prev if self.name == "warm" else self.h_out if self.name == "jacobi" else None
         if self._out is None:
-            return self.pass_(self.h, None, Write.NONE, self.relax, shift)
-        return self.pass_(self.h, self._out, Write.OUT, JACOBI_TAU, shift)
+            bracket = self.pass_(self.h, None, Write.NONE, self.relax, shift)
+        else:
+            bracket = self.pass_(self.h, self._out, Write.OUT, JACOBI_TAU, shift)
+        self.ex.certified()
+        return bracket
 
     def advance(self) -> None:
         out, self._out = self._out, None
