@@ -82,9 +82,8 @@ def test_auto_takes_relaxation_1_when_relaxation_2_stopped_below_it(monkeypatch,
 
 
 def test_auto_beyond_the_whole_lp_takes_relaxation_2_on_the_lumped_chains(monkeypatch):
-    """With relaxation 2's whole LP out of reach, auto still raises its Lagrangian from relaxation 1's
-    prices on the lumped chains (the smoothed ascent): certified, above relaxation 1's bound (here
-    relaxation 2's optimum is 0.14% above it), below the exact g*."""
+    """With relaxation 2's whole LP out of reach, auto still evaluates its Lagrangian at relaxation 1's
+    prices on the lumped chains: certified, at least relaxation 1's bound, below the exact g*."""
     from wncs_lp.bounds import joint
 
     sc = load_scenario(scenario_path("paper_p1234"), ["tau_cap=6"])
@@ -92,9 +91,9 @@ def test_auto_beyond_the_whole_lp_takes_relaxation_2_on_the_lumped_chains(monkey
     monkeypatch.setattr(joint, "REACH_MAX_NNZ", 1)
     res = lower_bound(system, "auto")
     assert "joint-configuration" in res.stats["auto_bounds"]
-    assert "Lagrangian on the lumped chains" in res.stats["auto_reason"]
+    assert "Lagrangian at relaxation 1's prices" in res.stats["auto_reason"]
     r2 = res.stats["auto_bounds"]["joint-configuration"]
-    assert r2 >= res.stats["auto_bounds"]["private-servers"] * (1 + 1e-3)
+    assert r2 >= res.stats["auto_bounds"]["private-servers"] * (1 - 1e-6)
     assert res.lower_bound <= solve(build(sc)).gain_upper
 
 

@@ -22,7 +22,7 @@ from .pairs import pairs_bound, pairs_size
 from .private import private_bound
 from .result import BoundResult
 
-__all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "AUTO_ASCENT_STEPS", "AUTO_ASCENT_CPU",
+__all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "AUTO_ASCENT_STEPS",
            "AUTO_ASCENT_MAX_BYTES", "AUTO_PAIRS_STEPS", "AUTO_PAIRS_BUDGET", "AUTO_PAIRS_CPU_PER_WORK",
            "AUTO_PAIRS_MAX_BYTES", "AUTO_PAIRS_MIN_GAIN",
            "lower_bound", "parse_relaxation", "auto_pick", "runs_grouped"]
@@ -49,15 +49,14 @@ AUTO_SEARCH = {"max_iter": 30, "time_limit": None}
 AUTO_GROUPED_TIME_LIMIT = 300.0
 
 
-#: Beyond relaxation 2's reach (its whole LP), ``"auto"`` still raises relaxation 2's Lagrangian on
-#: the lumped chains from relaxation 1's prices (:func:`~wncs_lp.bounds.joint.joint_bound` with
-#: ``method="smooth"``: L-BFGS on the smoothed Lagrangian, never below its start, relaxation 1's
-#: prices) for this many smoothed evaluations ...
-AUTO_ASCENT_STEPS = 40
-#: ... or until this many seconds of CPU time are spent in the search, whichever comes first (the
-#: measured figures at sixteen processes: docs/bounds.md, "Relaxation 2 and the lookahead at
-#: sixteen processes").
-AUTO_ASCENT_CPU = 150.0
+#: Beyond relaxation 2's reach (its whole LP), ``"auto"`` still evaluates relaxation 2's Lagrangian on
+#: the lumped chains (:func:`~wncs_lp.bounds.joint.joint_bound` with ``method="ascent"``) this many
+#: steps from relaxation 1's prices: one, the start, never below relaxation 1. Where measured at
+#: sixteen processes the start was the best point of 100 supergradient steps, and the smoothed
+#: ascent (``method="smooth"``) in a comparable budget gained 0.05% at ``bounds_lab16`` and nothing at
+#: ``bounds_p1234_x4`` while taking the command past ten minutes of CPU (docs/bounds.md, "Relaxation
+#: 2 and the lookahead at sixteen processes").
+AUTO_ASCENT_STEPS = 1
 #: ... where its arrays are estimated to fit this many bytes.
 AUTO_ASCENT_MAX_BYTES = 3 * 2**30
 
@@ -108,8 +107,8 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         looser than relaxation 2; run by ``"auto"`` after relaxation 2's interior point where
         predicted to fit and where its start pays (:data:`AUTO_PAIRS_STEPS`).
         ``"auto"``: the largest certified bound of relaxation 1, relaxation 2 when the instance is
-        within its reach (beyond it, on an enumerated system, its Lagrangian raised from relaxation
-        1's prices on the lumped chains: :data:`AUTO_ASCENT_STEPS`), and relaxation 3 (pairs, :mod:`~wncs_lp.bounds.grouped`)
+        within its reach (beyond it, on an enumerated system, its Lagrangian at relaxation 1's
+        prices on the lumped chains: :data:`AUTO_ASCENT_STEPS`), and relaxation 3 (pairs, :mod:`~wncs_lp.bounds.grouped`)
         when there are at least three processes and relaxation 2 was not solved by its interior
         point (where it was, it was the tighter: processes 1-4, cap 20, 1547.6 against 1441.2);
         relaxation 4 (pairs) after relaxation 2's interior point where it fits and its start pays
@@ -249,8 +248,8 @@ def _try_joint(system: System, options: dict) -> tuple[BoundResult | None, str]:
 
 
 def _try_lumped(system: System, options: dict, why_not: str) -> tuple[BoundResult | None, str]:
-    """Beyond the whole LP's reach: relaxation 2's Lagrangian raised from relaxation 1's prices on the
-    lumped chains (:data:`AUTO_ASCENT_STEPS`, :data:`AUTO_ASCENT_CPU`), where its arrays fit :data:`AUTO_ASCENT_MAX_BYTES`."""
+    """Beyond the whole LP's reach: relaxation 2's Lagrangian at relaxation 1's prices on the lumped
+    chains (:data:`AUTO_ASCENT_STEPS`), where its arrays fit :data:`AUTO_ASCENT_MAX_BYTES`."""
     size = joint_size(system)
     cap = int(max(system.caps))
     # the automaton's outcome arrays, the certificate's (outcomes x cap) temporaries, the tables
@@ -259,11 +258,10 @@ def _try_lumped(system: System, options: dict, why_not: str) -> tuple[BoundResul
         return None, f"beyond relaxation 2's reach: {why_not}; its lumped chains need ~{need / 2**30:.1f} GiB"
     keep = {k: v for k, v in options.items() if k in ("tol", "progress")}
     try:
-        res = joint_bound(system, method="smooth", max_iter=AUTO_ASCENT_STEPS, time_limit=None,
-                          ascent_cpu_limit=AUTO_ASCENT_CPU, **keep)
+        res = joint_bound(system, method="ascent", max_iter=AUTO_ASCENT_STEPS, time_limit=None, **keep)
     except WncsError as exc:
         return None, f"beyond relaxation 2's reach: {why_not}; its lumped chains could not run: {exc}"
-    return res, f"relaxation 2's whole LP is out of reach ({why_not}): its Lagrangian on the lumped chains instead"
+    return res, f"relaxation 2's whole LP is out of reach ({why_not}): its Lagrangian at relaxation 1's prices instead"
 
 
 def _try_pairs(system: System, res2: BoundResult | None, options: dict) -> tuple[BoundResult | None, str]:
