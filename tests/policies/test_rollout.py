@@ -109,8 +109,11 @@ def test_exact_tables_give_the_optimum():
     assert evaluate(mdp, pol).gain == pytest.approx(solve(mdp).gain, rel=1e-9)
 
 
-def test_by_name_in_the_gap_report_and_refusals(p12):
+def test_by_name_in_the_gap_report_and_refusals(p12, monkeypatch):
+    from wncs_lp.bounds import lookahead
+
     _, system, res, mdp = p12
+    monkeypatch.setattr(lookahead, "PARALLEL_MIN_STATES", 10**12)  # the serial kernel: one compilation
     report = policy_gaps(res, system, ["bound", "rollout"])
     row = report.rows[1]
     assert row.policy.startswith("rollout-") and row.how == "exact"
@@ -121,3 +124,22 @@ def test_by_name_in_the_gap_report_and_refusals(p12):
         RolloutPolicy(bound_policy(res, system), res.tables.value, horizon=0)
     with pytest.raises(PolicyError, match="value function"):
         RolloutPolicy(bound_policy(res, system), None)
+
+
+@pytest.mark.parametrize("relaxation", ["private", "grouped"])
+def test_the_kernel_takes_the_numpy_rollouts_decisions(p12, relaxation):
+    from wncs_lp.bounds import TableRolloutPolicy, grouped_bound
+
+    _, system, res, _ = p12
+    if relaxation == "grouped":  # one group of both processes: tables over (tau_1, tau_2, C_G)
+        res = grouped_bound(system, [(0, 1)])
+    greedy = bound_policy(res, system)
+    fast = TableRolloutPolicy(greedy, candidates=3, horizon=4, samples=5, seed=11, threads=1)
+    slow = RolloutPolicy(greedy, res.tables.value, candidates=3, horizon=4, samples=5, seed=11)
+    assert np.array_equal(fast.uniforms, slow.uniforms) and fast.name == slow.name
+    rng = np.random.default_rng(8)
+    n = 400
+    tau = np.stack([rng.integers(1, int(system.caps[k]) + 1, n) for k in range(system.n_processes)], axis=1)
+    cfg = rng.integers(0, system.n_configs, n)
+    assert np.array_equal(fast.act(tau, cfg), slow.act(tau, cfg))
+    assert np.array_equal(TableRolloutPolicy(greedy, horizon=1, threads=1).act(tau, cfg), greedy.act(tau, cfg))

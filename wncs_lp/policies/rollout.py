@@ -40,11 +40,14 @@ import numpy as np
 from ..errors import PolicyError
 from .base import Policy
 
-__all__ = ["RolloutPolicy", "BLOCK_ENTRIES"]
+__all__ = ["RolloutPolicy", "BLOCK_ENTRIES", "TIE"]
 
 #: Values of the base policy (rows x A_max) computed at once: the states of a call are rolled out in
 #: blocks of about this many numbers.
 BLOCK_ENTRIES = 4_000_000
+#: Relative width within which two candidates' scores tie (the first in candidate order is taken):
+#: paths that coincide under two actions give scores equal but for the order of their sums.
+TIE = 1e-12
 
 
 class RolloutPolicy(Policy):
@@ -140,7 +143,9 @@ class RolloutPolicy(Policy):
             a_r = np.argmin(v, axis=1)
             resid += s.state_cost(t_r) + v[rows, a_r] - np.asarray(self.value(t_r, c_r), dtype=float)
         q = q + resid.reshape(R, K, S).mean(axis=2)
-        return cand[np.arange(R), np.argmin(q, axis=1)]  # ties: the greedy's choice
+        low = q.min(axis=1, keepdims=True)
+        pick = np.argmax(q <= low + TIE * np.abs(low), axis=1)  # ties: the greedy's choice, then by greedy value
+        return cand[np.arange(R), pick]
 
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "base": self.base.describe(), "candidates": self.candidates,
