@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import PolicyError
 from ..models.system import System
 from ..policies.base import Policy
+from ..policies.rollout import check_rollout, rollout_uniforms
 from ..policies.suboptimal import SeparableGreedyPolicy
 from .policy import TABLE_MAX_BYTES, GroupBoundPolicy
 from .projected import ProjectedBoundPolicy
@@ -224,11 +225,7 @@ class TableRolloutPolicy(LookaheadPolicy):
         if result is None:
             raise PolicyError("the table rollout needs a bound's greedy policy (BoundPolicy, GroupBoundPolicy, "
                               f"ProjectedBoundPolicy: its tables are the terminal value); got {type(base).__name__}")
-        for what, x in (("candidates", candidates), ("horizon", horizon), ("samples", samples)):
-            if not (isinstance(x, (int, np.integer)) and x >= 1):
-                raise PolicyError(f"{what} must be a whole number >= 1, got {x!r}")
-        if not (isinstance(seed, (int, np.integer)) and seed >= 0):
-            raise PolicyError(f"seed must be a whole number >= 0, got {seed!r}")
+        check_rollout(candidates, horizon, samples, seed)
         super().__init__(base, int(candidates), threads)
         t0 = time.perf_counter()
         s = self.system
@@ -247,8 +244,7 @@ class TableRolloutPolicy(LookaheadPolicy):
         self._hflat = np.concatenate([h.ravel() for h in hs])
         self._hcol = np.stack([np.asarray(tables.column[where[g]], np.int64) for g in blocks])
         self.horizon, self.samples, self.seed = int(horizon), int(samples), int(seed)
-        self.uniforms = np.random.default_rng(np.random.SeedSequence(self.seed)).random((self.samples,
-                                                                                          self.horizon - 1))
+        self.uniforms = rollout_uniforms(self.samples, self.horizon, self.seed)
         self.name = f"rollout-k{self.candidates}-h{self.horizon}-s{self.samples}[{base.name}]"
         self.build_seconds += time.perf_counter() - t0
 

@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import PolicyError
 from .base import Policy
 
-__all__ = ["RolloutPolicy", "BLOCK_ENTRIES", "TIE"]
+__all__ = ["RolloutPolicy", "check_rollout", "rollout_uniforms", "BLOCK_ENTRIES", "TIE"]
 
 #: Values of the base policy (rows x A_max) computed at once: the states of a call are rolled out in
 #: blocks of about this many numbers.
@@ -48,6 +48,20 @@ BLOCK_ENTRIES = 4_000_000
 #: Relative width within which two candidates' scores tie (the first in candidate order is taken):
 #: paths that coincide under two actions give scores equal but for the order of their sums.
 TIE = 1e-12
+
+
+def check_rollout(candidates: Any, horizon: Any, samples: Any, seed: Any) -> None:
+    """Refuse (:class:`PolicyError`, naming the parameter) a count below 1 or a negative seed."""
+    for what, x in (("candidates", candidates), ("horizon", horizon), ("samples", samples)):
+        if not (isinstance(x, (int, np.integer)) and x >= 1):
+            raise PolicyError(f"{what} must be a whole number >= 1, got {x!r}")
+    if not (isinstance(seed, (int, np.integer)) and seed >= 0):
+        raise PolicyError(f"seed must be a whole number >= 0, got {seed!r}")
+
+
+def rollout_uniforms(samples: int, horizon: int, seed: int) -> np.ndarray:
+    """The (samples, horizon - 1) uniforms that drive the rollout's paths, drawn once from ``seed``."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed))).random((int(samples), int(horizon) - 1))
 
 
 class RolloutPolicy(Policy):
@@ -86,18 +100,14 @@ class RolloutPolicy(Policy):
         if not callable(value):
             raise PolicyError(f"the rollout policy needs the value function h(tau, config_ids) of its base policy's "
                               f"tables; got {type(value).__name__}")
-        for what, x in (("candidates", candidates), ("horizon", horizon), ("samples", samples)):
-            if not (isinstance(x, (int, np.integer)) and x >= 1):
-                raise PolicyError(f"{what} must be a whole number >= 1, got {x!r}")
-        if not (isinstance(seed, (int, np.integer)) and seed >= 0):
-            raise PolicyError(f"seed must be a whole number >= 0, got {seed!r}")
+        check_rollout(candidates, horizon, samples, seed)
         super().__init__(base.system)
         t0 = time.perf_counter()
         if self.system.is_lazy:
             self.refuse_lazy(self.system)
         self.base, self.value = base, value
         self.candidates, self.horizon, self.samples, self.seed = int(candidates), int(horizon), int(samples), int(seed)
-        self.uniforms = np.random.default_rng(np.random.SeedSequence(self.seed)).random((self.samples, self.horizon - 1))
+        self.uniforms = rollout_uniforms(self.samples, self.horizon, self.seed)
         self.name = name or f"rollout-k{self.candidates}-h{self.horizon}-s{self.samples}[{base.name}]"
         self.build_seconds = time.perf_counter() - t0 + getattr(base, "build_seconds", 0.0)
 
