@@ -8,6 +8,7 @@ import pytest
 
 from wncs_lp import scenario_path, solve
 from wncs_lp.bounds import bound_policy, policy_gaps, private_bound
+from wncs_lp.bounds.gaps import policy_by_name
 from wncs_lp.errors import PolicyError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
@@ -118,6 +119,10 @@ def test_by_name_in_the_gap_report_and_refusals(p12, monkeypatch):
     row = report.rows[1]
     assert row.policy.startswith("rollout-") and row.how == "exact"
     assert row.gain >= solve(mdp).gain_lower * (1 - 1e-9)
+    # by name: 4 candidates on small systems, 8 where some configuration has more than AUTO_CANDIDATES_FROM actions
+    assert row.policy.startswith("rollout-k4-h4-s8[")
+    monkeypatch.setattr(lookahead, "AUTO_CANDIDATES_FROM", system.max_actions - 1)
+    assert policy_by_name("rollout", res, system).candidates == 8
     with pytest.raises(PolicyError, match="values"):
         RolloutPolicy(GreedyPolicy(system), res.tables.value)
     with pytest.raises(PolicyError, match="horizon"):

@@ -34,7 +34,8 @@ from .policy import TABLE_MAX_BYTES, GroupBoundPolicy
 from .projected import ProjectedBoundPolicy
 
 __all__ = ["LookaheadPolicy", "TableRolloutPolicy", "lookahead_policy", "auto_candidates", "AUTO_CANDIDATES",
-           "AUTO_CANDIDATES_FROM", "ROLLOUT_CANDIDATES", "ROLLOUT_HORIZON", "ROLLOUT_SAMPLES"]
+           "AUTO_CANDIDATES_FROM", "rollout_candidates", "ROLLOUT_CANDIDATES", "ROLLOUT_CANDIDATES_LARGE",
+           "ROLLOUT_HORIZON", "ROLLOUT_SAMPLES"]
 
 #: States per call of the kernel from which it runs threaded (:func:`wncs_lp.solvers.threads.resolve_threads`).
 PARALLEL_MIN_STATES = 20_000
@@ -188,9 +189,19 @@ class LookaheadPolicy(Policy):
                 "depth": self.depth, "middle": self.middle, "build_seconds": self.build_seconds}
 
 
-#: The rollout by name: candidates, horizon (slots simulated, the candidate's included) and paths per
-#: candidate (measured at eight and sixteen processes: docs/bounds.md, "Rollout").
-ROLLOUT_CANDIDATES, ROLLOUT_HORIZON, ROLLOUT_SAMPLES = 4, 4, 8
+#: The rollout by name: candidates (:data:`ROLLOUT_CANDIDATES` where no configuration has more than
+#: :data:`AUTO_CANDIDATES_FROM` actions, :data:`ROLLOUT_CANDIDATES_LARGE` beyond), horizon (slots
+#: simulated, the candidate's included) and paths per candidate. Measured (docs/bounds.md, "Rollout"):
+#: at eight processes 8 candidates chose as 4 did; at sixteen (240 actions) 8 cut the upper limit by a
+#: further 0.31%, while a horizon of 8 instead of 4 raised it by 1%.
+ROLLOUT_CANDIDATES, ROLLOUT_CANDIDATES_LARGE, ROLLOUT_HORIZON, ROLLOUT_SAMPLES = 4, 8, 4, 8
+
+
+def rollout_candidates(system: System) -> int:
+    """The candidate count of the rollout by name on ``system`` (:data:`ROLLOUT_CANDIDATES`, or
+    :data:`ROLLOUT_CANDIDATES_LARGE` where some configuration has more than :data:`AUTO_CANDIDATES_FROM`
+    actions)."""
+    return ROLLOUT_CANDIDATES_LARGE if int(system.max_actions) > AUTO_CANDIDATES_FROM else ROLLOUT_CANDIDATES
 
 
 class TableRolloutPolicy(LookaheadPolicy):
@@ -213,18 +224,20 @@ class TableRolloutPolicy(LookaheadPolicy):
     base : BoundPolicy, GroupBoundPolicy or ProjectedBoundPolicy
         A bound's greedy policy (its ``result.tables`` are h).
     candidates, horizon, samples : int
-        Default :data:`ROLLOUT_CANDIDATES`, :data:`ROLLOUT_HORIZON`, :data:`ROLLOUT_SAMPLES`.
+        Default :func:`rollout_candidates` of the system, :data:`ROLLOUT_HORIZON`, :data:`ROLLOUT_SAMPLES`.
     seed : int
     threads : int, optional
     """
 
     def __init__(self, base: SeparableGreedyPolicy | GroupBoundPolicy | ProjectedBoundPolicy,
-                 candidates: int = ROLLOUT_CANDIDATES, horizon: int = ROLLOUT_HORIZON,
+                 candidates: int | None = None, horizon: int = ROLLOUT_HORIZON,
                  samples: int = ROLLOUT_SAMPLES, seed: int = 0, threads: int | None = None):
         result = getattr(base, "result", None)
         if result is None:
             raise PolicyError("the table rollout needs a bound's greedy policy (BoundPolicy, GroupBoundPolicy, "
                               f"ProjectedBoundPolicy: its tables are the terminal value); got {type(base).__name__}")
+        if candidates is None:
+            candidates = rollout_candidates(base.system)
         check_rollout(candidates, horizon, samples, seed)
         super().__init__(base, int(candidates), threads)
         t0 = time.perf_counter()
