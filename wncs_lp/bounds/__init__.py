@@ -22,6 +22,8 @@ the enumerated MDP).
   read through the projections on the private systems (:mod:`wncs_lp.bounds.projected`: memory
   linear in the number of processes);
 * :class:`LookaheadPolicy` -- the two-step lookahead on a greedy policy's tables (greedy on T h);
+* :class:`TableRolloutPolicy` -- the rollout of a bound's greedy policy (a few simulated slots ahead of
+  each candidate action, the tables as terminal value and control variate), in a numba kernel;
 * :func:`whittle_indices` / :class:`IndexPolicy` -- Whittle-type indices of relaxation 1's priced
   chains and the index policy;
 * :func:`~wncs_lp.bounds.gaps.policy_gaps` -- policies evaluated against a bound: the certified
@@ -38,7 +40,7 @@ from .gaps import GapReport, PolicyGap, policy_gaps
 from .lower import AUTO_SEARCH, RELAXATIONS, lower_bound, parse_relaxation
 from .grouped import grouped_bound
 from .index import IndexPolicy, IndexTables, whittle_indices
-from .lookahead import LookaheadPolicy
+from .lookahead import LookaheadPolicy, TableRolloutPolicy
 from .policy import BoundPolicy, GroupBoundPolicy, bound_policy
 from .private import private_bound
 from .projected import ProjectedBoundPolicy
@@ -47,4 +49,4 @@ from .result import BoundResult, GroupTables, ValueTables
 __all__ = ["BoundResult", "ValueTables", "GroupTables", "BoundPolicy", "GroupBoundPolicy", "ProjectedBoundPolicy",
            "GapReport", "PolicyGap",
            "RELAXATIONS", "lower_bound", "bound_policy", "policy_gaps", "private_bound", "grouped_bound",
-           "parse_relaxation", "AUTO_SEARCH", "LookaheadPolicy", "IndexPolicy", "IndexTables", "whittle_indices"]
+           "parse_relaxation", "AUTO_SEARCH", "LookaheadPolicy", "TableRolloutPolicy", "IndexPolicy", "IndexTables", "whittle_indices"]

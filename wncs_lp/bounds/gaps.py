@@ -42,7 +42,7 @@ from ..policies.factory import BOUND_POLICY_NAMES, make_basic_policy
 from ..progress import as_progress
 from ..simulate import simulate
 from .index import IndexPolicy, whittle_indices
-from .lookahead import LookaheadPolicy, auto_candidates
+from .lookahead import LookaheadPolicy, TableRolloutPolicy, auto_candidates
 from .named import named_policy
 from .policy import bound_policy
 from .projected import PROJECTED, ProjectedValue
@@ -136,7 +136,10 @@ class GapReport:
 
 def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Policy:
     """A policy of a gap report by name: ``"bound"`` (the bound's greedy policy) and
-    ``"lookahead"`` on this bound's tables, ``"index"`` priced from relaxation 1 (this bound when
+    ``"lookahead"`` on this bound's tables, ``"lookahead3"`` (depth 3, the ``middle`` 2 best actions
+    at the intermediate state, the same candidates), ``"rollout"``
+    (:class:`~wncs_lp.bounds.lookahead.TableRolloutPolicy`: the bound's greedy policy simulated a few
+    slots ahead of each candidate action, the tables as terminal value and control variate), ``"index"`` priced from relaxation 1 (this bound when
     it is relaxation 1's, else computed: seconds), any other name by the policy factory's rooms
     (:func:`~wncs_lp.bounds.named.named_policy`, :func:`~wncs_lp.policies.factory.make_basic_policy`);
     a :class:`Policy` is returned as it is."""
@@ -146,6 +149,10 @@ def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Po
         return bound_policy(bound, system)
     if name == "lookahead":
         return LookaheadPolicy(bound_policy(bound, system), auto_candidates(system))
+    if name == "lookahead3":
+        return LookaheadPolicy(bound_policy(bound, system), auto_candidates(system), depth=3, middle=2)
+    if name == "rollout":
+        return TableRolloutPolicy(bound_policy(bound, system))
     if name == "index":
         return IndexPolicy(system, whittle_indices(system, bound if bound.relaxation == "private-servers" else None))
     if name in BOUND_POLICY_NAMES:
@@ -230,7 +237,9 @@ def policy_gaps(
         The system the bound was computed on.
     policies : sequence of str or Policy
         ``"bound"`` (the bound's greedy policy), ``"lookahead"`` (the two-step lookahead on the
-        bound's tables), ``"index"`` (the index policy of relaxation 1's chains), any name of
+        bound's tables), ``"lookahead3"`` (one step deeper), ``"rollout"`` (the bound's greedy policy
+        simulated a few slots ahead from each candidate action: :class:`~wncs_lp.bounds.lookahead.TableRolloutPolicy`),
+        ``"index"`` (the index policy of relaxation 1's chains), any name of
         :func:`wncs_lp.workflow.make_policy` that needs no enumerated MDP (``suboptimal``,
         ``static``, ``greedy``, ``random``), or policies.
     exact : bool, optional

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..policies.rollout import TIE
 from ..solvers.threads import twins
 
 
@@ -177,3 +178,95 @@ def _lookahead_body(tau, cfg, first, count, nxt, delta, deltas, prob, caps, q, W
 
 #: The kernel on numba's threads and on one (``prange`` then ``range``).
 lookahead, lookahead_serial = twins(_lookahead_body, "lookahead")
+
+
+@njit(cache=True)
+def _rollout_decide(r, tau, cfg, first, count, nxt, delta, deltas, cum, caps, q, W, off, width, mptr, members, stride,
+                    idle, touch, tpair, hflat, hoff, hwidth, hcol, U, k_cand, greedy, out, t0, t1, t2, tb, g0, gv, v2, cand):
+    """The rollout's action at state r (:class:`~wncs_lp.bounds.lookahead.TableRolloutPolicy`): the
+    greedy choice ``greedy[r]``, then the k_cand - 1 others of least greedy value, each scored by its greedy value
+    plus the mean over the rows of U of the greedy policy's Bellman residuals
+    cost(t') + min_a' value(c', a', t') - h(c', t') along the path the row's uniforms draw."""
+    c = cfg[r]
+    for k in range(caps.size):
+        t0[k] = tau[r, k] - 1
+    n = count[c]
+    _block_index(mptr, members, stride, t0, tb)
+    _values(c, first, count, W, off, width, idle, touch, tpair, tb, g0)
+    m = n if k_cand <= 0 or k_cand > n else k_cand
+    for j in range(n):
+        gv[j] = g0[j]
+    cand[0] = greedy[r]  # the greedy policy's own choice (its tie rule), then by least value
+    gv[greedy[r]] = np.inf
+    for i in range(1, m):
+        best, arg = np.inf, -1
+        for a in range(n):
+            if gv[a] < best:
+                best, arg = gv[a], a
+        cand[i] = arg
+        gv[arg] = np.inf
+    S, H1 = U.shape
+    if m == 1 or H1 == 0:
+        out[r] = cand[0]
+        return
+    bestq, choice = np.inf, cand[0]
+    for i in range(m):
+        a = cand[i]
+        tot = 0.0
+        for s in range(S):
+            for k in range(caps.size):
+                t1[k] = t0[k]
+            p = first[c] + a
+            for st in range(H1):
+                u = U[s, st]
+                o = 0
+                for j in range(cum.shape[1]):
+                    if u >= cum[p, j]:
+                        o += 1
+                cost = _step(p, o, t1, deltas, delta, caps, q, t2)
+                c2 = nxt[p, o]
+                _block_index(mptr, members, stride, t2, tb)
+                _values(c2, first, count, W, off, width, idle, touch, tpair, tb, v2)
+                a2, v = 0, np.inf
+                for j in range(count[c2]):
+                    if v2[j] < v:
+                        a2, v = j, v2[j]
+                hv = 0.0
+                for b in range(tb.size):
+                    hv += hflat[hoff[b] + hcol[b, c2] * hwidth[b] + tb[b]]
+                tot += cost + v - hv
+                p = first[c2] + a2
+                for k in range(caps.size):
+                    t1[k] = t2[k]
+        gv[i] = g0[a] + tot / S
+        if gv[i] < bestq:
+            bestq = gv[i]
+    for i in range(m):  # the first candidate within TIE of the least score (sums in another order tie)
+        if gv[i] <= bestq + TIE * abs(bestq):
+            choice = cand[i]
+            break
+    out[r] = choice
+
+
+def _rollout_body(tau, cfg, first, count, nxt, delta, deltas, cum, caps, q, W, off, width, mptr, members, stride,
+                  idle, touch, tpair, hflat, hoff, hwidth, hcol, U, k_cand, greedy, amax, out):
+    n = cfg.size
+    N = caps.size
+    chunk = 256
+    for blk in prange((n + chunk - 1) // chunk):
+        t0 = np.empty(N, dtype=np.int64)
+        t1 = np.empty(N, dtype=np.int64)
+        t2 = np.empty(N, dtype=np.int64)
+        tb = np.empty(off.size, dtype=np.int64)
+        g0 = np.empty(amax)
+        gv = np.empty(amax)
+        v2 = np.empty(amax)
+        cand = np.empty(amax, dtype=np.int64)
+        for r in range(blk * chunk, min(n, (blk + 1) * chunk)):
+            _rollout_decide(r, tau, cfg, first, count, nxt, delta, deltas, cum, caps, q, W, off, width, mptr, members,
+                            stride, idle, touch, tpair, hflat, hoff, hwidth, hcol, U, k_cand, greedy, out, t0, t1,
+                            t2, tb, g0, gv, v2, cand)
+
+
+#: The rollout kernel on numba's threads and on one.
+rollout, rollout_serial = twins(_rollout_body, "rollout")

@@ -151,7 +151,9 @@ def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--compare", default="lookahead,suboptimal,static,greedy", metavar="NAMES",
                    help="policies evaluated with --policy besides the bound's greedy one (default "
                         "lookahead,suboptimal,static,greedy; lookahead: the two-step lookahead on the bound's tables, "
-                        "index: the Whittle-type index policy of relaxation 1's chains; '' for none)")
+                        "lookahead3: one step deeper; rollout: the bound's greedy policy simulated a few slots ahead "
+                        "of each candidate action; index: the Whittle-type index policy of relaxation 1's chains; '' "
+                        "for none)")
     p.add_argument("--exact-max-states", type=NONNEGATIVE, default=50_000_000, metavar="N",
                    help="evaluate exactly (certified matrix-free evaluation) when the AoI box has at most N states, "
                         "else by Monte Carlo (default 50000000; 0: always Monte Carlo)")

@@ -32,6 +32,10 @@ Policies (:func:`wncs_lp.workflow.make_policy` builds them by name):
 ``relaxation``   the greedy policy of the certified lower bound (:mod:`wncs_lp.bounds`), a
                  :class:`SeparableGreedyPolicy` on the relaxation's value tables;
 ``lookahead``    the two-step lookahead on the same tables (:class:`wncs_lp.bounds.LookaheadPolicy`);
+``lookahead3``   the same, one step deeper (the 2 best actions at the intermediate state);
+``rollout``      the greedy policy on the same tables simulated a few slots ahead of each candidate
+                 action (:class:`wncs_lp.bounds.TableRolloutPolicy`; :class:`RolloutPolicy` for any
+                 greedy policy with ``values``);
 ``index``        the Whittle-type index policy of relaxation 1's priced chains
                  (:class:`wncs_lp.bounds.IndexPolicy`).
 
@@ -64,6 +68,7 @@ from .rules import (
     default_assignment,
     static_assignments,
 )
+from .rollout import RolloutPolicy
 from .search import best_static
 from .suboptimal import ProcessPoisson, SeparableGreedyPolicy, SuboptimalPolicy
 
@@ -90,6 +95,7 @@ __all__ = [
     "CappedPolicy",
     "ClippedPolicy",
     "MixedPolicy",
+    "RolloutPolicy",
     "MatrixFreePolicy",
     "TauIndependentPolicy",
     "RandomPolicy",
