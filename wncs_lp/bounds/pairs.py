@@ -66,7 +66,7 @@ from .inputs import bound_system
 from .joint import joint_bound
 from .joint_bundle import PriceBundle
 from .joint_chains import ChainSolution, JointData, TableCertificate, certificate_of, damped_rvi, lazy_power
-from .joint_symmetry import ProcessSymmetry, process_symmetry
+from .joint_symmetry import ProcessSymmetry, orbit_labels, process_symmetry
 from .result import BoundResult, GroupTables, ValueTables
 
 __all__ = ["pairs_bound", "pairs_size", "GroupChains", "GroupLumps", "certify_group_tables", "solve_group_chain", "group_cut",
@@ -187,22 +187,6 @@ def _swap_maps(sym: ProcessSymmetry, x: int, y: int) -> tuple[np.ndarray, np.nda
     return cx[cy[cx]], px[py[px]]
 
 
-def _orbit_labels(maps: list, size: int) -> tuple[int, np.ndarray]:
-    """(number of orbits, orbit of each element, numbered by first element) of the group generated
-    by the involutions ``maps`` (labels propagated to their minimum until nothing moves)."""
-    lab = np.arange(size)
-    moved = bool(maps)
-    while moved:
-        moved = False
-        for m in maps:
-            new = np.minimum(lab, lab[m])
-            if not np.array_equal(new, lab):
-                lab, moved = new, True
-        lab = lab[lab]  # compress: each label to its own label's
-    _, inv = np.unique(lab, return_inverse=True)
-    return int(inv.max()) + 1 if size else 0, inv.astype(np.int64)
-
-
 @dataclass(frozen=True, eq=False)
 class GroupLumps:
     r"""Each group's priced chain lumped by the symmetry of interchangeable processes.
@@ -254,13 +238,13 @@ class GroupLumps:
                     if all((x in g) == (y in g) for g in groups):
                         swaps.append((x, y))
         maps = {s: _swap_maps(sym, *s) for s in swaps}
-        n_q, qorb = _orbit_labels([maps[s][1] for s in swaps], data.n_pairs)
+        n_q, qorb = orbit_labels([maps[s][1] for s in swaps], data.n_pairs)
         lens = np.diff(data.out_ptr)
         chains, corbs, price_of = [], [], []
         for g in groups:
             mine = [maps[s] for s in swaps if not set(s) & set(g)]
-            n_k, corb = _orbit_labels([m[0] for m in mine], data.n_configs)
-            n_o, porb = _orbit_labels([m[1] for m in mine], data.n_pairs)
+            n_k, corb = orbit_labels([m[0] for m in mine], data.n_configs)
+            n_o, porb = orbit_labels([m[1] for m in mine], data.n_pairs)
             first = np.full(n_o, -1, dtype=np.int64)
             first[porb[::-1]] = np.arange(data.n_pairs)[::-1]  # each orbit's smallest pair
             conf = corb[data.pair_c[first]]
