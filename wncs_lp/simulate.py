@@ -545,10 +545,7 @@ def _run_slots(policy, tau: np.ndarray, burn_in: int, slots: int, chan: np.rando
                 h_now = _values(value, tau, c)
             tau, c, h_now = _controlled_step(pt, caps, value, tau, p, o, rows, h_now, acc, b)
         else:
-            d = pt.deltas[pt.delta[p, o]]
-            c = pt.nxt[p, o]
-            tnew = np.minimum(tau + 1, caps)
-            tau = np.where(d > 0, np.minimum(tnew, d), tnew)
+            tau, c = sysm.next_tau(tau, pt.deltas[pt.delta[p, o]]), pt.nxt[p, o]
         if bar is not None and (t + 1) % chunk == 0:
             bar.update(chunk)
     if bar is not None:

@@ -122,7 +122,7 @@ class RolloutPolicy(Policy):
 
     def _act_block(self, tau: np.ndarray, c: np.ndarray) -> np.ndarray:
         s = self.system
-        pt, caps = s.pairs, np.asarray(s.caps, dtype=np.int64)
+        pt = s.pairs
         v0 = np.asarray(self.base.values(tau, c), dtype=float)
         R, A = v0.shape
         K = min(self.candidates, A)
@@ -145,10 +145,7 @@ class RolloutPolicy(Policy):
         for t in range(H - 1):
             p = pt.first[c_r] + a_r
             o = (u[:, t][:, None] >= pt.cum[p]).sum(axis=1)
-            d = pt.deltas[pt.delta[p, o]]
-            c_r = pt.nxt[p, o]
-            t_next = np.minimum(t_r + 1, caps)
-            t_r = np.where(d > 0, np.minimum(t_next, d), t_next)
+            t_r, c_r = s.next_tau(t_r, pt.deltas[pt.delta[p, o]]), pt.nxt[p, o]
             v = np.asarray(self.base.values(t_r, c_r), dtype=float)
             a_r = np.argmin(v, axis=1)
             resid += s.state_cost(t_r) + v[rows, a_r] - np.asarray(self.value(t_r, c_r), dtype=float)
