@@ -163,15 +163,28 @@ COMPILER_PACKAGES = ("numba", "llvmlite")
 _later: list[int] = []  # signals waiting for the main thread to leave the compiler
 
 
-def in_compiler(frame) -> bool:
-    """The frame (a signal handler's ``frame``) or one of its callers runs numba's or llvmlite's
-    Python code: a kernel is being compiled (or loaded from numba's cache)."""
+def _on_stack(frame, test: Callable[[object], bool]) -> bool:
+    """``test`` holds for the frame or one of its callers."""
     while frame is not None:
-        name = frame.f_globals.get("__name__", "")
-        if name.split(".", 1)[0] in COMPILER_PACKAGES:
+        if test(frame):
             return True
         frame = frame.f_back
     return False
+
+
+def _compiling(frame) -> bool:
+    return frame.f_globals.get("__name__", "").split(".", 1)[0] in COMPILER_PACKAGES
+
+
+def _finalizing(frame) -> bool:
+    return (frame.f_code.co_name == "__del__" or frame.f_globals.get("__name__", "") in FINALIZER_MODULES
+            or frame.f_code is _lost_interrupt.__code__)
+
+
+def in_compiler(frame) -> bool:
+    """The frame (a signal handler's ``frame``) or one of its callers runs numba's or llvmlite's
+    Python code: a kernel is being compiled (or loaded from numba's cache)."""
+    return _on_stack(frame, _compiling)
 
 
 #: Modules whose functions the garbage collector calls as weak reference callbacks: an exception
@@ -182,18 +195,13 @@ FINALIZER_MODULES = ("weakref", "_weakrefset")
 def in_finalizer(frame) -> bool:
     """The frame or one of its callers is a finalizer (``__del__``) or a weak reference's
     callback: an exception raised there is not propagated, only printed."""
-    while frame is not None:
-        if (frame.f_code.co_name == "__del__" or frame.f_globals.get("__name__", "") in FINALIZER_MODULES
-                or frame.f_code is _lost_interrupt.__code__):
-            return True
-        frame = frame.f_back
-    return False
+    return _on_stack(frame, _finalizing)
 
 
 def not_raisable(frame) -> bool:
     """A signal handler called on this frame must not raise: the main thread is compiling
-    (:func:`in_compiler`) or finalizing (:func:`in_finalizer`)."""
-    return in_compiler(frame) or in_finalizer(frame)
+    (:func:`in_compiler`) or finalizing (:func:`in_finalizer`); one walk of the stack."""
+    return _on_stack(frame, lambda f: _compiling(f) or _finalizing(f))
 
 
 def deliver_later(signum: int, poll: float = 0.02) -> None:

@@ -59,11 +59,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
 
     def on_signal(signum, frame):  # stop the whole command (files are written atomically), then say so
-        if stopping.not_raisable(frame):  # inside numba's compiler it can hang it, in a finalizer it is lost:
-            stopping.request(signum)  # a moment later, or at the next check between steps if that comes first
-            stopping.deliver_later(signum)
-            return
         stopping.request(signum)
+        if stopping.not_raisable(frame):  # inside numba's compiler it can hang it, in a finalizer it is lost:
+            stopping.deliver_later(signum)  # a moment later, or at the next check between steps if that comes first
+            return
         raise KeyboardInterrupt
 
     previous = {}
