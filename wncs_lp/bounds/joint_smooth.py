@@ -97,11 +97,7 @@ def smoothed_ascent(lumped: LumpedChains, prices0: list, kern: Kernels, *, stage
     def prices_of(z: np.ndarray) -> list:
         return [b + d for b, d in zip(base, project([z[cuts[i]:cuts[i + 1]] for i in range(n)]))]
 
-    def hard(prices, h0):
-        value, sols = lumped.lagrangian(prices, kern, tol=chain_tol, h0=h0)
-        return value, sols
-
-    best_value, sols = hard(base, None)
+    best_value, sols = lumped.lagrangian(base, kern, tol=chain_tol)
     best = (best_value, base, sols)
     history = [best_value]
     scale = max(abs(best_value), 1.0)
@@ -149,7 +145,7 @@ def smoothed_ascent(lumped: LumpedChains, prices0: list, kern: Kernels, *, stage
             stopped = True
         z = top[1] if stopped or not np.isfinite(top[0]) else z
         prices = prices_of(z)
-        value, sols = hard(prices, [s.h for s in best[2]])
+        value, sols = lumped.lagrangian(prices, kern, tol=chain_tol, h0=[s.h for s in best[2]])
         history.append(value)
         if value > best[0]:
             best = (value, prices, sols)
