@@ -17,8 +17,7 @@ class Extrapolator:
     iterations before: a second value vector, copied at the start of the cycle of sweeps that
     may end in an extrapolation, so m is the whole cycle. (A difference over one iteration, as
     before, has f = lambda / (1 - lambda) ~ 6 and multiplies by it whatever else changed in
-    that iteration; over the cycle f ~ 0.4. One thread, improvement sweeps and certificates:
-    817 -> 766 over eight instances of processes 1-2 to 1-6, none more.) The certificate is
+    that iteration; over the cycle f ~ 0.4: docs/matrix-free.md has the sweeps saved.) The certificate is
     computed on the new h at once; if its width is not below the one before, h is restored
     ((h + f h_prev) / (1 + f)) and extrapolation is switched off for the run after
     ``max_undo`` such undos. So a poor extrapolation costs one pass, never validity.
