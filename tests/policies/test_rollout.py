@@ -148,3 +148,20 @@ def test_the_kernel_takes_the_numpy_rollouts_decisions(p12, relaxation):
     cfg = rng.integers(0, system.n_configs, n)
     assert np.array_equal(fast.act(tau, cfg), slow.act(tau, cfg))
     assert np.array_equal(TableRolloutPolicy(greedy, horizon=1, threads=1).act(tau, cfg), greedy.act(tau, cfg))
+
+
+def test_the_direct_rule_and_the_rollout_by_name_share_their_defaults(p12):
+    """Built with no options, the numpy rule and its numba twin are the same policy (they once differed:
+    horizon 6 / 16 paths against 4 / 8)."""
+    from wncs_lp.bounds import TableRolloutPolicy
+
+    _, system, res, _ = p12
+    greedy = bound_policy(res, system)
+    fast = TableRolloutPolicy(greedy, threads=1)
+    slow = RolloutPolicy(greedy, res.tables.value)
+    assert (fast.candidates, fast.horizon, fast.samples) == (slow.candidates, slow.horizon, slow.samples)
+    assert fast.name == slow.name and np.array_equal(fast.uniforms, slow.uniforms)
+    rng = np.random.default_rng(3)
+    tau = np.stack([rng.integers(1, int(system.caps[k]) + 1, 200) for k in range(system.n_processes)], axis=1)
+    cfg = rng.integers(0, system.n_configs, 200)
+    assert np.array_equal(fast.act(tau, cfg), slow.act(tau, cfg))

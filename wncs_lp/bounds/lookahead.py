@@ -28,14 +28,13 @@ import numpy as np
 from ..errors import PolicyError
 from ..models.system import System
 from ..policies.base import Policy
-from ..policies.rollout import check_rollout, rollout_uniforms
+from ..policies.rollout import ROLLOUT_CANDIDATES, ROLLOUT_HORIZON, ROLLOUT_SAMPLES, check_rollout, rollout_uniforms
 from ..policies.suboptimal import SeparableGreedyPolicy
 from .policy import TABLE_MAX_BYTES, GroupBoundPolicy
 from .projected import ProjectedBoundPolicy
 
 __all__ = ["LookaheadPolicy", "TableRolloutPolicy", "lookahead_policy", "auto_candidates", "AUTO_CANDIDATES",
-           "AUTO_CANDIDATES_FROM", "rollout_candidates", "ROLLOUT_CANDIDATES", "ROLLOUT_CANDIDATES_LARGE",
-           "ROLLOUT_HORIZON", "ROLLOUT_SAMPLES"]
+           "AUTO_CANDIDATES_FROM", "rollout_candidates", "ROLLOUT_CANDIDATES_LARGE"]
 
 #: States per call of the kernel from which it runs threaded (:func:`wncs_lp.solvers.threads.resolve_threads`).
 PARALLEL_MIN_STATES = 20_000
@@ -189,12 +188,12 @@ class LookaheadPolicy(Policy):
                 "depth": self.depth, "middle": self.middle, "build_seconds": self.build_seconds}
 
 
-#: The rollout by name: candidates (:data:`ROLLOUT_CANDIDATES` where no configuration has more than
-#: :data:`AUTO_CANDIDATES_FROM` actions, :data:`ROLLOUT_CANDIDATES_LARGE` beyond), horizon (slots
-#: simulated, the candidate's included) and paths per candidate. Measured (docs/bounds.md, "Rollout"):
-#: at eight processes 8 candidates chose as 4 did; at sixteen (240 actions) 8 cut the upper limit by a
-#: further 0.31% and 16 no more than 8, while a horizon of 8 instead of 4 raised it by 1%.
-ROLLOUT_CANDIDATES, ROLLOUT_CANDIDATES_LARGE, ROLLOUT_HORIZON, ROLLOUT_SAMPLES = 4, 8, 4, 8
+#: The rollout by name where some configuration has more than :data:`AUTO_CANDIDATES_FROM` actions
+#: (:data:`~wncs_lp.policies.rollout.ROLLOUT_CANDIDATES` below; the horizon and the paths are the rule's
+#: own defaults, :data:`~wncs_lp.policies.rollout.ROLLOUT_HORIZON` and ``ROLLOUT_SAMPLES``). Measured
+#: (docs/bounds.md, "Rollout"): at eight processes 8 candidates chose as 4 did; at sixteen (240
+#: actions) 8 cut the upper limit by a further 0.31% and 16 no more than 8.
+ROLLOUT_CANDIDATES_LARGE = 8
 
 
 def rollout_candidates(system: System) -> int:
