@@ -129,3 +129,30 @@ def test_numba_and_numpy_kernels_agree(case):
         fast.push(data, k, y, w, pushed[0])
         slow.push(data, k, y, w, pushed[1])
         np.testing.assert_allclose(pushed[0], pushed[1], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("lazy", [0.5, 0.25, 0.1])
+def test_lazy_power_finds_the_stationary_law_of_a_periodic_chain(lazy):
+    """The cuts' power iteration on a chain of period 2 (a walk on 0..4 reflecting at both ends:
+    plain power iteration oscillates) reaches its stationary law, the closed form of a
+    birth-death chain, pi_i proportional to prod_{j<i} up_j / down_{j+1}, for every lazy weight."""
+    from wncs_lp.bounds.joint_chains import lazy_power
+
+    up = np.array([1.0, 0.6, 0.3, 0.2, 0.0])
+    P = np.zeros((5, 5))
+    for i in range(5):
+        if i < 4:
+            P[i, i + 1] = up[i]
+        if i > 0:
+            P[i, i - 1] = 1.0 - up[i]
+    pi = np.cumprod(np.r_[1.0, up[:-1] / (1.0 - up[1:])])
+    pi /= pi.sum()
+
+    def push(y, out):
+        out[:] = y @ P
+
+    y, res, sweeps = lazy_power(push, np.ones(5), tol=1e-13, max_sweeps=100_000, lazy=lazy)
+    assert res <= 1e-13 and sweeps < 100_000
+    np.testing.assert_allclose(y, pi, rtol=1e-10, atol=1e-13)
+    with pytest.raises(SolverError, match="lazy"):
+        lazy_power(push, np.ones(5), tol=1e-9, max_sweeps=10, lazy=1.0)

@@ -104,6 +104,31 @@ def test_bound_is_between_relaxation_2_and_g_star(three):
     assert certify_group_tables(chains, flat).lower_bound == r4.lower_bound
 
 
+def test_auto_hands_the_pairs_a_loose_interior_point(three, monkeypatch):
+    """Where relaxation 4 follows a slow interior point, ``auto`` stops IPX at AUTO_PAIRS_IPM_TOL
+    (forced here by lowering the threshold to 0 s): the tolerance reaches relaxation 2, the bound
+    stays below the exact g* and the pairs still close relaxation 2's 2.9% gap from the looser
+    duals; without the rule relaxation 2 runs at ``tol``."""
+    import wncs_lp.bounds.lower as lower
+
+    system, g_star, _, _ = three
+    seen = []
+
+    def spy(system_, **options):
+        seen.append(options.get("ipm_tol"))
+        return lower.joint_bound(system_, **options)
+
+    monkeypatch.setattr(lower, "_try_joint", lambda s, o: (spy(s, **o), ""))
+    lower_bound(system, "auto")
+    assert seen == [None]  # the interior point takes seconds here: tol
+    monkeypatch.setattr(lower, "AUTO_PAIRS_IPM_FROM", 0.0)
+    res = lower_bound(system, "auto")
+    assert seen[-1] == lower.AUTO_PAIRS_IPM_TOL
+    assert res.relaxation == "joint-pairs" and res.stats["certified"]
+    assert res.lower_bound <= g_star
+    assert (g_star - res.lower_bound) / g_star < 1e-4
+
+
 @pytest.mark.parametrize("name", ["paper", "asymmetric", "idle"])
 def test_one_pair_is_the_whole_value_function(name):
     """Two processes in one group: the tables are the whole value function over the box, so the

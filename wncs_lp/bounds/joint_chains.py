@@ -432,10 +432,17 @@ def stationary(data: JointData, k: int, weights: np.ndarray, kern: Kernels, y0: 
     return lazy_power(lambda x, out: kern.push(data, k, x, weights, out), y, tol=tol, max_sweeps=max_sweeps)
 
 
-def lazy_power(push, y: np.ndarray, *, tol: float, max_sweeps: int) -> tuple[np.ndarray, float, int]:
-    """Power iteration of the lazy chain (P + I) / 2 from ``y`` (normalised first), the stationary
-    laws of both relaxations' priced chains: ``push(y, out)`` writes y P into ``out``; until
-    ||y P - y||_1 <= tol or ``max_sweeps``. Returns (y, ||y P - y||_1, sweeps)."""
+def lazy_power(push, y: np.ndarray, *, tol: float, max_sweeps: int,
+               lazy: float = 0.5) -> tuple[np.ndarray, float, int]:
+    """Power iteration of the lazy chain lazy I + (1 - lazy) P from ``y`` (normalised first), the
+    stationary laws of the relaxations' priced chains: ``push(y, out)`` writes y P into ``out``;
+    until ||y P - y||_1 <= tol or ``max_sweeps``. Returns (y, ||y P - y||_1, sweeps).
+
+    The lazy chain has P's stationary laws and no period for any 0 < ``lazy`` < 1; an eigenvalue
+    lambda of P becomes lazy + (1 - lazy) lambda, so near lambda = 1 (slow mixing, the common
+    case) a smaller ``lazy`` converges faster (complex eigenvalues near the unit circle the other way)."""
+    if not 0.0 < lazy < 1.0:
+        raise SolverError(f"lazy must be in (0, 1), got {lazy!r}")
     y = y / y.sum()
     yn = np.empty_like(y)
     res = np.inf
@@ -444,7 +451,7 @@ def lazy_power(push, y: np.ndarray, *, tol: float, max_sweeps: int) -> tuple[np.
         push(y, yn)
         sweeps += 1
         res = float(np.abs(yn - y).sum())
-        y = 0.5 * (y + yn)
+        y = lazy * y + (1.0 - lazy) * yn
         y /= y.sum()
         if res <= tol:
             break

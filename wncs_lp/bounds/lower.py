@@ -17,14 +17,16 @@ from ..models.system import System
 from ..scenario import Scenario
 from .grouped import grouped_bound
 from .inputs import bound_system
-from .joint import joint_bound, joint_reach, joint_size
+from .joint import ipm_plan, joint_bound, joint_reach, joint_size
+from .joint_chains import JointData
+from .joint_symmetry import process_symmetry
 from .pairs import pairs_bound, pairs_size
 from .private import private_bound
 from .result import BoundResult
 
 __all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "AUTO_ASCENT_STEPS",
            "AUTO_ASCENT_MAX_BYTES", "AUTO_PAIRS_STEPS", "AUTO_PAIRS_BUDGET", "AUTO_PAIRS_CPU_PER_WORK",
-           "AUTO_PAIRS_MAX_BYTES", "AUTO_PAIRS_MIN_GAIN",
+           "AUTO_PAIRS_MAX_BYTES", "AUTO_PAIRS_MIN_GAIN", "AUTO_PAIRS_IPM_TOL", "AUTO_PAIRS_IPM_FROM",
            "lower_bound", "parse_relaxation", "auto_pick", "runs_grouped"]
 
 #: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
@@ -69,11 +71,19 @@ AUTO_ASCENT_MAX_BYTES = 3 * 2**30
 #: the start measures: the bundle runs, and the result competes with the others, only when the
 #: start raised relaxation 2's bound by more than :data:`AUTO_PAIRS_MIN_GAIN` (relative).
 #: A count of steps, no wall clock: the same bound on every machine.
-AUTO_PAIRS_STEPS = 8
-AUTO_PAIRS_BUDGET = 240.0
+AUTO_PAIRS_STEPS = 20
+AUTO_PAIRS_BUDGET = 360.0
 AUTO_PAIRS_CPU_PER_WORK = 6e-7
 AUTO_PAIRS_MAX_BYTES = 2**30
 AUTO_PAIRS_MIN_GAIN = 1e-4
+#: Where relaxation 4 follows (its rule above) and relaxation 2's interior point is predicted to take
+#: at least :data:`AUTO_PAIRS_IPM_FROM` seconds of CPU, IPX stops at this tolerance instead of
+#: ``tol``: the pairs start from the coupling duals repaired by the chains, and at eight processes,
+#: cap 20 the looser duals gave the pairs a *higher* start (9048.16 against 9045.38 at 1e-4) at about
+#: 60% of IPX's CPU (36 iterations against 58), relaxation 2's own bound 0.037% lower (docs/bounds.md,
+#: "Relaxation 4"). Where IPX is quicker (processes 1-4: 23-87 s) ``tol`` stays.
+AUTO_PAIRS_IPM_TOL = 1e-2
+AUTO_PAIRS_IPM_FROM = 200.0
 
 #: Why relaxation 2 does not run on a lazily explored system.
 LAZY_NOTE = ("the system's configuration automaton is explored lazily (too large to enumerate), and relaxation 2's "
@@ -156,7 +166,7 @@ def _auto(system: System, options: dict) -> BoundResult:
     """``"auto"``: every relaxation that applies, the largest certified bound returned."""
     found: list[BoundResult] = []
     notes: list[str] = []
-    res2, note = _try_joint(system, options)
+    res2, note = _try_joint(system, {**_pairs_ipm_tol(system), **options})
     if res2 is not None:
         found.append(res2)
     if note:
@@ -264,15 +274,37 @@ def _try_lumped(system: System, options: dict, why_not: str) -> tuple[BoundResul
     return res, f"relaxation 2's whole LP is out of reach ({why_not}): its Lagrangian at relaxation 1's prices instead"
 
 
+def _pairs_prediction(system: System) -> tuple[float, dict]:
+    """(predicted CPU seconds of relaxation 4's start and :data:`AUTO_PAIRS_STEPS` steps, ``pairs_size``)."""
+    size = pairs_size(system)
+    return AUTO_PAIRS_CPU_PER_WORK * size["sweep_work"] * (1 + AUTO_PAIRS_STEPS / size["candidates"]), size
+
+
+def _pairs_fit(predicted: float, size: dict) -> bool:
+    return predicted <= AUTO_PAIRS_BUDGET and size["memory_bytes"] <= AUTO_PAIRS_MAX_BYTES
+
+
+def _pairs_ipm_tol(system: System) -> dict:
+    """``{"ipm_tol": AUTO_PAIRS_IPM_TOL}`` where relaxation 4 is predicted to follow relaxation 2's
+    interior point and that is predicted to take at least :data:`AUTO_PAIRS_IPM_FROM` seconds of
+    CPU; else nothing (IPX at ``tol``)."""
+    if system.is_lazy or system.n_processes < 3 or joint_reach(system) is not None:
+        return {}
+    data = JointData.from_system(system)
+    plan = ipm_plan(data, process_symmetry(system, data))
+    if not plan["fits"] or plan["predicted_seconds"] < AUTO_PAIRS_IPM_FROM or not _pairs_fit(*_pairs_prediction(system)):
+        return {}
+    return {"ipm_tol": AUTO_PAIRS_IPM_TOL}
+
+
 def _try_pairs(system: System, res2: BoundResult | None, options: dict) -> tuple[BoundResult | None, str]:
     """Relaxation 4 from relaxation 2's result where :data:`AUTO_PAIRS_STEPS`' rule takes it:
     (its result, why) or (None, why not; "" where it does not apply)."""
     if res2 is None or res2.stats.get("ipm_tables") is not True or system.n_processes < 3:
         return None, ""
-    size = pairs_size(system)
     steps = AUTO_PAIRS_STEPS
-    predicted = AUTO_PAIRS_CPU_PER_WORK * size["sweep_work"] * (1 + steps / size["candidates"])
-    if predicted > AUTO_PAIRS_BUDGET or size["memory_bytes"] > AUTO_PAIRS_MAX_BYTES:
+    predicted, size = _pairs_prediction(system)
+    if not _pairs_fit(predicted, size):
         return None, (f"relaxation 4 not run: predicted {predicted:.0f} s of CPU (budget {AUTO_PAIRS_BUDGET:.0f}), "
                       f"{size['memory_bytes'] / 2**30:.2f} GiB (at most {AUTO_PAIRS_MAX_BYTES / 2**30:.0f})")
     keep = {k: v for k, v in options.items() if k in ("tol", "progress")}

@@ -326,6 +326,11 @@ def solve_group_chain(chains: GroupChains, i: int, price: np.ndarray, h0: np.nda
     return ChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)
 
 
+#: The lazy weight of the cuts' power iteration (:func:`~wncs_lp.bounds.joint_chains.lazy_power`):
+#: 0.25 took 2/3 to 3/4 of the sweeps of 0.5 on the eight-process pair chains (docs/bounds.md).
+CUT_LAZY = 0.25
+
+
 def group_cut(chains: GroupChains, i: int, policy: np.ndarray, y0: np.ndarray | None = None, *,
               tol: float = 1e-9, max_sweeps: int = 20_000) -> tuple[float, np.ndarray, np.ndarray]:
     """The cut of group i's deterministic policy: (a, x, y), y a stationary law (lazy power
@@ -337,7 +342,7 @@ def group_cut(chains: GroupChains, i: int, policy: np.ndarray, y0: np.ndarray | 
     y = np.full(shape, 1.0 / (shape[0] * shape[1])) if y0 is None else np.array(y0, dtype=float, copy=True)
     c1, c2, _, out_ptr, out_nxt, out_prob, s1, s2 = chains.args(i)
     y, _, _ = lazy_power(lambda x, out: mod.push(x, policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, out), y,
-                         tol=tol, max_sweeps=max_sweeps)
+                         tol=tol, max_sweeps=max_sweeps, lazy=CUT_LAZY)
     x = np.bincount(policy.ravel(), weights=y.ravel(), minlength=d.n_pairs)
     return float((y * chains.q[i][None, :]).sum()), x, y
 
