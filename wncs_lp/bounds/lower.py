@@ -122,7 +122,8 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         when there are at least three processes and relaxation 2 was not solved by its interior
         point (where it was, it was the tighter: processes 1-4, cap 20, 1547.6 against 1441.2);
         relaxation 4 (pairs) after relaxation 2's interior point where it fits and its start pays
-        (:data:`AUTO_PAIRS_STEPS`); on a tie the first of 2, 4, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
+        (:data:`AUTO_PAIRS_STEPS`; the interior point then stops at :data:`AUTO_PAIRS_IPM_TOL`
+        where it is slow, :data:`AUTO_PAIRS_IPM_FROM`); on a tie the first of 2, 4, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
         ``stats["auto_bounds"]`` say which was taken, why, and what each gave. Relaxation 2's
         search then stops as :data:`AUTO_SEARCH` says unless ``max_iter`` / ``time_limit`` are given.
     **options
