@@ -71,9 +71,9 @@ AUTO_ASCENT_MAX_BYTES = 3 * 2**30
 #: the start measures: the bundle runs, and the result competes with the others, only when the
 #: start raised relaxation 2's bound by more than :data:`AUTO_PAIRS_MIN_GAIN` (relative).
 #: A count of steps, no wall clock: the same bound on every machine.
-AUTO_PAIRS_STEPS = 20
-AUTO_PAIRS_BUDGET = 360.0
-AUTO_PAIRS_CPU_PER_WORK = 6e-7
+AUTO_PAIRS_STEPS = 50
+AUTO_PAIRS_BUDGET = 480.0
+AUTO_PAIRS_CPU_PER_WORK = 3.7e-7
 AUTO_PAIRS_MAX_BYTES = 2**30
 AUTO_PAIRS_MIN_GAIN = 1e-4
 #: Where relaxation 4 follows (its rule above) and relaxation 2's interior point is predicted to take
@@ -308,7 +308,7 @@ def _try_pairs(system: System, res2: BoundResult | None, options: dict) -> tuple
     if not _pairs_fit(predicted, size):
         return None, (f"relaxation 4 not run: predicted {predicted:.0f} s of CPU (budget {AUTO_PAIRS_BUDGET:.0f}), "
                       f"{size['memory_bytes'] / 2**30:.2f} GiB (at most {AUTO_PAIRS_MAX_BYTES / 2**30:.0f})")
-    keep = {k: v for k, v in options.items() if k in ("tol", "progress")}
+    keep = {k: v for k, v in options.items() if k in ("tol", "progress", "threads")}
     try:
         res = pairs_bound(system, start=res2, max_iter=steps, time_limit=None, min_gain=AUTO_PAIRS_MIN_GAIN, **keep)
     except WncsError as exc:

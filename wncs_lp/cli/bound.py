@@ -6,14 +6,15 @@ import argparse
 import time
 
 from ..errors import WncsError
-from .common import (COUNT, NONNEGATIVE, Command, add_progress_arg, add_scenario_args, add_simulation_args, emit_json,
-                     head, load, progress_for, real_option)
+from .common import (COUNT, NONNEGATIVE, Command, add_progress_arg, add_scenario_args, add_simulation_args, add_threads_arg,
+                     emit_json, head, load, progress_for, real_option)
 
 
 def cmd_bound(args: argparse.Namespace) -> int:
     from ..bounds import lower_bound, parse_relaxation, policy_gaps
     from ..models.system import System
     from ..policies import parse_policy_names
+    from ..solvers.threads import resolve_threads
 
     relaxation = parse_relaxation(args.relaxation)  # before any work
     compare = parse_policy_names(args.compare) if args.compare else []
@@ -29,6 +30,8 @@ def cmd_bound(args: argparse.Namespace) -> int:
         if relaxation not in ("grouped-private-servers", "joint-pairs"):
             raise WncsError("--groups is an option of --relaxation 3 (grouped private servers) and 4 (pairs)")
         limit["groups"] = _parse_groups(args.groups)
+    if relaxation in ("joint-configuration", "joint-pairs", "auto"):  # relaxations 2 and 4's chains
+        limit["threads"] = resolve_threads(args.threads)
     res = lower_bound(system, relaxation, tol=args.tol, progress=prog, **limit)
     report = None
     if args.policy:
@@ -164,6 +167,7 @@ def _configure(p: argparse.ArgumentParser) -> None:
     add_simulation_args(p, "Monte Carlo")
     p.add_argument("--no-control-variate", action="store_true",
                    help="Monte Carlo: the plain time average, without the bound's tables as control variate")
+    add_threads_arg(p)
     add_progress_arg(p)
 
 
