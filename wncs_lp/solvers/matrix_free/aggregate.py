@@ -31,7 +31,11 @@ on the h it is reported for (a correction not yet certified when the run stops i
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
+from scipy import sparse
+from scipy.sparse import linalg as sparse_linalg
 
 from ...models.system import System
 from ..threads import run_parallel
@@ -96,17 +100,18 @@ class Aggregator:
                    o.e_stride, o.q, h, pol, self.counts, self.rsum, o.max_out)
         nC = self.size.size
         share = self.counts[self.e_cfg, self.e_local] / self.size[self.e_cfg]  # of its configuration's states
-        M = np.bincount(self.e_cfg * nC + self.e_nxt, weights=share * o.e_prob, minlength=nC * nC).reshape(nC, nC)
         rbar = self.rsum / self.size
-        # y + g 1 = rbar + M y, with the states' mean of y fixed at 0 (a constant is no correction)
-        K = np.zeros((nC + 1, nC + 1))
-        K[:nC, :nC] = np.eye(nC) - M
-        K[:nC, nC] = 1.0
-        K[nC, :nC] = self.size / self.size.sum()
-        try:
-            sol = np.linalg.solve(K, np.r_[rbar, 0.0])
-        except np.linalg.LinAlgError:  # several recurrent classes among the configurations
-            sol, *_ = np.linalg.lstsq(K, np.r_[rbar, 0.0], rcond=None)
+        # y + g 1 = rbar + M y, with the states' mean of y fixed at 0 (a constant is no correction):
+        # sparse (a configuration has a few successors), solved by SuperLU on one thread (a dense
+        # solve on the BLAS threads cost more CPU than the whole pass beside the numba threads)
+        w = self.size / self.size.sum()
+        rows = np.r_[self.e_cfg, np.arange(nC), np.arange(nC), np.full(nC, nC)]
+        cols = np.r_[self.e_nxt, np.arange(nC), np.full(nC, nC), np.arange(nC)]
+        vals = np.r_[-share * o.e_prob, np.ones(nC), np.ones(nC), w]
+        K = sparse.csc_matrix((vals, (rows, cols)), shape=(nC + 1, nC + 1))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sparse_linalg.MatrixRankWarning)
+            sol = sparse_linalg.spsolve(K, np.r_[rbar, 0.0])
         if not np.all(np.isfinite(sol)):
             return False
         self.y = weight * sol[:nC]
