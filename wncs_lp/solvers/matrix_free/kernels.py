@@ -359,6 +359,32 @@ used_actions, used_actions_serial = twins(_used_actions_body, "used_actions")
 
 
 # ----------------------------------------------------------------------------- reachability
+@njit(inline="always")
+def _row_offsets(t, N, e_base, e_stride, e_m, o0, nO, P):
+    """Successor offsets (every axis but the last) of the outcomes o0 .. o0 + nO - 1 from the row
+    at AoI indices t (the first N - 1 axes)."""
+    for o in range(nO):
+        e = o0 + o
+        v = e_base[e]
+        for k in range(N - 1):
+            tk = t[k] + 1
+            mk = e_m[e, k]
+            v += e_stride[e, k] * (tk if tk < mk else mk)
+        P[o] = v
+
+
+@njit(inline="always")
+def _next_row(t, c, N, lo_, dims):
+    """The AoI indices of the next row of configuration c's box (C order)."""
+    k = N - 2
+    while k >= 0:
+        t[k] += 1
+        if t[k] < lo_[c, k] + dims[c, k]:
+            break
+        t[k] = lo_[c, k]
+        k -= 1
+
+
 @njit(cache=True, nogil=True, boundscheck=False)
 def _reach_config(c, N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride, mask, t, P):
     """Mark the successors (under every action) of the marked states of configuration c;
@@ -374,14 +400,7 @@ def _reach_config(c, N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride,
     new = 0
     s0 = off[c]
     for r in range(nrows):
-        for o in range(nO):
-            e = o0 + o
-            v = e_base[e]
-            for k in range(N - 1):
-                tk = t[k] + 1
-                mk = e_m[e, k]
-                v += e_stride[e, k] * (tk if tk < mk else mk)
-            P[o] = v
+        _row_offsets(t, N, e_base, e_stride, e_m, o0, nO, P)
         for i in range(L):
             if mask[s0 + i] == 0:
                 continue
@@ -393,13 +412,7 @@ def _reach_config(c, N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride,
                     mask[idx] = 1
                     new += 1
         s0 += L
-        k = N - 2
-        while k >= 0:
-            t[k] += 1
-            if t[k] < lo_[c, k] + dims[c, k]:
-                break
-            t[k] = lo_[c, k]
-            k -= 1
+        _next_row(t, c, N, lo_, dims)
     return new
 
 
@@ -420,19 +433,6 @@ def reach_all(N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride, mask, 
 
 
 # ----------------------------------------------------------------------------- aggregation
-@njit(inline="always")
-def _agg_row(t, N, e_base, e_stride, e_m, o0, nO, P):
-    """Successor offsets (all axes but the last) of the outcomes o0 .. o0 + nO - 1 at AoIs t."""
-    for o in range(nO):
-        e = o0 + o
-        v = e_base[e]
-        for k in range(N - 1):
-            tk = t[k] + 1
-            mk = e_m[e, k]
-            v += e_stride[e, k] * (tk if tk < mk else mk)
-        P[o] = v
-
-
 def _agg_config_body(cp, N, lo_, dims, off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, pol, counts, rsum,
                      maxO):
     """Per configuration c: how many of its states take each local action under ``pol``
@@ -456,7 +456,7 @@ def _agg_config_body(cp, N, lo_, dims, off, act_ptr, out_ptr, e_prob, e_m, e_bas
             s0 = off[c]
             acc = 0.0
             for r in range(nrows):
-                _agg_row(t, N, e_base, e_stride, e_m, o0, nO, P)
+                _row_offsets(t, N, e_base, e_stride, e_m, o0, nO, P)
                 qr = 0.0
                 for k in range(N - 1):
                     qr += q[k, t[k]]
@@ -471,13 +471,7 @@ def _agg_config_body(cp, N, lo_, dims, off, act_ptr, out_ptr, e_prob, e_m, e_bas
                         v += e_prob[oo] * h[P[oo - o0] + (tN if tN < mN else mN)]
                     acc += v - h[s]
                 s0 += L
-                k = N - 2
-                while k >= 0:
-                    t[k] += 1
-                    if t[k] < lo_[c, k] + dims[c, k]:
-                        break
-                    t[k] = lo_[c, k]
-                    k -= 1
+                _next_row(t, c, N, lo_, dims)
             rsum[c] = acc
 
 
