@@ -16,9 +16,15 @@ import pytest
 pytest.importorskip("numba")
 
 import wncs_lp  # noqa: E402
+from wncs_lp.errors import SolverError  # noqa: E402
 from wncs_lp.evaluate import evaluate  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
-from wncs_lp.solvers.matrix_free import BoxLayout, matrix_free_evaluate, matrix_free_value_iteration  # noqa: E402
+from wncs_lp.solvers.matrix_free import (  # noqa: E402
+    BoxLayout,
+    MatrixFreeOptions,
+    matrix_free_evaluate,
+    matrix_free_value_iteration,
+)
 from wncs_lp.solvers.matrix_free.aggregate import Aggregator  # noqa: E402
 from wncs_lp.solvers.matrix_free.operator import Operator, Write  # noqa: E402
 from wncs_lp.solvers.matrix_free.sweeper import Sweeper  # noqa: E402
@@ -95,3 +101,9 @@ def test_corrected_evaluation_equals_the_stored_evaluation(cases):
     ev = matrix_free_evaluate(system, opt, threads=1, tol=1e-10, aggregate=True, aggregate_rel=1.0)
     assert ev.status == "optimal" and ev.stats["aggregations"] >= 1
     assert ev.gain_lower - 1e-9 * ref.gain <= ref.gain <= ev.gain_upper + 1e-9 * ref.gain
+
+
+@pytest.mark.parametrize("field, value", [("aggregate", 1), ("aggregate_rel", 0.0), ("aggregate_rel", float("nan"))])
+def test_the_options_are_checked(field, value):
+    with pytest.raises(SolverError, match=field):
+        MatrixFreeOptions(**{field: value})
