@@ -38,7 +38,9 @@ Sections (one CSV row per measurement, a table on stdout):
   ratios). After the solve the worker times one pass of each kind on the solution (improvement
   sweep over every action and, where the tree has them, over the candidate actions;
   certificate; evaluation sweep): wall and CPU seconds, CPU ns a state and the factor over the
-  bandwidth floor, in the row's note.
+  bandwidth floor, in the row's note. ``--variants '{"label": {options}, ...}'`` runs this tree
+  once per variant instead (each with its options on top of ``--options``; the ratios against the
+  first), e.g. the coarse correction (``{"aggregate": true}``) against the defaults.
 
 The machine is shared: every row records the 1-minute load average when it started (2 cores;
 a load above ~1 means another job competed for them), and the CPU seconds of the worker.
