@@ -10,7 +10,7 @@ scale, and its sweeps against the memory bandwidth (before / after a change, in 
         --instances paper_p1234:20,paper_p1234:30,bounds_mix6:10 --out /tmp/sweeps.csv
     # options of this tree against each other (the first the reference), e.g. the coarse correction
     python benchmarks/matrix_free.py --sections sweeps --instances paper_p1234:12,paper_p1234:20 \
-        --variants '{"plain": {}, "aggregate": {"aggregate": 1}}' --out /tmp/agg.csv
+        --variants '{"plain": {}, "aggregate": {"aggregate": true}}' --out /tmp/agg.csv
 
 Sections (one CSV row per measurement, a table on stdout):
 
@@ -365,7 +365,7 @@ def main(argv=None):
     ap.add_argument("--baseline", default=None, help="an older source tree to time beside this one (sweeps)")
     ap.add_argument("--variants", default=None,
                     help='JSON {label: options} run on this tree in turn, ratios against the first (sweeps), '
-                         'e.g. \'{"plain": {}, "aggregate": {"aggregate": 1}}\'')
+                         'e.g. \'{"plain": {}, "aggregate": {"aggregate": true}}\'')
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--sweeps-worker", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
