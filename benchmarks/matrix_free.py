@@ -8,6 +8,9 @@ scale, and its sweeps against the memory bandwidth (before / after a change, in 
     # sweeps and GB/s of this tree and of an older one (git archive <commit> | tar -x -C /tmp/base)
     python benchmarks/matrix_free.py --sections sweeps --baseline /tmp/base \
         --instances paper_p1234:20,paper_p1234:30,bounds_mix6:10 --out /tmp/sweeps.csv
+    # options of this tree against each other (the first the reference), e.g. the coarse correction
+    python benchmarks/matrix_free.py --sections sweeps --instances paper_p1234:12,paper_p1234:20 \
+        --variants '{"plain": {}, "aggregate": {"aggregate": true}}' --out /tmp/agg.csv
 
 Sections (one CSV row per measurement, a table on stdout):
 
@@ -35,7 +38,9 @@ Sections (one CSV row per measurement, a table on stdout):
   ratios). After the solve the worker times one pass of each kind on the solution (improvement
   sweep over every action and, where the tree has them, over the candidate actions;
   certificate; evaluation sweep): wall and CPU seconds, CPU ns a state and the factor over the
-  bandwidth floor, in the row's note.
+  bandwidth floor, in the row's note. ``--variants '{"label": {options}, ...}'`` runs this tree
+  once per variant instead (each with its options on top of ``--options``; the ratios against the
+  first), e.g. the coarse correction (``{"aggregate": true}``) against the defaults.
 
 The machine is shared: every row records the 1-minute load average when it started (2 cores;
 a load above ~1 means another job competed for them), and the CPU seconds of the worker.
@@ -301,7 +306,7 @@ def sweeps_worker(name, cap, threads, options):
               bytes_per_pass=nbytes, gb_per_s=round(nbytes / per / 1e9, 2), copy_gb_per_s=round(bw, 2),
               floor_ratio=round(per / (nbytes / (bw * 1e9)), 2),
               note=f"setup {st['seconds_setup']:.1f} s; {st.get('value_vectors')} value vector(s); "
-                   f"{st.get('extrapolations')} extrapolation(s); options {options or 'defaults'}; "
+                   f"{st.get('extrapolations')} extrapolation(s); {st.get('aggregations', 0)} aggregation(s); options {options or 'defaults'}; "
                    f"package {Path(wncs_lp.__file__).parent.parent}")
     prof = pass_profile(sol, st["threads"], bw)
     out["note"] += "; one pass of each kind (wall s, CPU s, CPU ns a state, x floor): " + "; ".join(
@@ -309,24 +314,28 @@ def sweeps_worker(name, cap, threads, options):
     print(json.dumps(out), flush=True)
 
 
-def sweeps(instances, threads, options, baseline):
-    trees = [("this", ROOT)] + ([("baseline", Path(baseline).resolve())] if baseline else [])
+def sweeps(instances, threads, options, baseline, variants=None):
+    """Each instance by each run in turn: this tree with ``options`` (or, with ``variants``, this
+    tree with each variant's options, the first the reference), then the ``baseline`` tree."""
+    runs = ([(label, ROOT, {**options, **opt}) for label, opt in variants.items()] if variants
+            else [("this", ROOT, options)])
+    runs += [("baseline", Path(baseline).resolve(), options)] if baseline else []
     rows = []
     for name, cap in instances:
         mine = None
-        for label, tree in trees:
+        for label, tree, opts in runs:
             env = dict(os.environ)
             env["WNCS_LP_BENCH_TREE"] = str(tree)
             cmd = [sys.executable, str(ROOT / "benchmarks" / "matrix_free.py"), "--sweeps-worker", f"{name}:{cap}",
-                   "--threads", str(threads), "--options", json.dumps(options)]
-            print(f"sweeps: {name} cap {cap}, {label} tree (load {load1()}) ...", flush=True)
+                   "--threads", str(threads), "--options", json.dumps(opts)]
+            print(f"sweeps: {name} cap {cap}, {label} (load {load1()}) ...", flush=True)
             for r in worker_rows(cmd, cwd=tree, env=env):
                 r["tree"] = label
-                if label == "this":
-                    mine = (float(r["seconds"]), float(r["cpu_seconds"]), int(r["passes"]))
-                elif mine:
+                if mine is None:
+                    mine = (float(r["seconds"]), float(r["cpu_seconds"]), int(r["passes"]), label)
+                else:
                     r["ratio"] = round(float(r["seconds"]) / mine[0], 2)
-                    r["note"] = (f"baseline / this: wall {r['ratio']}, CPU {float(r['cpu_seconds']) / mine[1]:.2f}, "
+                    r["note"] = (f"{label} / {mine[3]}: wall {r['ratio']}, CPU {float(r['cpu_seconds']) / mine[1]:.2f}, "
                                  f"passes {int(r['passes']) / mine[2]:.2f}; ") + r["note"]
                 rows.append(r)
                 print(f"  {label:8s} {r['seconds']} s, {r['passes']} passes ({r['sweeps']} sweeps + "
@@ -354,6 +363,9 @@ def main(argv=None):
                     help="scenario:cap list of the sweeps section")
     ap.add_argument("--options", default="{}", help="JSON dict of matrix_free_value_iteration options (sweeps)")
     ap.add_argument("--baseline", default=None, help="an older source tree to time beside this one (sweeps)")
+    ap.add_argument("--variants", default=None,
+                    help='JSON {label: options} run on this tree in turn, ratios against the first (sweeps), '
+                         'e.g. \'{"plain": {}, "aggregate": {"aggregate": true}}\'')
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--sweeps-worker", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -375,7 +387,8 @@ def main(argv=None):
         rows += big(caps, a.threads, a.tol, policies, not a.no_extrapolate)
     if "sweeps" in sections:
         inst = [(x.split(":")[0], int(x.split(":")[1])) for x in a.instances.split(",") if x]
-        rows += sweeps(inst, a.threads, json.loads(a.options), a.baseline)
+        rows += sweeps(inst, a.threads, json.loads(a.options), a.baseline,
+                       json.loads(a.variants) if a.variants else None)
     if a.out:
         with open(a.out, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=COLUMNS)

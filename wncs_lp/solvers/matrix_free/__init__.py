@@ -51,10 +51,11 @@ evaluators; :meth:`MatrixFreeSolution.save` / :func:`load_solution` store it.
 Exact evaluation of a given policy (:func:`matrix_free_evaluate`) iterates the fixed-policy
 operator T_pi to the bracket min_S (T_pi h - h) <= g_pi <= max_S (T_pi h - h).
 
-Rooms: :mod:`.layout` (the states), :mod:`.operator` (the tables a sweep reads, tiles and
-thread split), :mod:`.kernels` (numba), :mod:`.sweeper` (kernel calls, reachability),
-:mod:`.extrapolate`, :mod:`.options`, :mod:`.iterate` (value iteration and evaluation), :mod:`.result` (result
-types, save / load), :mod:`.capmass` (time at the cap), :mod:`.solve` (entry points by method).
+Rooms: :mod:`.layout` (the states), :mod:`.operator` (the tables a sweep reads, tiles and thread
+split), :mod:`.kernels` (numba), :mod:`.sweeper` (kernel calls, reachability), :mod:`.extrapolate`,
+:mod:`.aggregate` (the opt-in coarse correction), :mod:`.options`, :mod:`.iterate` (value iteration
+and evaluation), :mod:`.result` (result types, save / load), :mod:`.capmass` (time at the cap),
+:mod:`.solve` (entry points by method).
 """
 from __future__ import annotations
 

@@ -14,6 +14,7 @@ from ...models.system import System
 from ...progress import Progress, as_progress
 from ...scenario import Scenario
 from ..iteration import IterationOutcome, IterationScheme, certified_iteration, gamma, max_abs, options_from
+from .aggregate import Aggregator
 from .extrapolate import Extrapolator
 from .layout import BoxLayout, check_local_actions, resolve_domain
 from .operator import Operator, Reduce, Write, with_cost
@@ -107,6 +108,10 @@ class BoxSweeps(IterationScheme):
         self.warm_rel, self.warm_max = opts.warm_rel, opts.warm_max
         self.vectors = 1 + (self.h_out is not None) + self.ex.enabled
         self.iters = 0  # improvement sweeps (the extrapolation's clock)
+        self.agg = Aggregator(st.system, st.op, st.sw.threads) if opts.aggregate and main != "jacobi" else None
+        self.agg_rel = opts.aggregate_rel
+        self.agg_unseen = False  # a correction made since the last certificate
+        self.bracket = (np.inf, -np.inf)  # the last certificate's
         self._out: np.ndarray | None = None  # where the last certificate pass wrote the next iterate
 
     def pass_(self, h: np.ndarray, h_out: np.ndarray | None, write: Write, relax: float, shift: float) -> tuple[float, float]:
@@ -117,6 +122,11 @@ class BoxSweeps(IterationScheme):
     def evaluation_sweeps(self, shift: float) -> int:
         """Sweeps after each improvement sweep (modified policy iteration); returns how many."""
         return 0
+
+    def agg_policy(self) -> np.ndarray | None:
+        """The policy (one local action per state) whose evaluation the coarse correction
+        targets: the greedy policy of the last certificate's h (None: no correction)."""
+        return None
 
     @property
     def in_place(self) -> bool:
@@ -147,6 +157,7 @@ class BoxSweeps(IterationScheme):
         else:
             bracket = self.pass_(self.h, self._out, Write.OUT, JACOBI_TAU, shift)
         self.ex.certified()
+        self.bracket, self.agg_unseen = bracket, False
         return bracket
 
     def advance(self) -> None:
@@ -175,7 +186,15 @@ class BoxSweeps(IterationScheme):
         note = self.ex.step(self.h, self.iters, width)
         if note is not None:
             progress.phase(f"[{self.label}] {note}")
-        return self.ex.pending is not None or (note is not None and "undone" in note)
+        if self.ex.pending is not None or (note is not None and "undone" in note):
+            return True
+        pol = self.agg_policy()
+        mid = 0.5 * (self.bracket[0] + self.bracket[1])
+        if self.agg is not None and pol is not None and self.in_place and width <= self.agg_rel * abs(mid):
+            # the certificate left in pol the greedy policy of h (T_pol h = T h): the coarse
+            # correction of that policy's evaluation (.aggregate), certified by the next certificate
+            self.agg_unseen = self.agg.correct(self.h, pol)
+        return False
 
     def fall_back(self) -> str | None:
         if self.name == "jacobi":
@@ -191,6 +210,9 @@ class BoxSweeps(IterationScheme):
         self.ex.pending = None
 
     def settle(self) -> None:
+        if self.agg_unseen:  # the run ended before a certificate of the corrected h
+            self.agg.undo(self.h)
+            self.agg_unseen = False
         self.ex.settle(self.h)
 
     def roundoff(self) -> float:
@@ -234,6 +256,9 @@ class _Improve(BoxSweeps):
             self.cand = None
         return lo, hi
 
+    def agg_policy(self) -> np.ndarray:
+        return self.pol
+
     def evaluation_sweeps(self, shift: float) -> int:
         for _ in range(self.n_eval):
             self.sw.fixed(self.h, None, self.pol, Write.IN_PLACE, self.relax, shift)
@@ -250,6 +275,9 @@ class _Evaluate(BoxSweeps):
         self.table, self.W = table, W
         self._none = np.zeros(1, np.uint8)
         self.label = f"matrix-free eval {name}"
+
+    def agg_policy(self) -> np.ndarray | None:
+        return self.table
 
     def pass_(self, h, h_out, write, relax, shift):
         if self.table is None:
@@ -356,7 +384,8 @@ def _common_stats(out: IterationOutcome, opts: MatrixFreeOptions, sweeps: BoxSwe
             "rel_gap": (hi - lo) / max(abs(gain), 1e-300), "converged": out.converged,
             "roundoff_delta": delta, "span_computed": out.hi - out.lo, "stop": out.stop,
             "seconds_setup": t_setup, "fallback": out.fallback, "history": out.history,
-            "extrapolations": sweeps.ex.count, "extrapolations_undone": sweeps.ex.reverted}
+            "extrapolations": sweeps.ex.count, "extrapolations_undone": sweeps.ex.reverted,
+            "aggregations": sweeps.agg.count if sweeps.agg is not None else 0}
 
 
 # ============================================================================ evaluation

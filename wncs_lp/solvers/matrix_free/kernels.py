@@ -359,6 +359,32 @@ used_actions, used_actions_serial = twins(_used_actions_body, "used_actions")
 
 
 # ----------------------------------------------------------------------------- reachability
+@njit(inline="always")
+def _row_offsets(t, N, e_base, e_stride, e_m, o0, nO, P):
+    """Successor offsets (every axis but the last) of the outcomes o0 .. o0 + nO - 1 from the row
+    at AoI indices t (the first N - 1 axes)."""
+    for o in range(nO):
+        e = o0 + o
+        v = e_base[e]
+        for k in range(N - 1):
+            tk = t[k] + 1
+            mk = e_m[e, k]
+            v += e_stride[e, k] * (tk if tk < mk else mk)
+        P[o] = v
+
+
+@njit(inline="always")
+def _next_row(t, c, N, lo_, dims):
+    """The AoI indices of the next row of configuration c's box (C order)."""
+    k = N - 2
+    while k >= 0:
+        t[k] += 1
+        if t[k] < lo_[c, k] + dims[c, k]:
+            break
+        t[k] = lo_[c, k]
+        k -= 1
+
+
 @njit(cache=True, nogil=True, boundscheck=False)
 def _reach_config(c, N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride, mask, t, P):
     """Mark the successors (under every action) of the marked states of configuration c;
@@ -374,14 +400,7 @@ def _reach_config(c, N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride,
     new = 0
     s0 = off[c]
     for r in range(nrows):
-        for o in range(nO):
-            e = o0 + o
-            v = e_base[e]
-            for k in range(N - 1):
-                tk = t[k] + 1
-                mk = e_m[e, k]
-                v += e_stride[e, k] * (tk if tk < mk else mk)
-            P[o] = v
+        _row_offsets(t, N, e_base, e_stride, e_m, o0, nO, P)
         for i in range(L):
             if mask[s0 + i] == 0:
                 continue
@@ -393,13 +412,7 @@ def _reach_config(c, N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride,
                     mask[idx] = 1
                     new += 1
         s0 += L
-        k = N - 2
-        while k >= 0:
-            t[k] += 1
-            if t[k] < lo_[c, k] + dims[c, k]:
-                break
-            t[k] = lo_[c, k]
-            k -= 1
+        _next_row(t, c, N, lo_, dims)
     return new
 
 
@@ -417,3 +430,60 @@ def reach_all(N, lo_, dims, off, act_ptr, out_ptr, e_m, e_base, e_stride, mask, 
         if new == 0:
             return it + 1
     return max_passes + 1
+
+
+# ----------------------------------------------------------------------------- aggregation
+def _agg_config_body(cp, N, lo_, dims, off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, pol, counts, rsum,
+                     maxO):
+    """Per configuration c: how many of its states take each local action under ``pol``
+    (``counts[c, j]``) and the sum of their residuals d = c + P_pol h - h (``rsum[c]``). A plain
+    loop over each box (a row's successor offsets computed once): one pass a correction."""
+    for ci in prange(cp.size - 1):
+        t = np.empty(max(N, 1), np.int64)
+        P = np.empty(maxO, np.int64)
+        for c in range(cp[ci], cp[ci + 1]):
+            L = dims[c, N - 1]
+            loN = lo_[c, N - 1]
+            a0 = act_ptr[c]
+            o0 = out_ptr[a0]
+            nO = out_ptr[act_ptr[c + 1]] - o0
+            for j in range(counts.shape[1]):
+                counts[c, j] = 0
+            nrows = 1
+            for k in range(N - 1):
+                nrows *= dims[c, k]
+                t[k] = lo_[c, k]
+            s0 = off[c]
+            acc = 0.0
+            for r in range(nrows):
+                _row_offsets(t, N, e_base, e_stride, e_m, o0, nO, P)
+                qr = 0.0
+                for k in range(N - 1):
+                    qr += q[k, t[k]]
+                for i in range(L):
+                    s = s0 + i
+                    j = pol[s]
+                    counts[c, j] += 1
+                    tN = loN + i + 1
+                    v = qr + q[N - 1, loN + i]
+                    for oo in range(out_ptr[a0 + j], out_ptr[a0 + j + 1]):
+                        mN = e_m[oo, N - 1]
+                        v += e_prob[oo] * h[P[oo - o0] + (tN if tN < mN else mN)]
+                    acc += v - h[s]
+                s0 += L
+                _next_row(t, c, N, lo_, dims)
+            rsum[c] = acc
+
+
+def _agg_apply_body(off, h, y):
+    """h[s] += y[c] over the states s of every configuration c."""
+    for c in prange(off.size - 1):
+        yc = y[c]
+        for s in range(off[c], off[c + 1]):
+            h[s] += yc
+
+
+#: Per configuration, a fixed policy's action counts and residual sum (the aggregated problem).
+agg_config, agg_config_serial = twins(_agg_config_body, "agg_config")
+#: The correction of every state by its configuration's.
+agg_apply, agg_apply_serial = twins(_agg_apply_body, "agg_apply")

@@ -64,6 +64,14 @@ class MatrixFreeOptions(IterationOptions):
         the last certificate's greedy policy takes somewhere in its box (0: every action, always).
         The certificate passes always try every action, so the bracket is unchanged; this only
         makes the improvement sweeps cheaper.
+    aggregate : bool
+        After each certificate whose relative width is at most ``aggregate_rel``, the coarse
+        correction of :mod:`~.aggregate` (one group per configuration: the aggregated
+        evaluation of the certificate's greedy policy, its solution added to h). Off by
+        default: docs/matrix-free.md has the sweeps it saves (evaluations) and costs (the
+        optimum's modified policy iteration).
+    aggregate_rel : float
+        > 0 (1e-2).
     warm_start : bool or None
         Jacobi sweeps first, until the bracket is within ``warm_rel`` (at most ``warm_max``
         sweeps); it shares the extrapolation's second vector. None: on for an evaluation, off for
@@ -87,6 +95,8 @@ class MatrixFreeOptions(IterationOptions):
     tile_order: str = "forward"
     extrapolate: bool = True
     candidates_rel: float = 1e-3
+    aggregate: bool = False
+    aggregate_rel: float = 1e-2
     warm_start: bool | None = None
     warm_rel: float = 0.05
     warm_max: int = 100
@@ -109,7 +119,9 @@ class MatrixFreeOptions(IterationOptions):
                 raise SolverError(f"{name} must be an integer >= 0, got {v!r}")
         if self.threads is not None and not (is_int(self.threads) and self.threads >= 1):
             raise SolverError(f"threads must be an integer >= 1 (or None: the usable cores), got {self.threads!r}")
-        for name in ("extrapolate", "force"):
+        if not (is_real(self.aggregate_rel) and math.isfinite(self.aggregate_rel) and self.aggregate_rel > 0):
+            raise SolverError(f"aggregate_rel must be a finite number > 0, got {self.aggregate_rel!r}")
+        for name in ("extrapolate", "force", "aggregate"):
             if not isinstance(getattr(self, name), bool):
                 raise SolverError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.warm_start is not None and not isinstance(self.warm_start, bool):
