@@ -24,8 +24,8 @@ and of gain to the first's.
 
 ``--levers`` measures what might bring relaxation 2 nearer its optimum at sixteen processes, or the
 policy onto better tables (docs/bounds.md, "Sixteen processes: the levers measured"), one row each:
-``pdlp`` HiGHS's first-order solver (``solver="pdlp"``, ``--pdlp-seconds`` of wall clock, tolerance
-1e-4) on relaxation 2's LP reduced by symmetry, its raw duals' tables certified and the lumped chains
+``pdlp`` HiGHS's first-order solver (``solver="pdlp"``, ``--pdlp-iterations`` iterations, a count so
+that a loaded machine does not change the result; tolerance 1e-4) on relaxation 2's LP reduced by symmetry, its raw duals' tables certified and the lumped chains
 at its coupling duals certified; ``warm`` the reduced LP at cap ``--warm-cap`` by the interior point,
 its coupling duals (prices on orbits of (C, a), the same at every cap) priced into the full cap's
 lumped chains; ``prices`` relaxation 2's lumped Lagrangian along relaxation 1's own family of prices
@@ -188,11 +188,12 @@ def levers(instance: str, which: list[str], args, folder: Path) -> list[dict]:
         lp = symmetric_lp(sym, data)
         _, _, z, st = solve_highs(lp.A, lp.b, lp.c, tol=1e-4, max_iter=2**31 - 1, verbose=False,
                                   settings={"variant": "simplex", "solver": "pdlp", "pdlp_optimality_tolerance": 1e-4,
-                                            "presolve": "off", "time_limit": float(args.pdlp_seconds)})
+                                            "presolve": "off", "pdlp_iteration_limit": int(args.pdlp_iterations)})
         lam = np.zeros(lp.keep.size)
         lam[lp.keep] = -z
         raw = certify_tables(data, spread_tables(sym, data, lp, lam)).lower_bound
-        note = f"HiGHS {st['solver_status']}, primal objective {st['obj_scaled']:.8g} (not a bound)"
+        note = (f"HiGHS {st['solver_status']} after {args.pdlp_iterations} iterations, primal objective "
+                f"{st['obj_scaled']:.8g} (not a bound)")
         row("pdlp", "the raw duals' tables", raw, time.process_time() - c0, note)
         value, cert = _certified_chains(sym, data, lumped, coupling_prices(lp, lam), kern)
         row("pdlp", "the lumped chains at its coupling duals", cert, time.process_time() - c0, f"L {value:.10g}")
@@ -249,7 +250,7 @@ def main() -> int:
     ap.add_argument("--search", default="", help="relaxation 2's lumped searches to compare (e.g. ascent,smooth)")
     ap.add_argument("--steps", type=int, default=40, help="steps (smoothed evaluations) of each --search method")
     ap.add_argument("--levers", default="", help="pdlp,warm,prices,pairs,tables (module docstring)")
-    ap.add_argument("--pdlp-seconds", type=float, default=400.0, help="HiGHS's wall-clock limit of --levers pdlp")
+    ap.add_argument("--pdlp-iterations", type=int, default=8000, help="PDLP's iterations in --levers pdlp")
     ap.add_argument("--warm-cap", type=int, default=10, help="the smaller cap of --levers warm")
     args = ap.parse_args()
     rows = []
