@@ -4,6 +4,7 @@
     python benchmarks/scale.py --instances bounds_lab16 --relaxation 1 --out /tmp/s.csv
     python benchmarks/scale.py --instances lab:32,p1234:8 --compare greedy --out /tmp/s.csv
     python benchmarks/scale.py --search ascent,smooth --steps 40 --instances bounds_lab16 --out /tmp/r2.csv
+    python benchmarks/scale.py --levers pdlp,warm,prices,pairs,tables --instances bounds_p1234_x4 --out /tmp/l.csv
 
 Every instance runs as ``wncs-lp bound INSTANCE --policy --json`` in its own process (so its peak
 resident memory is its own: ``ru_maxrss`` of the child), with the command's defaults unless told:
@@ -20,6 +21,17 @@ method=M, max_iter=--steps, time_limit=None)`` for each method M, in turn in one
 1 and the symmetry check are in every row's time): the certified bound, the gain over the start
 (relaxation 1's prices on the lumped chains) and the CPU seconds, with each method's ratio of CPU
 and of gain to the first's.
+
+``--levers`` measures what might bring relaxation 2 nearer its optimum at sixteen processes, or the
+policy onto better tables (docs/bounds.md, "Sixteen processes: the levers measured"), one row each:
+``pdlp`` HiGHS's first-order solver (``solver="pdlp"``, ``--pdlp-iterations`` iterations, a count so
+that a loaded machine does not change the result; tolerance 1e-4) on relaxation 2's LP reduced by symmetry, its raw duals' tables certified and the lumped chains
+at its coupling duals certified; ``warm`` the reduced LP at cap ``--warm-cap`` by the interior point,
+its coupling duals (prices on orbits of (C, a), the same at every cap) priced into the full cap's
+lumped chains; ``prices`` relaxation 2's lumped Lagrangian along relaxation 1's own family of prices
+mu(lambda) = lambda . claims, lambda scaled per server; ``pairs`` relaxation 4's predicted CPU and
+memory (``pairs_size`` and ``auto``'s rule); ``tables`` the ``--compare`` policies on the tables of
+relaxation 2's lumped start (what ``auto`` computes beyond the LP's reach), 20 x 40,000 slots.
 
 One CSV row per policy (and one for the bound) with the seconds of the whole command, its CPU
 seconds, its peak memory and the 1-minute load average when it started: the machine is shared
@@ -127,6 +139,104 @@ def search(instance: str, methods: list[str], steps: int, folder: Path) -> list[
     return rows
 
 
+LEVER_COLUMNS = ["instance", "lever", "what", "value", "reference", "cpu_seconds", "load1", "note"]
+
+
+def _certified_chains(sym, data, lumped, prices, kern) -> tuple[float, float]:
+    """(L at ``prices``, the certified bound of the lumped chains' biases spread to every process)."""
+    from wncs_lp.bounds.joint_chains import certify_tables
+    from wncs_lp.bounds.joint_symmetry import spread_orbit_tables
+
+    value, sols = lumped.lagrangian(prices, kern, tol=2e-6)
+    return value, certify_tables(data, spread_orbit_tables(sym, data, [s.h for s in sols])).lower_bound
+
+
+def levers(instance: str, which: list[str], args, folder: Path) -> list[dict]:
+    """The levers of ``--levers`` on one instance (module docstring), each row as it is measured."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from wncs_lp.bounds.gaps import policy_gaps
+    from wncs_lp.bounds.inputs import bound_system
+    from wncs_lp.bounds.joint import joint_bound, relaxation1_start
+    from wncs_lp.bounds.joint_chains import JointData, Kernels, certify_tables
+    from wncs_lp.bounds.joint_ipm import ipm_tables
+    from wncs_lp.bounds.joint_symmetry import (coupling_prices, lumped_chains, process_symmetry, spread_tables,
+                                               symmetric_lp)
+    from wncs_lp.bounds.lower import AUTO_PAIRS_CPU_PER_WORK, AUTO_PAIRS_STEPS
+    from wncs_lp.bounds.pairs import pairs_size
+    from wncs_lp.bounds.private import private_bound
+    from wncs_lp.solvers.highs import solve_highs
+
+    path = _generated(instance, folder) if ":" in instance else scenario_path(instance)
+    system = bound_system(load_scenario(path))
+    data = JointData.from_system(system)
+    sym = process_symmetry(system, data)
+    lumped = lumped_chains(sym, data)
+    kern = Kernels("auto", 1)
+    r1 = private_bound(system)
+    rows = []
+
+    def row(lever, what, value, cpu, note="", reference=r1.lower_bound):
+        rows.append({"instance": instance, "lever": lever, "what": what, "value": value, "reference": reference,
+                     "cpu_seconds": round(cpu, 1), "load1": round(os.getloadavg()[0], 2), "note": note})
+        print("  ".join(f"{k}={rows[-1][k]}" for k in LEVER_COLUMNS if rows[-1][k] not in (None, "")), flush=True)
+
+    if "pdlp" in which:
+        c0 = time.process_time()
+        lp = symmetric_lp(sym, data)
+        _, _, z, st = solve_highs(lp.A, lp.b, lp.c, tol=1e-4, max_iter=2**31 - 1, verbose=False,
+                                  settings={"variant": "simplex", "solver": "pdlp", "pdlp_optimality_tolerance": 1e-4,
+                                            "presolve": "off", "pdlp_iteration_limit": int(args.pdlp_iterations)})
+        lam = np.zeros(lp.keep.size)
+        lam[lp.keep] = -z
+        raw = certify_tables(data, spread_tables(sym, data, lp, lam)).lower_bound
+        note = (f"HiGHS {st['solver_status']} after {args.pdlp_iterations} iterations, primal objective "
+                f"{st['obj_scaled']:.8g} (not a bound)")
+        row("pdlp", "the raw duals' tables", raw, time.process_time() - c0, note)
+        value, cert = _certified_chains(sym, data, lumped, coupling_prices(lp, lam), kern)
+        row("pdlp", "the lumped chains at its coupling duals", cert, time.process_time() - c0, f"L {value:.10g}")
+    if "warm" in which:
+        c0 = time.process_time()
+        small = bound_system(load_scenario(path, {"tau_cap": args.warm_cap}))
+        d_s = JointData.from_system(small)
+        ipm = ipm_tables(d_s, symmetry=process_symmetry(small, d_s), tol=1e-4)
+        row("warm", f"the reduced LP at cap {args.warm_cap} (interior point; its objective)", ipm.objective,
+            time.process_time() - c0, f"HiGHS {ipm.status}, {ipm.iterations} iterations")
+        if d_s.n_pairs == data.n_pairs and np.array_equal(d_s.pair_c, data.pair_c):
+            value, cert = _certified_chains(sym, data, lumped, ipm.prices, kern)
+            row("warm", f"the lumped chains at cap {args.warm_cap}'s coupling duals", cert, time.process_time() - c0,
+                f"L {value:.10g}")
+    if "prices" in which:
+        lam1 = np.asarray(r1.multipliers, float)
+        h0 = None
+        for f in [(1, 1), (1.1, 1), (0.9, 1), (1, 1.1), (1, 0.9), (1.2, 1.2), (0.8, 0.8)]:
+            c0 = time.process_time()
+            scale = np.resize(np.asarray(f, float), lam1.size).reshape(lam1.shape)
+            _, mu = relaxation1_start(system, replace(r1, multipliers=lam1 * scale))
+            value, sols = lumped.lagrangian(lumped.prices_from(mu), kern, tol=2e-6, h0=h0)
+            h0 = [s.h for s in sols]
+            row("prices", f"L at relaxation 1's lambda x {f}", value, time.process_time() - c0)
+    if "pairs" in which:
+        c0 = time.process_time()
+        z = pairs_size(system)
+        cpu = AUTO_PAIRS_CPU_PER_WORK * z["sweep_work"]
+        row("pairs", "relaxation 4's start: predicted CPU seconds", cpu, time.process_time() - c0,
+            f"{AUTO_PAIRS_STEPS} steps: {cpu * (1 + AUTO_PAIRS_STEPS / z['candidates']):.0f} s; "
+            f"{z['memory_bytes'] / 2**30:.2f} GiB of tables; {z['candidates']} candidate partitions", reference="")
+    if "tables" in which:
+        c0 = time.process_time()
+        r2 = joint_bound(system, method="ascent", max_iter=1, time_limit=None)
+        row("tables", "relaxation 2's lumped start", r2.lower_bound, time.process_time() - c0)
+        for name in args.compare.split(","):
+            c0 = time.process_time()
+            for g in policy_gaps(r2, system, [name], slots=args.slots, reps=args.reps).rows:
+                row("tables", f"{g.policy} on its tables: mean", g.gain, time.process_time() - c0,
+                    f"95% upper limit {g.gain_upper:.8g}", reference=r2.lower_bound)
+    return rows
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--instances", default=",".join(DEFAULT))
@@ -139,8 +249,17 @@ def main() -> int:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--search", default="", help="relaxation 2's lumped searches to compare (e.g. ascent,smooth)")
     ap.add_argument("--steps", type=int, default=40, help="steps (smoothed evaluations) of each --search method")
+    ap.add_argument("--levers", default="", help="pdlp,warm,prices,pairs,tables (module docstring)")
+    ap.add_argument("--pdlp-iterations", type=int, default=8000, help="PDLP's iterations in --levers pdlp")
+    ap.add_argument("--warm-cap", type=int, default=10, help="the smaller cap of --levers warm")
     args = ap.parse_args()
     rows = []
+    if args.levers:
+        with tempfile.TemporaryDirectory() as tmp:
+            for inst in args.instances.split(","):
+                rows += levers(inst.strip(), args.levers.split(","), args, Path(tmp))
+                atomic_write_csv(args.out, rows, LEVER_COLUMNS, extras="ignore")
+        return 0
     if args.search:
         with tempfile.TemporaryDirectory() as tmp:
             for inst in args.instances.split(","):
