@@ -54,6 +54,7 @@ of pairs, and its tables, spread back, are certified on the whole system.
 from __future__ import annotations
 
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -437,9 +438,12 @@ class _Search:
         self.sweeps += sum(s.sweeps for s in sols)
         gains = np.array([s.lower for s in sols])
         self.offer([lp.spread(i, h) for i, h in enumerate(self.h)], prices.copy(), gains, where)
+        # the cuts' power iterations (a scatter, serial inside) are independent: one group per thread
+        with ThreadPoolExecutor(max_workers=max(1, min(self.threads, len(sols)))) as pool:
+            found = list(pool.map(lambda i: group_cut(lp.chains[i], 0, sols[i].policy, self.laws[i]),
+                                  range(len(sols))))
         cuts = []
-        for i, s in enumerate(sols):
-            a, x, y = group_cut(lp.chains[i], 0, s.policy, self.laws[i])
+        for i, (a, x, y) in enumerate(found):
             self.laws[i] = y
             cuts.append((i, a, np.bincount(lp.price_of[i], weights=x, minlength=lp.n_prices)))
         return float(gains.sum()), cuts

@@ -87,7 +87,7 @@ def residuals(h, q, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, u):
             u[p] = m
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # nogil: the groups' cuts run side by side on Python threads
 def push(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, y_out):
     """y_out = y P_pi for the deterministic policy ``pol[c, T]`` (a pair of configuration c)."""
     n_c, n_t = y.shape
