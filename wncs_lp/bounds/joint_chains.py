@@ -38,6 +38,7 @@ import numpy as np
 from .. import moved
 from ..errors import SolverError
 from ..models.system import System
+from ..solvers.threads import run_twins
 
 __all__ = ["JointData", "TableCertificate", "ChainSolution", "Kernels", "certify_tables", "certificate_of",
            "solve_chain", "damped_rvi", "policy_weights", "stationary", "lazy_power", "column", "kernels_available"]
@@ -291,16 +292,7 @@ class Kernels:
 
     def parallel(self, serial, par, *args):
         """Run ``par`` under this many numba threads (``serial`` with one)."""
-        if self.threads <= 1:
-            return serial(*args)
-        import numba
-
-        old = numba.get_num_threads()
-        numba.set_num_threads(self.threads)
-        try:
-            return par(*args)
-        finally:
-            numba.set_num_threads(old)
+        return run_twins(par, serial, self.threads, *args)
 
     def bellman(self, data: JointData, k: int, h: np.ndarray, price: np.ndarray, th: np.ndarray, pol: np.ndarray):
         """th = T h of process k's priced chain (pair cost q_k + price); pol = a minimising pair."""

@@ -168,7 +168,7 @@ class LookaheadPolicy(Policy):
         self.build_seconds = time.perf_counter() - t0 + getattr(base, "build_seconds", 0.0)
 
     def act(self, tau, config_ids, rng=None):
-        from ..solvers.threads import resolve_threads, run_parallel
+        from ..solvers.threads import resolve_threads, run_twins
 
         tau, c = self._check_inputs(tau, config_ids)
         if tau.shape[1] != self._caps.size or np.any(tau < 1) or np.any(tau > self._caps):
@@ -177,10 +177,7 @@ class LookaheadPolicy(Policy):
         out = np.empty(c.size, dtype=np.int64)
         args = (np.ascontiguousarray(tau), np.ascontiguousarray(c), *self._args, out)
         threads = resolve_threads(self.threads, None if c.size >= PARALLEL_MIN_STATES else 0)
-        if threads > 1:
-            run_parallel(self.kernels.lookahead, threads, *args)
-        else:
-            self.kernels.lookahead_serial(*args)
+        run_twins(self.kernels.lookahead, self.kernels.lookahead_serial, threads, *args)
         return out
 
     def describe(self) -> dict[str, Any]:
@@ -261,7 +258,7 @@ class TableRolloutPolicy(LookaheadPolicy):
         self.build_seconds += time.perf_counter() - t0
 
     def act(self, tau, config_ids, rng=None):
-        from ..solvers.threads import resolve_threads, run_parallel
+        from ..solvers.threads import resolve_threads, run_twins
 
         tau, c = self._check_inputs(tau, config_ids)
         if tau.shape[1] != self._caps.size or np.any(tau < 1) or np.any(tau > self._caps):
@@ -276,10 +273,7 @@ class TableRolloutPolicy(LookaheadPolicy):
                 np.ascontiguousarray(self.base.act(tau, c), dtype=np.int64), int(self.system.max_actions), out)
         work = c.size * self.candidates * self.samples * (self.horizon - 1)
         threads = resolve_threads(self.threads, None if work >= PARALLEL_MIN_STATES else 0)
-        if threads > 1:
-            run_parallel(self.kernels.rollout, threads, *args)
-        else:
-            self.kernels.rollout_serial(*args)
+        run_twins(self.kernels.rollout, self.kernels.rollout_serial, threads, *args)
         return out
 
     def describe(self) -> dict[str, Any]:

@@ -62,7 +62,7 @@ import numpy as np
 from ..errors import SolverError
 from ..models.system import System
 from ..progress import as_progress
-from ..solvers.threads import run_parallel
+from ..solvers.threads import run_twins
 from ..status import INTERRUPTED, MAX_ITER, OPTIMAL
 from .inputs import bound_system
 from .joint import joint_bound
@@ -323,13 +323,8 @@ def solve_group_chain(chains: GroupChains, i: int, price: np.ndarray, h0: np.nda
     pol = np.empty(shape, dtype=np.int64)
     price = np.ascontiguousarray(price, dtype=float)
     args = (chains.q[i], price, *chains.args(i), th, pol)
-    if threads <= 1:
-        def sweep(x):
-            mod.bellman_ser(x, *args)
-    else:  # the configurations split over the threads: each writes its own rows, so the same numbers
-        def sweep(x):
-            run_parallel(mod.bellman_par, threads, x, *args)
-    lo, hi, sweeps = damped_rvi(sweep, h, th, tol=tol, max_sweeps=max_sweeps, relax=relax, stop=stop)
+    # on threads the configurations split, each writing its own rows: the same numbers as one thread
+    lo, hi, sweeps = damped_rvi(lambda x: run_twins(mod.bellman_par, mod.bellman_ser, threads, x, *args), h, th, tol=tol, max_sweeps=max_sweeps, relax=relax, stop=stop)
     return ChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import SolverError
 from ..mdp import MDP
-from .threads import resolve_threads, run_parallel
+from .threads import resolve_threads, run_twins
 
 __all__ = ["SweepData", "prepare", "code_table", "get_kernel", "numba_available", "ScipyKernel", "KERNELS",
            "NUMBA_MIN_STATES"]
@@ -236,10 +236,7 @@ class NumbaKernel:
         d = self.d
         args = (d.indptr, d.indices, d.codes, d.table, d.cost, d.cost_per_state, d.pair_ptr, h, h_out,
                 float(tau), float(shift), self.nchunk, self._lo, self._hi)
-        if self.threads > 1:
-            run_parallel(self.mod.jacobi_sweep, self.threads, *args)
-        else:
-            self.mod.jacobi_sweep_serial(*args)
+        run_twins(self.mod.jacobi_sweep, self.mod.jacobi_sweep_serial, self.threads, *args)
         return float(self._lo.min()), float(self._hi.max())
 
     def gauss_seidel(self, h: np.ndarray, tau: float, shift: float, pol: np.ndarray) -> None:

@@ -29,7 +29,7 @@ import types
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator
 
-__all__ = ["usable_cores", "resolve_threads", "run_parallel", "fork_unsafe", "twins", "thread_limit",
+__all__ = ["usable_cores", "resolve_threads", "run_parallel", "run_twins", "fork_unsafe", "twins", "thread_limit",
            "threads_limit", "FORK_UNSAFE_LAYERS", "PARALLEL_MIN_STATES", "LIMIT_ENV"]
 
 #: Below this many states a solve uses one thread unless ``threads`` says otherwise: a parallel
@@ -137,6 +137,15 @@ def run_parallel(fn: Callable[..., Any], threads: int, *args: Any, chunksize: in
             layer = "unknown"
         _FIRST_PARALLEL = (os.getpid(), layer)
     return out
+
+
+def run_twins(parallel: Callable[..., Any], serial: Callable[..., Any], threads: int, *args: Any,
+              chunksize: int | None = None) -> Any:
+    """Call a :func:`twins` pair: ``serial(*args)`` on one thread, else ``parallel`` through
+    :func:`run_parallel` on ``threads``."""
+    if threads > 1:
+        return run_parallel(parallel, threads, *args, chunksize=chunksize)
+    return serial(*args)
 
 
 def twins(body: Callable[..., Any], name: str, **flags: Any) -> tuple[Any, Any]:

@@ -38,7 +38,7 @@ from scipy import sparse
 from scipy.sparse import linalg as sparse_linalg
 
 from ...models.system import System
-from ..threads import run_parallel
+from ..threads import run_twins
 from .operator import Operator
 
 __all__ = ["Aggregator", "config_chunks"]
@@ -86,17 +86,11 @@ class Aggregator:
         self.count = 0
         self.last_gain = np.nan
 
-    def _call(self, name: str, *args) -> None:
-        if self.threads > 1:
-            run_parallel(getattr(self.K, name), self.threads, *args)
-        else:
-            getattr(self.K, name + "_serial")(*args)
-
     def correct(self, h: np.ndarray, pol: np.ndarray, weight: float = 1.0) -> bool:
         """Add the aggregated correction of policy ``pol`` (one local action per state) to h in
         place; False (h unchanged) when the groups' equation has no finite solution."""
         o = self.op
-        self._call("agg_config", self.cp, o.N, o.lo, o.dims, o.off, o.act_ptr, o.out_ptr, o.e_prob, o.e_m, o.e_base,
+        run_twins(self.K.agg_config, self.K.agg_config_serial, self.threads, self.cp, o.N, o.lo, o.dims, o.off, o.act_ptr, o.out_ptr, o.e_prob, o.e_m, o.e_base,
                    o.e_stride, o.q, h, pol, self.counts, self.rsum, o.max_out)
         nC = self.size.size
         share = self.counts[self.e_cfg, self.e_local] / self.size[self.e_cfg]  # of its configuration's states
@@ -116,12 +110,12 @@ class Aggregator:
             return False
         self.y = weight * sol[:nC]
         self.last_gain = float(sol[nC])
-        self._call("agg_apply", o.off, h, self.y)
+        run_twins(self.K.agg_apply, self.K.agg_apply_serial, self.threads, o.off, h, self.y)
         self.count += 1
         return True
 
     def undo(self, h: np.ndarray) -> None:
         """Take the last correction back out of h."""
         if self.y is not None:
-            self._call("agg_apply", self.op.off, h, -self.y)
+            run_twins(self.K.agg_apply, self.K.agg_apply_serial, self.threads, self.op.off, h, -self.y)
             self.y = None

@@ -9,7 +9,7 @@ import numpy as np
 
 from ...errors import SolverError
 from ...models.system import System
-from ..threads import resolve_threads, run_parallel
+from ..threads import resolve_threads, run_twins
 from .layout import BoxLayout
 from .operator import Operator, Reduce, Write, work_items
 
@@ -54,10 +54,7 @@ class Sweeper:
         self._no_cand = np.zeros(1, np.uint64)
 
     def _run(self, fn_par, fn_ser, *args) -> tuple[float, float]:
-        if self.threads > 1:
-            run_parallel(fn_par, self.threads, *args, chunksize=1)
-        else:
-            fn_ser(*args)
+        run_twins(fn_par, fn_ser, self.threads, *args, chunksize=1)
         return float(self.los.min()), float(self.his.max())
 
     def all_actions(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, W: np.ndarray | None,
@@ -83,10 +80,7 @@ class Sweeper:
     def used_actions(self, pol: np.ndarray, cand: np.ndarray) -> np.ndarray:
         """Into ``cand`` (uint64, one per configuration): the bit set of the actions ``pol`` takes
         somewhere in the configuration's box (actions past 63 as bit 63)."""
-        if self.threads > 1:
-            run_parallel(self.K.used_actions, self.threads, pol, self.op.off, cand)
-        else:
-            self.K.used_actions_serial(pol, self.op.off, cand)
+        run_twins(self.K.used_actions, self.K.used_actions_serial, self.threads, pol, self.op.off, cand)
         return cand
 
     def fixed(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, write: Write, relax: float,
