@@ -73,3 +73,29 @@ def test_a_search_stopped_at_its_budget_exits_0(capsys):
     g_star = solve(build(load_scenario(P12, ["tau_cap=8"]))).gain_upper
     assert out["bound"]["status"] == "max_iter" and rc == 0
     assert out["bound"]["lower_bound"] <= g_star
+
+
+def test_threads_cap_every_kernel_of_the_command(capsys, monkeypatch):
+    """``--threads 1`` reaches the relaxation (its count) and the policies' evaluation (the command's
+    thread cap, which the lookahead, the rollout and the exact evaluations resolve their count under);
+    the cap is lifted afterwards."""
+    import wncs_lp.bounds as bounds
+    from wncs_lp.solvers.threads import resolve_threads, threads_limit
+
+    seen = {}
+    real_lower, real_gaps = bounds.lower_bound, bounds.policy_gaps
+
+    def lower(*a, **kw):
+        seen["relaxation"] = kw.get("threads")
+        return real_lower(*a, **kw)
+
+    def gaps(*a, **kw):
+        seen["cap"], seen["resolved"] = threads_limit(), resolve_threads(None)
+        return real_gaps(*a, **kw)
+
+    monkeypatch.setattr(bounds, "lower_bound", lower)
+    monkeypatch.setattr(bounds, "policy_gaps", gaps)
+    rc, _ = _json(capsys, "bound", P12, "--set", "tau_cap=6", "--relaxation", "2", "--policy", "--compare", "",
+                  "--threads", "1", "--json")
+    assert rc == 0 and seen == {"relaxation": 1, "cap": 1, "resolved": 1}
+    assert threads_limit() is None

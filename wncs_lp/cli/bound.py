@@ -14,7 +14,7 @@ def cmd_bound(args: argparse.Namespace) -> int:
     from ..bounds import lower_bound, parse_relaxation, policy_gaps
     from ..models.system import System
     from ..policies import parse_policy_names
-    from ..solvers.threads import resolve_threads
+    from ..solvers.threads import resolve_threads, thread_limit
 
     relaxation = parse_relaxation(args.relaxation)  # before any work
     compare = parse_policy_names(args.compare) if args.compare else []
@@ -30,16 +30,19 @@ def cmd_bound(args: argparse.Namespace) -> int:
         if relaxation not in ("grouped-private-servers", "joint-pairs"):
             raise WncsError("--groups is an option of --relaxation 3 (grouped private servers) and 4 (pairs)")
         limit["groups"] = _parse_groups(args.groups)
-    if relaxation in ("joint-configuration", "joint-pairs", "auto"):  # relaxations 2 and 4's chains
-        limit["threads"] = resolve_threads(args.threads)
-    res = lower_bound(system, relaxation, tol=args.tol, progress=prog, **limit)
-    report = None
-    if args.policy:
-        report = policy_gaps(res, system, ["bound", *compare], exact=None if args.exact_max_states else False,
-                             exact_max_states=args.exact_max_states or 0, slots=args.slots, reps=args.reps,
-                             seed=args.seed, burn_in=args.burn_in, control=not args.no_control_variate,
-                             progress=prog)
-    interval = _untruncated(args, res, system, report, compare, prog)
+    # --threads caps every kernel of the command (the policies' and evaluations' too); relaxations 2
+    # and 4 take their count explicitly (their library default is one thread)
+    with thread_limit(args.threads):
+        if relaxation in ("joint-configuration", "joint-pairs", "auto"):
+            limit["threads"] = resolve_threads(args.threads)
+        res = lower_bound(system, relaxation, tol=args.tol, progress=prog, **limit)
+        report = None
+        if args.policy:
+            report = policy_gaps(res, system, ["bound", *compare], exact=None if args.exact_max_states else False,
+                                 exact_max_states=args.exact_max_states or 0, slots=args.slots, reps=args.reps,
+                                 seed=args.seed, burn_in=args.burn_in, control=not args.no_control_variate,
+                                 progress=prog)
+        interval = _untruncated(args, res, system, report, compare, prog)
     if args.json:
         emit_json({**head(args, scenario), "bound": res.summary(), "explored": "lazily" if system.is_lazy else "whole",
                    "policies": None if report is None else report.summary(), "untruncated": interval.to_dict(),
