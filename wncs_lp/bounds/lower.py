@@ -200,13 +200,15 @@ def runs_grouped(system: System, joint_result: BoundResult | None) -> bool:
 
 def auto_pick(found: list[BoundResult], notes: list[str] = ()) -> BoundResult:
     """``"auto"``'s choice among certified bounds listed in the order 2, 4, 3, 1: the largest (the
-    first of equals), with ``stats["auto_choice"]``, ``"auto_reason"`` and ``"auto_bounds"``."""
+    first of equals), with ``stats["auto_choice"]``, ``"auto_reason"`` and ``"auto_bounds"``, and the
+    others as ``alternatives`` (their tables may make the better policy: :func:`~wncs_lp.bounds.gaps.policy_source`)."""
     best = max(found, key=lambda r: r.lower_bound)  # max keeps the first of equals: 2, 4, 3, 1
     bounds = {r.relaxation: r.lower_bound for r in found}
     reason = "; ".join([f"the largest certified bound of {', '.join(f'{k} {v:.10g}' for k, v in bounds.items())}"]
                        + list(notes))
     return replace(best, stats={**best.stats, "auto_choice": best.relaxation, "auto_reason": reason,
-                                "auto_bounds": bounds})
+                                "auto_bounds": bounds},
+                   alternatives=tuple(r for r in found if r is not best))  # their tables, for the policies
 
 
 def _check_options(name: str, options: dict) -> None:

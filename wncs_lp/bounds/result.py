@@ -111,6 +111,10 @@ class BoundResult(Display):
     seconds : float
     iterations : int
     stats : dict
+    alternatives : tuple of BoundResult
+        The other certified results ``lower_bound(relaxation="auto")`` computed beside this one
+        (their tables, for the policy side: :func:`~wncs_lp.bounds.gaps.policy_source`); empty
+        otherwise. Not part of :meth:`summary`.
     """
 
     relaxation: str
@@ -124,6 +128,7 @@ class BoundResult(Display):
     seconds: float
     iterations: int
     stats: dict[str, Any] = field(default_factory=dict)
+    alternatives: tuple = field(default=(), repr=False)
 
     def gap_of(self, gain: float) -> float:
         """The certified relative optimality gap of a policy of gain ``gain``: (gain - LB) / LB."""

@@ -12,6 +12,7 @@ from .common import (COUNT, NONNEGATIVE, Command, add_progress_arg, add_scenario
 
 def cmd_bound(args: argparse.Namespace) -> int:
     from ..bounds import lower_bound, parse_relaxation, policy_gaps
+    from ..bounds.gaps import policy_source
     from ..models.system import System
     from ..policies import parse_policy_names
     from ..solvers.threads import resolve_threads, thread_limit
@@ -36,25 +37,27 @@ def cmd_bound(args: argparse.Namespace) -> int:
         if relaxation in ("joint-configuration", "joint-pairs", "auto"):
             limit["threads"] = resolve_threads(args.threads)
         res = lower_bound(system, relaxation, tol=args.tol, progress=prog, **limit)
-        report = None
+        report, source, why = None, res, ""
         if args.policy:
+            source, why = policy_source(res, system, seed=args.seed)  # the bound's own tables unless clearly worse
             report = policy_gaps(res, system, ["bound", *compare], exact=None if args.exact_max_states else False,
                                  exact_max_states=args.exact_max_states or 0, slots=args.slots, reps=args.reps,
                                  seed=args.seed, burn_in=args.burn_in, control=not args.no_control_variate,
-                                 progress=prog)
-        interval = _untruncated(args, res, system, report, compare, prog)
+                                 progress=prog, tables=source)
+        interval = _untruncated(args, res, source, system, report, compare, prog)
     if args.json:
         emit_json({**head(args, scenario), "bound": res.summary(), "explored": "lazily" if system.is_lazy else "whole",
-                   "policies": None if report is None else report.summary(), "untruncated": interval.to_dict(),
+                   "policies": None if report is None else {**report.summary(), "tables_note": why},
+                   "untruncated": interval.to_dict(),
                    "seconds": time.perf_counter() - t0})
     else:
-        _print(scenario, res, report, system.is_lazy)
+        _print(scenario, res, report, system.is_lazy, why)
         tail = "" if interval.candidates or interval.note else " (--untruncated simulates the policies without the cap for one)"
         print(interval.message() + tail)
     return 0 if res.certified else 1  # a search stopped at its budget still certifies its bound
 
 
-def _untruncated(args: argparse.Namespace, res, system, report, compare: list[str], prog):
+def _untruncated(args: argparse.Namespace, res, source, system, report, compare: list[str], prog):
     """The interval for the optimum without the cap: the certified bound below (g*(cap) <= g*_inf),
     and with ``--untruncated`` the policies evaluated (the bound's alone without ``--policy``)
     simulated without the cap, the least upper confidence limit above."""
@@ -65,7 +68,7 @@ def _untruncated(args: argparse.Namespace, res, system, report, compare: list[st
     if not args.untruncated:
         return untruncated_interval(res.lower_bound, lower_from=lower_from)
     names = ["bound", *compare] if report is not None else ["bound"]
-    policies = [policy_by_name(n, res, system) for n in names]
+    policies = [policy_by_name(n, source, system) for n in names]
     prog.phase(f"simulating {', '.join(p.name for p in policies)} without the AoI cap ({args.reps} x {args.slots} "
                f"slots each, seed {args.seed})")
     return untruncated_interval(res.lower_bound, policies, lower_from=lower_from, slots=args.slots, reps=args.reps,
@@ -83,7 +86,7 @@ def _parse_groups(text: str) -> list[tuple[int, ...]]:
     return groups
 
 
-def _print(scenario, res, report, lazy: bool = False) -> None:
+def _print(scenario, res, report, lazy: bool = False, tables_note: str = "") -> None:
     from ..models.automaton import approx_count
 
     print(scenario.describe())
@@ -113,6 +116,8 @@ def _print(scenario, res, report, lazy: bool = False) -> None:
               f"upper = one-sided {100 * r0.get('confidence', 0.95):g}% upper confidence limit, Student t over the "
               f"independent replications (the AoI box has {approx_count(report.states)} states, above "
               "--exact-max-states):")
+    if tables_note:
+        print(f"  {tables_note}")
     w = max(len("policy"), *(len(r.policy) for r in report.rows))
     print(f"  {'policy':<{w}} {'gain':>16} {'upper':>16} {'gap <=':>9}")
     for r in report.rows:
