@@ -184,3 +184,22 @@ def test_lumped_ascent_climbs_from_relaxation_1_and_stays_below_the_lp():
     assert res.stats["ascent_steps"] == 40 and res.stats["ascent_value"] > res.stats["ascent_start"]
     assert r1 < res.lower_bound <= lp_optimum * (1 + 1e-9) and lp_optimum <= solve(build(sc)).gain_upper
     assert res.lower_bound == pytest.approx(res.stats["ascent_value"], rel=1e-6)
+
+
+def test_the_reduced_route_is_sized_as_reduced_and_loose_ipx_is_repaired(twice, lumped, monkeypatch):
+    """``lower_bound(x, 2, method="ipm")`` is guarded by the reduced LP's and the lumped chains' size,
+    not the whole LP's (sixteen processes: 4.25M nonzeros against 595M): with memory for the first
+    only, the whole route is refused and the reduced one runs; IPX stopped at 1e-2 and repaired by
+    the lumped chains certifies within 1e-2 of the LP's optimum (HiGHS at 1e-9), below g*."""
+    from wncs_lp.bounds import lower_bound
+    from wncs_lp.bounds.joint import joint_size
+    from wncs_lp.models import guard
+
+    system, _, _, g_star = twice
+    whole = joint_size(system)["memory_bytes"]
+    monkeypatch.setattr(guard, "available_memory", lambda: int(0.5 * whole / guard.MEMORY_FRACTION))
+    with pytest.raises(guard.SizeLimitError):
+        lower_bound(system, 2)
+    res = lower_bound(system, 2, method="ipm", ipm_tol=1e-2)
+    optimum = lumped[0].objective
+    assert res.stats["ipm_tables"] and (1 - 1e-2) * optimum <= res.lower_bound <= min(optimum * (1 + 1e-9), g_star)

@@ -155,7 +155,8 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         if system.is_lazy:
             raise WncsError(f"relaxation {name} asked for, but {LAZY_NOTE}")
         size = joint_size(system)  # estimate first: refuse, with the cheaper routes, what would not fit
-        require_memory(size["memory_bytes"], f"relaxation 2 on {system.n_processes} processes ({size['lp_nnz']:,} "
+        require_memory(_joint_bytes(system, size, options) if name == "joint-configuration" else size["memory_bytes"],
+                       f"relaxation 2 on {system.n_processes} processes ({size['lp_nnz']:,} "
                        f"LP nonzeros, {size['configurations']:,} joint configurations)",
                        ["relaxation 3 (--relaxation 3: pairs sharing private servers)",
                         "relaxation 1 (--relaxation 1: seconds at any size)"])
@@ -260,13 +261,32 @@ def _try_joint(system: System, options: dict) -> tuple[BoundResult | None, str]:
     return res, ""
 
 
+def _lumped_bytes(system: System, size: dict) -> int:
+    """Peak bytes of relaxation 2 on the lumped chains: the automaton's outcome arrays, the
+    certificate's (outcomes x cap) temporaries, the tables."""
+    cap = int(max(system.caps))
+    return 8 * size["outcomes"] * (system.n_processes + 4 * cap) + 16 * size["configurations"] * cap * system.n_processes
+
+
+def _joint_bytes(system: System, size: dict, options: dict) -> int:
+    """Peak bytes of relaxation 2 by the route asked: with ``method="ipm"``, ``"ascent"`` or
+    ``"smooth"`` on interchangeable processes, the reduced LP (:func:`ipm_plan`) or the lumped
+    chains and the certificate, never the whole LP (595M nonzeros at the paper's four types four
+    times, 4.25M reduced); otherwise :func:`joint_size`'s estimate of the whole LP."""
+    method = options.get("method", "auto")
+    if method not in ("ipm", "ascent", "smooth") or options.get("symmetry") is False:
+        return size["memory_bytes"]
+    need = _lumped_bytes(system, size)
+    if method == "ipm":
+        data = JointData.from_system(system)
+        need += ipm_plan(data, process_symmetry(system, data))["memory_bytes"]
+    return need
+
+
 def _try_lumped(system: System, options: dict, why_not: str) -> tuple[BoundResult | None, str]:
     """Beyond the whole LP's reach: relaxation 2's Lagrangian at relaxation 1's prices on the lumped
     chains (:data:`AUTO_ASCENT_STEPS`), where its arrays fit :data:`AUTO_ASCENT_MAX_BYTES`."""
-    size = joint_size(system)
-    cap = int(max(system.caps))
-    # the automaton's outcome arrays, the certificate's (outcomes x cap) temporaries, the tables
-    need = 8 * size["outcomes"] * (system.n_processes + 4 * cap) + 16 * size["configurations"] * cap * system.n_processes
+    need = _lumped_bytes(system, joint_size(system))
     if need > AUTO_ASCENT_MAX_BYTES:
         return None, f"beyond relaxation 2's reach: {why_not}; its lumped chains need ~{need / 2**30:.1f} GiB"
     keep = {k: v for k, v in options.items() if k in ("tol", "progress")}
