@@ -5,6 +5,7 @@
     python benchmarks/scale.py --instances lab:32,p1234:8 --compare greedy --out /tmp/s.csv
     python benchmarks/scale.py --search ascent,smooth --steps 40 --instances bounds_lab16 --out /tmp/r2.csv
     python benchmarks/scale.py --levers pdlp,warm,prices,pairs,tables --instances bounds_p1234_x4 --out /tmp/l.csv
+    python benchmarks/scale.py --levers ipm --ipm-tol 1e-2 --instances bounds_lab16 --out /tmp/ipm.csv
 
 Every instance runs as ``wncs-lp bound INSTANCE --policy --json`` in its own process (so its peak
 resident memory is its own: ``ru_maxrss`` of the child), with the command's defaults unless told:
@@ -24,6 +25,10 @@ and of gain to the first's.
 
 ``--levers`` measures what might bring relaxation 2 nearer its optimum at sixteen processes, or the
 policy onto better tables (docs/bounds.md, "Sixteen processes: the levers measured"), one row each:
+``ipm`` HiGHS's interior point IPX (no crossover, tolerance ``--ipm-tol``) on relaxation 2's LP reduced
+by symmetry (:func:`~wncs_lp.bounds.joint_ipm.ipm_tables`, what ``method="ipm"`` runs), the LP's size,
+IPX's iterations and CPU seconds, its raw duals' tables certified and the lumped chains at its
+coupling duals certified (the repair of ``method="ipm"``);
 ``pdlp`` HiGHS's first-order solver (``solver="pdlp"``, ``--pdlp-iterations`` iterations, a count so
 that a loaded machine does not change the result; tolerance 1e-4) on relaxation 2's LP reduced by symmetry, its raw duals' tables certified and the lumped chains
 at its coupling duals certified; ``warm`` the reduced LP at cap ``--warm-cap`` by the interior point,
@@ -183,6 +188,17 @@ def levers(instance: str, which: list[str], args, folder: Path) -> list[dict]:
                      "cpu_seconds": round(cpu, 1), "load1": round(os.getloadavg()[0], 2), "note": note})
         print("  ".join(f"{k}={rows[-1][k]}" for k in LEVER_COLUMNS if rows[-1][k] not in (None, "")), flush=True)
 
+    if "ipm" in which:
+        c0 = time.process_time()
+        ipm = ipm_tables(data, symmetry=sym, tol=float(args.ipm_tol))
+        raw = certify_tables(data, ipm.tables).lower_bound if ipm.tables is not None else float("-inf")
+        rows_, cols_, nnz_ = ipm.shape
+        row("ipm", f"the raw duals' tables (IPX at {args.ipm_tol})", raw, time.process_time() - c0,
+            f"HiGHS {ipm.status}, {ipm.iterations} iterations, {ipm.cpu_seconds:.1f} s of CPU in IPX and the build; "
+            f"LP {rows_:,} x {cols_:,}, {nnz_:,} nonzeros; objective {ipm.objective:.10g} (not a bound)")
+        if ipm.prices is not None:
+            value, cert = _certified_chains(sym, data, lumped, ipm.prices, kern)
+            row("ipm", "the lumped chains at its coupling duals", cert, time.process_time() - c0, f"L {value:.10g}")
     if "pdlp" in which:
         c0 = time.process_time()
         lp = symmetric_lp(sym, data)
@@ -249,9 +265,10 @@ def main() -> int:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--search", default="", help="relaxation 2's lumped searches to compare (e.g. ascent,smooth)")
     ap.add_argument("--steps", type=int, default=40, help="steps (smoothed evaluations) of each --search method")
-    ap.add_argument("--levers", default="", help="pdlp,warm,prices,pairs,tables (module docstring)")
+    ap.add_argument("--levers", default="", help="ipm,pdlp,warm,prices,pairs,tables (module docstring)")
     ap.add_argument("--pdlp-iterations", type=int, default=8000, help="PDLP's iterations in --levers pdlp")
     ap.add_argument("--warm-cap", type=int, default=10, help="the smaller cap of --levers warm")
+    ap.add_argument("--ipm-tol", type=float, default=1e-2, help="IPX's tolerance in --levers ipm")
     args = ap.parse_args()
     rows = []
     if args.levers:
