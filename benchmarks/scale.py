@@ -6,6 +6,7 @@
     python benchmarks/scale.py --search ascent,smooth --steps 40 --instances bounds_lab16 --out /tmp/r2.csv
     python benchmarks/scale.py --levers pdlp,warm,prices,pairs,tables --instances bounds_p1234_x4 --out /tmp/l.csv
     python benchmarks/scale.py --levers ipm --ipm-tol 1e-2 --instances bounds_lab16 --out /tmp/ipm.csv
+    python benchmarks/scale.py --levers clarabel --clarabel-time-limit 300 --instances bounds_p1234_x4 --out /tmp/c.csv
 
 Every instance runs as ``wncs-lp bound INSTANCE --policy --json`` in its own process (so its peak
 resident memory is its own: ``ru_maxrss`` of the child), with the command's defaults unless told:
@@ -29,6 +30,8 @@ policy onto better tables (docs/bounds.md, "Sixteen processes: the levers measur
 by symmetry (:func:`~wncs_lp.bounds.joint_ipm.ipm_tables`, what ``method="ipm"`` runs), the LP's size,
 IPX's iterations and CPU seconds, its raw duals' tables certified and the lumped chains at its
 coupling duals certified (the repair of ``method="ipm"``);
+``clarabel`` the same LP by Clarabel (z >= 0 as a nonnegative cone, tolerances ``--ipm-tol``, no
+presolve, ``--clarabel-time-limit`` seconds), then the same two certificates;
 ``pdlp`` HiGHS's first-order solver (``solver="pdlp"``, ``--pdlp-iterations`` iterations, a count so
 that a loaded machine does not change the result; tolerance 1e-4) on relaxation 2's LP reduced by symmetry, its raw duals' tables certified and the lumped chains
 at its coupling duals certified; ``warm`` the reduced LP at cap ``--warm-cap`` by the interior point,
@@ -199,6 +202,26 @@ def levers(instance: str, which: list[str], args, folder: Path) -> list[dict]:
         if ipm.prices is not None:
             value, cert = _certified_chains(sym, data, lumped, ipm.prices, kern)
             row("ipm", "the lumped chains at its coupling duals", cert, time.process_time() - c0, f"L {value:.10g}")
+    if "clarabel" in which:
+        import clarabel
+        import scipy.sparse as sp
+
+        c0 = time.process_time()
+        lp = symmetric_lp(sym, data)
+        m, n = lp.A.shape
+        st = clarabel.DefaultSettings()
+        st.verbose, st.presolve_enable, st.time_limit = True, False, float(args.clarabel_time_limit)
+        st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = float(args.ipm_tol)
+        sol = clarabel.DefaultSolver(sp.csc_matrix((n, n)), lp.c, sp.vstack([lp.A, -sp.identity(n)]).tocsc(),
+                                     np.r_[lp.b, np.zeros(n)], [clarabel.ZeroConeT(m), clarabel.NonnegativeConeT(n)],
+                                     st).solve()
+        lam = np.zeros(lp.keep.size)
+        lam[lp.keep] = -np.asarray(sol.z)[:m]  # Clarabel's sign: q + A^T z >= 0
+        raw = certify_tables(data, spread_tables(sym, data, lp, lam)).lower_bound
+        row("clarabel", f"the raw duals' tables (Clarabel at {args.ipm_tol})", raw, time.process_time() - c0,
+            f"{sol.status}, {sol.iterations} iterations; LP {m:,} x {n:,}, {lp.A.nnz:,} nonzeros")
+        value, cert = _certified_chains(sym, data, lumped, coupling_prices(lp, lam), kern)
+        row("clarabel", "the lumped chains at its coupling duals", cert, time.process_time() - c0, f"L {value:.10g}")
     if "pdlp" in which:
         c0 = time.process_time()
         lp = symmetric_lp(sym, data)
@@ -265,10 +288,11 @@ def main() -> int:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--search", default="", help="relaxation 2's lumped searches to compare (e.g. ascent,smooth)")
     ap.add_argument("--steps", type=int, default=40, help="steps (smoothed evaluations) of each --search method")
-    ap.add_argument("--levers", default="", help="ipm,pdlp,warm,prices,pairs,tables (module docstring)")
+    ap.add_argument("--levers", default="", help="ipm,clarabel,pdlp,warm,prices,pairs,tables (module docstring)")
     ap.add_argument("--pdlp-iterations", type=int, default=8000, help="PDLP's iterations in --levers pdlp")
     ap.add_argument("--warm-cap", type=int, default=10, help="the smaller cap of --levers warm")
     ap.add_argument("--ipm-tol", type=float, default=1e-2, help="IPX's tolerance in --levers ipm")
+    ap.add_argument("--clarabel-time-limit", type=float, default=900.0, help="seconds of --levers clarabel")
     args = ap.parse_args()
     rows = []
     if args.levers:
