@@ -11,7 +11,8 @@ from bounds_reference import EDGE, REMOTE
 from wncs_lp.bounds.joint_chains import JointData
 from wncs_lp.bounds.joint_symmetry import process_symmetry
 from wncs_lp.bounds.lower import lower_bound
-from wncs_lp.bounds.pairs import GroupChains, GroupLumps, certify_group_tables, solve_group_chain
+from wncs_lp.bounds import pairs_kernels
+from wncs_lp.bounds.pairs import GroupChains, GroupLumps, certify_group_tables, group_cut, solve_group_chain
 from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.scenario import scenario_from_dict
@@ -80,3 +81,53 @@ def test_symmetric_search_is_valid_and_as_tight_as_the_whole_one(twice):
     lumps = GroupLumps.build(JointData.from_system(system), sym.tables.groups, process_symmetry(system))
     mu = np.asarray(sym.multipliers)
     assert np.allclose(mu, lumps.prices_of(mu)[:, lumps.pair_orbit])
+
+
+def test_own_swap_computes_half_the_chain_and_changes_no_gain(twice):
+    """A same-type pair's chain lumped also by its own swap (PairSwap): each sweep computes one state
+    of each orbit and mirrors the rest, so the gain and the table are the chain's solved whole (on
+    the chain lumped only by the swaps disjoint from the pair); the cut's push from one state of
+    each orbit equals the whole push of the policy mixing p and sigma p at the fixed states, and
+    the cut prices the policy at the chain's gain (a + <x, mu> = g, the defining property of a cut
+    of an optimal policy)."""
+    _, data, sym, _, _ = twice
+    chains = GroupChains.build(data, ((0, 2), (1, 3)))
+    swapped = GroupLumps.build(data, chains.groups, sym)
+    plain = GroupLumps.build(data, chains.groups, sym, own_swap=False)
+    rng = np.random.default_rng(5)
+    prices = rng.normal(scale=5.0, size=(chains.n_groups, swapped.n_prices))
+    prices -= prices.mean(axis=0)
+    for i in range(chains.n_groups):
+        ch, sw = swapped.chains[i], swapped.chains[i].swap(0)
+        assert sw is not None and plain.chains[i].swap(0) is None and 0.4 < sw.share < 0.8
+        mu = prices[i][swapped.price_of[i]]
+        fast = solve_group_chain(ch, 0, mu, None, tol=1e-12)
+        slow = solve_group_chain(plain.chains[i], 0, mu, None, tol=1e-12)
+        assert fast.lower == pytest.approx(slow.lower, rel=1e-10) and fast.upper == pytest.approx(slow.upper, rel=1e-10)
+        assert np.allclose(fast.h, slow.h, atol=1e-8 * np.abs(slow.h).max())
+        # the push: from a sigma-invariant law, the whole chain's under p and under sigma p, averaged
+        ages = np.arange(ch.shape(0)[1])
+        image = (ages % ch.c2[0]) * ch.c2[0] + ages // ch.c2[0]
+        y = rng.random(ch.shape(0))
+        y += y[sw.config][:, image]
+        c1, c2, _, out_ptr, out_nxt, out_prob, s1, s2 = ch.args(0)
+        mixed = sw.pair[fast.policy[sw.config][:, image]]
+        fixed = (sw.kind[:, None] == 1) & (image == ages)[None, :]
+        assert np.all((mixed == fast.policy) | fixed)  # equivariant off the fixed states
+        whole = [np.empty_like(y) for _ in range(3)]
+        for pol, out in ((fast.policy, whole[0]), (mixed, whole[1])):
+            pairs_kernels.push(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, out)
+        pairs_kernels.push_sym(y, fast.policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, sw.kind, sw.config, whole[2])
+        assert np.allclose(whole[2], 0.5 * (whole[0] + whole[1]), rtol=0, atol=1e-12 * y.sum())
+        a, x, _ = group_cut(ch, 0, fast.policy)
+        assert a + x @ mu == pytest.approx(fast.lower, rel=1e-8)
+
+
+def test_own_swap_search_is_the_same_bound_and_valid(twice):
+    """The search on the chains lumped by their own swaps finds the bound of the search without
+    (the same chains, their gains to the chains' accuracy), below the exact g*."""
+    system, _, _, g_star, r2 = twice
+    swapped = lower_bound(system, 4, start=r2, groups=[(0, 2), (1, 3)], max_iter=15)
+    plain = lower_bound(system, 4, start=r2, groups=[(0, 2), (1, 3)], max_iter=15, own_swap=False)
+    assert r2.lower_bound < swapped.lower_bound <= g_star
+    assert swapped.lower_bound == pytest.approx(plain.lower_bound, rel=1e-8)

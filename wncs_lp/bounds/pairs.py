@@ -55,7 +55,7 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -71,7 +71,7 @@ from .joint_chains import ChainSolution, JointData, TableCertificate, certificat
 from .joint_symmetry import ProcessSymmetry, orbit_labels, process_symmetry
 from .result import BoundResult, GroupTables, ValueTables
 
-__all__ = ["pairs_bound", "pairs_size", "GroupChains", "GroupLumps", "certify_group_tables", "solve_group_chain", "group_cut",
+__all__ = ["pairs_bound", "pairs_size", "GroupChains", "GroupLumps", "PairSwap", "certify_group_tables", "solve_group_chain", "group_cut",
            "candidate_partitions",
            "pair_partition"]
 
@@ -101,6 +101,9 @@ class GroupChains:
         missing second member).
     q : tuple of (c1 * c2,) arrays
         q_G(T) = q_{k1}(t1) + q_{k2}(t2) at the flat index T = t1 * c2 + t2.
+    swaps : tuple of PairSwap or None
+        Per group its own swap where its chain is symmetric under it (:class:`PairSwap`: the
+        sweeps and the cuts computed on one state of each orbit); empty: none.
     """
 
     data: JointData
@@ -110,6 +113,7 @@ class GroupChains:
     s1: tuple
     s2: tuple
     q: tuple
+    swaps: tuple = ()
 
     @classmethod
     def build(cls, data: JointData, groups) -> "GroupChains":
@@ -138,6 +142,9 @@ class GroupChains:
     def shape(self, i: int) -> tuple[int, int]:
         """(|C|, c1 * c2): group i's table, flat over its ages."""
         return self.data.n_configs, self.c1[i] * self.c2[i]
+
+    def swap(self, i: int) -> "PairSwap | None":
+        return self.swaps[i] if self.swaps else None
 
     def args(self, i: int) -> tuple:
         d = self.data
@@ -190,6 +197,52 @@ def _swap_maps(sym: ProcessSymmetry, x: int, y: int) -> tuple[np.ndarray, np.nda
 
 
 @dataclass(frozen=True, eq=False)
+class PairSwap:
+    r"""A pair's chain lumped by its own swap: sigma (t1, t2, C) = (t2, t1, sigma C).
+
+    Where the group's two members are interchangeable (the same costs, caps and links) and its
+    prices are sigma-invariant (the search's are: sigma is in Gamma, :class:`GroupLumps`), sigma
+    maps the chain onto itself: the state (t1, t2, C) under pair p = (C, a) and (t2, t1, sigma C)
+    under sigma p have the same cost and the same price, and their outcomes correspond (sigma o
+    delivers to the members in the other order). So T h is sigma-invariant when h is, the
+    relative value iteration from a sigma-invariant start stays on sigma-invariant tables (its
+    fixed point and brackets are the whole chain's), a greedy policy may be taken sigma-equivariant,
+    and its stationary law from a sigma-invariant start is sigma-invariant. Each sweep and push is
+    then computed on one state of each sigma-orbit and mirrored (``pairs_kernels.mirror``,
+    ``push_sym``); the tables still live on every state, and are certified on the whole system.
+
+    Attributes
+    ----------
+    kind : (|C|,) int8 array
+        0: configuration computed whole (its image is larger); 1: sigma C = C, only t2 >= t1
+        computed; 2: the image of a smaller configuration (not computed).
+    config : (|C|,) int array
+        sigma on the chain's configurations.
+    pair : (|C x A|,) int array
+        sigma on the chain's pairs.
+    todo : int array
+        The configurations of kind 0 or 1.
+    """
+
+    kind: np.ndarray
+    config: np.ndarray
+    pair: np.ndarray
+    todo: np.ndarray
+
+    @classmethod
+    def of(cls, config: np.ndarray, pair: np.ndarray) -> "PairSwap":
+        n = config.size
+        kind = np.where(config > np.arange(n), 0, np.where(config == np.arange(n), 1, 2)).astype(np.int8)
+        return cls(kind, np.ascontiguousarray(config, dtype=np.int64), np.ascontiguousarray(pair, dtype=np.int64),
+                   np.flatnonzero(kind != 2).astype(np.int64))
+
+    @property
+    def share(self) -> float:
+        """The fraction of a whole sweep computed (states, weighed alike)."""
+        return float(np.mean(np.where(self.kind == 0, 1.0, np.where(self.kind == 1, 0.5, 0.0))))
+
+
+@dataclass(frozen=True, eq=False)
 class GroupLumps:
     r"""Each group's priced chain lumped by the symmetry of interchangeable processes.
 
@@ -232,7 +285,8 @@ class GroupLumps:
     n_prices: int
 
     @classmethod
-    def build(cls, data: JointData, groups: tuple, sym: ProcessSymmetry | None) -> "GroupLumps":
+    def build(cls, data: JointData, groups: tuple, sym: ProcessSymmetry | None,
+              own_swap: bool = True) -> "GroupLumps":
         swaps = []
         for cl in (sym.classes if sym is not None else ()):
             for i, x in enumerate(cl):
@@ -261,7 +315,10 @@ class GroupLumps:
                                out_nxt=np.ascontiguousarray(corb[data.out_nxt[idx]]),
                                out_prob=np.ascontiguousarray(data.out_prob[idx]),
                                out_delta=np.ascontiguousarray(data.out_delta[idx][:, list(g)]))
-            chains.append(GroupChains.build(lumped, [tuple(range(len(g)))]))
+            chain = GroupChains.build(lumped, [tuple(range(len(g)))])
+            if own_swap and g in maps:
+                chain = replace(chain, swaps=(_own_swap(data, g, maps[g], corb, n_k, porb, first, lumped),))
+            chains.append(chain)
             corbs.append(corb)
             price_of.append(qorb[first])
         return cls(tuple(chains), tuple(corbs), tuple(price_of), qorb, n_q)
@@ -280,6 +337,26 @@ class GroupLumps:
         first = np.full(self.chains[i].data.n_configs, -1, dtype=np.int64)
         first[self.config_orbit[i][::-1]] = np.arange(self.config_orbit[i].size)[::-1]
         return np.ascontiguousarray(h[first])
+
+
+def _own_swap(data: JointData, g: tuple, maps: tuple, corb: np.ndarray, n_k: int, porb: np.ndarray,
+              first: np.ndarray, lumped: JointData) -> "PairSwap | None":
+    """Group g's own swap on its chain lumped by H_G (sigma commutes with H_G, so it acts on the
+    orbits), or None where the chain is not symmetric under it (caps or costs differ)."""
+    a, b = g
+    if data.caps[a] != data.caps[b] or not np.array_equal(data.q[a], data.q[b]):
+        return None
+    cmap, pmap = maps
+    firstc = np.full(n_k, -1, dtype=np.int64)
+    firstc[corb[::-1]] = np.arange(corb.size)[::-1]
+    config = corb[cmap[firstc]]
+    inv = np.empty(first.size, dtype=np.int64)
+    inv[porb[first]] = np.arange(first.size)
+    pair = inv[porb[pmap[first]]]
+    if not np.array_equal(lumped.pair_c[pair], config[lumped.pair_c]) or not np.array_equal(config[config],
+                                                                                            np.arange(n_k)):
+        return None
+    return PairSwap.of(config, pair)
 
 
 # ---------------------------------------------------------------------------- the certificate
@@ -322,10 +399,26 @@ def solve_group_chain(chains: GroupChains, i: int, price: np.ndarray, h0: np.nda
     th = np.empty(shape)
     pol = np.empty(shape, dtype=np.int64)
     price = np.ascontiguousarray(price, dtype=float)
-    args = (chains.q[i], price, *chains.args(i), th, pol)
+    sw = chains.swap(i)
     # on threads the configurations split, each writing its own rows: the same numbers as one thread
-    lo, hi, sweeps = damped_rvi(lambda x: run_twins(mod.bellman_par, mod.bellman_ser, threads, x, *args), h, th, tol=tol, max_sweeps=max_sweeps, relax=relax, stop=stop)
+    if sw is None:
+        args = (chains.q[i], price, *chains.args(i), th, pol)
+        bellman = lambda x: run_twins(mod.bellman_par, mod.bellman_ser, threads, x, *args)  # noqa: E731
+    else:  # one state of each orbit of the pair's own swap, then the rest mirrored (PairSwap)
+        h = 0.5 * (h + h[sw.config][:, _transposed(shape, chains.c2[i])])  # a sigma-invariant start
+        args = (chains.q[i], price, *chains.args(i), sw.kind, sw.todo, th, pol)
+
+        def bellman(x):
+            run_twins(mod.bellman_sym_par, mod.bellman_sym_ser, threads, x, *args)
+            run_twins(mod.mirror_par, mod.mirror_ser, threads, th, pol, chains.c2[i], sw.kind, sw.config, sw.pair)
+    lo, hi, sweeps = damped_rvi(bellman, h, th, tol=tol, max_sweeps=max_sweeps, relax=relax, stop=stop)
     return ChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)
+
+
+def _transposed(shape: tuple, c2: int) -> np.ndarray:
+    """The flat age index (t2, t1) of each flat index (t1, t2) of a square pair's table."""
+    t = np.arange(shape[1])
+    return (t % c2) * c2 + t // c2
 
 
 #: The lazy weight of the cuts' power iteration (:func:`~wncs_lp.bounds.joint_chains.lazy_power`):
@@ -343,9 +436,19 @@ def group_cut(chains: GroupChains, i: int, policy: np.ndarray, y0: np.ndarray | 
     shape = chains.shape(i)
     y = np.full(shape, 1.0 / (shape[0] * shape[1])) if y0 is None else np.array(y0, dtype=float, copy=True)
     c1, c2, _, out_ptr, out_nxt, out_prob, s1, s2 = chains.args(i)
-    y, _, _ = lazy_power(lambda x, out: mod.push(x, policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, out), y,
-                         tol=tol, max_sweeps=max_sweeps, lazy=CUT_LAZY)
+    sw = chains.swap(i)
+    if sw is None:
+        def push(x, out):
+            mod.push(x, policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, out)
+    else:  # solve_group_chain's policy, sigma-equivariant off the fixed states (PairSwap), there mixed
+        y = 0.5 * (y + y[sw.config][:, _transposed(shape, c2)])
+
+        def push(x, out):
+            mod.push_sym(x, policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, sw.kind, sw.config, out)
+    y, _, _ = lazy_power(push, y, tol=tol, max_sweeps=max_sweeps, lazy=CUT_LAZY)
     x = np.bincount(policy.ravel(), weights=y.ravel(), minlength=d.n_pairs)
+    if sw is not None:  # at a fixed state the law is pushed half by p, half by sigma p
+        x = 0.5 * (x + np.bincount(sw.pair[policy.ravel()], weights=y.ravel(), minlength=d.n_pairs))
     return float((y * chains.q[i][None, :]).sum()), x, y
 
 
@@ -463,8 +566,8 @@ def pairs_size(system: System, groups="auto", *, symmetric: bool = True) -> dict
 
 
 def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4, max_iter: int = 30,
-                time_limit: float | None = 600.0, threads: int = 1, symmetric: bool = True, min_gain: float = 0.0,
-                progress=None, **joint_options):
+                time_limit: float | None = 600.0, threads: int = 1, symmetric: bool = True, own_swap: bool = True,
+                min_gain: float = 0.0, progress=None, **joint_options):
     """A certified lower bound on g* from relaxation 4 (relaxation 2 with pairs of processes' ages
     kept jointly; module docstring).
 
@@ -493,6 +596,10 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
         Search over prices invariant under the permutations of interchangeable processes that map
         every group onto itself, each group's chain lumped by them (:class:`GroupLumps`: the same
         maximum of L, smaller chains); False: every pair priced on its own, the whole chains.
+    own_swap : bool
+        With ``symmetric``, each pair of interchangeable processes' chain also lumped by its own
+        swap (:class:`PairSwap`: the same chain, each sweep and cut computed on one state of each
+        orbit); False: only by the permutations that fix its members.
     min_gain : float
         The bundle runs only when the start raised relaxation 2's bound by more than
         ``min_gain |bound|`` (``"auto"``'s test of whether the pairs pay); 0: always.
@@ -531,7 +638,7 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
     stats: dict = {"relaxation_2_bound": float(start.lower_bound), "candidates": {}}
     status, it, found = MAX_ITER, 0, []  # found: the best start so far, which an interrupt keeps
     try:
-        _best_start(data, sym, cands, sep, mu1, tol, threads, deadline, prog, stats, found)
+        _best_start(data, sym, own_swap, cands, sep, mu1, tol, threads, deadline, prog, stats, found)
         s = found[0][0]
         pays = s.best_bound - start.lower_bound > min_gain * abs(start.lower_bound)
         stats["start_pays"] = bool(pays)
@@ -564,14 +671,14 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
                        seconds=time.monotonic() - t0, iterations=int(s.evaluations), stats=stats)
 
 
-def _best_start(data: JointData, sym: ProcessSymmetry | None, cands: list, sep: list, mu1: np.ndarray, tol: float,
-                threads: int, deadline: float, prog, stats: dict, found: list) -> None:
+def _best_start(data: JointData, sym: ProcessSymmetry | None, own_swap: bool, cands: list, sep: list, mu1: np.ndarray,
+                tol: float, threads: int, deadline: float, prog, stats: dict, found: list) -> None:
     """Phase 1: each candidate partition's chains at relaxation 2's prices summed per group (its
     tables summed per group offered first); the best certified so far kept in ``found`` as
     ``[(search, L, cuts, prices)]``."""
     for cand in cands:
         ch = GroupChains.build(data, cand)
-        lumps = GroupLumps.build(data, ch.groups, sym)
+        lumps = GroupLumps.build(data, ch.groups, sym, own_swap)
         summed = ch.from_separable(sep)
         s = _Search(ch, lumps, float(tol), int(threads), deadline, [lumps.lumped(i, h) for i, h in enumerate(summed)],
                     [None] * ch.n_groups)

@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..solvers.threads import twins
+
 
 @njit(inline="always")
 def _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
@@ -108,3 +110,98 @@ def push(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, y_out):
                 n1 = t1 + 1 if t1 < m1 else m1
                 n2 = t2 + 1 if t2 < m2 else m2
                 y_out[out_nxt[o], n1 * c2 + n2] += w * out_prob[o]
+
+
+# ---------------------------------------------------------------------------- a pair lumped by its own swap
+# A same-type pair's chain is symmetric under sigma: (t1, t2, C) -> (t2, t1, swap[C]), pairs p ->
+# pswap[p] (pairs.PairSwap). ``kind[c]``: 0 configuration c computed (its image swap[c] > c is
+# not), 1 swap[c] == c, 2 the image of a smaller one (not computed); ``todo`` the configurations
+# of kind 0 or 1. After a sweep :func:`mirror_ser` writes the rest from their images. A
+# fixed configuration is swept whole and its states below the diagonal then overwritten by their
+# images (exactly sigma-invariant tables and an equivariant policy off the diagonal): sweeping only
+# t2 >= t1 there was measured slower than whole rows (short inner loops).
+@njit(inline="always")
+def _swapped(t, c2):
+    t1 = t // c2
+    return (t - t1 * c2) * c2 + t1
+
+
+def _bellman_sym_body(h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, kind, todo, th, pol):
+    """:func:`bellman_ser` on the configurations ``todo`` (kind 0 or 1); :func:`mirror_ser` after."""
+    for j in prange(todo.size):
+        acc = np.empty(c1 * c2)
+        best = np.empty(c1 * c2)
+        _bellman_config(todo[j], h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol, acc, best)
+
+
+bellman_sym_par, bellman_sym_ser = twins(_bellman_sym_body, "bellman_sym")
+
+
+@njit(inline="always")
+def _mirror_config(c, th, pol, c1, c2, kind, swap, pswap):
+    src = swap[c]
+    for t1 in range(c1):
+        for t2 in range(t1 if kind[c] == 1 else c2):  # a fixed configuration: below the diagonal
+            th[c, t1 * c2 + t2] = th[src, t2 * c2 + t1]
+            pol[c, t1 * c2 + t2] = pswap[pol[src, t2 * c2 + t1]]
+
+
+def _mirror_body(th, pol, c2, kind, swap, pswap):
+    """The states of kind 2 and below the diagonal of kind 1 from their images (computed by
+    ``bellman_sym_ser``): th[c, (t1, t2)] = th[swap[c], (t2, t1)], pol likewise through ``pswap``;
+    each configuration writes its own row from computed rows."""
+    n_c, n_t = th.shape
+    for c in prange(n_c):
+        if kind[c] != 0:
+            _mirror_config(c, th, pol, n_t // c2, c2, kind, swap, pswap)
+
+
+mirror_par, mirror_ser = twins(_mirror_body, "mirror")
+
+
+@njit(cache=True, nogil=True)
+def push_sym(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, kind, swap, y_out):
+    """y_out = y P_pi for a sigma-invariant law y and policy: pushed from one state of each orbit
+    (a fixed state with half its mass), then y_out(s) = z(s) + z(sigma s)."""
+    n_c, n_t = y.shape
+    for c in range(n_c):
+        for t in range(n_t):
+            y_out[c, t] = 0.0
+    for c in range(n_c):
+        if kind[c] == 2:
+            continue
+        for t in range(n_t):
+            t1 = t // c2
+            t2 = t - t1 * c2
+            w = y[c, t]
+            if kind[c] == 1:
+                if t2 < t1:
+                    continue
+                if t2 == t1:
+                    w *= 0.5
+            if w == 0.0:
+                continue
+            p = pol[c, t]
+            for o in range(out_ptr[p], out_ptr[p + 1]):
+                m1 = s1[o]
+                m2 = s2[o]
+                n1 = t1 + 1 if t1 < m1 else m1
+                n2 = t2 + 1 if t2 < m2 else m2
+                y_out[out_nxt[o], n1 * c2 + n2] += w * out_prob[o]
+    for c in range(n_c):  # z + sigma z, each orbit once
+        if kind[c] == 2:
+            continue
+        d = swap[c]
+        for t in range(n_t):
+            t1 = t // c2
+            t2 = t - t1 * c2
+            s = _swapped(t, c2)
+            if kind[c] == 1:
+                if t2 < t1:
+                    continue
+                if t2 == t1:
+                    y_out[c, t] *= 2.0
+                    continue
+            v = y_out[c, t] + y_out[d, s]
+            y_out[c, t] = v
+            y_out[d, s] = v
