@@ -382,22 +382,31 @@ def solve_chain(data: JointData, k: int, price: np.ndarray, h0: np.ndarray | Non
 
 
 def damped_rvi(bellman, h: np.ndarray, th: np.ndarray, *, tol: float, max_sweeps: int, relax: float,
-               stop=None) -> tuple[float, float, int]:
+               stop=None, fused=None) -> tuple[float, float, int]:
     """The relative value iteration of the relaxations' priced chains, in place on ``h``:
     ``bellman(h)`` writes T h into ``th``; h <- h + relax (T h - h), recentred at h[0, 0], until
     max (T h - h) - min (T h - h) <= tol * max(|min|, 1), ``max_sweeps`` or ``stop()`` (polled
-    every 16 sweeps). Returns (min, max, sweeps): the bracket of the chain's gain at the last h."""
+    every 16 sweeps). Returns (min, max, sweeps): the bracket of the chain's gain at the last h.
+
+    ``fused``: a pair (bracket, update) of kernels doing the same arithmetic without temporaries,
+    ``bracket(th, h) -> (min, max)`` of th - h and ``update(h, th, relax)`` (the same numbers)."""
     lo, hi = -np.inf, np.inf
     sweeps = 0
     while sweeps < max_sweeps:
         bellman(h)
         sweeps += 1
-        d = th - h
-        lo, hi = float(d.min()), float(d.max())
+        if fused is None:
+            d = th - h
+            lo, hi = float(d.min()), float(d.max())
+        else:
+            lo, hi = fused[0](th, h)
         if hi - lo <= tol * max(abs(lo), 1.0) or (stop is not None and sweeps % 16 == 0 and stop()):
             break
-        h += relax * d
-        h -= h[0, 0]
+        if fused is None:
+            h += relax * d
+            h -= h[0, 0]
+        else:
+            fused[1](h, th, relax)
     return lo, hi, sweeps
 
 
@@ -425,25 +434,33 @@ def stationary(data: JointData, k: int, weights: np.ndarray, kern: Kernels, y0: 
 
 
 def lazy_power(push, y: np.ndarray, *, tol: float, max_sweeps: int,
-               lazy: float = 0.5) -> tuple[np.ndarray, float, int]:
+               lazy: float = 0.5, mix=None) -> tuple[np.ndarray, float, int]:
     """Power iteration of the lazy chain lazy I + (1 - lazy) P from ``y`` (normalised first), the
     stationary laws of the relaxations' priced chains: ``push(y, out)`` writes y P into ``out``;
     until ||y P - y||_1 <= tol or ``max_sweeps``. Returns (y, ||y P - y||_1, sweeps).
 
     The lazy chain has P's stationary laws and no period for any 0 < ``lazy`` < 1; an eigenvalue
     lambda of P becomes lazy + (1 - lazy) lambda, so near lambda = 1 (slow mixing, the common
-    case) a smaller ``lazy`` converges faster (complex eigenvalues near the unit circle the other way)."""
+    case) a smaller ``lazy`` converges faster (complex eigenvalues near the unit circle the other way).
+
+    ``mix``: a kernel ``mix(y, yn, lazy, z)`` writing |yn - y| into z and lazy y + (1 - lazy) yn
+    into y in one pass (the same numbers, fewer temporaries)."""
     if not 0.0 < lazy < 1.0:
         raise SolverError(f"lazy must be in (0, 1), got {lazy!r}")
     y = y / y.sum()
     yn = np.empty_like(y)
+    z = None if mix is None else np.empty_like(y)
     res = np.inf
     sweeps = 0
     while sweeps < max_sweeps:
         push(y, yn)
         sweeps += 1
-        res = float(np.abs(yn - y).sum())
-        y = lazy * y + (1.0 - lazy) * yn
+        if mix is None:
+            res = float(np.abs(yn - y).sum())
+            y = lazy * y + (1.0 - lazy) * yn
+        else:
+            mix(y, yn, lazy, z)
+            res = float(z.sum())
         y /= y.sum()
         if res <= tol:
             break

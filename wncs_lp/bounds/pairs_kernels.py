@@ -205,3 +205,40 @@ def push_sym(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, kind, swap, y_o
             v = y_out[c, t] + y_out[d, s]
             y_out[c, t] = v
             y_out[d, s] = v
+
+
+# ---------------------------------------------------------------------------- the relative value iteration's step
+@njit(cache=True, nogil=True)
+def bracket(th, h):
+    """(min, max) of th - h (joint_chains.damped_rvi's bracket, without a temporary)."""
+    lo = np.inf
+    hi = -np.inf
+    n_c, n_t = h.shape
+    for c in range(n_c):
+        for t in range(n_t):
+            d = th[c, t] - h[c, t]
+            lo = min(lo, d)
+            hi = max(hi, d)
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def relax_update(h, th, relax):
+    """h <- h + relax (th - h), then minus its new h[0, 0]: the numbers of numpy's
+    ``h += relax * (th - h); h -= h[0, 0]`` (the same operations, each rounded alike)."""
+    n_c, n_t = h.shape
+    h00 = h[0, 0] + relax * (th[0, 0] - h[0, 0])
+    for c in range(n_c):
+        for t in range(n_t):
+            h[c, t] = (h[c, t] + relax * (th[c, t] - h[c, t])) - h00
+
+
+@njit(cache=True, nogil=True)
+def lazy_mix(y, yn, lazy, z):
+    """z = |yn - y| and y <- lazy y + (1 - lazy) yn in one pass (joint_chains.lazy_power's step,
+    the numbers numpy's expressions give)."""
+    n_c, n_t = y.shape
+    for c in range(n_c):
+        for t in range(n_t):
+            z[c, t] = abs(yn[c, t] - y[c, t])
+            y[c, t] = lazy * y[c, t] + (1.0 - lazy) * yn[c, t]
