@@ -36,14 +36,38 @@ def _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
 
 
 @njit(inline="always")
-def _bellman_config(c, h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol, acc, best):
+def _expect_upper(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
+    """:func:`_expect` only where t2 >= t1 (a pair's fixed configuration; the rest mirrored)."""
+    for o in range(out_ptr[p], out_ptr[p + 1]):
+        pr = out_prob[o]
+        cn = out_nxt[o]
+        m1 = s1[o]
+        m2 = s2[o]
+        for t1 in range(c1):
+            n1 = t1 + 1 if t1 < m1 else m1
+            base = n1 * c2
+            row = t1 * c2
+            for t2 in range(t1, m2):
+                acc[row + t2] += pr * h[cn, base + t2 + 1]
+            v = pr * h[cn, base + m2]
+            for t2 in range(max(t1, m2), c2):
+                acc[row + t2] += v
+
+
+@njit(inline="always")
+def _bellman_config(c, h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol, acc, best,
+                    upper=False):
+    """Row c of T h and its policy (``upper``: right only where t2 >= t1, the rest mirrored after)."""
     n_t = c1 * c2
     for t in range(n_t):
         best[t] = np.inf
     for p in range(act_ptr[c], act_ptr[c + 1]):
         for t in range(n_t):
             acc[t] = price[p]
-        _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
+        if upper:
+            _expect_upper(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
+        else:
+            _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
         for t in range(n_t):
             if acc[t] < best[t]:
                 best[t] = acc[t]
@@ -116,22 +140,17 @@ def push(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, y_out):
 # A same-type pair's chain is symmetric under sigma: (t1, t2, C) -> (t2, t1, swap[C]), pairs p ->
 # pswap[p] (pairs.PairSwap). ``kind[c]``: 0 configuration c computed (its image swap[c] > c is
 # not), 1 swap[c] == c, 2 the image of a smaller one (not computed); ``todo`` the configurations
-# of kind 0 or 1. After a sweep :func:`mirror_ser` writes the rest from their images. A
-# fixed configuration is swept whole and its states below the diagonal then overwritten by their
-# images (exactly sigma-invariant tables and an equivariant policy off the diagonal): sweeping only
-# t2 >= t1 there was measured slower than whole rows (short inner loops).
-@njit(inline="always")
-def _swapped(t, c2):
-    t1 = t // c2
-    return (t - t1 * c2) * c2 + t1
-
-
+# of kind 0 or 1; a fixed configuration's expectations only where t2 >= t1. After a sweep
+# :func:`mirror_ser` writes the rest from their images (exactly sigma-invariant tables, and a
+# policy equivariant off the diagonal).
 def _bellman_sym_body(h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, kind, todo, th, pol):
     """:func:`bellman_ser` on the configurations ``todo`` (kind 0 or 1); :func:`mirror_ser` after."""
     for j in prange(todo.size):
         acc = np.empty(c1 * c2)
         best = np.empty(c1 * c2)
-        _bellman_config(todo[j], h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol, acc, best)
+        c = todo[j]
+        _bellman_config(c, h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol, acc, best,
+                        kind[c] == 1)
 
 
 bellman_sym_par, bellman_sym_ser = twins(_bellman_sym_body, "bellman_sym")
@@ -170,41 +189,31 @@ def push_sym(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, kind, swap, y_o
     for c in range(n_c):
         if kind[c] == 2:
             continue
-        for t in range(n_t):
-            t1 = t // c2
-            t2 = t - t1 * c2
-            w = y[c, t]
-            if kind[c] == 1:
-                if t2 < t1:
-                    continue
-                if t2 == t1:
+        for t1 in range(c1):
+            for t2 in range(t1 if kind[c] == 1 else 0, c2):  # a fixed configuration: t2 >= t1
+                w = y[c, t1 * c2 + t2]
+                if kind[c] == 1 and t2 == t1:
                     w *= 0.5
-            if w == 0.0:
-                continue
-            p = pol[c, t]
-            for o in range(out_ptr[p], out_ptr[p + 1]):
-                m1 = s1[o]
-                m2 = s2[o]
-                n1 = t1 + 1 if t1 < m1 else m1
-                n2 = t2 + 1 if t2 < m2 else m2
-                y_out[out_nxt[o], n1 * c2 + n2] += w * out_prob[o]
+                if w == 0.0:
+                    continue
+                p = pol[c, t1 * c2 + t2]
+                for o in range(out_ptr[p], out_ptr[p + 1]):
+                    m1 = s1[o]
+                    m2 = s2[o]
+                    n1 = t1 + 1 if t1 < m1 else m1
+                    n2 = t2 + 1 if t2 < m2 else m2
+                    y_out[out_nxt[o], n1 * c2 + n2] += w * out_prob[o]
     for c in range(n_c):  # z + sigma z, each orbit once
         if kind[c] == 2:
             continue
         d = swap[c]
-        for t in range(n_t):
-            t1 = t // c2
-            t2 = t - t1 * c2
-            s = _swapped(t, c2)
+        for t1 in range(c1):
             if kind[c] == 1:
-                if t2 < t1:
-                    continue
-                if t2 == t1:
-                    y_out[c, t] *= 2.0
-                    continue
-            v = y_out[c, t] + y_out[d, s]
-            y_out[c, t] = v
-            y_out[d, s] = v
+                y_out[c, t1 * c2 + t1] *= 2.0
+            for t2 in range(t1 + 1 if kind[c] == 1 else 0, c2):
+                v = y_out[c, t1 * c2 + t2] + y_out[d, t2 * c2 + t1]
+                y_out[c, t1 * c2 + t2] = v
+                y_out[d, t2 * c2 + t1] = v
 
 
 # ---------------------------------------------------------------------------- the relative value iteration's step
