@@ -49,7 +49,9 @@ Where interchangeable processes are paired with each other, L is invariant under
 of process names that map every group onto itself; L being concave, its maximum is reached at
 prices invariant under them, and at such prices each group's chain lumps by the permutations that
 fix its members (:class:`GroupLumps`): the search runs on the lumped chains and on prices per orbit
-of pairs, and its tables, spread back, are certified on the whole system.
+of pairs, and its tables, spread back, are certified on the whole system. A pair of two
+interchangeable processes is moreover symmetric under its own swap (:class:`PairSwap`): its sweeps
+and cuts are computed on one state of each orbit of that swap and mirrored.
 """
 from __future__ import annotations
 

@@ -37,7 +37,8 @@ def _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
 
 @njit(inline="always")
 def _expect_upper(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
-    """:func:`_expect` only where t2 >= t1 (a pair's fixed configuration; the rest mirrored)."""
+    """:func:`_expect` only where t2 >= t1 (a pair's fixed configuration; the rest mirrored). A copy
+    rather than a flag of :func:`_expect`, so that the plain chains' innermost loops stay as they were."""
     for o in range(out_ptr[p], out_ptr[p + 1]):
         pr = out_prob[o]
         cn = out_nxt[o]
