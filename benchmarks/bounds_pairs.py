@@ -25,6 +25,12 @@ number of bundle steps: give ``--max-iter``; the time limit is lifted for both):
 
     python benchmarks/bounds_pairs.py --instances bounds_p1234_twice:20 --r2 shipped --max-iter 5 --whole
 
+``--no-own-swap`` likewise runs the same search with each same-type pair's own swap left out of the
+lumping (``own_swap=False``) after the default one, and records ``plain_bound``, ``plain_cpu`` and
+``swap_ratio`` = plain / default CPU seconds:
+
+    python benchmarks/bounds_pairs.py --instances bounds_p1234_twice:20 --r2 loose --max-iter 6 --no-own-swap
+
 ``--no-time-limit`` lets only ``--max-iter`` stop the search, as ``auto`` runs it (8 steps):
 
     python benchmarks/bounds_pairs.py --instances bounds_p1234_twice:20 --r2 shipped --max-iter 8 \
@@ -62,7 +68,8 @@ from wncs_lp.scenario import load_scenario, scenario_from_dict  # noqa: E402
 KNOWN = {("paper_p1234", 12): 1169.1063487, ("paper_p1234", 20): 1572.4473862, ("paper_p1234", 30): 1628.3374066}
 COLUMNS = ["instance", "cap", "load", "g_star", "r2_bound", "r2_cpu", "r2_from", "groups", "r4_start", "r4_bound",
            "r4_cpu", "r4_status", "bundle_steps", "peak_mib", "r2_looseness", "r4_looseness", "policy", "gain",
-           "gain_upper", "gap_r4", "how", "whole_bound", "whole_cpu", "cpu_ratio"]
+           "gain_upper", "gap_r4", "how", "whole_bound", "whole_cpu", "cpu_ratio", "plain_bound", "plain_cpu",
+           "swap_ratio"]
 
 
 def three(cap: int):
@@ -111,7 +118,7 @@ def run(name: str, cap: int, args) -> list[dict]:
     r2_cpu = time.process_time() - t
     t = time.process_time()
     opts = {} if args.max_iter is None else {"max_iter": args.max_iter}
-    if args.whole or args.no_time_limit:
+    if args.whole or args.no_own_swap or args.no_time_limit:
         opts["time_limit"] = None
     r4 = pairs_bound(system, start=r2, progress=args.progress, **opts)
     r4_cpu = time.process_time() - t
@@ -121,6 +128,11 @@ def run(name: str, cap: int, args) -> list[dict]:
         w = pairs_bound(system, start=r2, progress=args.progress, symmetric=False, **opts)
         w_cpu = time.process_time() - t
         whole = {"whole_bound": w.lower_bound, "whole_cpu": round(w_cpu, 2), "cpu_ratio": round(w_cpu / r4_cpu, 3)}
+    if args.no_own_swap:
+        t = time.process_time()
+        w = pairs_bound(system, start=r2, progress=args.progress, own_swap=False, **opts)
+        w_cpu = time.process_time() - t
+        whole.update(plain_bound=w.lower_bound, plain_cpu=round(w_cpu, 2), swap_ratio=round(w_cpu / r4_cpu, 3))
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     loose = (lambda b: None if g_star is None else (g_star - b) / g_star)
     base = {"instance": name, "cap": cap, "load": round(load, 2), "g_star": g_star, "r2_bound": r2.lower_bound,
@@ -153,6 +165,8 @@ def main(argv=None) -> int:
     p.add_argument("--progress", action="store_true")
     p.add_argument("--no-time-limit", action="store_true", help="only --max-iter stops the search (as under auto)")
     p.add_argument("--whole", action="store_true", help="also the search without the symmetry reduction, and the ratio")
+    p.add_argument("--no-own-swap", action="store_true",
+                   help="also the search without each same-type pair's own swap, and the ratio")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     warnings.simplefilter("ignore")
