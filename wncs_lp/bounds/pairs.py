@@ -210,7 +210,7 @@ class PairSwap:
     relative value iteration from a sigma-invariant start stays on sigma-invariant tables (its
     fixed point and brackets are the whole chain's), a greedy policy may be taken sigma-equivariant,
     and its stationary law from a sigma-invariant start is sigma-invariant. Each sweep and push is
-    then computed on one state of each sigma-orbit and mirrored (``pairs_kernels.mirror``,
+    then computed on one state of each sigma-orbit and mirrored (``pairs_kernels.bellman_sym_ser``,
     ``push_sym``); the tables still live on every state, and are certified on the whole system.
 
     Attributes
@@ -408,11 +408,10 @@ def solve_group_chain(chains: GroupChains, i: int, price: np.ndarray, h0: np.nda
         bellman = lambda x: run_twins(mod.bellman_par, mod.bellman_ser, threads, x, *args)  # noqa: E731
     else:  # one state of each orbit of the pair's own swap, then the rest mirrored (PairSwap)
         h = 0.5 * (h + h[sw.config][:, _transposed(shape, chains.c2[i])])  # a sigma-invariant start
-        args = (chains.q[i], price, *chains.args(i), sw.kind, sw.todo, th, pol)
+        args = (chains.q[i], price, *chains.args(i), sw.kind, sw.config, sw.pair, sw.todo, th, pol)
 
         def bellman(x):
             run_twins(mod.bellman_sym_par, mod.bellman_sym_ser, threads, x, *args)
-            run_twins(mod.mirror_par, mod.mirror_ser, threads, th, pol, chains.c2[i], sw.kind, sw.config, sw.pair)
     lo, hi, sweeps = damped_rvi(bellman, h, th, tol=tol, max_sweeps=max_sweeps, relax=relax, stop=stop,
                                 fused=(mod.bracket, mod.relax_update))
     return ChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)

@@ -141,42 +141,41 @@ def push(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, y_out):
 # A same-type pair's chain is symmetric under sigma: (t1, t2, C) -> (t2, t1, swap[C]), pairs p ->
 # pswap[p] (pairs.PairSwap). ``kind[c]``: 0 configuration c computed (its image swap[c] > c is
 # not), 1 swap[c] == c, 2 the image of a smaller one (not computed); ``todo`` the configurations
-# of kind 0 or 1; a fixed configuration's expectations only where t2 >= t1. After a sweep
-# :func:`mirror_ser` writes the rest from their images (exactly sigma-invariant tables, and a
-# policy equivariant off the diagonal).
-def _bellman_sym_body(h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, kind, todo, th, pol):
-    """:func:`bellman_ser` on the configurations ``todo`` (kind 0 or 1); :func:`mirror_ser` after."""
+# of kind 0 or 1; a fixed configuration's expectations only where t2 >= t1; each computed row then
+# written onto the rest of its orbit (exactly sigma-invariant tables, and a policy equivariant off
+# the diagonal).
+def _bellman_sym_body(h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, kind, swap, pswap, todo,
+                      th, pol):
+    """:func:`bellman_ser` on the configurations ``todo`` (kind 0 or 1), each then mirrored onto
+    the rest of its orbit (:func:`_mirror_config`): one parallel region a sweep."""
     for j in prange(todo.size):
+        c = todo[j]
         acc = np.empty(c1 * c2)
         best = np.empty(c1 * c2)
-        c = todo[j]
         _bellman_config(c, h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, th, pol, acc, best,
                         kind[c] == 1)
-
-
-bellman_sym_par, bellman_sym_ser = twins(_bellman_sym_body, "bellman_sym")
+        _mirror_config(c, th, pol, c1, c2, kind, swap, pswap)
 
 
 @njit(inline="always")
 def _mirror_config(c, th, pol, c1, c2, kind, swap, pswap):
-    src = swap[c]
-    for t1 in range(c1):
-        for t2 in range(t1 if kind[c] == 1 else c2):  # a fixed configuration: below the diagonal
-            th[c, t1 * c2 + t2] = th[src, t2 * c2 + t1]
-            pol[c, t1 * c2 + t2] = pswap[pol[src, t2 * c2 + t1]]
+    """The states of configuration c's orbits not computed, from c's row: its image row swap[c]
+    (kind 0) or its own states below the diagonal (kind 1): th[sigma s] = th[s], pol[sigma s] =
+    pswap[pol[s]]. Rows written by one iteration only (sigma is an involution)."""
+    d = swap[c]
+    if kind[c] == 0:
+        for t1 in range(c1):
+            for t2 in range(c2):
+                th[d, t2 * c2 + t1] = th[c, t1 * c2 + t2]
+                pol[d, t2 * c2 + t1] = pswap[pol[c, t1 * c2 + t2]]
+    else:
+        for t1 in range(c1):
+            for t2 in range(t1):
+                th[c, t1 * c2 + t2] = th[c, t2 * c2 + t1]
+                pol[c, t1 * c2 + t2] = pswap[pol[c, t2 * c2 + t1]]
 
 
-def _mirror_body(th, pol, c2, kind, swap, pswap):
-    """The states of kind 2 and below the diagonal of kind 1 from their images (computed by
-    ``bellman_sym_ser``): th[c, (t1, t2)] = th[swap[c], (t2, t1)], pol likewise through ``pswap``;
-    each configuration writes its own row from computed rows."""
-    n_c, n_t = th.shape
-    for c in prange(n_c):
-        if kind[c] != 0:
-            _mirror_config(c, th, pol, n_t // c2, c2, kind, swap, pswap)
-
-
-mirror_par, mirror_ser = twins(_mirror_body, "mirror")
+bellman_sym_par, bellman_sym_ser = twins(_bellman_sym_body, "bellman_sym")
 
 
 @njit(cache=True, nogil=True)
