@@ -238,6 +238,12 @@ class PairSwap:
         return cls(kind, np.ascontiguousarray(config, dtype=np.int64), np.ascontiguousarray(pair, dtype=np.int64),
                    np.flatnonzero(kind != 2).astype(np.int64))
 
+    def symmetrised(self, table: np.ndarray, c2: int) -> np.ndarray:
+        """(table + table o sigma) / 2 for a table over (C, t1 * c2 + t2) of a square pair: the
+        sigma-invariant start of the chains' iteration and of the cuts' power iteration."""
+        t = np.arange(table.shape[1])
+        return 0.5 * (table + table[self.config][:, (t % c2) * c2 + t // c2])
+
     @property
     def share(self) -> float:
         """The fraction of a whole sweep computed (states, weighed alike)."""
@@ -402,25 +408,18 @@ def solve_group_chain(chains: GroupChains, i: int, price: np.ndarray, h0: np.nda
     pol = np.empty(shape, dtype=np.int64)
     price = np.ascontiguousarray(price, dtype=float)
     sw = chains.swap(i)
-    # on threads the configurations split, each writing its own rows: the same numbers as one thread
     if sw is None:
-        args = (chains.q[i], price, *chains.args(i), th, pol)
-        bellman = lambda x: run_twins(mod.bellman_par, mod.bellman_ser, threads, x, *args)  # noqa: E731
+        kernels, args = (mod.bellman_par, mod.bellman_ser), (chains.q[i], price, *chains.args(i), th, pol)
     else:  # one state of each orbit of the pair's own swap, then the rest mirrored (PairSwap)
-        h = 0.5 * (h + h[sw.config][:, _transposed(shape, chains.c2[i])])  # a sigma-invariant start
+        h = sw.symmetrised(h, chains.c2[i])  # a sigma-invariant start
+        kernels = (mod.bellman_sym_par, mod.bellman_sym_ser)
         args = (chains.q[i], price, *chains.args(i), sw.kind, sw.config, sw.pair, sw.todo, th, pol)
 
-        def bellman(x):
-            run_twins(mod.bellman_sym_par, mod.bellman_sym_ser, threads, x, *args)
+    def bellman(x):  # on threads the configurations split, each writing its own rows: the same numbers
+        run_twins(*kernels, threads, x, *args)
     lo, hi, sweeps = damped_rvi(bellman, h, th, tol=tol, max_sweeps=max_sweeps, relax=relax, stop=stop,
                                 fused=(mod.bracket, mod.relax_update))
     return ChainSolution(h=h, lower=lo, upper=hi, policy=pol, sweeps=sweeps)
-
-
-def _transposed(shape: tuple, c2: int) -> np.ndarray:
-    """The flat age index (t2, t1) of each flat index (t1, t2) of a square pair's table."""
-    t = np.arange(shape[1])
-    return (t % c2) * c2 + t // c2
 
 
 #: The lazy weight of the cuts' power iteration (:func:`~wncs_lp.bounds.joint_chains.lazy_power`):
@@ -443,7 +442,7 @@ def group_cut(chains: GroupChains, i: int, policy: np.ndarray, y0: np.ndarray | 
         def push(x, out):
             mod.push(x, policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, out)
     else:  # solve_group_chain's policy, sigma-equivariant off the fixed states (PairSwap), there mixed
-        y = 0.5 * (y + y[sw.config][:, _transposed(shape, c2)])
+        y = sw.symmetrised(y, c2)
 
         def push(x, out):
             mod.push_sym(x, policy, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, sw.kind, sw.config, out)
