@@ -144,6 +144,9 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                         continue
                 ob = out_ptr[a0 + j] - o0
                 oe = out_ptr[a0 + j + 1] - o0
+                # the minimum's first action is summed straight into best (no copy)
+                direct = first and mode == Reduce.MIN
+                tgt = best if direct else acc
                 for oo in range(ob, oe):
                     p = e_prob[o0 + oo]
                     b = uint64(P[oo] + loN + 1)
@@ -151,18 +154,17 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                     v = p * h[P[oo] + sat[oo]]
                     if oo == ob:
                         for i in range(sp):
-                            acc[i] = p * h[b + uint64(i)]
+                            tgt[i] = p * h[b + uint64(i)]
                         for i in range(sp, L):
-                            acc[i] = v
+                            tgt[i] = v
                     else:
                         for i in range(sp):
-                            acc[i] += p * h[b + uint64(i)]
+                            tgt[i] += p * h[b + uint64(i)]
                         for i in range(sp, L):
-                            acc[i] += v
+                            tgt[i] += v
                 if mode == Reduce.MIN:
                     if first:
                         for i in range(L):
-                            best[i] = acc[i]
                             arg[i] = j
                     else:
                         for i in range(L):
@@ -248,6 +250,9 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
                 pol_i = pol[su + uint64(i)]
                 arg[i] = pol_i
                 used |= uint64(1) << uint64(pol_i & 63)
+            # one action on the whole row (most rows): its values go straight into best, no select
+            single = na <= 64 and (used & (used - uint64(1))) == uint64(0)
+            tgt = best if single else acc
             for j in range(na):
                 if na <= 64 and (used >> uint64(j)) & uint64(1) == uint64(0):
                     continue
@@ -262,16 +267,17 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
                     v = p * h[Po + sat[oo]]
                     if oo == ob:
                         for i in range(sp):
-                            acc[i] = p * h[b + uint64(i)]
+                            tgt[i] = p * h[b + uint64(i)]
                         for i in range(sp, L):
-                            acc[i] = v
+                            tgt[i] = v
                     else:
                         for i in range(sp):
-                            acc[i] += p * h[b + uint64(i)]
+                            tgt[i] += p * h[b + uint64(i)]
                         for i in range(sp, L):
-                            acc[i] += v
-                for i in range(L):
-                    best[i] = acc[i] if arg[i] == j else best[i]
+                            tgt[i] += v
+                if not single:
+                    for i in range(L):
+                        best[i] = acc[i] if arg[i] == j else best[i]
             if write == Write.IN_PLACE:
                 for i in range(L):
                     hs = h[su + uint64(i)]
