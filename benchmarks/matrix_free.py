@@ -38,7 +38,10 @@ Sections (one CSV row per measurement, a table on stdout):
   ratios). After the solve the worker times one pass of each kind on the solution (improvement
   sweep over every action and, where the tree has them, over the candidate actions;
   certificate; evaluation sweep): wall and CPU seconds, CPU ns a state and the factor over the
-  bandwidth floor, in the row's note. ``--variants '{"label": {options}, ...}'`` runs this tree
+  bandwidth floor, in the row's note; and, timed inside the solve, each kind's passes, least
+  and median wall seconds and CPU / wall (2: both threads busy all along), with the CPU seconds
+  the machine's other processes used meanwhile (``/proc/stat``): the median against the least
+  is what other jobs cost a threaded pass. ``--variants '{"label": {options}, ...}'`` runs this tree
   once per variant instead (each with its options on top of ``--options``; the ratios against the
   first), e.g. the coarse correction (``{"aggregate": true}``) against the defaults.
 
@@ -281,6 +284,51 @@ def pass_profile(sol, threads, bw, repeats=2):
     return out
 
 
+def machine_cpu() -> float | None:
+    """CPU seconds all processes of the machine have used since boot (/proc/stat), None off Linux."""
+    try:
+        with open("/proc/stat") as f:
+            v = [int(x) for x in f.readline().split()[1:]]
+    except OSError:
+        return None
+    return (sum(v) - v[3] - v[4]) / os.sysconf("SC_CLK_TCK")
+
+
+def timed_passes():
+    """Record (kind, wall s, CPU s) of every pass the worker tree's Sweeper makes (its two pass
+    methods wrapped); returns the log and the function that unwraps them."""
+    from wncs_lp.solvers.matrix_free import sweeper as S
+
+    log, saved = [], {}
+    for meth in ("all_actions", "fixed"):
+        saved[meth] = f = getattr(S.Sweeper, meth)
+
+        def timed(self, *a, _f=f, _meth=meth, **k):
+            c0, t0 = time.process_time(), time.perf_counter()
+            out = _f(self, *a, **k)
+            write = int(a[5]) if len(a) > 5 else int(k["write"])
+            kind = "evaluation" if _meth == "fixed" else "improvement" if write == 1 else "certificate"
+            log.append((kind, time.perf_counter() - t0, time.process_time() - c0))
+            return out
+
+        setattr(S.Sweeper, meth, timed)
+    return log, lambda: [setattr(S.Sweeper, m, f) for m, f in saved.items()]
+
+
+def pass_times_note(log) -> str:
+    """Per pass kind in the solve: passes, least and median wall seconds, CPU / wall (2 = both threads busy)."""
+    import numpy as np
+
+    parts = []
+    for kind in ("improvement", "certificate", "evaluation"):
+        w = np.array([x[1] for x in log if x[0] == kind])
+        c = np.array([x[2] for x in log if x[0] == kind])
+        if w.size:
+            parts.append(f"{kind} {w.size} passes, wall least {w.min():.4f} s / median {np.median(w):.4f} s, "
+                         f"CPU/wall {c.sum() / w.sum():.2f}")
+    return "; ".join(parts)
+
+
 def sweeps_worker(name, cap, threads, options):
     import numpy as np  # noqa: F401  (the worker's own tree is the one imported)
 
@@ -290,9 +338,13 @@ def sweeps_worker(name, cap, threads, options):
     bw = copy_bandwidth()
     sc = scenario(name, cap)
     ld = load1()
+    log, unwrap = timed_passes()
+    m0 = machine_cpu()
     c0 = time.process_time()
     sol = mfvi(sc, threads=threads, progress=True, **options)
     cpu = time.process_time() - c0
+    others = None if m0 is None else machine_cpu() - m0 - cpu
+    unwrap()
     st = sol.stats
     n = st["n_states"]
     passes = st["sweeps"] + st["eval_sweeps"]
@@ -308,6 +360,8 @@ def sweeps_worker(name, cap, threads, options):
               note=f"setup {st['seconds_setup']:.1f} s; {st.get('value_vectors')} value vector(s); "
                    f"{st.get('extrapolations')} extrapolation(s); {st.get('aggregations', 0)} aggregation(s); options {options or 'defaults'}; "
                    f"package {Path(wncs_lp.__file__).parent.parent}")
+    out["note"] += (f"; in the solve: {pass_times_note(log)}; other processes' CPU during the solve "
+                    f"{'?' if others is None else f'{others:.1f}'} s")
     prof = pass_profile(sol, st["threads"], bw)
     out["note"] += "; one pass of each kind (wall s, CPU s, CPU ns a state, x floor): " + "; ".join(
         f"{k} {v['wall']} s, {v['cpu']} s, {v['ns_cpu_per_state']} ns, {v['floor_ratio']}x" for k, v in prof.items())
