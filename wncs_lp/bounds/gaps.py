@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import numpy as np
@@ -47,6 +47,7 @@ from .named import named_policy
 from .policy import bound_policy
 from .projected import PROJECTED, ProjectedValue
 from .result import BoundResult
+from .tuned import TUNE_SEED_OFFSET, TUNED_NAMES, tune_tables, tuned_policy
 
 __all__ = ["PolicyGap", "GapReport", "policy_gaps", "policy_by_name", "policy_source", "DEFAULT_POLICIES",
            "EXACT_MAX_STATES", "PILOT", "PILOT_MARGIN"]
@@ -147,7 +148,8 @@ class GapReport:
                 "tables_from": self.tables_from or self.relaxation}
 
 
-def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Policy:
+def policy_by_name(name: str | Policy, bound: BoundResult, system: System, *,
+                   tune_seed: int = TUNE_SEED_OFFSET, tune: dict | None = None) -> Policy:
     """A policy of a gap report by name: ``"bound"`` (the bound's greedy policy) and
     ``"lookahead"`` on this bound's tables, ``"lookahead3"`` (depth 3, the ``middle`` 2 best actions
     at the intermediate state, the same candidates), ``"rollout"``
@@ -155,7 +157,10 @@ def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Po
     slots ahead of each candidate action, the tables as terminal value and control variate), ``"index"`` priced from relaxation 1 (this bound when
     it is relaxation 1's, else computed: seconds), any other name by the policy factory's rooms
     (:func:`~wncs_lp.bounds.named.named_policy`, :func:`~wncs_lp.policies.factory.make_basic_policy`);
-    a :class:`Policy` is returned as it is."""
+    ``"tuned"``, ``"tuned_lookahead"``, ``"tuned_rollout"`` the greedy policy, the lookahead or the
+    rollout on this bound's tables reweighted per class of processes by a simulation on ``tune_seed``
+    (:func:`~wncs_lp.bounds.tuned.tune_tables`, with the settings ``tune`` if given); a
+    :class:`Policy` is returned as it is."""
     if isinstance(name, Policy):
         return name
     if name == "bound":
@@ -168,6 +173,8 @@ def policy_by_name(name: str | Policy, bound: BoundResult, system: System) -> Po
         return TableRolloutPolicy(bound_policy(bound, system))
     if name == "index":
         return IndexPolicy(system, whittle_indices(system, bound if bound.relaxation == "private-servers" else None))
+    if name in TUNED_NAMES:
+        return tuned_policy(tune_tables(bound, system, TUNED_NAMES[name], seed=tune_seed, **(tune or {})), system)
     if name in BOUND_POLICY_NAMES:
         return named_policy(name, system)
     return make_basic_policy(name, system)
@@ -282,6 +289,7 @@ def policy_gaps(
     control: bool = True,
     progress: Any = False,
     tables: BoundResult | None = None,
+    tune: dict | None = None,
 ) -> GapReport:
     """Evaluate policies and bound their optimality gap by a certified lower bound.
 
@@ -294,7 +302,11 @@ def policy_gaps(
         ``"bound"`` (the bound's greedy policy), ``"lookahead"`` (the two-step lookahead on the
         bound's tables), ``"lookahead3"`` (one step deeper), ``"rollout"`` (the bound's greedy policy
         simulated a few slots ahead from each candidate action: :class:`~wncs_lp.bounds.lookahead.TableRolloutPolicy`),
-        ``"index"`` (the index policy of relaxation 1's chains), any name of
+        ``"index"`` (the index policy of relaxation 1's chains), ``"tuned"``, ``"tuned_lookahead"``,
+        ``"tuned_rollout"`` (the greedy policy, the lookahead, the rollout on the tables reweighted per
+        class of processes, :mod:`~wncs_lp.bounds.tuned`: tuned by simulation on ``seed`` +
+        :data:`~wncs_lp.bounds.tuned.TUNE_SEED_OFFSET`, then evaluated on ``seed`` like every other
+        policy, so the upper limit is on fresh randomness; the row's ``detail["tuning"]`` says how), any name of
         :func:`wncs_lp.workflow.make_policy` that needs no enumerated MDP (``suboptimal``,
         ``static``, ``greedy``, ``random``), or policies.
     exact : bool, optional
@@ -312,6 +324,10 @@ def policy_gaps(
         Build the bound's policies (``"bound"``, ``"lookahead"``, ``"rollout"``, ...) and the
         control variate on this result's tables instead of ``bound``'s (:func:`policy_source`);
         the gaps are still against ``bound.lower_bound``.
+    tune : dict, optional
+        Settings of the tuned policies' tuning (keywords of :func:`~wncs_lp.bounds.tuned.tune_tables`
+        but its seed: ``slots``, ``reps``, ``burn_in``, ``steps``, ``max_evaluations``; default
+        :data:`~wncs_lp.bounds.tuned.TUNE`).
 
     Returns
     -------
@@ -325,15 +341,18 @@ def policy_gaps(
     prog = as_progress(progress)
     use_exact, n = _exact_route(system, exact, exact_max_states)
     rows, skipped = [], []
+    pol_tuning = {}  # a tuned policy's row says how it was tuned (its seed is not the evaluation's)
     source = bound if tables is None else tables
     for name in policies:
         try:
-            pol = policy_by_name(name, source, system)
+            pol = policy_by_name(name, source, system, tune_seed=seed + TUNE_SEED_OFFSET, tune=tune)
         except (PolicyError, SizeLimitError) as exc:  # a comparator that does not fit this system: say so, go on
             if not isinstance(name, str) or name == "bound":
                 raise
             skipped.append((name, str(exc)))
             continue
+        if getattr(pol, "tuning", None):
+            pol_tuning[pol.name] = pol.tuning
         prog.phase(f"evaluating the {pol.name} policy " + ("exactly (matrix-free)" if use_exact else
                                                            f"by Monte Carlo ({reps} x {slots} slots)"))
         if use_exact:
@@ -346,6 +365,8 @@ def policy_gaps(
                 use_exact = False
         rows.append(_monte_carlo(pol, bound.lower_bound, slots, reps, seed, burn_in, confidence,
                                  _TablesControl(source, system) if control else None))
+    rows = [replace(r, detail={**r.detail, "tuning": pol_tuning[r.policy]}) if r.policy in pol_tuning else r
+            for r in rows]
     how = sorted({r.how for r in rows})
     return GapReport(float(bound.lower_bound), bound.relaxation, tuple(rows), "+".join(how), n,
                      time.perf_counter() - t0, tuple(skipped),

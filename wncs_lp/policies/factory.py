@@ -30,10 +30,12 @@ __all__ = ["POLICY_NAMES", "BASIC_POLICY_NAMES", "BOUND_POLICY_NAMES", "NEED_MDP
 
 #: Policy names understood by :func:`wncs_lp.workflow.make_policy` and the command line.
 POLICY_NAMES = ("optimal", "suboptimal", "static", "best_static", "greedy", "random", "relaxation", "lookahead",
-                "lookahead3", "rollout", "index", "max_age", "max_weight", "round_robin")
+                "lookahead3", "rollout", "index", "max_age", "max_weight", "round_robin", "tuned", "tuned_lookahead",
+                "tuned_rollout")
 #: The policies the bounds room makes (:func:`wncs_lp.bounds.named.named_policy`), and those of this
 #: room (:func:`make_basic_policy`).
-BOUND_POLICY_NAMES = ("relaxation", "lookahead", "lookahead3", "rollout", "index")
+BOUND_POLICY_NAMES = ("relaxation", "lookahead", "lookahead3", "rollout", "index", "tuned", "tuned_lookahead",
+                      "tuned_rollout")
 BASIC_POLICY_NAMES = tuple(n for n in POLICY_NAMES if n not in BOUND_POLICY_NAMES)
 #: The policy a solve makes, and those that need the enumerated MDP.
 OPTIMAL = "optimal"

@@ -1,0 +1,240 @@
+r"""Tables tuned for a policy: a bound's value tables reweighted per class of processes.
+
+A relaxation's tables h(s) = sum_G h_G(tau_G, column_G(C)) (one block G a process, a group or a
+pair) are each exact for a relaxed problem, not for the real one: the servers' coupling is only
+priced, so the relative weight a block's table carries against another's when the greedy policy
+(or its lookahead, or its rollout) compares actions is the relaxation's, not the system's. The
+tuned tables put one weight on each *class* of blocks (blocks whose private systems are the same
+chain: :func:`table_classes`, the interchangeable copies of a process type share one),
+
+.. math:: h_w(s) = \sum_G w_{\kappa(G)}\, h_G(\tau_G, \mathrm{column}_G(C)),
+
+and choose the weights w by a coordinate search on the simulated average cost of the policy built
+on h_w (:func:`tune_tables`): from w = 1, each class's weight is multiplied by 1 +- step, the move
+kept when the mean falls, the steps shrinking in turn (:data:`TUNE`). Every candidate is simulated
+with the same seed (common random numbers: the comparison of two weights is far less noisy than
+either mean) and the bound's own tables as the control variate. The weights are normalised to a
+mean of 1 over the processes (the greedy policy does not see a common scale; the lookahead and
+the rollout add costs to the tables and do).
+
+**The tuning seed is not the evaluation seed.** The search selects on the noise of its own
+simulations, so its means are biased low; a gap report evaluates the tuned policy on fresh
+randomness: :func:`~wncs_lp.bounds.gaps.policy_gaps` tunes on ``seed + TUNE_SEED_OFFSET`` and
+evaluates on ``seed`` (the pilot of :func:`~wncs_lp.bounds.gaps.policy_source` uses ``seed + 1``),
+so the reported one-sided upper confidence limit stays an honest limit on the tuned policy,
+which is fixed before the evaluation draws its first number. The tuned tables certify nothing
+(the reweighted result has no bound, :func:`reweighted`); the gaps stay against the bound's
+certificate.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable
+
+import numpy as np
+
+from ..errors import PolicyError
+from ..models.system import System
+from ..policies.base import Policy
+from ..simulate import simulate
+from .lookahead import LookaheadPolicy, TableRolloutPolicy, auto_candidates
+from .policy import bound_policy
+from .private import chain_key
+from .projected import PROJECTED, ProjectedValue
+from .result import BoundResult, GroupTables, ValueTables
+
+__all__ = ["TunedTables", "tune_tables", "tuned_policy", "table_classes", "reweighted", "TUNE", "TUNE_SEED_OFFSET",
+           "TUNED_TARGETS", "TUNED_NAMES"]
+
+#: The tuning's simulation of each candidate (``reps`` x ``slots`` slots after ``burn_in``), the
+#: step factors of the coordinate search in turn, and its budget of simulated candidates.
+TUNE = {"slots": 2_500, "reps": 8, "burn_in": 300, "steps": (0.1, 0.04), "max_evaluations": 40}
+#: The tuning simulates on the evaluation seed plus this (the pilot of ``policy_source`` takes + 1).
+TUNE_SEED_OFFSET = 2
+#: The policies whose tables can be tuned: the target is the policy the weights are tuned for and
+#: the one built on them.
+TUNED_TARGETS = ("greedy", "lookahead", "rollout")
+#: The policy names (:data:`~wncs_lp.policies.factory.BOUND_POLICY_NAMES`) and the target each tunes.
+TUNED_NAMES = {"tuned": "greedy", "tuned_lookahead": "lookahead", "tuned_rollout": "rollout"}
+
+
+@dataclass(frozen=True, eq=False)
+class TunedTables:
+    """Weights per class of a bound's table blocks, tuned by simulation (:func:`tune_tables`).
+
+    Attributes
+    ----------
+    target : str
+        The policy the weights were tuned for and are used by (one of :data:`TUNED_TARGETS`).
+    weights : numpy array
+        One weight per class (mean 1 over the processes).
+    classes : numpy array of int
+        The class of each block of the tables (:func:`table_classes`).
+    result : BoundResult
+        The bound's result with the reweighted tables (:func:`reweighted`; no bound of its own).
+    base_mean, tuned_mean : float
+        The tuning simulation's mean at w = 1 and at the weights returned (on the tuning seed: the
+        latter is biased low by the search's selection, see the module docstring).
+    evaluations : int
+        Candidates simulated.
+    seed : int
+        The tuning simulation's seed.
+    settings : dict
+        slots, reps, burn_in, steps, max_evaluations.
+    history : tuple of (weights, mean)
+        Every accepted move.
+    seconds : float
+    """
+
+    target: str
+    weights: np.ndarray
+    classes: np.ndarray
+    result: BoundResult
+    base_mean: float
+    tuned_mean: float
+    evaluations: int
+    seed: int
+    settings: dict
+    history: tuple = field(default=(), repr=False)
+    seconds: float = 0.0
+
+    def summary(self) -> dict[str, Any]:
+        return {"target": self.target, "weights": [float(w) for w in self.weights],
+                "classes": [int(c) for c in self.classes], "base_mean": self.base_mean,
+                "tuned_mean": self.tuned_mean, "evaluations": self.evaluations, "tuning_seed": self.seed,
+                **self.settings, "seconds": self.seconds}
+
+
+def _blocks(tables: ValueTables | GroupTables) -> list[tuple[int, ...]]:
+    return [tuple(int(k) for k in g) for g in tables.groups] if isinstance(tables, GroupTables) else \
+        [(k,) for k in range(tables.n_processes)]
+
+
+def table_classes(tables: ValueTables | GroupTables, system: System) -> np.ndarray:
+    """The class of each block of ``tables`` (a process of :class:`ValueTables`, a group of
+    :class:`GroupTables`): blocks whose private systems (the block's processes alone with their own
+    servers, :meth:`~wncs_lp.models.base.Model.group_scenario`) are the same chain share a class,
+    numbered in the order of their first block."""
+    keys = [chain_key(system.model.group_scenario(g)) for g in _blocks(tables)]
+    first: dict[str, int] = {}
+    return np.array([first.setdefault(k, len(first)) for k in keys], np.int64)
+
+
+def reweighted(result: BoundResult, weights: np.ndarray, classes: np.ndarray) -> BoundResult:
+    """``result`` with each block's table multiplied by the weight of its class, and no bound: its
+    ``lower_bound`` is NaN and ``certified_by`` says why (only the tables are for use, by the
+    policies)."""
+    w = np.asarray(weights, float)
+    t = result.tables
+    if w.ndim != 1 or np.any(~np.isfinite(w)) or np.any(w <= 0) or np.max(classes, initial=-1) >= w.size:
+        raise PolicyError(f"weights must be positive and finite, one per class ({int(np.max(classes)) + 1}); got {w}")
+    h = tuple(w[c] * np.asarray(hk, float) for c, hk in zip(classes, t.h))
+    tables = GroupTables(t.groups, h, t.column) if isinstance(t, GroupTables) else ValueTables(h, t.column)
+    return replace(result, lower_bound=float("nan"), relaxation_upper=float("inf"), tables=tables, alternatives=(),
+                   certified_by=f"nothing: the {result.relaxation} tables reweighted per class for a policy "
+                                f"(weights {np.round(w, 6).tolist()}); the bound is the original result's",
+                   stats={**result.stats, "tuned_weights": w.tolist()})
+
+
+def _builder(target: str, system: System) -> Callable[[BoundResult], Policy]:
+    """The policy ``target`` on a result's tables (as the gap reports build it by name)."""
+    makers = {"greedy": lambda r: bound_policy(r, system),
+              "lookahead": lambda r: LookaheadPolicy(bound_policy(r, system), auto_candidates(system)),
+              "rollout": lambda r: TableRolloutPolicy(bound_policy(r, system))}
+    if target not in makers:
+        raise PolicyError(f"target: expected one of {', '.join(TUNED_TARGETS)}, got {target!r}")
+    return makers[target]
+
+
+def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, seed: int = TUNE_SEED_OFFSET,
+                slots: int = TUNE["slots"], reps: int = TUNE["reps"], burn_in: int = TUNE["burn_in"],
+                steps: tuple = TUNE["steps"], max_evaluations: int = TUNE["max_evaluations"]) -> TunedTables:
+    """Weights per class of ``bound``'s tables for the policy ``target`` built on them (module docstring).
+
+    Parameters
+    ----------
+    bound : BoundResult
+        Its tables are reweighted (any relaxation's).
+    system : System
+    target : {"greedy", "lookahead", "rollout"}
+        The policy simulated for each candidate: the greedy policy on the tables, the two-step
+        lookahead (:func:`~wncs_lp.bounds.lookahead.auto_candidates` candidates) or the rollout
+        (:class:`~wncs_lp.bounds.lookahead.TableRolloutPolicy` with its defaults).
+    seed : int
+        The tuning's simulation seed, the same for every candidate (common random numbers). Keep it
+        apart from the seed the tuned policy is then evaluated on (``policy_gaps`` takes its own
+        seed + :data:`TUNE_SEED_OFFSET`).
+    slots, reps, burn_in : int
+        Each candidate's simulation.
+    steps : tuple of float
+        The factors 1 +- step tried on each class's weight, one step size after the other (each
+        until a pass over the classes improves nothing).
+    max_evaluations : int
+        At most this many candidates simulated (the start included).
+
+    Returns
+    -------
+    TunedTables
+        With one class only (every block the same chain) the weights are 1 and nothing is
+        simulated: a common scale is all a single weight could change.
+    """
+    build = _builder(target, system)
+    if not (isinstance(max_evaluations, (int, np.integer)) and max_evaluations >= 1) or \
+            not all(0 < float(x) < 1 for x in steps):
+        raise PolicyError(f"max_evaluations must be >= 1 and each step in (0, 1); got {max_evaluations}, {steps}")
+    t0 = time.perf_counter()
+    classes = table_classes(bound.tables, system)
+    sizes = np.array([len(g) for g in _blocks(bound.tables)], float)
+    n_cls = int(classes.max()) + 1
+    settings = {"slots": int(slots), "reps": int(reps), "burn_in": int(burn_in), "steps": [float(x) for x in steps],
+                "max_evaluations": int(max_evaluations)}
+    ones = np.ones(n_cls)
+    if n_cls == 1:
+        return TunedTables(target, ones, classes, reweighted(bound, ones, classes), float("nan"), float("nan"), 0,
+                           int(seed), settings, (), time.perf_counter() - t0)
+    lazy = system.is_lazy and bound.relaxation in PROJECTED
+    control = ProjectedValue(bound, system) if lazy else bound.tables.value
+
+    def normal(w: np.ndarray) -> np.ndarray:
+        return w * sizes.sum() / float(np.dot(w[classes], sizes))
+
+    def mean(w: np.ndarray) -> float:
+        res = simulate(build(reweighted(bound, w, classes)), slots=slots, reps=reps, seed=seed, burn_in=burn_in,
+                       control=control, progress=False)
+        return float(res.mean)
+
+    w = ones
+    best = base = mean(w)
+    history = [(w.copy(), best)]
+    n = 1
+    for step in steps:
+        improved = True
+        while improved and n < max_evaluations:
+            improved = False
+            for c in range(n_cls):
+                trial = []
+                for f in (1.0 + step, 1.0 - step):
+                    if n >= max_evaluations:
+                        break
+                    cand = w.copy()
+                    cand[c] *= f
+                    cand = normal(cand)
+                    trial.append((mean(cand), cand))
+                    n += 1
+                if trial:
+                    m, cand = min(trial, key=lambda x: x[0])
+                    if m < best:
+                        best, w, improved = m, cand, True
+                        history.append((w.copy(), best))
+    return TunedTables(target, w, classes, reweighted(bound, w, classes), base, best, n, int(seed), settings,
+                       tuple(history), time.perf_counter() - t0)
+
+
+def tuned_policy(tuned: TunedTables, system: System) -> Policy:
+    """The policy ``tuned.target`` on the tuned tables, named ``tuned-<target>[...]`` and carrying the
+    tuning's summary as ``policy.tuning``."""
+    pol = _builder(tuned.target, system)(tuned.result)
+    pol.name = f"tuned-{tuned.target}[{tuned.result.relaxation}]"
+    pol.tuning = tuned.summary()
+    return pol
