@@ -24,6 +24,9 @@ the enumerated MDP).
 * :class:`LookaheadPolicy` -- the two-step lookahead on a greedy policy's tables (greedy on T h);
 * :class:`TableRolloutPolicy` -- the rollout of a bound's greedy policy (a few simulated slots ahead of
   each candidate action, the tables as terminal value and control variate), in a numba kernel;
+* :func:`~wncs_lp.bounds.tuned.tune_tables` / :func:`~wncs_lp.bounds.tuned.tuned_policy` -- a bound's
+  tables reweighted per class of processes by a seeded simulation of the policy built on them
+  (:mod:`wncs_lp.bounds.tuned`; the names ``tuned``, ``tuned_lookahead``, ``tuned_rollout``);
 * :func:`whittle_indices` / :class:`IndexPolicy` -- Whittle-type indices of relaxation 1's priced
   chains and the index policy;
 * :func:`~wncs_lp.bounds.gaps.policy_gaps` -- policies evaluated against a bound: the certified
@@ -45,8 +48,10 @@ from .policy import BoundPolicy, GroupBoundPolicy, bound_policy
 from .private import private_bound
 from .projected import ProjectedBoundPolicy
 from .result import BoundResult, GroupTables, ValueTables
+from .tuned import TunedTables, tune_tables, tuned_policy
 
 __all__ = ["BoundResult", "ValueTables", "GroupTables", "BoundPolicy", "GroupBoundPolicy", "ProjectedBoundPolicy",
            "GapReport", "PolicyGap",
            "RELAXATIONS", "lower_bound", "bound_policy", "policy_gaps", "private_bound", "grouped_bound",
-           "parse_relaxation", "AUTO_SEARCH", "LookaheadPolicy", "TableRolloutPolicy", "IndexPolicy", "IndexTables", "whittle_indices"]
+           "parse_relaxation", "AUTO_SEARCH", "LookaheadPolicy", "TableRolloutPolicy", "IndexPolicy", "IndexTables", "whittle_indices",
+           "TunedTables", "tune_tables", "tuned_policy"]

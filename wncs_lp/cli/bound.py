@@ -163,8 +163,9 @@ def _configure(p: argparse.ArgumentParser) -> None:
                    help="policies evaluated with --policy besides the bound's greedy one (default "
                         "lookahead,suboptimal,static,greedy; lookahead: the two-step lookahead on the bound's tables, "
                         "lookahead3: one step deeper; rollout: the bound's greedy policy simulated a few slots ahead "
-                        "of each candidate action; index: the Whittle-type index policy of relaxation 1's chains; '' "
-                        "for none)")
+                        "of each candidate action; index: the Whittle-type index policy of relaxation 1's chains; "
+                        "tuned, tuned_lookahead, tuned_rollout: those on the tables reweighted per process type by a "
+                        "simulation on --seed + 2; '' for none)")
     p.add_argument("--exact-max-states", type=NONNEGATIVE, default=50_000_000, metavar="N",
                    help="evaluate exactly (certified matrix-free evaluation) when the AoI box has at most N states, "
                         "else by Monte Carlo (default 50000000; 0: always Monte Carlo)")
