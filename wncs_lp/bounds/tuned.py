@@ -28,6 +28,7 @@ certificate.
 """
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable
@@ -39,7 +40,7 @@ from ..models.system import System
 from ..policies.base import Policy
 from ..simulate import simulate
 from .lookahead import LookaheadPolicy, TableRolloutPolicy, auto_candidates
-from .policy import bound_policy
+from .policy import BoundPolicy, GroupBoundPolicy, bound_policy
 from .private import chain_key
 from .projected import PROJECTED, ProjectedValue
 from .result import BoundResult, GroupTables, ValueTables
@@ -137,14 +138,34 @@ def reweighted(result: BoundResult, weights: np.ndarray, classes: np.ndarray) ->
                    stats={**result.stats, "tuned_weights": w.tolist()})
 
 
-def _builder(target: str, system: System) -> Callable[[BoundResult], Policy]:
-    """The policy ``target`` on a result's tables (as the gap reports build it by name)."""
-    makers = {"greedy": lambda r: bound_policy(r, system),
-              "lookahead": lambda r: LookaheadPolicy(bound_policy(r, system), auto_candidates(system)),
-              "rollout": lambda r: TableRolloutPolicy(bound_policy(r, system))}
+def _builder(target: str, system: System) -> Callable[[Policy], Policy]:
+    """The policy ``target`` on a greedy policy of tables (as the gap reports build it by name)."""
+    makers = {"greedy": lambda g: g,
+              "lookahead": lambda g: LookaheadPolicy(g, auto_candidates(system)),
+              "rollout": lambda g: TableRolloutPolicy(g)}
     if target not in makers:
         raise PolicyError(f"target: expected one of {', '.join(TUNED_TARGETS)}, got {target!r}")
     return makers[target]
+
+
+def _greedy_on(result: BoundResult, system: System, base: Policy | None, weights: np.ndarray,
+               classes: np.ndarray) -> Policy:
+    """The greedy policy on ``result`` (the reweighted tables), from ``base`` (the greedy policy on the
+    original tables) where its precomputed expectations can be scaled instead of computed again:
+    they are linear in the tables (W_k = E[h_k(s')] of :class:`BoundPolicy`, W_G of
+    :class:`GroupBoundPolicy`). The greedy policy of relaxations 1 and 3 is built again (cheap)."""
+    if isinstance(base, BoundPolicy) and base.tables is not None:
+        pol = copy.copy(base)
+        pol._h = result.tables.h
+        pol.tables = tuple(weights[c] * W for c, W in zip(classes, base.tables))
+    elif isinstance(base, GroupBoundPolicy) and all(W is not None for W in base.lookahead):
+        pol = copy.copy(base)
+        pol.tables = result.tables
+        pol.lookahead = tuple(weights[c] * W for c, W in zip(classes, base.lookahead))
+    else:
+        return bound_policy(result, system)
+    pol.result = result
+    return pol
 
 
 def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, seed: int = TUNE_SEED_OFFSET,
@@ -199,9 +220,12 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
     def normal(w: np.ndarray) -> np.ndarray:
         return w * sizes.sum() / float(np.dot(w[classes], sizes))
 
+    base = bound_policy(bound, system)
+
     def mean(w: np.ndarray) -> float:
-        res = simulate(build(reweighted(bound, w, classes)), slots=slots, reps=reps, seed=seed, burn_in=burn_in,
-                       control=control, progress=False)
+        greedy = _greedy_on(reweighted(bound, w, classes), system, base, w, classes)
+        res = simulate(build(greedy), slots=slots, reps=reps, seed=seed, burn_in=burn_in, control=control,
+                       progress=False)
         return float(res.mean)
 
     w = ones
@@ -234,7 +258,7 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
 def tuned_policy(tuned: TunedTables, system: System) -> Policy:
     """The policy ``tuned.target`` on the tuned tables, named ``tuned-<target>[...]`` and carrying the
     tuning's summary as ``policy.tuning``."""
-    pol = _builder(tuned.target, system)(tuned.result)
+    pol = _builder(tuned.target, system)(bound_policy(tuned.result, system))
     pol.name = f"tuned-{tuned.target}[{tuned.result.relaxation}]"
     pol.tuning = tuned.summary()
     return pol
