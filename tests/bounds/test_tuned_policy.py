@@ -17,6 +17,7 @@ from wncs_lp.errors import PolicyError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
 from wncs_lp.models.system import System
+from wncs_lp.policies import parse_policy_names
 from wncs_lp.scenario import load_scenario
 from wncs_lp.simulate import simulate
 
@@ -117,3 +118,13 @@ def test_tuning_on_joint_tables_scales_the_built_expectations_exactly(p123):
                          control=res.tables.value, progress=False)
         assert again.mean == tuned.tuned_mean
         assert g_star - 1e-6 <= evaluate(mdp, fresh).gain < 1.01 * g_star
+
+
+def test_the_lookahead_and_the_rollout_are_tuned_for_themselves(p123):
+    system, mdp, g_star, bound, _ = p123
+    assert parse_policy_names("tuned,tuned_lookahead,tuned_rollout") == ["tuned", "tuned_lookahead", "tuned_rollout"]
+    quick = {"slots": 500, "reps": 4, "burn_in": 100, "max_evaluations": 3}
+    report = policy_gaps(bound, system, ["tuned_lookahead", "tuned_rollout"], exact=True, tune=quick)
+    for row, target in zip(report.rows, ("lookahead", "rollout")):
+        assert row.policy == f"tuned-{target}[private-servers]" and row.detail["tuning"]["target"] == target
+        assert row.how == "exact" and g_star - 1e-6 <= row.gain <= row.gain_upper < 1.001 * g_star
