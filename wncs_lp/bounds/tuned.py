@@ -149,19 +149,26 @@ def _builder(target: str, system: System) -> Callable[[Policy], Policy]:
 
 
 def _greedy_on(result: BoundResult, system: System, base: Policy | None, weights: np.ndarray,
-               classes: np.ndarray) -> Policy:
+               classes: np.ndarray, scratch: list) -> Policy:
     """The greedy policy on ``result`` (the reweighted tables), from ``base`` (the greedy policy on the
     original tables) where its precomputed expectations can be scaled instead of computed again:
     they are linear in the tables (W_k = E[h_k(s')] of :class:`BoundPolicy`, W_G of
-    :class:`GroupBoundPolicy`). The greedy policy of relaxations 1 and 3 is built again (cheap)."""
+    :class:`GroupBoundPolicy`). The scaled tables are written into ``scratch`` (one buffer per block,
+    allocated once: the candidates are simulated one after the other, and a policy built on them
+    copies what it keeps). The greedy policy of relaxations 1 and 3 is built again (cheap)."""
+    def scaled(tables: tuple) -> tuple:
+        if not scratch:
+            scratch.extend(np.empty_like(W) for W in tables)
+        return tuple(np.multiply(W, weights[c], out=out) for c, W, out in zip(classes, tables, scratch))
+
     if isinstance(base, BoundPolicy) and base.tables is not None:
         pol = copy.copy(base)
         pol._h = result.tables.h
-        pol.tables = tuple(weights[c] * W for c, W in zip(classes, base.tables))
+        pol.tables = scaled(base.tables)
     elif isinstance(base, GroupBoundPolicy) and all(W is not None for W in base.lookahead):
         pol = copy.copy(base)
         pol.tables = result.tables
-        pol.lookahead = tuple(weights[c] * W for c, W in zip(classes, base.lookahead))
+        pol.lookahead = scaled(base.lookahead)
     else:
         return bound_policy(result, system)
     pol.result = result
@@ -221,9 +228,10 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
         return w * sizes.sum() / float(np.dot(w[classes], sizes))
 
     base = bound_policy(bound, system)
+    scratch: list = []
 
     def mean(w: np.ndarray) -> float:
-        greedy = _greedy_on(reweighted(bound, w, classes), system, base, w, classes)
+        greedy = _greedy_on(reweighted(bound, w, classes), system, base, w, classes, scratch)
         res = simulate(build(greedy), slots=slots, reps=reps, seed=seed, burn_in=burn_in, control=control,
                        progress=False)
         return float(res.mean)
