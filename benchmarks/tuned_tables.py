@@ -3,6 +3,7 @@ against the untuned policies on the same tables, against g* where it is known an
 
     python benchmarks/tuned_tables.py --out /tmp/tuned_small.csv     # processes 1-3 at caps 10, 12: exact
     python benchmarks/tuned_tables.py --instances bounds_mix6:10,bounds_mix5:14 --out /tmp/tuned_cal.csv
+    (benchmarks/tuned_tables.csv: the first two, one after the other; docs/bounds.md "Tuned tables")
     python benchmarks/tuned_tables.py --instances bounds_p1234_x4:40,bounds_lab16:20 --out /tmp/tuned16.csv
 
 For every instance: a bound (``--relaxation``, default 1: relaxation 1's tables in seconds at any
