@@ -237,7 +237,7 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
         return float(res.mean)
 
     w = ones
-    best = base = mean(w)
+    best = base_mean = mean(w)
     history = [(w.copy(), best)]
     n = 1
     for step in steps:
@@ -259,7 +259,7 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
                     if m < best:
                         best, w, improved = m, cand, True
                         history.append((w.copy(), best))
-    return TunedTables(target, w, classes, reweighted(bound, w, classes), base, best, n, int(seed), settings,
+    return TunedTables(target, w, classes, reweighted(bound, w, classes), base_mean, best, n, int(seed), settings,
                        tuple(history), time.perf_counter() - t0)
 
 
