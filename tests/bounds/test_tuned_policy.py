@@ -99,10 +99,10 @@ def test_classes_follow_the_interchangeable_copies():
 
 def test_tuning_on_joint_tables_scales_the_built_expectations_exactly(p123):
     """Tables over the joint configuration (relaxations 2 and 4) are tuned by scaling the greedy
-    policy's precomputed expectations instead of computing them again: the tuning's mean at the
-    weights it returns is the mean of the tuned policy built from scratch, on the same seed, to the
-    last bit. Relaxation 1's tables read on the joint configurations stand in for such tables (as
-    one table per process, and as two groups)."""
+    policy's precomputed expectations instead of computing them again: here (no two actions tie to
+    rounding) the tuning's mean at the weights it returns is the mean of the tuned policy built from
+    scratch, on the same seed, to the last bit. Relaxation 1's tables read on the joint
+    configurations stand in for such tables (as one table per process, and as two groups)."""
     system, mdp, g_star, bound, _ = p123
     n = system.n_configs
     joint = tuple(np.asarray(h)[np.asarray(col)] for h, col in zip(bound.tables.h, bound.tables.column))

@@ -153,7 +153,9 @@ def _greedy_on(result: BoundResult, system: System, base: Policy | None, weights
     """The greedy policy on ``result`` (the reweighted tables), from ``base`` (the greedy policy on the
     original tables) where its precomputed expectations can be scaled instead of computed again:
     they are linear in the tables (W_k = E[h_k(s')] of :class:`BoundPolicy`, W_G of
-    :class:`GroupBoundPolicy`). The scaled tables are written into ``scratch`` (one buffer per block,
+    :class:`GroupBoundPolicy`; the same values up to rounding, so actions that tie to rounding may
+    go another way than in the policy built on ``result``, which is the one :func:`tuned_policy`
+    builds and a report evaluates). The scaled tables are written into ``scratch`` (one buffer per block,
     allocated once: the candidates are simulated one after the other, and a policy built on them
     copies what it keeps). The greedy policy of relaxations 1 and 3 is built again (cheap)."""
     def scaled(tables: tuple) -> tuple:
