@@ -128,3 +128,17 @@ def test_the_lookahead_and_the_rollout_are_tuned_for_themselves(p123):
     for row, target in zip(report.rows, ("lookahead", "rollout")):
         assert row.policy == f"tuned-{target}[private-servers]" and row.detail["tuning"]["target"] == target
         assert row.how == "exact" and g_star - 1e-6 <= row.gain <= row.gain_upper < 1.001 * g_star
+
+
+def test_a_move_must_beat_its_paired_noise_when_asked(p123):
+    """``accept_se``: a move kept only when its paired mean difference is below minus that many of its
+    standard errors. The fixture's search (accept_se 0) keeps moves on this instance, whose greedy
+    policy is 6.5% off; the history's kept means fall, and no finite sample beats an infinite bar."""
+    system, _, _, bound, tuned = p123
+    means = [m for _, m in tuned.history]
+    assert len(means) > 1 and all(b < a for a, b in zip(means, means[1:]))
+    stuck = tune_tables(bound, system, "greedy", seed=2, accept_se=1e9, **SHORT)
+    assert np.array_equal(stuck.weights, np.ones_like(stuck.weights)) and len(stuck.history) == 1
+    assert stuck.base_mean == tuned.base_mean  # the same start on the same seed
+    with pytest.raises(PolicyError, match="accept_se"):
+        tune_tables(bound, system, "greedy", accept_se=-1.0)
