@@ -126,15 +126,19 @@ def push(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, y_out):
             w = y[c, t]
             if w == 0.0:
                 continue
-            p = pol[c, t]
             t1 = t // c2
-            t2 = t - t1 * c2
-            for o in range(out_ptr[p], out_ptr[p + 1]):
-                m1 = s1[o]
-                m2 = s2[o]
-                n1 = t1 + 1 if t1 < m1 else m1
-                n2 = t2 + 1 if t2 < m2 else m2
-                y_out[out_nxt[o], n1 * c2 + n2] += w * out_prob[o]
+            _scatter(w, pol[c, t], t1, t - t1 * c2, c2, out_ptr, out_nxt, out_prob, s1, s2, y_out)
+
+
+@njit(inline="always")
+def _scatter(w, p, t1, t2, c2, out_ptr, out_nxt, out_prob, s1, s2, y_out):
+    """Mass w at ages (t1, t2) pushed along the outcomes of pair p (:func:`push`, :func:`push_sym`)."""
+    for o in range(out_ptr[p], out_ptr[p + 1]):
+        m1 = s1[o]
+        m2 = s2[o]
+        n1 = t1 + 1 if t1 < m1 else m1
+        n2 = t2 + 1 if t2 < m2 else m2
+        y_out[out_nxt[o], n1 * c2 + n2] += w * out_prob[o]
 
 
 # ---------------------------------------------------------------------------- a pair lumped by its own swap
@@ -196,13 +200,7 @@ def push_sym(y, pol, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, kind, swap, y_o
                     w *= 0.5
                 if w == 0.0:
                     continue
-                p = pol[c, t1 * c2 + t2]
-                for o in range(out_ptr[p], out_ptr[p + 1]):
-                    m1 = s1[o]
-                    m2 = s2[o]
-                    n1 = t1 + 1 if t1 < m1 else m1
-                    n2 = t2 + 1 if t2 < m2 else m2
-                    y_out[out_nxt[o], n1 * c2 + n2] += w * out_prob[o]
+                _scatter(w, pol[c, t1 * c2 + t2], t1, t2, c2, out_ptr, out_nxt, out_prob, s1, s2, y_out)
     for c in range(n_c):  # z + sigma z, each orbit once
         if kind[c] == 2:
             continue
