@@ -88,7 +88,7 @@ class TunedTables:
     seed : int
         The tuning simulation's seed.
     settings : dict
-        slots, reps, burn_in, steps, max_evaluations.
+        slots, reps, burn_in, steps, max_evaluations, accept_se.
     history : tuple of (weights, mean)
         Every accepted move.
     seconds : float
@@ -252,12 +252,12 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
     def beats(y: np.ndarray, inc: np.ndarray) -> bool:
         d = y - inc
         se = float(np.std(d, ddof=1) / np.sqrt(d.size)) if d.size > 1 else 0.0
-        return float(d.mean()) < -float(accept_se) * se and float(d.mean()) < 0
+        return float(d.mean()) < -float(accept_se) * se  # accept_se >= 0: also a lower mean
 
     w = ones
-    inc = rep_means(w)
-    best = base_mean = float(inc.mean())
-    history = [(w.copy(), best)]
+    inc = rep_means(w)  # the incumbent's per-replication means
+    base_mean = float(inc.mean())
+    history = [(w.copy(), base_mean)]
     n = 1
     for step in steps:
         improved = True
@@ -276,10 +276,10 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
                 if trial:
                     y, cand = min(trial, key=lambda x: float(x[0].mean()))
                     if beats(y, inc):
-                        inc, best, w, improved = y, float(y.mean()), cand, True
-                        history.append((w.copy(), best))
-    return TunedTables(target, w, classes, reweighted(bound, w, classes), base_mean, best, n, int(seed), settings,
-                       tuple(history), time.perf_counter() - t0)
+                        inc, w, improved = y, cand, True
+                        history.append((w.copy(), float(inc.mean())))
+    return TunedTables(target, w, classes, reweighted(bound, w, classes), base_mean, float(inc.mean()), n, int(seed),
+                       settings, tuple(history), time.perf_counter() - t0)
 
 
 def tuned_policy(tuned: TunedTables, system: System) -> Policy:
