@@ -62,13 +62,15 @@ def _untruncated(args: argparse.Namespace, res, source, system, report, compare:
     and with ``--untruncated`` the policies evaluated (the bound's alone without ``--policy``)
     simulated without the cap, the least upper confidence limit above."""
     from ..bounds.gaps import policy_by_name
+    from ..bounds.tuned import TUNE_SEED_OFFSET
     from ..untruncated import untruncated_interval
 
     lower_from = f"the certified lower bound ({res.relaxation})"
     if not args.untruncated:
         return untruncated_interval(res.lower_bound, lower_from=lower_from)
     names = ["bound", *compare] if report is not None else ["bound"]
-    policies = [policy_by_name(n, source, system) for n in names]
+    # the tuned policies tuned on the report's seed as there (the same weights, not the default seed's)
+    policies = [policy_by_name(n, source, system, tune_seed=args.seed + TUNE_SEED_OFFSET) for n in names]
     prog.phase(f"simulating {', '.join(p.name for p in policies)} without the AoI cap ({args.reps} x {args.slots} "
                f"slots each, seed {args.seed})")
     return untruncated_interval(res.lower_bound, policies, lower_from=lower_from, slots=args.slots, reps=args.reps,
