@@ -3,9 +3,6 @@
 Gains are checked with a small certified relative value iteration written here (so these tests
 do not depend on ``wncs_lp.solvers``), and additionally with ``wncs_lp.solvers.solve`` when that
 package provides it.
-
-Tests marked ``slow`` (the LP solve of the reference row, the 3-process instance at cap 12:
-tens of seconds each) run in the default suite too; ``-m "not slow"`` deselects them locally.
 """
 from __future__ import annotations
 
@@ -32,7 +29,6 @@ from wncs_lp.scenario import load_scenario, scenario_from_dict
 
 PAPER = scenario_path("paper_preemption_p12.toml")
 THREE = scenario_path("preemption_p123_u0d0.toml")
-slow = [pytest.mark.slow]
 REF_STATES, REF_PAIRS, REF_GAIN = 23_268, 46_536, 1078.548921698
 
 A1 = [[1.02, 1, 0, 1], [0, 1, 0.2, 0], [0, 0, 1, 0], [0, 0, 0, 1.01]]
@@ -399,11 +395,30 @@ def test_three_processes_without_delays_builds_and_validates():
     assert gain(mdp) > 0
 
 
-@slow[0]
-def test_three_processes_cap12_builds():
-    mdp = build(load_scenario(THREE))
+def test_three_processes_state_space_is_the_reachable_set():
+    """The three-process scenario (no delays, so stacks of preempted jobs form) at cap 8: the
+    built states are exactly those reachable, under any actions and outcomes, from model.md's
+    start set (any tau, any arrivals, idle server, empty stack): a breadth-first search by scipy
+    on the built transition graph, independent of the builder's own vectorised search."""
+    from scipy.sparse import csr_matrix, hstack, vstack
+    from scipy.sparse.csgraph import breadth_first_order
+
+    sc = load_scenario(THREE, {"tau_cap": 8})
+    mdp = build(sc)
     mdp.validate()
-    assert mdp.n_states == 1_297_040 and mdp.n_pairs == 3_242_600
+    S, n = mdp.states, mdp.n_states
+    start = np.flatnonzero(np.isin(S.config, [S.config_id(c) for c in initial_preemption_configs(sc)]))
+    assert 0 < start.size < n
+    P = mdp.P.tocsr()
+    edges = csr_matrix((np.ones(P.nnz), P.indices, P.indptr), shape=P.shape)
+    owner = csr_matrix((np.ones(mdp.n_pairs), (np.asarray(mdp.s_indices), np.arange(mdp.n_pairs))),
+                       shape=(n, mdp.n_pairs))
+    graph = vstack([owner @ edges, csr_matrix((np.ones(start.size), (np.zeros(start.size, int), start)),
+                                              shape=(1, n))])  # a root node n pointing at the start set
+    graph = hstack([graph, csr_matrix((n + 1, 1))]).tocsr()
+    reached = breadth_first_order(graph, n, directed=True, return_predecessors=False)
+    assert reached.size - 1 == n  # every built state reached, and no more (validate: rows stay inside)
+    assert len(S.configs) > 2 ** 3  # stacks and jobs beyond the start set's configurations
 
 
 @pytest.mark.parametrize("preemptive", [True, False])
