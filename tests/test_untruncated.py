@@ -145,3 +145,30 @@ def test_no_upper_end_where_a_run_without_the_cap_would_under_report():
         with pytest.raises(ModelError, match=re.escape(field)):
             simulate_uncapped(run.solution, run.mdp, slots=100, reps=2)
     assert untruncated_interval(1.0).note == ""
+
+
+def test_the_growing_cost_stops_at_its_ceiling_without_recomputing_each_step(monkeypatch):
+    """A starving process's AoI climbs by one a slot past where doubling its cost table overflows:
+    the table grows once to the longest length below MAX_COST (q(n) = (a^(2n) - 1) / (a^2 - 1) in
+    closed form here), later AoIs below it are read, and the first past it raises UnboundedCost --
+    in a number of table builds logarithmic in the AoI, not one a slot."""
+    import math
+
+    from wncs_lp import untruncated
+    from wncs_lp.mdp import MAX_COST
+
+    a = 1.3
+    proc = one_process(a, 1.0, 0.5, 4).processes[0]
+    closed = lambda n: (a ** (2 * n) - 1) / (a * a - 1)  # noqa: E731
+    ceiling = max(n for n in range(1, 1000) if closed(n) <= MAX_COST)
+    assert math.isfinite(closed(ceiling))
+    builds = []
+    real = untruncated.process_cost
+    monkeypatch.setattr(untruncated, "process_cost", lambda *x, **k: builds.append(x[1]) or real(*x, **k))
+    q = untruncated._GrowingCost(proc, 4, "test")
+    for n in range(1, ceiling + 1):
+        assert q[np.array([n - 1])][0] == pytest.approx(closed(n), rel=1e-12)
+    assert q.ceiling == ceiling and len(q) == ceiling
+    with pytest.raises(untruncated.UnboundedCost, match=f"reached {ceiling + 1}"):
+        q[np.array([ceiling])]
+    assert len(builds) <= 3 * math.ceil(math.log2(ceiling)) + 2

@@ -79,26 +79,56 @@ def uncapped_refusal(scenario: Any) -> str:
 
 class _GrowingCost:
     """q_k(1..L) of one process, extended (doubling L) whenever an AoI past L is asked for; the
-    largest AoI asked for is kept (:attr:`max_tau`)."""
+    largest AoI asked for is kept (:attr:`max_tau`).
+
+    Where doubling would pass the largest cost the solvers take (:data:`~wncs_lp.mdp.MAX_COST`),
+    the table grows once to the longest length that stays below it (a bisection, O(L log L) in
+    all) and that length is remembered (:attr:`ceiling`): an AoI past it raises
+    :class:`UnboundedCost` at once. (Extending to exactly the AoI asked for instead recomputed
+    the whole table at every step of a starving process: 150 s of the default reproduction.)"""
 
     def __init__(self, process: Any, length: int, source: str):
         self.process, self.source = process, source
         self.table = process_cost(process, int(length), source)
         self.max_tau = 0
+        self.ceiling: int | None = None  # the longest table below MAX_COST, once a doubling hit it
+
+    def _fits(self, length: int) -> np.ndarray | None:
+        try:
+            return process_cost(self.process, length, self.source)
+        except ModelError:
+            return None
+
+    def _grow(self, need: int) -> None:
+        if self.ceiling is None:
+            table = self._fits(max(need, 2 * self.table.size))
+            if table is not None:
+                self.table = table
+                return
+            good, bad = self.table.size, max(need, 2 * self.table.size)  # q fits up to good, not up to bad
+            while bad - good > 1:
+                mid = (good + bad) // 2
+                if self._fits(mid) is None:
+                    bad = mid
+                else:
+                    good = mid
+            self.ceiling = good
+            if good > self.table.size:
+                self.table = process_cost(self.process, good, self.source)
+        if need > self.table.size:
+            try:
+                process_cost(self.process, need, self.source)  # raises: the message names the AoI
+            except ModelError as exc:
+                note = f"the AoI of {self.process.name} reached {need}, where its cost passes {MAX_COST:g}"
+                raise UnboundedCost(f"uncapped simulation: {exc}. Without the cap {note}: the policy starves it, "
+                                    "and its untruncated average cost is unbounded in effect", note) from None
+            raise AssertionError("a cost table past its ceiling did not overflow")  # pragma: no cover
 
     def __getitem__(self, idx: Any) -> np.ndarray:
         need = int(np.max(idx)) + 1
         self.max_tau = max(self.max_tau, need)
         if need > self.table.size:
-            try:
-                self.table = process_cost(self.process, max(need, 2 * self.table.size), self.source)
-            except ModelError:
-                try:
-                    self.table = process_cost(self.process, need, self.source)
-                except ModelError as exc:
-                    note = f"the AoI of {self.process.name} reached {need}, where its cost passes {MAX_COST:g}"
-                    raise UnboundedCost(f"uncapped simulation: {exc}. Without the cap {note}: the policy starves it, "
-                                        "and its untruncated average cost is unbounded in effect", note) from None
+            self._grow(need)
         return self.table[idx]
 
     def __len__(self) -> int:
