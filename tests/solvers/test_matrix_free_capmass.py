@@ -16,7 +16,7 @@ from wncs_lp.policies import MatrixFreePolicy
 from wncs_lp.workflow import make_policy
 from wncs_lp.solvers.matrix_free import (cap_cost, matrix_free_cap_mass, matrix_free_evaluate,
                                          matrix_free_value_iteration)
-from wncs_lp.truncation import policy_cap_mass
+from wncs_lp.truncation import CAP_COUNT_ATOL, policy_cap_mass
 
 
 @pytest.mark.parametrize("name,overrides", [
@@ -31,11 +31,19 @@ def test_optimal_policy_time_at_cap_matches_the_stationary_law(name, overrides):
     mf = matrix_free_value_iteration(sc, tol=1e-10)
     on = mf.on_mdp(mdp)  # the same policy as pair indices
     ref = policy_cap_mass(mdp, on.policy)
-    ev = matrix_free_cap_mass(sc, MatrixFreePolicy.from_solution(mf))
+    pol = MatrixFreePolicy.from_solution(mf)
+    ev = matrix_free_cap_mass(sc, pol)  # in-place sweeps from h = 0 (no Jacobi warm start)
     assert ev.status == "optimal"
     m = float(sum(ref.per_process))
     assert ev.gain_lower - 1e-12 <= m <= ev.gain_upper + 1e-12
     assert ev.gain_upper - ev.gain_lower <= 1.01e-7
+    # the commands' coarser width, and the Jacobi warm start the evaluation used to take: each
+    # bracket still holds the stationary law's value
+    coarse = matrix_free_cap_mass(sc, pol, atol=CAP_COUNT_ATOL)
+    warm = matrix_free_cap_mass(sc, pol, warm_start=True)
+    for e in (coarse, warm):
+        assert e.status == "optimal" and e.gain_lower - 1e-12 <= m <= e.gain_upper + 1e-12
+    assert coarse.gain_upper - coarse.gain_lower <= CAP_COUNT_ATOL
     # sum_k m_k brackets the share of time with some process at its cap
     assert ref.total <= m + 1e-12 and m / len(ref.per_process) <= ref.total + 1e-12
 

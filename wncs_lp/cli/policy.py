@@ -155,7 +155,7 @@ def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> 
     the policy and of its time at the cap (round robin: exact on its per-process chains)."""
     from ..errors import PolicyError
     from ..solvers.matrix_free import matrix_free_cap_mass, matrix_free_evaluate
-    from ..truncation import CapCount
+    from ..truncation import CAP_COUNT_ATOL, CapCount
 
     for flag, given in (("--from-initial", args.from_initial), ("--horizon", args.horizon is not None)):
         if given:
@@ -177,7 +177,8 @@ def _evaluate_matrix_free(args: argparse.Namespace, scenario, prog, refused) -> 
         out = {"how": "matrix-free", "gain": ev.gain, "gain_lower": ev.gain_lower, "gain_upper": ev.gain_upper,
                "status": ev.status, "iterations": ev.iterations, "states": int(ev.stats.get("n_states", ev.bias.size))}
         prog.phase(f"measuring the {policy.name} policy's time at the AoI cap (certified matrix-free evaluation)")
-        cap = CapCount.of(matrix_free_cap_mass(system, policy, threads=args.threads, progress=prog), system)
+        cap = CapCount.of(matrix_free_cap_mass(system, policy, atol=CAP_COUNT_ATOL, threads=args.threads,
+                                                 progress=prog), system)
     payload = {**head(args, scenario), "policy": policy.name, "route": why, **out,
                "cap_mass": None if cap is None else cap.to_dict(), "policy_info": policy.describe(), **label,
                "setup_seconds": made.seconds}

@@ -13,13 +13,14 @@ from .common import (SOLVE_METHODS, Command, add_progress_arg, add_scenario_args
 def _matrix_free(args: argparse.Namespace, scenario, run, t0: float) -> int:
     """A solve without a stored matrix (:mod:`wncs_lp.solvers.matrix_free`): asked for, or auto's fallback."""
     from ..solvers.matrix_free import matrix_free_cap_mass
-    from ..truncation import CapCount
+    from ..truncation import CAP_COUNT_ATOL, CapCount
 
     sol = run.solution
     prog = progress_for(args)
     prog.phase("measuring the optimal policy's time at the AoI cap (a certified matrix-free evaluation)")
     t_cap = time.perf_counter()
-    cap = CapCount.of(matrix_free_cap_mass(sol.system, sol, threads=args.threads, progress=prog), sol.system)
+    cap = CapCount.of(matrix_free_cap_mass(sol.system, sol, atol=CAP_COUNT_ATOL, threads=args.threads,
+                                             progress=prog), sol.system)
     t_cap = time.perf_counter() - t_cap
     interval = _untruncated(args, sol, None, prog)
     failed = None

@@ -156,9 +156,9 @@ def _matrix_free(sol: Any, system: Any, opts: dict[str, Any]) -> tuple[float, in
     """The same of a matrix-free solve: the mass is the certified upper end of :class:`CapCount`."""
     from ..policies import MatrixFreePolicy
     from ..solvers.matrix_free import matrix_free_cap_mass
-    from ..truncation import CapCount
+    from ..truncation import CAP_COUNT_ATOL, CapCount
 
-    count = CapCount.of(matrix_free_cap_mass(system, sol, threads=opts["threads"]), system)
+    count = CapCount.of(matrix_free_cap_mass(system, sol, atol=CAP_COUNT_ATOL, threads=opts["threads"]), system)
     return count.total, int(sol.stats.get("n_states", sol.bias.size)), 0, MatrixFreePolicy.from_solution(sol)
 
 

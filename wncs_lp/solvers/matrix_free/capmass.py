@@ -23,6 +23,19 @@ def cap_cost(scenario_or_system: Scenario | System) -> np.ndarray:
     return c
 
 
+def _cap_defaults(kw: dict[str, Any]) -> None:
+    """The defaults of an evaluation under the cap cost: relative ``tol`` 1e-8, and in-place
+    sweeps from the start (``warm_start=False``). :func:`~.iterate.matrix_free_evaluate` warms up
+    with Jacobi passes by default because a wide first bracket's midpoint, as the in-place
+    sweeps' shift, would distort h; here the first bracket is [0, N], and what the sweeps must do
+    first is carry the cost down from the caps, which the Jacobi passes (aperiodicity transform
+    0.5) do at half the speed and at the price of a certificate each (processes 1-4 at cap 20,
+    the optimal policy, one thread: 299 passes, 101 of them Jacobi, 63 s of CPU with the warm
+    start; 265 passes, 43-48 s without: docs/matrix-free.md)."""
+    kw.setdefault("tol", 1e-8)
+    kw.setdefault("warm_start", False)
+
+
 def matrix_free_cap_mass(scenario_or_system: Scenario | System, policy: Any, *, atol: float = 1e-7,
                          **kw: Any) -> "MatrixFreeEvaluation":
     r"""How much a policy leans on the AoI cap, certified, without a transition matrix.
@@ -33,9 +46,11 @@ def matrix_free_cap_mass(scenario_or_system: Scenario | System, policy: Any, *, 
     :func:`wncs_lp.truncation.cap_mass`, which needs the stationary law):
     :math:`\frac1N \sum_k m_k \le m \le \sum_k m_k`, so the result is an upper bound on m.
     ``atol`` is the absolute width at which the bracket counts as closed (a share of time, so
-    1e-7 is ample); ``tol`` (relative, default 1e-8 here) also closes it.
+    1e-7 is ample; the commands ask for :data:`wncs_lp.truncation.CAP_COUNT_ATOL`, what they
+    print needs no more); ``tol`` (relative, default 1e-8 here) also closes it. ``warm_start``
+    defaults to off here (:func:`_cap_defaults`).
     """
-    kw.setdefault("tol", 1e-8)
+    _cap_defaults(kw)
     kw.setdefault("name", f"{getattr(policy, 'name', 'policy')}: processes at the cap")
     return matrix_free_evaluate(scenario_or_system, policy, cost=cap_cost(scenario_or_system), atol=atol, **kw)
 
@@ -50,7 +65,7 @@ def matrix_free_cap_masses(scenario_or_system: Scenario | System, policy: Any, *
     """
     system = as_system(scenario_or_system)
     base = cap_cost(system)
-    kw.setdefault("tol", 1e-8)
+    _cap_defaults(kw)
     out = []
     for k in range(base.shape[0]):
         cost = np.zeros_like(base)
