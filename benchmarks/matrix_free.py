@@ -11,6 +11,10 @@ scale, and its sweeps against the memory bandwidth (before / after a change, in 
     # options of this tree against each other (the first the reference), e.g. the coarse correction
     python benchmarks/matrix_free.py --sections sweeps --instances paper_p1234:12,paper_p1234:20 \
         --variants '{"plain": {}, "aggregate": {"aggregate": true}}' --out /tmp/agg.csv
+    # the certified time at the cap of the optimal policy, the commands' settings against the old
+    # ones in turn, on solutions kept in a folder (solved and saved there when missing)
+    python benchmarks/matrix_free.py --sections capmass --instances paper_p1234:20,paper_p1234:30 \
+        --solutions /tmp/mfsol --repeats 2 --out /tmp/capmass.csv
 
 Sections (one CSV row per measurement, a table on stdout):
 
@@ -44,6 +48,14 @@ Sections (one CSV row per measurement, a table on stdout):
   is what other jobs cost a threaded pass. ``--variants '{"label": {options}, ...}'`` runs this tree
   once per variant instead (each with its options on top of ``--options``; the ratios against the
   first), e.g. the coarse correction (``{"aggregate": true}``) against the defaults.
+
+* ``capmass`` -- ``--instances`` (scenario:cap): the optimal policy (read from ``--solutions``
+  / NAME_CAP.npz, or solved with the defaults and saved there), then
+  ``matrix_free_cap_mass`` of it with each setting of ``CAPMASS_VARIANTS`` in turn,
+  ``--repeats`` times (A, B, A, B: a change of load hits both): the Jacobi warm start and an
+  absolute width of 1e-7 (the commands' settings until issue 34) against the commands' now
+  (in-place sweeps from h = 0, ``CAP_COUNT_ATOL``). ``ratio`` is seconds / the first
+  variant's in the same round (the note adds CPU and passes).
 
 The machine is shared: every row records the 1-minute load average when it started (2 cores;
 a load above ~1 means another job competed for them), and the CPU seconds of the worker.
@@ -401,6 +413,54 @@ def sweeps(instances, threads, options, baseline, variants=None):
     return rows
 
 
+#: The settings of the time-at-cap evaluation compared by the capmass section (the first the reference).
+CAPMASS_VARIANTS = {"warm, 1e-7": {"warm_start": True, "atol": 1e-7}, "cold, commands'": {"warm_start": False}}
+
+
+def capmass(instances, threads, folder, repeats):
+    """The certified time at the cap of each instance's optimal policy under each setting in turn."""
+    from wncs_lp.solvers.matrix_free import load_solution, matrix_free_cap_mass
+    from wncs_lp.truncation import CAP_COUNT_ATOL
+
+    rows = []
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, cap in instances:
+        system = System.from_scenario(scenario(name, cap))
+        path = folder / f"{name}_{cap}.npz"
+        if path.exists():
+            sol = load_solution(path, system)
+        else:
+            print(f"capmass: solving {name} cap {cap} (load {load1()}) ...", flush=True)
+            sol = matrix_free_value_iteration(system, threads=threads)
+            sol.save(path)
+        small = System.from_scenario(scenario("paper_p12", 6))
+        matrix_free_cap_mass(small, make_policy("greedy", small), threads=threads)  # compile the kernels first
+        for rep in range(repeats):
+            ref = None
+            for label, opts in CAPMASS_VARIANTS.items():
+                opts = {"atol": CAP_COUNT_ATOL, **opts}
+                ld = load1()
+                c0, w0 = time.process_time(), time.perf_counter()
+                ev = matrix_free_cap_mass(system, sol, threads=threads, **opts)
+                wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+                r = row(section="capmass", instance=name, cap=cap, states=ev.stats["n_states"], method=label,
+                        threads=ev.stats["threads"], seconds=round(wall, 2), gain=ev.gain, gain_lower=ev.gain_lower,
+                        gain_upper=ev.gain_upper, load1=ld, status=ev.status, cpu_seconds=round(cpu, 1),
+                        passes=ev.iterations, peak_rss_gib=round(rss_gib(), 2),
+                        note=f"round {rep + 1}; options {opts}; {ev.stats['checks']} certificates")
+                if ref is None:
+                    ref = (wall, cpu, ev.iterations)
+                else:
+                    r["ratio"] = round(wall / ref[0], 2)
+                    r["note"] = (f"against the first: wall {r['ratio']}, CPU {cpu / ref[1]:.2f}, passes "
+                                 f"{ev.iterations / ref[2]:.2f}; ") + r["note"]
+                rows.append(r)
+                print(f"  {name} cap {cap} {label:16s} {wall:.1f} s, CPU {cpu:.1f} s, {ev.iterations} passes, "
+                      f"{ev.gain_lower:.9f} <= sum_k m_k <= {ev.gain_upper:.9f}, load {ld}; {r['note']}", flush=True)
+    return rows
+
+
 def main(argv=None):
     warnings.filterwarnings("ignore", message=".*is at most the shortest loop.*")
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -420,6 +480,9 @@ def main(argv=None):
     ap.add_argument("--variants", default=None,
                     help='JSON {label: options} run on this tree in turn, ratios against the first (sweeps), '
                          'e.g. \'{"plain": {}, "aggregate": {"aggregate": true}}\'')
+    ap.add_argument("--solutions", default="/tmp/wncs_mf_solutions",
+                    help="folder of the optimal policies the capmass section reads (or solves and saves)")
+    ap.add_argument("--repeats", type=int, default=1, help="rounds of the capmass section's settings")
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--sweeps-worker", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -443,6 +506,9 @@ def main(argv=None):
         inst = [(x.split(":")[0], int(x.split(":")[1])) for x in a.instances.split(",") if x]
         rows += sweeps(inst, a.threads, json.loads(a.options), a.baseline,
                        json.loads(a.variants) if a.variants else None)
+    if "capmass" in sections:
+        inst = [(x.split(":")[0], int(x.split(":")[1])) for x in a.instances.split(",") if x]
+        rows += capmass(inst, a.threads, a.solutions, a.repeats)
     if a.out:
         with open(a.out, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=COLUMNS)
