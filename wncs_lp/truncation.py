@@ -32,10 +32,10 @@ CAP_MASS_WARN = 0.01
 #: The certified width to which the commands and the cap study measure a :class:`CapCount`
 #: (``atol`` of :func:`wncs_lp.solvers.matrix_free.matrix_free_cap_mass`). What reads it: the
 #: shares printed to 0.01% (``solve``, ``evaluate``) or 0.001% (``capstudy``), the count to four
-#: digits, and the comparison with :data:`CAP_MASS_WARN` or a study's ``mass_tol`` (>= 1e-4 in
-#: practice). 1e-6 is a tenth of the finest digit printed and 1e-4 of the threshold, so a finer
-#: certificate changes nothing shown or decided; it costs ~30 more passes (11%) of the
-#: evaluation at cap 20 (docs/matrix-free.md).
+#: digits, and the comparison of the certified upper end with :data:`CAP_MASS_WARN` or a study's
+#: ``mass_tol`` (so a wider bracket can only warn or go on sooner, never pass a mass wrongly).
+#: 1e-6 is a tenth of the finest digit printed and 1e-4 of the threshold, so a finer certificate
+#: changes nothing shown or decided, only costs passes (docs/matrix-free.md).
 CAP_COUNT_ATOL = 1e-6
 
 

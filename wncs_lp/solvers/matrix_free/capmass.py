@@ -29,9 +29,8 @@ def _cap_defaults(kw: dict[str, Any]) -> None:
     with Jacobi passes by default because a wide first bracket's midpoint, as the in-place
     sweeps' shift, would distort h; here the first bracket is [0, N], and what the sweeps must do
     first is carry the cost down from the caps, which the Jacobi passes (aperiodicity transform
-    0.5) do at half the speed and at the price of a certificate each (processes 1-4 at cap 20,
-    the optimal policy, one thread: 299 passes, 101 of them Jacobi, 63 s of CPU with the warm
-    start; 265 passes, 43-48 s without: docs/matrix-free.md)."""
+    0.5) do at half the speed and at the price of a certificate each (the passes and CPU
+    measured both ways are in docs/matrix-free.md)."""
     kw.setdefault("tol", 1e-8)
     kw.setdefault("warm_start", False)
 
