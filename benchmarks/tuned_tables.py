@@ -5,6 +5,8 @@ against the untuned policies on the same tables, against g* where it is known an
     python benchmarks/tuned_tables.py --instances bounds_mix6:10,bounds_mix5:14 --out /tmp/tuned_cal.csv
     (benchmarks/tuned_tables.csv: the first two, one after the other; docs/bounds.md "Tuned tables")
     python benchmarks/tuned_tables.py --instances bounds_p1234_x4:40,bounds_lab16:20 --out /tmp/tuned16.csv
+    python benchmarks/tuned_tables.py --instances bounds_lab16:20 --relaxation auto --policies tuned_lookahead \
+        --proxy none,greedy,2 --out /tmp/proxy16.csv      # tune cheap, use dear (``TUNE["proxy"]``)
 
 For every instance: a bound (``--relaxation``, default 1: relaxation 1's tables in seconds at any
 size, the tables tuning has the most to correct; ``auto``: ``lower_bound(system, "auto")``), then
@@ -18,6 +20,11 @@ Rows: the bound, then each policy's gain, upper value, certified gap, (g_pi - g*
 is known (``KNOWN``, or solved by the LP when the MDP has at most ``--lp-max-states`` states), the
 CPU seconds of building (tuning included) and evaluating it, the tuned weights, the 1-minute load
 when the row started and the peak memory of the process so far (2 shared cores).
+
+``--proxy P1,P2,...``: each tuned policy once per proxy, the policy the tuning's search simulates
+(``tune_tables(..., proxy=P)``: ``none`` the target itself, ``greedy``, a number of candidates, ``auto``
+the package's default), the tuned policy then built as by name. With ``--relaxation auto`` the
+policies take the tables the gap report would (``policy_source``), as ``wncs-lp bound --policy`` does.
 """
 from __future__ import annotations
 
@@ -35,12 +42,12 @@ sys.path.insert(0, str(ROOT))
 
 import wncs_lp  # noqa: E402
 from wncs_lp.bounds import lower_bound, policy_gaps  # noqa: E402
-from wncs_lp.bounds.gaps import policy_by_name  # noqa: E402
-from wncs_lp.bounds.tuned import TUNE_SEED_OFFSET  # noqa: E402
+from wncs_lp.bounds.gaps import policy_by_name, policy_source  # noqa: E402
+from wncs_lp.bounds.tuned import TUNE_SEED_OFFSET, TUNED_NAMES  # noqa: E402
 from wncs_lp.files import atomic_write_csv  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
 
-COLUMNS = ["instance", "cap", "processes", "tables", "row", "how", "gain", "gain_upper", "gap_certified",
+COLUMNS = ["instance", "cap", "processes", "tables", "row", "proxy", "how", "gain", "gain_upper", "gap_certified",
            "loss_optimum", "build_cpu", "eval_cpu", "weights", "load1", "peak_gib"]
 #: Certified optima: the matrix-free solver's (bracket <= 1e-9 relative; docs/bounds.md, calibration).
 KNOWN = {("bounds_mix6", 10): 1171.1406021, ("bounds_mix5", 14): 1365.5087359, ("bounds_mix5", 12): 1190.8146406,
@@ -73,6 +80,10 @@ def _optimum(sc, name: str, cap: int, lp_max_states: int) -> float | None:
     return float(wncs_lp.solve(sc).gain)
 
 
+def _proxy(text: str) -> str | int | None:
+    return None if text == "none" else int(text) if text.isdigit() else text
+
+
 def run(args: argparse.Namespace) -> list[dict]:
     rows = []
     for name, cap in _instances(args.instances):
@@ -86,15 +97,21 @@ def run(args: argparse.Namespace) -> list[dict]:
                      "loss_optimum": "" if g_star is None else (bound.lower_bound - g_star) / g_star,
                      "build_cpu": round(time.process_time() - c0, 2), "load1": load, "peak_gib": peak_gib()})
         print(rows[-1], flush=True)
-        for pname in args.policies.split(","):
+        source = policy_source(bound, system, seed=args.seed)[0] if args.relaxation == "auto" else bound
+        runs = [(p, x) for p in args.policies.split(",") for x in
+                ((args.proxy.split(",") if args.proxy else [None]) if p in TUNED_NAMES else [None])]
+        for pname, proxy in runs:
             c0, load = time.process_time(), load1()
-            pol = policy_by_name(pname, bound, system, tune_seed=args.seed + TUNE_SEED_OFFSET)
+            tune = None if proxy is None else {"proxy": _proxy(proxy)}
+            pol = policy_by_name(pname, source, system, tune_seed=args.seed + TUNE_SEED_OFFSET, tune=tune)
             c1 = time.process_time()
             rep = policy_gaps(bound, system, [pol], exact=None if args.exact_max_states else False,
-                              exact_max_states=args.exact_max_states, slots=args.slots, reps=args.reps, seed=args.seed)
+                              exact_max_states=args.exact_max_states, slots=args.slots, reps=args.reps, seed=args.seed,
+                              tables=source)
             r = rep.rows[0]
             tuning = getattr(pol, "tuning", None)
-            rows.append({**base, "tables": bound.relaxation, "row": r.policy, "how": r.how, "gain": r.gain,
+            rows.append({**base, "tables": source.relaxation, "row": r.policy, "how": r.how, "gain": r.gain,
+                         "proxy": "" if tuning is None else tuning["proxy"],
                          "gain_upper": r.gain_upper, "gap_certified": r.gap,
                          "loss_optimum": "" if g_star is None else (r.gain - g_star) / g_star,
                          "build_cpu": round(c1 - c0, 2), "eval_cpu": round(time.process_time() - c1, 2),
@@ -114,6 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--slots", type=int, default=40_000)
     ap.add_argument("--reps", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--proxy", default=None, help="the tuned policies once per proxy: none, greedy, auto, K, ... "
+                                                  "(default: the package's TUNE['proxy'])")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore", wncs_lp.errors.ScenarioWarning)

@@ -12,7 +12,7 @@ from wncs_lp import scenario_path, solve
 from wncs_lp.bounds import policy_gaps, private_bound
 from wncs_lp.bounds.policy import BoundPolicy, GroupBoundPolicy, bound_policy
 from wncs_lp.bounds.result import GroupTables, ValueTables
-from wncs_lp.bounds.tuned import TUNE_SEED_OFFSET, reweighted, table_classes, tune_tables, tuned_policy
+from wncs_lp.bounds.tuned import TUNE_SEED_OFFSET, reweighted, table_classes, tune_tables, tuned_policy, tuning_proxy
 from wncs_lp.errors import PolicyError
 from wncs_lp.evaluate import evaluate
 from wncs_lp.models import build
@@ -142,3 +142,29 @@ def test_a_move_must_beat_its_paired_noise_when_asked(p123):
     assert stuck.base_mean == tuned.base_mean  # the same start on the same seed
     with pytest.raises(PolicyError, match="accept_se"):
         tune_tables(bound, system, "greedy", accept_se=-1.0)
+
+
+def test_weights_tuned_on_a_cheaper_proxy_serve_the_dearer_policy(p123):
+    """``proxy``: the search simulates another policy than the one the weights are for. The
+    lookahead with one candidate is the greedy policy itself, so tuning the lookahead on it retraces
+    the greedy tuning's search to the last bit; the lookahead then built on those weights (all its
+    candidates) is evaluated exactly against the LP's optimum."""
+    system, mdp, g_star, bound, tuned = p123
+    quick = {"slots": 600, "reps": 4, "burn_in": 100, "max_evaluations": 5}
+    greedy = tune_tables(bound, system, "greedy", seed=2, **quick)
+    via_k1 = tune_tables(bound, system, "lookahead", seed=2, proxy=1, **quick)
+    assert via_k1.target == "lookahead" and via_k1.settings["proxy"] == "lookahead-k1"
+    assert not np.allclose(greedy.weights, 1.0)
+    np.testing.assert_array_equal(via_k1.weights, greedy.weights)
+    assert via_k1.base_mean == greedy.base_mean and via_k1.tuned_mean == greedy.tuned_mean
+    pol = tuned_policy(via_k1, system)
+    assert pol.name == "tuned-lookahead[private-servers]" and pol.candidates is None  # every action here
+    assert g_star - 1e-6 <= evaluate(mdp, pol).gain < 1.001 * g_star
+    # "auto" where the lookahead by name takes every action: the target itself; "greedy": the greedy
+    assert tuning_proxy(system, "lookahead") == ("lookahead", None) and tuned.settings["proxy"] == "greedy"
+    assert tuning_proxy(system, "rollout", "greedy") == ("greedy", None)
+    assert tuning_proxy(system, "rollout", 2) == ("rollout", 2)
+    with pytest.raises(PolicyError, match="proxy"):
+        tuning_proxy(system, "lookahead", 0)
+    with pytest.raises(PolicyError, match="target"):
+        tuning_proxy(system, "index", "greedy")

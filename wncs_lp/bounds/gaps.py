@@ -326,7 +326,7 @@ def policy_gaps(
         the gaps are still against ``bound.lower_bound``.
     tune : dict, optional
         Settings of the tuned policies' tuning (keywords of :func:`~wncs_lp.bounds.tuned.tune_tables`
-        but its seed: ``slots``, ``reps``, ``burn_in``, ``steps``, ``max_evaluations``, ``accept_se``; default
+        but its seed: ``slots``, ``reps``, ``burn_in``, ``steps``, ``max_evaluations``, ``accept_se``, ``proxy``; default
         :data:`~wncs_lp.bounds.tuned.TUNE`).
 
     Returns
