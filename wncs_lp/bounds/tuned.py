@@ -10,8 +10,8 @@ chain: :func:`table_classes`, the interchangeable copies of a process type share
 .. math:: h_w(s) = \sum_G w_{\kappa(G)}\, h_G(\tau_G, \mathrm{column}_G(C)),
 
 and choose the weights w by a coordinate search on the simulated average cost of the policy built
-on h_w (:func:`tune_tables`; or of a cheaper policy on the same tables, :func:`tuning_proxy`: the
-greedy policy where a lookahead or rollout decision costs tens to hundreds of greedy ones): from w = 1, each class's weight is multiplied by 1 +- step, the move
+on h_w (:func:`tune_tables`; or of a cheaper policy on the same tables, :func:`tuning_proxy`, where a
+lookahead or rollout decision costs tens to hundreds of greedy ones): from w = 1, each class's weight is multiplied by 1 +- step, the move
 kept when it lowers the mean (by more than ``accept_se`` standard errors of the paired difference,
 replication by replication on the same seeds, when that is set), the steps shrinking in turn (:data:`TUNE`). Every candidate is simulated
 with the same seed (common random numbers: the comparison of two weights is far less noisy than
@@ -48,7 +48,7 @@ from .projected import PROJECTED, ProjectedValue
 from .result import BoundResult, GroupTables, ValueTables
 
 __all__ = ["TunedTables", "tune_tables", "tuned_policy", "tuning_proxy", "table_classes", "reweighted", "TUNE",
-           "TUNE_SEED_OFFSET", "TUNED_TARGETS", "TUNED_NAMES"]
+           "TUNE_SEED_OFFSET", "TUNED_TARGETS", "TUNED_NAMES", "PROXY_ROLLOUT_CANDIDATES"]
 
 #: The tuning's simulation of each candidate (``reps`` x ``slots`` slots after ``burn_in``), the
 #: step factors of the coordinate search in turn, and its budget of simulated candidates.
@@ -57,10 +57,14 @@ __all__ = ["TunedTables", "tune_tables", "tuned_policy", "tuning_proxy", "table_
 #: the weights are worth less than it (the paper's four types four times), but also stopped it at
 #: w = 1 where a first +-10% move gains less than its noise and the later ones much more (processes
 #: 1-3 at cap 12: the greedy policy stayed +2.62% above g*, against +0.046% with 0).
-#: ``proxy``: the policy the search simulates (:func:`tuning_proxy`; "auto": the greedy policy on the
-#: tables where the lookahead by name takes fewer than every action, else the target itself).
+#: ``proxy``: the policy the search simulates (:func:`tuning_proxy`; "auto": where the lookahead by name
+#: takes fewer than every action, the greedy policy for the lookahead and the rollout with
+#: :data:`PROXY_ROLLOUT_CANDIDATES` candidates for the rollout, else the target itself).
 TUNE = {"slots": 2_500, "reps": 8, "burn_in": 300, "steps": (0.1, 0.04), "max_evaluations": 40, "accept_se": 0.0,
         "proxy": "auto"}
+#: The rollout's candidates in the tuning's search by ``proxy="auto"`` on systems with more than 64
+#: actions in some configuration (the rollout by name takes 8 there).
+PROXY_ROLLOUT_CANDIDATES = 2
 #: The tuning simulates on the evaluation seed plus this (the pilot of ``policy_source`` takes + 1).
 TUNE_SEED_OFFSET = 2
 #: The policies whose tables can be tuned: the target is the policy the weights are tuned for and
@@ -164,23 +168,28 @@ def tuning_proxy(system: System, target: str, proxy: int | str | None = "auto") 
 
     ``proxy`` None: ``target`` itself, as it is built by name. ``"greedy"``: the greedy policy on the
     tables. A whole number K: ``target`` (the lookahead or the rollout) with K candidate actions.
-    ``"auto"``: the greedy policy where the lookahead by name takes fewer than every action
+    ``"auto"``: where the lookahead by name takes fewer than every action
     (:func:`~wncs_lp.bounds.lookahead.auto_candidates`: some configuration has more than 64 actions,
-    where a lookahead or rollout decision costs tens to hundreds of greedy ones), else ``target``
-    itself. Measured (docs/bounds.md, "Tuned tables"): at the sixteen lab sensors the lookahead on
-    weights tuned on the greedy policy is as good as on weights tuned on the lookahead itself, for a
-    fifth of the tuning's CPU."""
+    where a lookahead or rollout decision costs tens to hundreds of greedy ones) the greedy policy
+    for the lookahead and the rollout with :data:`PROXY_ROLLOUT_CANDIDATES` candidates for the
+    rollout, else ``target`` itself. Measured (docs/bounds.md, "Tuned tables"): at the sixteen lab
+    sensors the lookahead on weights tuned on the greedy policy is as good as on weights tuned on the
+    lookahead itself, for a fifth of the tuning's CPU; at the paper's four types four times the
+    rollout on greedy-tuned weights came out worse than untuned, on weights tuned on its
+    2-candidate self no worse.
+    """
     if target not in TUNED_TARGETS:
         raise PolicyError(f"target: expected one of {', '.join(TUNED_TARGETS)}, got {target!r}")
+    if not (proxy in (None, "auto", "greedy") or (isinstance(proxy, (int, np.integer)) and not isinstance(proxy, bool)
+                                                  and proxy >= 1)):
+        raise PolicyError(f"proxy: expected None, 'auto', 'greedy' or a whole number of candidates >= 1, got {proxy!r}")
     if proxy is None or target == "greedy":
         return target, None
-    if proxy == "greedy" or (proxy == "auto" and auto_candidates(system) is not None):
-        return "greedy", None
     if proxy == "auto":
-        return target, None
-    if isinstance(proxy, (int, np.integer)) and not isinstance(proxy, bool) and proxy >= 1:
-        return target, int(proxy)
-    raise PolicyError(f"proxy: expected None, 'auto', 'greedy' or a whole number of candidates >= 1, got {proxy!r}")
+        if auto_candidates(system) is None:
+            return target, None
+        return ("greedy", None) if target == "lookahead" else (target, PROXY_ROLLOUT_CANDIDATES)
+    return ("greedy", None) if proxy == "greedy" else (target, int(proxy))
 
 
 def _greedy_on(result: BoundResult, system: System, base: Policy | None, weights: np.ndarray,
