@@ -48,7 +48,8 @@ from .projected import PROJECTED, ProjectedValue
 from .result import BoundResult, GroupTables, ValueTables
 
 __all__ = ["TunedTables", "tune_tables", "tuned_policy", "tuning_proxy", "table_classes", "reweighted", "TUNE",
-           "TUNE_SEED_OFFSET", "TUNED_TARGETS", "TUNED_NAMES", "PROXY_ROLLOUT_CANDIDATES"]
+           "TUNE_SEED_OFFSET", "TUNED_TARGETS", "TUNED_NAMES", "PROXY_ROLLOUT_CANDIDATES",
+           "TUNED_LOOKAHEAD_CANDIDATES"]
 
 #: The tuning's simulation of each candidate (``reps`` x ``slots`` slots after ``burn_in``), the
 #: step factors of the coordinate search in turn, and its budget of simulated candidates.
@@ -62,6 +63,10 @@ __all__ = ["TunedTables", "tune_tables", "tuned_policy", "tuning_proxy", "table_
 #: :data:`PROXY_ROLLOUT_CANDIDATES` candidates for the rollout, else the target itself).
 TUNE = {"slots": 2_500, "reps": 8, "burn_in": 300, "steps": (0.1, 0.04), "max_evaluations": 40, "accept_se": 0.0,
         "proxy": "auto"}
+#: The tuned lookahead's candidates where the lookahead by name takes fewer than every action (16 of
+#: 240 at sixteen processes): at the sixteen lab sensors 8 gave the same gain to its noise for two
+#: thirds of the evaluation's CPU (docs/bounds.md, "Tuned tables").
+TUNED_LOOKAHEAD_CANDIDATES = 8
 #: The rollout's candidates in the tuning's search by ``proxy="auto"`` on systems with more than 64
 #: actions in some configuration (the rollout by name takes 8 there).
 PROXY_ROLLOUT_CANDIDATES = 2
@@ -153,10 +158,14 @@ def reweighted(result: BoundResult, weights: np.ndarray, classes: np.ndarray) ->
 
 
 def _builder(target: str, system: System, candidates: int | None = None) -> Callable[[Policy], Policy]:
-    """The policy ``target`` on a greedy policy of tables (as the gap reports build it by name; with
-    ``candidates`` the lookahead or the rollout with that many candidate actions instead)."""
+    """The policy ``target`` on a greedy policy of tables (as the gap reports build it by name: the
+    tuned lookahead with :data:`TUNED_LOOKAHEAD_CANDIDATES` candidates where the lookahead by name
+    takes fewer than every action; with ``candidates`` the lookahead or the rollout with that many
+    candidate actions instead)."""
+    auto = auto_candidates(system)
+    own = None if auto is None else min(auto, TUNED_LOOKAHEAD_CANDIDATES)
     makers = {"greedy": lambda g: g,
-              "lookahead": lambda g: LookaheadPolicy(g, candidates or auto_candidates(system)),
+              "lookahead": lambda g: LookaheadPolicy(g, candidates or own),
               "rollout": lambda g: TableRolloutPolicy(g, candidates)}
     if target not in makers:
         raise PolicyError(f"target: expected one of {', '.join(TUNED_TARGETS)}, got {target!r}")
@@ -234,7 +243,8 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
     system : System
     target : {"greedy", "lookahead", "rollout"}
         The policy simulated for each candidate: the greedy policy on the tables, the two-step
-        lookahead (:func:`~wncs_lp.bounds.lookahead.auto_candidates` candidates) or the rollout
+        lookahead (:data:`TUNED_LOOKAHEAD_CANDIDATES` candidates where some configuration has more than 64
+        actions, else every action) or the rollout
         (:class:`~wncs_lp.bounds.lookahead.TableRolloutPolicy` with its defaults).
     seed : int
         The tuning's simulation seed, the same for every candidate (common random numbers). Keep it
