@@ -28,6 +28,7 @@ import os
 import stat
 import tempfile
 import time
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -317,8 +318,11 @@ def read_regular(path: str | Path, max_bytes: int) -> bytes:
 
 # ----------------------------------------------------------------------------- reading .npz
 #: What a damaged .npz file raises inside numpy / zipfile / zlib.
+# numpy parses a member's header with ast and, for headers of format versions 1 and 2 that fail
+# to parse, re-tokenizes it: a damaged header raises SyntaxError or tokenize.TokenError, not only
+# ValueError
 _NPZ_ERRORS = (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile, zlib.error, RuntimeError,
-               NotImplementedError, MemoryError)
+               NotImplementedError, MemoryError, SyntaxError, tokenize.TokenError)
 
 
 def read_npz(path: str | Path, *, required: Iterable[str] = (), what: str = "an .npz file",
