@@ -14,8 +14,8 @@ from typing import Sequence
 __all__ = ["ESTIMATE_SECONDS", "ESTIMATE_WHERE", "Plan", "duration"]
 
 #: Seconds of each section with a cold cache, per profile: ``default`` from one run of
-#: ``wncs-lp reproduce`` on a fresh clone (commit efcd123, 2 cores, 2 threads, quiet, numba's caches
-#: cold: 6 min 52 s in all; report.json's ``timings_seconds``); ``quick`` from one run of
+#: ``wncs-lp reproduce`` on a fresh clone (commit 180c2f6, 2 cores, 2 threads, quiet, numba's caches
+#: cold: 5 min 04 s in all; the per-section lines it printed); ``quick`` from one run of
 #: ``wncs-lp reproduce --profile quick`` on the same machine (55 s). ``full`` adds B2's caps 20, 25
 #: and 30 and its sweep at cap 20, and B3's processes 1-4 at caps 20 and 30, estimated from the
 #: matrix-free and bounds benchmarks (not one measured run). C14-C16 (issue 37) reuse the solves of
@@ -24,11 +24,11 @@ ESTIMATE_SECONDS: dict[str, dict[str, float]] = {
     "quick": {"C1": 2.3, "C2": 1.6, "C3": 2.8, "C4": 1.4, "C5": 1.0, "C6": 3.7, "C7": 0.8, "C8": 0.1,
               "C9": 1.6, "C10": 0.1, "C11": 1.4, "C12": 1.1, "C13": 5.7, "C14": 0.3, "C15": 0.3, "C16": 0.3,
               "B1": 7.6, "B2": 4.5, "B3": 19.5},
-    "default": {"C1": 5.3, "C2": 9.2, "C3": 30.0, "C4": 16.7, "C5": 0.9, "C6": 68.4, "C7": 5.0, "C8": 0.6,
-                "C9": 2.6, "C10": 1.8, "C11": 10.2, "C12": 3.2, "C13": 3.2, "C14": 0.1, "C15": 0.2, "C16": 0.1,
-                "B1": 25.1, "B2": 163.7, "B3": 64.6},
+    "default": {"C1": 5.0, "C2": 8.0, "C3": 28.0, "C4": 17.0, "C5": 1.0, "C6": 76.0, "C7": 6.0, "C8": 1.0,
+                "C9": 3.0, "C10": 2.0, "C11": 10.0, "C12": 4.0, "C13": 3.0, "C14": 0.1, "C15": 0.2, "C16": 0.1,
+                "B1": 26.0, "B2": 43.0, "B3": 70.0},
 }
-ESTIMATE_SECONDS["full"] = {**ESTIMATE_SECONDS["default"], "B1": 80.0, "B2": 164.0 + 75 * 60.0, "B3": 65.0 + 15 * 60.0}
+ESTIMATE_SECONDS["full"] = {**ESTIMATE_SECONDS["default"], "B1": 80.0, "B2": 43.0 + 75 * 60.0, "B3": 65.0 + 15 * 60.0}
 #: Where the estimates come from, in the line that prints them.
 ESTIMATE_WHERE = "measured on a 2-core machine with a cold cache"
 
