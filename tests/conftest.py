@@ -174,3 +174,30 @@ def pytest_configure(config):
 @pytest.hookimpl(optionalhook=True)
 def pytest_configure_node(node):
     node.workerinput["wncs_loadgroup"] = node.config.option.dist == "loadgroup"
+
+
+def pytest_sessionstart(session):
+    """On a cold numba cache (a fresh clone) and before xdist starts its workers (its own
+    ``pytest_sessionstart`` runs last): compile the kernels once, in two processes side by side
+    (tests/prewarm_kernels.py), instead of in every worker and subprocess that reaches them first.
+    A failure here only costs the time: the tests then compile what they need themselves."""
+    if hasattr(session.config, "workerinput") or getattr(session.config.option, "numprocesses", None) in (None, 0):
+        return
+    import wncs_lp
+
+    package = Path(wncs_lp.__file__).parent
+    if sum(1 for _ in package.rglob("*.nbi")) >= PREWARMED_INDEXES:
+        return
+    script = Path(__file__).with_name("prewarm_kernels.py")
+    procs = [subprocess.Popen([sys.executable, str(script), part], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+             for part in ("solvers", "bounds")]
+    for proc in procs:
+        try:
+            proc.wait(timeout=300)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+#: Cache index files (one per compiled kernel) the prewarm leaves; with as many, it is skipped.
+PREWARMED_INDEXES = 20
