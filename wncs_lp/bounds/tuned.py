@@ -61,6 +61,9 @@ __all__ = ["TunedTables", "tune_tables", "tuned_policy", "tuning_proxy", "table_
 #: ``proxy``: the policy the search simulates (:func:`tuning_proxy`; "auto": where the lookahead by name
 #: takes fewer than every action, the greedy policy for the lookahead and the rollout with
 #: :data:`PROXY_ROLLOUT_CANDIDATES` candidates for the rollout, else the target itself).
+#: A move must lower the mean by more than this share of it (rounding), whatever ``accept_se``.
+MOVE_RTOL = 1e-9
+
 TUNE = {"slots": 2_500, "reps": 8, "burn_in": 300, "steps": (0.1, 0.04), "max_evaluations": 40, "accept_se": 0.0,
         "proxy": "auto"}
 #: The tuned lookahead's candidates where the lookahead by name takes fewer than every action (16 of
@@ -259,7 +262,8 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
         At most this many candidates simulated (the start included).
     accept_se : float
         A move is kept when the mean over replications of (candidate - incumbent), replication by
-        replication, is below ``-accept_se`` times its standard error (0: any lower mean).
+        replication, is below ``-accept_se`` times its standard error (0: any lower mean), and
+        below rounding (:data:`MOVE_RTOL` of the mean) in any case.
     proxy : None, "auto", "greedy" or int
         The policy simulated for each candidate when it is not ``target`` as built by name
         (:func:`tuning_proxy`: tune on a cheaper policy, use the weights on the dearer one).
@@ -305,7 +309,10 @@ def tune_tables(bound: BoundResult, system: System, target: str = "greedy", *, s
     def beats(y: np.ndarray, inc: np.ndarray) -> bool:
         d = y - inc
         se = float(np.std(d, ddof=1) / np.sqrt(d.size)) if d.size > 1 else 0.0
-        return float(d.mean()) < -float(accept_se) * se  # accept_se >= 0: also a lower mean
+        # by more than rounding too: weights that change no decision give the same paths, whose
+        # means then differ in the last bits only, and such a move would let a weight drift
+        floor = MOVE_RTOL * abs(float(inc.mean()))
+        return float(d.mean()) < -max(float(accept_se) * se, floor)
 
     w = ones
     inc = rep_means(w)  # the incumbent's per-replication means
