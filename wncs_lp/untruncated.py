@@ -105,16 +105,15 @@ class _GrowingCost:
             if table is not None:
                 self.table = table
                 return
-            good, bad = self.table.size, max(need, 2 * self.table.size)  # q fits up to good, not up to bad
-            while bad - good > 1:
-                mid = (good + bad) // 2
-                if self._fits(mid) is None:
+            good, bad = self.table, max(need, 2 * self.table.size)  # q fits up to good.size, not up to bad
+            while bad - good.size > 1:
+                mid = (good.size + bad) // 2
+                table = self._fits(mid)
+                if table is None:
                     bad = mid
                 else:
-                    good = mid
-            self.ceiling = good
-            if good > self.table.size:
-                self.table = process_cost(self.process, good, self.source)
+                    good = table
+            self.table, self.ceiling = good, int(good.size)
         if need > self.table.size:
             try:
                 process_cost(self.process, need, self.source)  # raises: the message names the AoI
