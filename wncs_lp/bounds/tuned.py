@@ -61,11 +61,10 @@ __all__ = ["TunedTables", "tune_tables", "tuned_policy", "tuning_proxy", "table_
 #: ``proxy``: the policy the search simulates (:func:`tuning_proxy`; "auto": where the lookahead by name
 #: takes fewer than every action, the greedy policy for the lookahead and the rollout with
 #: :data:`PROXY_ROLLOUT_CANDIDATES` candidates for the rollout, else the target itself).
-#: A move must lower the mean by more than this share of it (rounding), whatever ``accept_se``.
-MOVE_RTOL = 1e-9
-
 TUNE = {"slots": 2_500, "reps": 8, "burn_in": 300, "steps": (0.1, 0.04), "max_evaluations": 40, "accept_se": 0.0,
         "proxy": "auto"}
+#: A move must lower the mean by more than this share of it (rounding), whatever ``accept_se``.
+MOVE_RTOL = 1e-9
 #: The tuned lookahead's candidates where the lookahead by name takes fewer than every action (16 of
 #: 240 at sixteen processes): at the sixteen lab sensors 8 gave the same gain to its noise for two
 #: thirds of the evaluation's CPU (docs/bounds.md, "Tuned tables").
