@@ -259,6 +259,121 @@ def copy_bandwidth(nbytes=400 << 20, repeats=5) -> float:
     return 2 * a.nbytes / best / 1e9
 
 
+# ----------------------------------------------------------------------------- the work floor (terms)
+def outcome_terms(op, pol, cand=None) -> dict:
+    """Outcome terms per pass kind, as (contiguous, saturated) counts over the layout.
+
+    A term is one product p * h[successor] added into a row of the kernels' scratch: contiguous
+    where it reads h[b + i] along the successor row, saturated past the row's split (the last
+    AoI stays at its cap: one broadcast value). Kinds: ``all actions`` (an improvement sweep over
+    every action; a certificate computes the same), ``candidates`` (the actions the bit sets
+    ``cand`` allow), ``evaluation`` (what the fixed-policy kernel computes: each action used on a
+    row, over the whole row) and ``policy`` (the policy's own outcomes only: the least an
+    evaluation sweep must compute)."""
+    import numpy as np
+
+    N = op.N
+    out = {k: np.zeros(2) for k in ("all actions", "candidates", "evaluation", "policy")}
+    for c in range(op.off.size - 1):
+        L = int(op.dims[c, N - 1])
+        rows = int(op.off[c + 1] - op.off[c]) // L
+        loN = int(op.lo[c, N - 1])
+        a0 = int(op.act_ptr[c])
+        pc = pol[op.off[c]:op.off[c + 1]].reshape(rows, L)
+        for j in range(int(op.act_ptr[c + 1]) - a0):
+            ob, oe = int(op.out_ptr[a0 + j]), int(op.out_ptr[a0 + j + 1])
+            sp = np.clip(op.e_m[ob:oe, N - 1] - loN, 0, L)
+            per_row = np.array([sp.sum(), (L - sp).sum()], float)
+            out["all actions"] += rows * per_row
+            if cand is None or j >= 64 or (int(cand[c]) >> j) & 1:
+                out["candidates"] += rows * per_row
+            hit = pc == j
+            out["evaluation"] += int(hit.any(axis=1).sum()) * per_row
+            at = np.concatenate([[0], np.cumsum(hit.sum(axis=0))])  # states taking j at row positions < i
+            contig = float(at[sp].sum())
+            out["policy"] += np.array([contig, float(at[-1]) * (oe - ob) - contig])
+    return out
+
+
+def _row_kernel():
+    from numba import njit, uint64
+
+    @njit(boundscheck=False, fastmath={"contract"})
+    def rows(h, B, p, L, sp, tgt, reps):
+        """The kernels' row loop: per row, outcome o adds p[o] * h[B[r, o] + i] on i < sp and
+        p[o] * h[B[r, o] + sp] past it (the first outcome assigns), then the row goes back into
+        h (as an in-place sweep writes it: no work can be hoisted out of the repetitions)."""
+        nrow, nO = B.shape
+        for _ in range(reps):
+            for r in range(nrow):
+                for o in range(nO):
+                    b = uint64(B[r, o])
+                    po = p[o]
+                    v = po * h[b + uint64(sp)]
+                    if o == 0:
+                        for i in range(sp):
+                            tgt[i] = po * h[b + uint64(i)]
+                        for i in range(sp, L):
+                            tgt[uint64(i)] = v
+                    else:
+                        for i in range(sp):
+                            tgt[i] += po * h[b + uint64(i)]
+                        for i in range(sp, L):
+                            tgt[uint64(i)] += v
+                w = uint64(B[r, 0])
+                for i in range(L):
+                    h[w + uint64(i)] = tgt[i]
+    return rows
+
+
+def term_rate(L, n_out, h_doubles=1 << 16, nrow=2048, seconds=0.3, seed=0) -> float:
+    """Outcome terms a CPU second (one thread) of the kernels' row loop on rows of ``L`` states
+    (the last one saturated, as in 86% of the outcome rows of processes 1-4) with ``n_out``
+    outcomes each, the successor rows at random offsets of an ``h`` of ``h_doubles`` float64
+    (512 KiB by default: in the L2 cache, so the loop's arithmetic and loads, not the memory)."""
+    import numpy as np
+
+    f = _row_kernel()
+    rng = np.random.default_rng(seed)
+    h = rng.random(h_doubles)
+    B = rng.integers(0, h_doubles - L - 1, (nrow, n_out)).astype(np.int64)
+    p = rng.random(n_out)
+    p /= 1.01 * p.sum()  # a substochastic row: h stays bounded through the repetitions
+    tgt = np.zeros(L)
+    f(h, B, p, L, L - 1, tgt, 1)
+    reps = 1
+    while True:
+        c = time.process_time()
+        f(h, B, p, L, L - 1, tgt, reps)
+        dt = time.process_time() - c
+        if dt >= seconds:
+            break
+        reps = max(2 * reps, int(reps * 1.2 * seconds / max(dt, 1e-6)))
+    best = dt
+    for _ in range(2):
+        c = time.process_time()
+        f(h, B, p, L, L - 1, tgt, reps)
+        best = min(best, time.process_time() - c)
+    return reps * nrow * n_out * L / best
+
+
+def work_floor(op, pol, cand) -> dict:
+    """Terms a state per pass kind (:func:`outcome_terms`) and, for each, the microbenchmark's
+    terms a CPU second at the layout's mean row length and the kind's mean outcomes a row; with
+    the long-row rate (L = 1024, the loop's arithmetic without its per-row costs)."""
+    n = int(op.off[-1])
+    rows = int(sum(int(op.off[c + 1] - op.off[c]) // int(op.dims[c, op.N - 1]) for c in range(op.off.size - 1)))
+    L = n / rows
+    terms = outcome_terms(op, pol, cand)
+    out = {"mean_row": round(L, 2), "long_row_gterms": round(term_rate(1024, 8) / 1e9, 2)}
+    for kind, v in terms.items():
+        per_state = float(v.sum()) / n
+        n_out = max(1, round(per_state))  # outcomes a row = terms a state (each covers the row)
+        out[kind] = {"terms_per_state": round(per_state, 2), "saturated_share": round(float(v[1] / v.sum()), 3),
+                     "micro_gterms": round(term_rate(max(2, round(L)), n_out) / 1e9, 2)}
+    return out
+
+
 def pass_profile(sol, threads, bw, repeats=2):
     """Seconds (wall and CPU) of one pass of each kind on the solution's bias and policy, best of
     ``repeats``: the improvement sweep over every action and over the candidate actions (where the
@@ -280,10 +395,14 @@ def pass_profile(sol, threads, bw, repeats=2):
               lambda: sw.all_actions(h, None, pol, None, Reduce.MIN, Write.IN_PLACE, True, 0.8, 0.0)),
              ("certificate", 9, lambda: sw.all_actions(h, None, pol, None, Reduce.MIN, Write.NONE, True, 0.8, 0.0)),
              ("evaluation", 17, lambda: sw.fixed(h, None, pol, Write.IN_PLACE, 0.8, 0.0))]
+    cand = None
     if "cand" in inspect.signature(sw.all_actions).parameters:
         cand = sw.used_actions(pol, np.zeros(sol.layout.n_configs, np.uint64))
         kinds.insert(1, ("improvement, candidates", 17, lambda: sw.all_actions(
             h, None, pol, None, Reduce.MIN, Write.IN_PLACE, True, 0.8, 0.0, cand)))
+    floor = work_floor(op, pol, cand)
+    terms_of = {"improvement": "all actions", "improvement, candidates": "candidates", "certificate": "all actions",
+                "evaluation": "evaluation"}
     out = {}
     for label, per_state, fn in kinds:
         wall = cpu = float("inf")
@@ -291,8 +410,13 @@ def pass_profile(sol, threads, bw, repeats=2):
             c0, t0 = time.process_time(), time.perf_counter()
             fn()
             wall, cpu = min(wall, time.perf_counter() - t0), min(cpu, time.process_time() - c0)
+        f = floor[terms_of[label]]
+        gterms = f["terms_per_state"] * n / cpu / 1e9
         out[label] = {"wall": round(wall, 4), "cpu": round(cpu, 4), "ns_cpu_per_state": round(cpu / n * 1e9, 2),
-                      "floor_ratio": round(wall / (per_state * n / (bw * 1e9)), 2)}
+                      "floor_ratio": round(wall / (per_state * n / (bw * 1e9)), 2),
+                      "terms_per_state": f["terms_per_state"], "gterms_per_cpu_s": round(gterms, 2),
+                      "micro_gterms": f["micro_gterms"], "micro_ratio": round(f["micro_gterms"] / gterms, 1)}
+    out["floor"] = floor
     return out
 
 
@@ -375,8 +499,14 @@ def sweeps_worker(name, cap, threads, options):
     out["note"] += (f"; in the solve: {pass_times_note(log)}; other processes' CPU during the solve "
                     f"{'?' if others is None else f'{others:.1f}'} s")
     prof = pass_profile(sol, st["threads"], bw)
+    floor = prof.pop("floor")
     out["note"] += "; one pass of each kind (wall s, CPU s, CPU ns a state, x floor): " + "; ".join(
         f"{k} {v['wall']} s, {v['cpu']} s, {v['ns_cpu_per_state']} ns, {v['floor_ratio']}x" for k, v in prof.items())
+    out["note"] += (f"; outcome terms (mean row {floor['mean_row']} states; the row loop alone, one thread: "
+                    f"{floor['long_row_gterms']} G terms/s on rows of 1024): " + "; ".join(
+        f"{k} {v['terms_per_state']} a state, {v['gterms_per_cpu_s']} G terms a CPU s against "
+        f"{v['micro_gterms']} in the row loop alone ({v['micro_ratio']}x)" for k, v in prof.items()) +
+        "; policy's own outcomes " + f"{floor['policy']['terms_per_state']} a state")
     print(json.dumps(out), flush=True)
 
 
