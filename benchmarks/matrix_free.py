@@ -360,12 +360,13 @@ def term_rate(L, n_out, h_doubles=1 << 16, nrow=2048, seconds=0.3, seed=0) -> fl
 def work_floor(op, pol, cand) -> dict:
     """Terms a state per pass kind (:func:`outcome_terms`) and, for each, the microbenchmark's
     terms a CPU second at the layout's mean row length and the kind's mean outcomes a row; with
-    the long-row rate (L = 1024, the loop's arithmetic without its per-row costs)."""
+    the long-row rates (L = 1024, the loop without its per-row costs; h in L2 and in L1)."""
     n = int(op.off[-1])
     rows = int(sum(int(op.off[c + 1] - op.off[c]) // int(op.dims[c, op.N - 1]) for c in range(op.off.size - 1)))
     L = n / rows
     terms = outcome_terms(op, pol, cand)
-    out = {"mean_row": round(L, 2), "long_row_gterms": round(term_rate(1024, 8) / 1e9, 2)}
+    out = {"mean_row": round(L, 2), "long_row_gterms": round(term_rate(1024, 8) / 1e9, 2),
+           "long_row_l1_gterms": round(term_rate(1024, 8, h_doubles=4096) / 1e9, 2)}
     for kind, v in terms.items():
         per_state = float(v.sum()) / n
         n_out = max(1, round(per_state))  # outcomes a row = terms a state (each covers the row)
@@ -503,7 +504,7 @@ def sweeps_worker(name, cap, threads, options):
     out["note"] += "; one pass of each kind (wall s, CPU s, CPU ns a state, x floor): " + "; ".join(
         f"{k} {v['wall']} s, {v['cpu']} s, {v['ns_cpu_per_state']} ns, {v['floor_ratio']}x" for k, v in prof.items())
     out["note"] += (f"; outcome terms (mean row {floor['mean_row']} states; the row loop alone, one thread: "
-                    f"{floor['long_row_gterms']} G terms/s on rows of 1024): " + "; ".join(
+                    f"{floor['long_row_gterms']} G terms/s on rows of 1024, {floor['long_row_l1_gterms']} with h in L1): " + "; ".join(
         f"{k} {v['terms_per_state']} a state, {v['gterms_per_cpu_s']} G terms a CPU s against "
         f"{v['micro_gterms']} in the row loop alone ({v['micro_ratio']}x)" for k, v in prof.items()) +
         "; policy's own outcomes " + f"{floor['policy']['terms_per_state']} a state")
