@@ -45,7 +45,11 @@ Sections (one CSV row per measurement, a table on stdout):
   bandwidth floor, in the row's note; and, timed inside the solve, each kind's passes, least
   and median wall seconds and CPU / wall (2: both threads busy all along), with the CPU seconds
   the machine's other processes used meanwhile (``/proc/stat``): the median against the least
-  is what other jobs cost a threaded pass. ``--variants '{"label": {options}, ...}'`` runs this tree
+  is what other jobs cost a threaded pass. Beside the bytes, the work: the outcome terms a state
+  of each pass kind (``outcome_terms``: one product p * h[successor] added into a row), the G
+  terms a CPU second each pass achieved, and what numba's compiled row loop alone sustains on one
+  core at the layout's mean row length and the kind's outcomes a row (``term_rate``; on rows of
+  1,024 states too, its per-row costs amortised). ``--variants '{"label": {options}, ...}'`` runs this tree
   once per variant instead (each with its options on top of ``--options``; the ratios against the
   first), e.g. the coarse correction (``{"aggregate": true}``) against the defaults.
 
@@ -504,7 +508,8 @@ def sweeps_worker(name, cap, threads, options):
     out["note"] += "; one pass of each kind (wall s, CPU s, CPU ns a state, x floor): " + "; ".join(
         f"{k} {v['wall']} s, {v['cpu']} s, {v['ns_cpu_per_state']} ns, {v['floor_ratio']}x" for k, v in prof.items())
     out["note"] += (f"; outcome terms (mean row {floor['mean_row']} states; the row loop alone, one thread: "
-                    f"{floor['long_row_gterms']} G terms/s on rows of 1024, {floor['long_row_l1_gterms']} with h in L1): " + "; ".join(
+                    f"{floor['long_row_gterms']} G terms/s on rows of 1024, {floor['long_row_l1_gterms']} "
+                    f"with h in L1): " + "; ".join(
         f"{k} {v['terms_per_state']} a state, {v['gterms_per_cpu_s']} G terms a CPU s against "
         f"{v['micro_gterms']} in the row loop alone ({v['micro_ratio']}x)" for k, v in prof.items()) +
         "; policy's own outcomes " + f"{floor['policy']['terms_per_state']} a state")
