@@ -62,23 +62,32 @@ SERVERS = {"edge": {"uplink_delay": 0, "downlink_delay": 0, "slots_per_dimension
            "cloud": {"uplink_delay": 1, "downlink_delay": 1, "slots_per_dimension": 1}}
 #: (server, sensors, cap): caps at which the optimum's time at the cap is below ~1% for every sensor
 #: (the cap masses are in the CSV); the 5 edge sensors at cap 25 take ~50M states and the longest.
-DEFAULT = [("edge", 2, 30), ("edge", 3, 30), ("edge", 4, 30), ("cloud", 2, 30), ("cloud", 3, 30), ("cloud", 4, 25),
+DEFAULT = [("edge", 2, 30), ("edge", 3, 30), ("edge", 4, 40), ("cloud", 2, 30), ("cloud", 3, 30), ("cloud", 4, 25),
            ("edge", 5, 25)]
+#: The load: slots between two deliveries of a sensor when the server is always busy and serves the
+#: sensors in turn, N * SLOTS_PER_DELIVERY (p = 0.8 on both links). The edge (U = 0, T = 2) spends 1
+#: slot on an update lost on the uplink and T slots on one that arrives, and delivers p^2 of its
+#: attempts: (1 - p + p T) / p^2 = 2.8125 slots a delivery. The cloud (U = D = 1, T = 1) accepts an
+#: update every slot (the one in service leaves it as the next arrives): 1 / p^2 = 1.5625. At
+#: bounds_lab16 the two together deliver 1/2.8125 + 1/1.5625 = 1.0 update a slot to 16 sensors: 16
+#: slots a delivery, about the edge with 5-6 sensors or the cloud with 10.
+SLOTS_PER_DELIVERY = {"edge": 1.8 / 0.64, "cloud": 1 / 0.64, "both": 1 / (0.64 / 1.8 + 0.64)}
 RELAXATIONS = ((1, "private-servers", {}), (2, "joint-configuration", {"method": "ipm"}),
                (3, "grouped-private-servers", {}), (4, "joint-pairs", {}))
 
 
 def system_for(server: str, sensors: int, cap: int) -> System:
-    """The shipped five edge sensors' first ``sensors`` sensors on ``server`` alone, at cap ``cap``."""
-    if server not in SERVERS:
-        raise ValueError(f"server must be one of {sorted(SERVERS)}, got {server!r}")
+    """The shipped five edge sensors' first ``sensors`` sensors on ``server`` alone (``"both"``: on
+    the cloud and the edge server, bounds_lab16's pair), at cap ``cap``."""
+    if server not in (*SERVERS, "both"):
+        raise ValueError(f"server must be one of {sorted(SERVERS)} or 'both', got {server!r}")
     import tomllib
 
     raw = tomllib.loads(wncs_lp.scenario_path(SCENARIO).read_text())
     if not 1 <= sensors <= len(raw["process"]):
         raise ValueError(f"sensors must be 1..{len(raw['process'])}, got {sensors}")
     raw["process"] = raw["process"][:sensors]
-    raw["server"] = [{"name": server, **SERVERS[server]}]
+    raw["server"] = [{"name": m, **SERVERS[m]} for m in (("cloud", "edge") if server == "both" else (server,))]
     raw["model"]["tau_cap"] = cap
     return System.from_scenario(wncs_lp.scenario_from_dict(raw, f"{SCENARIO} ({sensors} sensors, {server}, cap {cap})"))
 
@@ -147,9 +156,9 @@ def markdown(rows: list[dict]) -> str:
     """One line per instance: g*, the time at the cap, each bound's looseness and each policy's loss (%)."""
     order = ["LB 1", "LB 2", "LB 3", "LB 4", "greedy of 2", "lookahead", "rollout", "index", "greedy of 1", "static",
              "suboptimal"]
-    head = ("| server, sensors, cap | states | g* | max time at cap | " + " | ".join(
+    head = ("| server, sensors, cap | slots a delivery | states | g* | max time at cap | " + " | ".join(
         f"{c} looseness" if c.startswith("LB") else f"{c} loss" for c in order) + " |")
-    out = [head, "|" + "---|" * (4 + len(order))]
+    out = [head, "|" + "---|" * (5 + len(order))]
     by = {}
     for r in rows:
         by.setdefault(r["instance"], {})[r["row"][:4] if r["row"].startswith("LB") else _short(r["row"])] = r
@@ -159,7 +168,8 @@ def markdown(rows: list[dict]) -> str:
         for c in order:
             r = d.get(c)
             cells.append("" if r is None else f"{100 * abs(float(r['vs_optimum'])):.3f}%")
-        out.append(f"| {g['server']}, {g['sensors']}, {g['cap']} | {int(g['states']):,} | {float(g['value']):.6f} | "
+        load = int(g["sensors"]) * SLOTS_PER_DELIVERY[g["server"]]
+        out.append(f"| {g['server']}, {g['sensors']}, {g['cap']} | {load:.1f} | {int(g['states']):,} | {float(g['value']):.6f} | "
                    f"{100 * float(g['cap_mass_max']):.2f}% | " + " | ".join(cells) + " |")
     return "\n".join(out)
 
