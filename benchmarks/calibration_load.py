@@ -9,9 +9,10 @@ At sixteen processes on two servers (``bounds_lab16``: an edge and a cloud serve
 sensors queue for each server, and the certified gap is 10-12%; g* is out of reach there. The
 instances here keep that load on ONE server with few enough states for the exact matrix-free
 solver: the lab's scalar sensors (A = 1.05, 1.1, 1.15, 1.2, 1.3 in turn, R = 1, p = 0.8) on the
-edge server alone (U = D = 0, T = 2) or the cloud server alone (U = D = 1, T = 1), N = 2..5 of
-them (``formulations/calib_edge5.toml`` is the largest, shipped; the others are its first N
-sensors). An instance is ``SERVER:N:CAP``.
+edge server alone (U = D = 0, T = 2), the cloud server alone (U = D = 1, T = 1) or both
+(``bounds_lab16``'s pair), N = 2..5 of them (``formulations/calib_edge5.toml`` is the largest,
+shipped; the others are its first N sensors). An instance is ``SERVER:N:CAP``, SERVER one of
+``edge``, ``cloud``, ``both``.
 
 For every instance, each in its own process (its peak memory its own):
 
@@ -61,9 +62,10 @@ SCENARIO = "calib_edge5"
 SERVERS = {"edge": {"uplink_delay": 0, "downlink_delay": 0, "slots_per_dimension": 2},
            "cloud": {"uplink_delay": 1, "downlink_delay": 1, "slots_per_dimension": 1}}
 #: (server, sensors, cap): caps at which the optimum's time at the cap is below ~1% for every sensor
-#: (the cap masses are in the CSV); the 5 edge sensors at cap 25 take ~50M states and the longest.
-DEFAULT = [("edge", 2, 30), ("edge", 3, 30), ("edge", 4, 40), ("cloud", 2, 30), ("cloud", 3, 30), ("cloud", 4, 25),
-           ("edge", 5, 25)]
+#: (the cap masses are in the CSV) but the five edge sensors at cap 25 (49.6M states, the longest:
+#: ~16 min of CPU, 6.7 GiB), where the optimum abandons the cheapest sensor at its cap.
+DEFAULT = [("edge", 2, 30), ("edge", 3, 30), ("edge", 4, 40), ("edge", 5, 25), ("cloud", 2, 30), ("cloud", 3, 30),
+           ("cloud", 4, 25), ("both", 3, 25), ("both", 4, 20)]
 #: The load: slots between two deliveries of a sensor when the server is always busy and serves the
 #: sensors in turn, N * SLOTS_PER_DELIVERY (p = 0.8 on both links). The edge (U = 0, T = 2) spends 1
 #: slot on an update lost on the uplink and T slots on one that arrives, and delivers p^2 of its
