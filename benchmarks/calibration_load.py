@@ -4,6 +4,7 @@ processes comes from, measured where g* is exact.
     python benchmarks/calibration_load.py --out benchmarks/calibration_load.csv      # the default table
     python benchmarks/calibration_load.py --instances edge:3:30,cloud:3:25 --out /tmp/c.csv
     python benchmarks/calibration_load.py --instances edge:5:25 --no-rollout         # one large instance
+    python benchmarks/calibration_load.py --compare-optimum edge:3:30                # where the greedy policy errs
 
 At sixteen processes on two servers (``bounds_lab16``: an edge and a cloud server, p = 0.8) many
 sensors queue for each server, and the certified gap is 10-12%; g* is out of reach there. The
@@ -135,6 +136,35 @@ def run_instance(server: str, sensors: int, cap: int, rollout: bool = True) -> l
     return [{**r, "peak_gib": peak} for r in rows]
 
 
+def compare_optimum(server: str, sensors: int, cap: int, slots: int = 200_000, seed: int = 0) -> list[dict]:
+    """Where relaxation 2's greedy policy leaves the optimum: both policies' actions on the states of
+    one simulated path of the optimal policy (``slots`` after 1,000 of burn-in, seed ``seed``: the
+    optimum's stationary law), the slots where they differ grouped by (the optimum's process, the
+    greedy policy's process), with the median ages there."""
+    import numpy as np
+
+    from wncs_lp.policies.matrix_free import MatrixFreePolicy
+    from wncs_lp.simulate import simulate
+
+    system = system_for(server, sensors, cap)
+    sol = matrix_free_value_iteration(system, tol=1e-9)
+    optimum = MatrixFreePolicy(system, sol.layout, sol.local_actions, solution=sol)
+    greedy = bound_policy(lower_bound(system, 2, method="ipm"), system)
+    path = simulate(optimum, slots=slots, reps=2, seed=seed, burn_in=1_000, path=slots, progress=False).path
+    ours = greedy.act(path.tau, path.config)
+    labels = system.labels[:, :, 0]  # one server: the process sent (1-based), 0 nothing
+    sent_opt, sent_greedy = labels[path.config, path.action], labels[path.config, ours]
+    rows = []
+    differ = sent_opt != sent_greedy
+    for a, b in sorted(set(zip(sent_opt[differ].tolist(), sent_greedy[differ].tolist()))):
+        at = differ & (sent_opt == a) & (sent_greedy == b)
+        rows.append({"optimum sends": a, "greedy sends": b, "share of slots": float(at.mean()),
+                     "median ages": np.median(path.tau[at], axis=0).tolist()})
+    rows.sort(key=lambda r: -r["share of slots"])
+    return [{"instance": f"{server}:{sensors}:{cap}", "differ": float(differ.mean()),
+             "mean ages": path.tau.mean(axis=0).round(2).tolist()}] + rows
+
+
 def _in_child(item: str, extra: list[str]) -> list[dict]:
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", item] + extra
     out = subprocess.run(cmd, capture_output=True, text=True)
@@ -182,9 +212,16 @@ def main(argv=None) -> int:
     ap.add_argument("--md", default=None, help="markdown table file")
     ap.add_argument("--instances", default=None, help="SERVER:SENSORS:CAP,... (e.g. edge:3:30,cloud:2:30)")
     ap.add_argument("--no-rollout", action="store_true", help="leave the rollout out (its exact evaluation is the slowest)")
+    ap.add_argument("--compare-optimum", default=None, metavar="SERVER:SENSORS:CAP",
+                    help="where relaxation 2's greedy policy acts otherwise than the optimum, on the optimum's path")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
+    if args.compare_optimum:
+        server, n, cap = args.compare_optimum.split(":")
+        for row in compare_optimum(server, int(n), int(cap)):
+            print(json.dumps(row))
+        return 0
     if args.child:
         server, n, cap = args.child.split(":")
         print("ROWS " + json.dumps(run_instance(server, int(n), int(cap), not args.no_rollout), default=float), flush=True)
