@@ -2,14 +2,15 @@
 server"): the lab's scalar sensors (A = 1.05, 1.1, 1.15, ...; p = 0.8) queued on ONE server, the
 edge one (U = D = 0, T = 2) or the cloud one (U = D = 1, T = 1). g* comes from the enumerated MDP's
 LP (the whole system, an independent solver). Every relaxation lies below it; a group holding
-every sensor of the server (relaxation 3's pair, relaxation 4's pair at two sensors) is the whole
+every sensor of the server (relaxation 3's and 4's pair at two sensors, relaxation 3's triple at
+three) is the whole
 system and meets it; relaxation 2's separable tables stay several percent below it there."""
 from __future__ import annotations
 
 import pytest
 
 from wncs_lp import solve
-from wncs_lp.bounds import lower_bound
+from wncs_lp.bounds import grouped_bound, lower_bound
 from wncs_lp.models import build
 from wncs_lp.models.system import System
 from wncs_lp.scenario import scenario_from_dict
@@ -33,30 +34,32 @@ def case(request):
     system = System.from_scenario(sc)
     bounds = {number: lower_bound(system, number, **({"method": "ipm"} if number == 2 else {})).lower_bound
               for number in (1, 2, 3, 4)}
-    return server, n, solve(build(sc)).gain_upper, bounds
+    whole = grouped_bound(system, [tuple(range(n))]).lower_bound if n == 3 else None
+    return server, n, solve(build(sc)).gain_upper, bounds, whole
 
 
 def test_every_relaxation_is_below_g_star(case):
-    _, _, g_star, bounds = case
+    _, _, g_star, bounds, _ = case
     for number, value in bounds.items():
         assert value <= g_star * (1 + 1e-9), (number, value, g_star)
 
 
 def test_groups_never_looser_and_whole_groups_exact(case):
-    _, n, g_star, bounds = case
+    _, n, g_star, bounds, whole = case
     assert bounds[4] >= bounds[2] - 1e-6 * g_star  # pairs carry relaxation 2's tables
     assert bounds[3] >= bounds[1] - 1e-9 * g_star
     if n == 2:  # the pair is every sensor of the one server: the whole system
         assert bounds[3] == pytest.approx(g_star, rel=1e-6)
         assert bounds[4] == pytest.approx(g_star, rel=1e-5)
-    else:  # a pair of three sensors queueing for one server leaves the third's collisions out
+    else:  # a pair of three sensors queueing for one server leaves the third's collisions out;
         assert max(bounds.values()) < g_star * (1 - 0.01)
+        assert whole == pytest.approx(g_star, rel=1e-8)  # the group of all three is the whole system
 
 
 def test_separable_tables_loose_when_sensors_queue(case):
     """Relaxation 2 on the edge server is loose by several percent even at two sensors (6.5% at
     two, 5.1% at three at cap 12; 7.8% and 14.4% at cap 30): what it leaves is the queueing."""
-    server, _, g_star, bounds = case
+    server, _, g_star, bounds, _ = case
     assert bounds[2] < g_star
     if server == "edge":
         assert (g_star - bounds[2]) / g_star > 0.04
