@@ -3,8 +3,8 @@ server"): the lab's scalar sensors (A = 1.05, 1.1, 1.15, ...; p = 0.8) queued on
 edge one (U = D = 0, T = 2) or the cloud one (U = D = 1, T = 1). g* comes from the enumerated MDP's
 LP (the whole system, an independent solver). Every relaxation lies below it; a group holding
 every sensor of the server (relaxation 3's and 4's pair at two sensors, relaxation 3's triple at
-three) is the whole
-system and meets it; relaxation 2's separable tables stay several percent below it there."""
+three) is the whole system and meets it; relaxation 2's separable tables stay several percent below
+it there."""
 from __future__ import annotations
 
 import pytest
