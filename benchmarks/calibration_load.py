@@ -5,6 +5,7 @@ processes comes from, measured where g* is exact.
     python benchmarks/calibration_load.py --instances edge:3:30,cloud:3:25 --out /tmp/c.csv
     python benchmarks/calibration_load.py --instances edge:5:25 --no-rollout         # one large instance
     python benchmarks/calibration_load.py --compare-optimum edge:3:30                # where the greedy policy errs
+    python benchmarks/calibration_load.py --tables edge:4:30                         # policies on relaxations 2 and 4
 
 At sixteen processes on two servers (``bounds_lab16``: an edge and a cloud server, p = 0.8) many
 sensors queue for each server, and the certified gap is 10-12%; g* is out of reach there. The
@@ -165,6 +166,23 @@ def compare_optimum(server: str, sensors: int, cap: int, slots: int = 200_000, s
              "mean ages": path.tau.mean(axis=0).round(2).tolist()}] + rows
 
 
+def policies_on_tables(server: str, sensors: int, cap: int, names=("bound", "lookahead", "lookahead3", "rollout")) -> list[dict]:
+    """The policies ``names`` on relaxation 2's tables (its interior point) and on relaxation 4's pair
+    tables, each evaluated exactly, against g*: whether the tighter relaxation's tables, or a deeper
+    search on them, make the better policy."""
+    system = system_for(server, sensors, cap)
+    g = float(matrix_free_value_iteration(system, tol=1e-9).gain)
+    rows = []
+    for number, _, kw in (RELAXATIONS[1], RELAXATIONS[3]):
+        bound = lower_bound(system, number, **kw)
+        for name in names:
+            c0 = time.process_time()
+            r = policy_gaps(bound, system, [name], exact=True).rows[0]
+            rows.append({"instance": f"{server}:{sensors}:{cap}", "tables": bound.relaxation, "policy": r.policy,
+                         "gain": r.gain, "loss": (r.gain - g) / g, "cpu_seconds": round(time.process_time() - c0, 1)})
+    return rows
+
+
 def _in_child(item: str, extra: list[str]) -> list[dict]:
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", item] + extra
     out = subprocess.run(cmd, capture_output=True, text=True)
@@ -214,9 +232,16 @@ def main(argv=None) -> int:
     ap.add_argument("--no-rollout", action="store_true", help="leave the rollout out (its exact evaluation is the slowest)")
     ap.add_argument("--compare-optimum", default=None, metavar="SERVER:SENSORS:CAP",
                     help="where relaxation 2's greedy policy acts otherwise than the optimum, on the optimum's path")
+    ap.add_argument("--tables", default=None, metavar="SERVER:SENSORS:CAP",
+                    help="the greedy policy, the lookahead (depth 2, 3) and the rollout on relaxation 2's and 4's tables")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
+    if args.tables:
+        server, n, cap = args.tables.split(":")
+        for row in policies_on_tables(server, int(n), int(cap)):
+            print(json.dumps(row))
+        return 0
     if args.compare_optimum:
         server, n, cap = args.compare_optimum.split(":")
         for row in compare_optimum(server, int(n), int(cap)):
