@@ -3,8 +3,8 @@ server"): the lab's scalar sensors (A = 1.05, 1.1, 1.15, ...; p = 0.8) queued on
 edge one (U = D = 0, T = 2) or the cloud one (U = D = 1, T = 1). g* comes from the enumerated MDP's
 LP (the whole system, an independent solver). Every relaxation lies below it; a group holding
 every sensor of the server (relaxation 3's and 4's pair at two sensors, relaxation 3's triple at
-three) is the whole system and meets it; relaxation 2's separable tables stay several percent below
-it there."""
+three) is the whole system and meets it. How loose the others are is a measurement
+(benchmarks/calibration_load.py), not asserted here: nothing independent fixes it."""
 from __future__ import annotations
 
 import pytest
@@ -51,15 +51,6 @@ def test_groups_never_looser_and_whole_groups_exact(case):
     if n == 2:  # the pair is every sensor of the one server: the whole system
         assert bounds[3] == pytest.approx(g_star, rel=1e-6)
         assert bounds[4] == pytest.approx(g_star, rel=1e-5)
-    else:  # a pair of three sensors queueing for one server leaves the third's collisions out;
-        assert max(bounds.values()) < g_star * (1 - 0.01)
+    else:
         assert whole == pytest.approx(g_star, rel=1e-8)  # the group of all three is the whole system
 
-
-def test_separable_tables_loose_when_sensors_queue(case):
-    """Relaxation 2 on the edge server is loose by several percent even at two sensors (6.5% at
-    two, 5.1% at three at cap 12; 7.8% and 14.4% at cap 30): what it leaves is the queueing."""
-    server, _, g_star, bounds, _ = case
-    assert bounds[2] < g_star
-    if server == "edge":
-        assert (g_star - bounds[2]) / g_star > 0.04
