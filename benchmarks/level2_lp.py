@@ -1,0 +1,168 @@
+"""Issue 33: a prototype of the level-2 joint relaxation -- every pair's ages on the joint configuration, all pairs at once.
+
+    python benchmarks/level2_lp.py --out /tmp/level2.csv                          # the default one-server list
+    python benchmarks/level2_lp.py --instances edge:3:16,edge:4:20 --out /tmp/l2.csv   # SERVER:SENSORS:CAP
+    python benchmarks/level2_lp.py --count bounds_lab16,bounds_p1234_x4           # the LP's size only
+
+Relaxation 4's dual keeps one occupation measure y_G(tau_G, C, a) per group G of a *partition*,
+balanced on (tau_G, C), all with the same (C, a) marginal. This prototype takes **every** pair
+{k, l} at once, y_kl(tau_k, tau_l, C, a), each balanced on (tau_k, tau_l, C), and makes them
+consistent: for each sensor k, the marginal of y_kl on (tau_k, C, a) is the same for every l (one
+variable z_k(tau_k, C, a) they all equal), and the z_k share the (C, a) marginal x. The objective is
+sum_k <q_k, z_k>. Valid because the stationary law of any stationary policy of the real system,
+projected onto (tau_k, tau_l, C, a), satisfies every pair's balance (the pair's ages and the joint
+configuration move by the outcome of (C, a) alone) and these projections are marginals of one law;
+so the LP's optimum is at most g*, and at least relaxation 4's with any partition into pairs (its
+constraints are a subset of these). The LP is solved whole by HiGHS's interior point: its
+objective is reported with HiGHS's status, not certified (a certified bound would price the
+consistency rows and certify every pair's chain, as relaxation 4 does its partition's).
+
+Per instance (the lab's sensors on one server, ``calibration_load.system_for``): g* (certified
+matrix-free value iteration), relaxation 4's certified bound (``lower_bound(system, 4)``), the LP's
+size, objective, status and CPU seconds. ``--count`` gives the LP's columns for a shipped scenario
+without building it (sum over pairs of tau_hat_k tau_hat_l |C x A|).
+"""
+from __future__ import annotations
+
+import argparse
+import itertools
+import sys
+import time
+import warnings
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import numpy as np  # noqa: E402
+import scipy.sparse as sp  # noqa: E402
+
+import wncs_lp  # noqa: E402
+from bounds import load1, peak_gib  # noqa: E402  (benchmarks/bounds.py)
+from calibration_load import system_for  # noqa: E402
+from wncs_lp.bounds import lower_bound  # noqa: E402
+from wncs_lp.bounds.joint_chains import JointData  # noqa: E402
+from wncs_lp.files import atomic_write_csv  # noqa: E402
+from wncs_lp.models.system import System  # noqa: E402
+from wncs_lp.solvers.matrix_free import matrix_free_value_iteration  # noqa: E402
+
+COLUMNS = ["instance", "cap", "g_star", "lb_level2", "looseness_level2", "lb_4", "looseness_4", "rows", "cols",
+           "nonzeros", "lp_cpu_seconds", "status", "load1", "peak_gib"]
+DEFAULT = "edge:2:12,edge:3:12,edge:3:16,edge:3:20,edge:4:12,edge:4:16,edge:4:20,cloud:3:16"
+
+
+def level2_lp(data: JointData):
+    """(A, b, c) of the level-2 LP in the form min c z, A z = b, z >= 0 (columns: every pair's
+    y_kl(t_k, t_l, p) at ``(t_k cap_l + t_l) P + p``, then each z_k(t, p), then x(p))."""
+    N, P, nC, caps = data.n_processes, int(data.act_ptr[-1]), data.n_configs, data.caps
+    pairs = list(itertools.combinations(range(N), 2))
+    yoff, cols = {}, 0
+    for k, l in pairs:
+        yoff[k, l] = cols
+        cols += int(caps[k] * caps[l]) * P
+    zoff = {}
+    for k in range(N):
+        zoff[k] = cols
+        cols += int(caps[k]) * P
+    xoff = cols
+    cols += P
+    R, C, V, b = [], [], [], []
+    row = 0
+
+    def add(r, c, v):
+        R.append(np.asarray(r, np.int64).ravel()); C.append(np.asarray(c, np.int64).ravel())
+        V.append(np.broadcast_to(np.asarray(v, float), np.shape(np.asarray(c).ravel())).copy())
+
+    for k, l in pairs:
+        ck, cl = int(caps[k]), int(caps[l])
+        tk, tl = (a.ravel() for a in np.meshgrid(np.arange(ck), np.arange(cl), indexing="ij"))
+        base = row
+        row += ck * cl * nC
+        b += [0.0] * (ck * cl * nC)
+        for p in range(P):
+            colp = yoff[k, l] + (tk * cl + tl) * P + p
+            add(base + (tk * cl + tl) * nC + data.pair_c[p], colp, 1.0)  # leaves (t, C)
+            for e in range(data.out_ptr[p], data.out_ptr[p + 1]):  # enters (t', C')
+                nk, nl = np.minimum(tk + 1, ck - 1), np.minimum(tl + 1, cl - 1)
+                if data.out_delta[e, k] > 0:
+                    nk = np.minimum(nk, data.out_delta[e, k] - 1)
+                if data.out_delta[e, l] > 0:
+                    nl = np.minimum(nl, data.out_delta[e, l] - 1)
+                add(base + (nk * cl + nl) * nC + data.out_nxt[e], colp, -data.out_prob[e])
+        for who, t in ((k, tk), (l, tl)):  # the pair's marginal on (t_who, p) equals z_who
+            cw = int(caps[who])
+            for p in range(P):
+                add(row + t * P + p, yoff[k, l] + (tk * cl + tl) * P + p, 1.0)
+                add(row + np.arange(cw) * P + p, zoff[who] + np.arange(cw) * P + p, -1.0)
+            row += cw * P
+            b += [0.0] * (cw * P)
+    for k in range(N):  # each z_k's (C, a) marginal is x
+        ck = int(caps[k])
+        for p in range(P):
+            add(np.full(ck, row), zoff[k] + np.arange(ck) * P + p, 1.0)
+            add([row], [xoff + p], -1.0)
+            row += 1
+            b.append(0.0)
+    add(np.full(P, row), xoff + np.arange(P), 1.0)
+    row += 1
+    b.append(1.0)
+    A = sp.csr_matrix((np.concatenate(V), (np.concatenate(R), np.concatenate(C))), shape=(row, cols))
+    c = np.zeros(cols)
+    for k in range(N):
+        for p in range(P):
+            c[zoff[k] + np.arange(int(caps[k])) * P + p] = data.q[k]
+    return A, np.asarray(b), c
+
+
+def level2_columns(system: System) -> int:
+    data = JointData.from_system(system)
+    P = int(data.act_ptr[-1])
+    caps = [int(c) for c in data.caps]
+    return sum(caps[k] * caps[l] for k, l in itertools.combinations(range(len(caps)), 2)) * P + sum(caps) * P + P
+
+
+def run(item: str) -> dict:
+    from scipy.optimize import linprog
+
+    server, sensors, cap = item.split(":")
+    system = system_for(server, int(sensors), int(cap))
+    l0 = load1()
+    g = float(matrix_free_value_iteration(system, tol=1e-9).gain)
+    lb4 = float(lower_bound(system, 4).lower_bound)
+    A, b, c = level2_lp(JointData.from_system(system))
+    c0 = time.process_time()
+    res = linprog(c, A_eq=A, b_eq=b, bounds=(0, None), method="highs-ipm")
+    cpu = time.process_time() - c0
+    lb = float(res.fun) if res.status == 0 else float("nan")
+    return {"instance": item, "cap": int(cap), "g_star": g, "lb_level2": lb, "looseness_level2": (g - lb) / g,
+            "lb_4": lb4, "looseness_4": (g - lb4) / g, "rows": A.shape[0], "cols": A.shape[1], "nonzeros": A.nnz,
+            "lp_cpu_seconds": round(cpu, 2), "status": res.message, "load1": l0, "peak_gib": peak_gib()}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--instances", default=DEFAULT, help="SERVER:SENSORS:CAP,... (default: %(default)s)")
+    ap.add_argument("--count", default="", help="shipped scenarios: print the LP's columns, build nothing")
+    ap.add_argument("--out", default="", help="CSV to write")
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    if args.count:
+        for name in args.count.split(","):
+            system = System.from_scenario(wncs_lp.load_scenario(wncs_lp.scenario_path(name)))
+            print(f"{name}: {level2_columns(system):,} columns")
+        return 0
+    rows = []
+    for item in args.instances.split(","):
+        r = run(item)
+        print(f"{item:12s} g* {r['g_star']:.6f}  level 2 {r['lb_level2']:.6f} ({100 * r['looseness_level2']:.3f}%)  "
+              f"relaxation 4 {100 * r['looseness_4']:.3f}%  LP {r['rows']}x{r['cols']} {r['lp_cpu_seconds']} s  "
+              f"load {r['load1']}", flush=True)
+        rows.append(r)
+        if args.out:
+            atomic_write_csv(args.out, rows, COLUMNS)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
