@@ -1,7 +1,7 @@
 """Issue 33, a prototype: the second-order ("all pairs at once") relaxation, solved as one LP.
 
-    python benchmarks/all_pairs_lp.py                                  # edge 3, 4 sensors at caps 12, 16, 20
-    python benchmarks/all_pairs_lp.py --instances edge:2:12,cloud:3:16 --out /tmp/ap.csv
+    python benchmarks/all_pairs_lp.py --out /tmp/ap.csv    # edge 2-4 sensors at caps 12-20, cloud 3, 4 at cap 16
+    python benchmarks/all_pairs_lp.py --instances edge:3:30,edge:4:40 --known benchmarks/calibration_load.csv
     python benchmarks/all_pairs_lp.py --count lab16                    # only the LP's size at bounds_lab16
 
 The instances are benchmarks/calibration_load.py's (``SERVER:N:CAP``: the lab's scalar sensors on
@@ -55,7 +55,8 @@ from wncs_lp.solvers.matrix_free import matrix_free_value_iteration  # noqa: E40
 COLUMNS = ["instance", "cap", "g_star", "lb_all_pairs", "looseness_all_pairs", "lb_3", "looseness_3", "lb_4",
            "looseness_4", "lp_rows", "lp_cols", "lp_nonzeros", "lp_seconds", "primal_residual", "dual_residual",
            "duality_gap", "pair_states", "status", "load1", "peak_gib"]
-DEFAULT = [("edge", 3, 12), ("edge", 3, 16), ("edge", 3, 20), ("edge", 4, 12), ("edge", 4, 16), ("edge", 4, 20)]
+DEFAULT = [("edge", 2, 12), ("edge", 3, 12), ("edge", 3, 16), ("edge", 3, 20), ("edge", 4, 12), ("edge", 4, 16),
+           ("edge", 4, 20), ("cloud", 3, 16), ("cloud", 4, 16)]
 
 
 class Chains:
@@ -111,7 +112,7 @@ def member_map(pair: PrivateChain, i: int, member: PrivateChain) -> np.ndarray:
     return out
 
 
-def all_pairs_lp(system, capacity: str) -> dict:
+def all_pairs_lp(system, capacity: str, method: str = "highs-ipm") -> dict:
     """Pose and solve the all-pairs LP of ``system``; its value, size, time and residuals."""
     n, M = system.n_processes, system.n_servers
     chains = Chains(system.model)
@@ -162,10 +163,10 @@ def all_pairs_lp(system, capacity: str) -> dict:
     kw = {"A_eq": sp.vstack([A_eq, cap]).tocsr(), "b_eq": np.concatenate([b_eq, np.ones(M)])} \
         if capacity == "equality" else {"A_eq": A_eq, "b_eq": b_eq, "A_ub": cap, "b_ub": np.ones(M)}
     t0 = time.perf_counter()
-    res = linprog(c, bounds=(0, None), method="highs", **kw)
+    res = linprog(c, bounds=(0, None), method=method, **kw)
     secs = time.perf_counter() - t0
     A_all = kw["A_eq"] if "A_ub" not in kw else sp.vstack([kw["A_eq"], kw["A_ub"]]).tocsr()
-    out = {"status": res.message, "lp_rows": A_all.shape[0], "lp_cols": A_all.shape[1], "lp_nonzeros": A_all.nnz,
+    out = {"status": f"{method}: {res.message}", "lp_rows": A_all.shape[0], "lp_cols": A_all.shape[1], "lp_nonzeros": A_all.nnz,
            "lp_seconds": round(secs, 2), "pair_states": [int(ch.mdp.n_states) for ch in pchains]}
     if res.status != 0:
         return {**out, "lb_all_pairs": float("nan")}
@@ -195,14 +196,16 @@ def from_csv(path: str, instance: str) -> dict | None:
     return {"g": got["optimum g*"], 3: got["LB 3"], 4: got["LB 4"]}
 
 
-def run(server: str, n: int, cap: int, csv_path: str | None = None) -> dict:
+def run(server: str, n: int, cap: int, csv_path: str | None = None, method: str = "highs-ipm") -> dict:
     """The all-pairs LP at one instance, beside g* and relaxations 3 and 4 at the same cap (computed,
     or read from calibration_load.py's CSV ``csv_path`` where it has the instance)."""
     system = system_for(server, n, cap)
     l0 = load1()
     known = from_csv(csv_path, f"{server}:{n}:{cap}") if csv_path else None
     capacity = private_bound(system).stats["capacity"]
-    row = {"instance": f"{server}:{n}:{cap}", "cap": cap, "load1": l0, **all_pairs_lp(system, capacity)}
+    row = {"instance": f"{server}:{n}:{cap}", "cap": cap, "load1": l0, **all_pairs_lp(system, capacity, method)}
+    print(f"  [{server}:{n}:{cap}] LP {row['lb_all_pairs']:.10g} in {row['lp_seconds']} s ({row['status']})",
+          file=sys.stderr, flush=True)
     g = known["g"] if known else float(matrix_free_value_iteration(system, tol=1e-9).gain)
     row["g_star"], row["looseness_all_pairs"] = g, (g - row["lb_all_pairs"]) / g
     for number in (3, 4):
@@ -213,19 +216,62 @@ def run(server: str, n: int, cap: int, csv_path: str | None = None) -> dict:
     return row
 
 
+def count(scenario: str) -> dict:
+    """The all-pairs LP's size at a shipped scenario, with symmetry by type: identical processes
+    share one single chain and one pair chain per pair of types (the LP is invariant under
+    permuting identical processes, so its optimum can be taken symmetric)."""
+    import wncs_lp
+    from wncs_lp.models import model_for
+
+    model = model_for(wncs_lp.load_scenario(wncs_lp.scenario_path(scenario)))
+    n = model.scenario.n_processes
+    kind = [chain_key(model.private_scenario(k)) for k in range(n)]
+    first = {}
+    for k, key in enumerate(kind):
+        first.setdefault(key, k)
+    types = sorted(first.values())
+    chains, out = Chains(model), {"types": len(types), "type_pairs": [], "cols": 0, "rows": 0, "nnz": 0}
+    # a pair of two processes of the same type: the type's first two processes
+    second = {key: next((k for k in range(n) if kind[k] == key and k != first[key]), None) for key in first}
+    for a, b in itertools.combinations_with_replacement(types, 2):
+        pair = (a, b) if a != b else (a, second[kind[a]])
+        if pair[1] is None:
+            continue
+        t0, c0 = time.perf_counter(), time.process_time()
+        ch = chains.of(tuple(sorted(pair)))
+        singles = [chains.of((k,)).mdp.n_pairs for k in pair]
+        out["type_pairs"].append((pair, int(ch.mdp.n_states), int(ch.mdp.n_pairs), int(ch.mdp.P.nnz)))
+        out["cols"] += ch.mdp.n_pairs
+        out["rows"] += ch.mdp.n_states + 1 + sum(singles)
+        out["nnz"] += ch.mdp.P.nnz + ch.mdp.n_pairs * 3 + ch.mdp.n_pairs  # balance, two marginals, probability
+        print(f"pair {pair}: {ch.mdp.n_states:,} states, {ch.mdp.n_pairs:,} pairs, {ch.mdp.P.nnz:,} transitions "
+              f"({time.process_time() - c0:.1f} s CPU, peak {peak_gib()} GiB, load {load1()})", flush=True)
+    out["cols"] += sum(chains.of((k,)).mdp.n_pairs for k in types)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--instances", default=None, help="SERVER:SENSORS:CAP,... (calibration_load.py's instances)")
     ap.add_argument("--out", default=None, help="CSV file (written after every instance)")
     ap.add_argument("--known", default=None, metavar="CSV",
                     help="calibration_load.py's CSV: g*, LB 3 and LB 4 read from it where it has the instance")
+    ap.add_argument("--method", default="highs-ipm", choices=("highs", "highs-ds", "highs-ipm"),
+                    help="scipy's HiGHS method for the LP (default: the interior point, with crossover)")
+    ap.add_argument("--count", default=None, metavar="SCENARIO",
+                    help="only the LP's size at a shipped scenario (symmetry by type), e.g. bounds_lab16")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
+    if args.count:
+        got = count(args.count)
+        print(f"{args.count}: {got['types']} types, {len(got['type_pairs'])} type pairs; LP {got['rows']:,} rows x "
+              f"{got['cols']:,} columns, ~{got['nnz']:,} nonzeros")
+        return 0
     todo = DEFAULT if args.instances is None else [(s.split(":")[0], int(s.split(":")[1]), int(s.split(":")[2]))
                                                    for s in args.instances.split(",")]
     rows = []
     for server, n, cap in todo:
-        row = run(server, n, cap, args.known)
+        row = run(server, n, cap, args.known, args.method)
         rows.append(row)
         print(f"{row['instance']:<12} g* {row['g_star']:.8g}  all pairs {row['lb_all_pairs']:.8g} "
               f"({100 * row['looseness_all_pairs']:.3f}%)  LB3 {100 * row['looseness_3']:.3f}%  "
