@@ -237,7 +237,6 @@ def count(scenario: str) -> dict:
         pair = (a, b) if a != b else (a, second[kind[a]])
         if pair[1] is None:
             continue
-        t0, c0 = time.perf_counter(), time.process_time()
         ch = chains.of(tuple(sorted(pair)))
         singles = [chains.of((k,)).mdp.n_pairs for k in pair]
         out["type_pairs"].append((pair, int(ch.mdp.n_states), int(ch.mdp.n_pairs), int(ch.mdp.P.nnz)))
@@ -245,7 +244,7 @@ def count(scenario: str) -> dict:
         out["rows"] += ch.mdp.n_states + 1 + sum(singles)
         out["nnz"] += ch.mdp.P.nnz + ch.mdp.n_pairs * 3 + ch.mdp.n_pairs  # balance, two marginals, probability
         print(f"pair {pair}: {ch.mdp.n_states:,} states, {ch.mdp.n_pairs:,} pairs, {ch.mdp.P.nnz:,} transitions "
-              f"({time.process_time() - c0:.1f} s CPU, peak {peak_gib()} GiB, load {load1()})", flush=True)
+              f"(peak {peak_gib()} GiB, load {load1()})", flush=True)
     out["cols"] += sum(chains.of((k,)).mdp.n_pairs for k in types)
     return out
 
@@ -263,8 +262,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     if args.count:
+        c0 = time.process_time()
         got = count(args.count)
-        print(f"{args.count}: {got['types']} types, {len(got['type_pairs'])} type pairs; LP {got['rows']:,} rows x "
+        print(f"{args.count} ({time.process_time() - c0:.1f} s of CPU): {got['types']} types, {len(got['type_pairs'])} type pairs; LP {got['rows']:,} rows x "
               f"{got['cols']:,} columns, ~{got['nnz']:,} nonzeros")
         return 0
     todo = DEFAULT if args.instances is None else [(s.split(":")[0], int(s.split(":")[1]), int(s.split(":")[2]))
