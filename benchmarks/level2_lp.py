@@ -20,8 +20,9 @@ chain, as relaxation 4 does its partition's).
 
 Per instance (the lab's sensors on one server, ``calibration_load.system_for``): g* (certified
 matrix-free value iteration), relaxation 4's certified bound (``lower_bound(system, 4)``), the LP's
-size, objective, status and CPU seconds, and the certified bound from its duals. ``--count`` gives the LP's columns for a shipped scenario
-without building it (sum over pairs of tau_hat_k tau_hat_l |C x A|).
+size, objective, status and CPU seconds, and the certified bound from its duals. ``--count`` gives
+the LP's columns for a shipped scenario without building it (:func:`layout`: sum over pairs of
+tau_hat_k tau_hat_l |C x A|, plus the z_k and x).
 """
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ import itertools
 import sys
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -46,6 +48,7 @@ from wncs_lp.bounds import lower_bound  # noqa: E402
 from wncs_lp.bounds.joint_chains import JointData  # noqa: E402
 from wncs_lp.files import atomic_write_csv  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
+from wncs_lp.solvers.iteration import gamma  # noqa: E402
 from wncs_lp.solvers.matrix_free import matrix_free_value_iteration  # noqa: E402
 
 COLUMNS = ["instance", "cap", "g_star", "lb_level2", "looseness_level2", "lb_level2_certified", "looseness_certified",
@@ -54,74 +57,83 @@ COLUMNS = ["instance", "cap", "g_star", "lb_level2", "looseness_level2", "lb_lev
 DEFAULT = "edge:2:12,edge:3:12,edge:3:16,edge:3:20,edge:4:12,edge:4:16,edge:4:20,cloud:3:16"
 
 
-def level2_lp(data: JointData):
-    """(A, b, c) of the level-2 LP in the form min c z, A z = b, z >= 0 (columns: every pair's
-    y_kl(t_k, t_l, p) at ``(t_k cap_l + t_l) P + p``, then each z_k(t, p), then x(p))."""
-    N, P, nC, caps = data.n_processes, int(data.act_ptr[-1]), data.n_configs, data.caps
-    pairs = list(itertools.combinations(range(N), 2))
-    yoff, cols = {}, 0
+@dataclass(frozen=True)
+class Layout:
+    """Where the LP's pieces sit. Columns: every pair's y_kl(t_k, t_l, p) from ``y[k, l]`` at
+    ``(t_k cap_l + t_l) P + p``, each z_k(t, p) from ``z[k]`` at ``t P + p``, x(p) from ``x``.
+    Rows: pair (k, l)'s balance rows (t_k, t_l, C) from ``balance[k, l]`` at ``(t_k cap_l + t_l) |C| + C``,
+    followed by its two consistency blocks (cap_k P and cap_l P rows); then each z_k's (C, a) rows, then
+    the normalisation."""
+
+    pairs: tuple
+    y: dict
+    z: dict
+    x: int
+    cols: int
+    balance: dict
+
+
+def layout(data: JointData) -> Layout:
+    N, P, nC, caps = data.n_processes, int(data.act_ptr[-1]), data.n_configs, [int(c) for c in data.caps]
+    pairs = tuple(itertools.combinations(range(N), 2))
+    y, balance, cols, row = {}, {}, 0, 0
     for k, l in pairs:
-        yoff[k, l] = cols
-        cols += int(caps[k] * caps[l]) * P
-    zoff = {}
+        y[k, l], balance[k, l] = cols, row
+        cols += caps[k] * caps[l] * P
+        row += caps[k] * caps[l] * nC + (caps[k] + caps[l]) * P
+    z = {}
     for k in range(N):
-        zoff[k] = cols
-        cols += int(caps[k]) * P
-    xoff = cols
-    cols += P
+        z[k] = cols
+        cols += caps[k] * P
+    return Layout(pairs=pairs, y=y, z=z, x=cols, cols=cols + P, balance=balance)
+
+
+def level2_lp(data: JointData):
+    """(A, b, c) of the level-2 LP in the form min c z, A z = b, z >= 0 (:func:`layout`); under outcome
+    e an age index t moves to min(t + 1, ``data.sat[e, k]``)."""
+    N, P, nC, caps = data.n_processes, int(data.act_ptr[-1]), data.n_configs, data.caps
+    lay = layout(data)
     R, C, V, b = [], [], [], []
-    row = 0
 
     def add(r, c, v):
         R.append(np.asarray(r, np.int64).ravel()); C.append(np.asarray(c, np.int64).ravel())
         V.append(np.broadcast_to(np.asarray(v, float), np.shape(np.asarray(c).ravel())).copy())
 
-    for k, l in pairs:
+    for k, l in lay.pairs:
         ck, cl = int(caps[k]), int(caps[l])
         tk, tl = (a.ravel() for a in np.meshgrid(np.arange(ck), np.arange(cl), indexing="ij"))
-        base = row
-        row += ck * cl * nC
+        base = lay.balance[k, l]
+        row = base + ck * cl * nC
         b += [0.0] * (ck * cl * nC)
         for p in range(P):
-            colp = yoff[k, l] + (tk * cl + tl) * P + p
+            colp = lay.y[k, l] + (tk * cl + tl) * P + p
             add(base + (tk * cl + tl) * nC + data.pair_c[p], colp, 1.0)  # leaves (t, C)
             for e in range(data.out_ptr[p], data.out_ptr[p + 1]):  # enters (t', C')
-                nk, nl = np.minimum(tk + 1, ck - 1), np.minimum(tl + 1, cl - 1)
-                if data.out_delta[e, k] > 0:
-                    nk = np.minimum(nk, data.out_delta[e, k] - 1)
-                if data.out_delta[e, l] > 0:
-                    nl = np.minimum(nl, data.out_delta[e, l] - 1)
+                nk, nl = np.minimum(tk + 1, data.sat[e, k]), np.minimum(tl + 1, data.sat[e, l])
                 add(base + (nk * cl + nl) * nC + data.out_nxt[e], colp, -data.out_prob[e])
         for who, t in ((k, tk), (l, tl)):  # the pair's marginal on (t_who, p) equals z_who
             cw = int(caps[who])
             for p in range(P):
-                add(row + t * P + p, yoff[k, l] + (tk * cl + tl) * P + p, 1.0)
-                add(row + np.arange(cw) * P + p, zoff[who] + np.arange(cw) * P + p, -1.0)
+                add(row + t * P + p, lay.y[k, l] + (tk * cl + tl) * P + p, 1.0)
+                add(row + np.arange(cw) * P + p, lay.z[who] + np.arange(cw) * P + p, -1.0)
             row += cw * P
             b += [0.0] * (cw * P)
     for k in range(N):  # each z_k's (C, a) marginal is x
         ck = int(caps[k])
         for p in range(P):
-            add(np.full(ck, row), zoff[k] + np.arange(ck) * P + p, 1.0)
-            add([row], [xoff + p], -1.0)
+            add(np.full(ck, row), lay.z[k] + np.arange(ck) * P + p, 1.0)
+            add([row], [lay.x + p], -1.0)
             row += 1
             b.append(0.0)
-    add(np.full(P, row), xoff + np.arange(P), 1.0)
+    add(np.full(P, row), lay.x + np.arange(P), 1.0)
     row += 1
     b.append(1.0)
-    A = sp.csr_matrix((np.concatenate(V), (np.concatenate(R), np.concatenate(C))), shape=(row, cols))
-    c = np.zeros(cols)
+    A = sp.csr_matrix((np.concatenate(V), (np.concatenate(R), np.concatenate(C))), shape=(row, lay.cols))
+    c = np.zeros(lay.cols)
     for k in range(N):
         for p in range(P):
-            c[zoff[k] + np.arange(int(caps[k])) * P + p] = data.q[k]
+            c[lay.z[k] + np.arange(int(caps[k])) * P + p] = data.q[k]
     return A, np.asarray(b), c
-
-
-def level2_columns(system: System) -> int:
-    data = JointData.from_system(system)
-    P = int(data.act_ptr[-1])
-    caps = [int(c) for c in data.caps]
-    return sum(caps[k] * caps[l] for k, l in itertools.combinations(range(len(caps)), 2)) * P + sum(caps) * P + P
 
 
 def certify_level2(data: JointData, duals: np.ndarray) -> float:
@@ -132,39 +144,32 @@ def certify_level2(data: JointData, duals: np.ndarray) -> float:
     is a lower bound on g* (the approximate-LP argument: averaged over the optimal policy's stationary
     law the tables cancel), and at the LP's optimal duals it equals the LP's value up to its
     tolerance (summing the dual constraints of the pair, singleton and (C, a) columns gives exactly
-    this inequality). A bound on the sum's rounding (64 eps times the sum of the absolute terms) is
-    subtracted. The box has prod_k tau_hat_k |C| states: a check for the small instances only.
+    this inequality). As in :func:`wncs_lp.bounds.joint_chains.certificate_of`, each table is first
+    shifted by a constant (which changes the inequality only by the outcome tables' defect from
+    stochastic, ``data.prob_defect``), and a bound on the round-off (Higham's gamma) is subtracted.
+    The box has prod_k tau_hat_k |C| states: a check for the small instances only.
     """
     N, P, nC, caps = data.n_processes, int(data.act_ptr[-1]), data.n_configs, [int(c) for c in data.caps]
-    pairs = list(itertools.combinations(range(N), 2))
-    tables, row = {}, 0
-    for k, l in pairs:
-        ck, cl = caps[k], caps[l]
-        tables[k, l] = duals[row:row + ck * cl * nC].reshape(ck, cl, nC)
-        row += ck * cl * nC + (ck + cl) * P
-    grids = np.meshgrid(*[np.arange(c) for c in caps], indexing="ij")
-    tau = [g.ravel() for g in grids]
+    lay = layout(data)
+    tables = {}
+    for k, l in lay.pairs:
+        h = duals[lay.balance[k, l]:lay.balance[k, l] + caps[k] * caps[l] * nC].reshape(caps[k], caps[l], nC)
+        tables[k, l] = h - 0.5 * (h.max() + h.min())
+    tau = [g.ravel() for g in np.meshgrid(*[np.arange(c) for c in caps], indexing="ij")]
     cost = sum(np.asarray(data.q[k])[tau[k]] for k in range(N))
     best = np.inf
-    eps = np.finfo(float).eps
     for p in range(P):
         c = data.pair_c[p]
-        here = sum(tables[k, l][tau[k], tau[l], c] for k, l in pairs)
+        here = sum(tables[k, l][tau[k], tau[l], c] for k, l in lay.pairs)
         nxt = np.zeros_like(cost)
-        mag = np.abs(cost) + np.abs(here)
         for e in range(data.out_ptr[p], data.out_ptr[p + 1]):
-            new = []
-            for k in range(N):
-                t = np.minimum(tau[k] + 1, caps[k] - 1)
-                if data.out_delta[e, k] > 0:
-                    t = np.minimum(t, data.out_delta[e, k] - 1)
-                new.append(t)
-            v = sum(tables[k, l][new[k], new[l], data.out_nxt[e]] for k, l in pairs)
-            nxt += data.out_prob[e] * v
-            mag += data.out_prob[e] * np.abs(v)
-        gap = cost + nxt - here - 64 * eps * (mag + len(pairs) * mag)
-        best = min(best, float(gap.min()))
-    return best
+            new = [np.minimum(tau[k] + 1, data.sat[e, k]) for k in range(N)]
+            nxt += data.out_prob[e] * sum(tables[k, l][new[k], new[l], data.out_nxt[e]] for k, l in lay.pairs)
+        best = min(best, float((cost + nxt - here).min()))
+    hk = sum(float(np.abs(h).max()) for h in tables.values())
+    terms = data.max_outcomes * len(lay.pairs) + len(lay.pairs) + N + 2
+    err = gamma(terms) * (sum(float(np.abs(q).max()) for q in data.q) + 2.0 * hk) + data.prob_defect * hk
+    return best - err
 
 
 def run(item: str) -> dict:
@@ -200,7 +205,7 @@ def main(argv=None) -> int:
     if args.count:
         for name in args.count.split(","):
             system = System.from_scenario(wncs_lp.load_scenario(wncs_lp.scenario_path(name)))
-            print(f"{name}: {level2_columns(system):,} columns")
+            print(f"{name}: {layout(JointData.from_system(system)).cols:,} columns")
         return 0
     rows = []
     for item in args.instances.split(","):
