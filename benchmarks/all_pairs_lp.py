@@ -48,7 +48,8 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from bounds import load1, peak_gib  # noqa: E402  (benchmarks/bounds.py)
 from calibration_load import system_for  # noqa: E402
 from wncs_lp.bounds import lower_bound  # noqa: E402
-from wncs_lp.bounds.private import PrivateChain, build_private_chain, chain_key, private_bound  # noqa: E402
+from wncs_lp.bounds.grouped import PrivateChains  # noqa: E402
+from wncs_lp.bounds.private import PrivateChain, chain_key, private_bound  # noqa: E402
 from wncs_lp.files import atomic_write_csv  # noqa: E402
 from wncs_lp.solvers.matrix_free import matrix_free_value_iteration  # noqa: E402
 
@@ -57,22 +58,6 @@ COLUMNS = ["instance", "cap", "g_star", "lb_all_pairs", "looseness_all_pairs", "
            "duality_gap", "pair_states", "status", "load1", "peak_gib"]
 DEFAULT = [("edge", 2, 12), ("edge", 3, 12), ("edge", 3, 16), ("edge", 3, 20), ("edge", 4, 12), ("edge", 4, 16),
            ("edge", 4, 20), ("cloud", 3, 16), ("cloud", 4, 16)]
-
-
-class Chains:
-    """The private chains (relaxation 1's, one process) and pair chains (relaxation 3's groups of
-    two) of a system, built by the toolkit's own builder, one per distinct private system."""
-
-    def __init__(self, model):
-        self.model = model
-        self.cache: dict[str, PrivateChain] = {}
-
-    def of(self, group: tuple) -> PrivateChain:
-        sc = self.model.group_scenario(group)
-        key = chain_key(sc)
-        if key not in self.cache:
-            self.cache[key] = build_private_chain(group, sc)
-        return self.cache[key]
 
 
 def member_map(pair: PrivateChain, i: int, member: PrivateChain) -> np.ndarray:
@@ -115,7 +100,7 @@ def member_map(pair: PrivateChain, i: int, member: PrivateChain) -> np.ndarray:
 def all_pairs_lp(system, capacity: str, method: str = "highs-ipm") -> dict:
     """Pose and solve the all-pairs LP of ``system``; its value, size, time and residuals."""
     n, M = system.n_processes, system.n_servers
-    chains = Chains(system.model)
+    chains = PrivateChains(system.model)
     singles = [chains.of((k,)) for k in range(n)]
     pairs = list(itertools.combinations(range(n), 2))
     pchains = [chains.of(p) for p in pairs]
@@ -230,7 +215,7 @@ def count(scenario: str) -> dict:
     for k, key in enumerate(kind):
         first.setdefault(key, k)
     types = sorted(first.values())
-    chains, out = Chains(model), {"types": len(types), "type_pairs": [], "cols": 0, "rows": 0, "nnz": 0}
+    chains, out = PrivateChains(model), {"types": len(types), "type_pairs": [], "cols": 0, "rows": 0, "nnz": 0}
     # a pair of two processes of the same type: the type's first two processes
     second = {key: next((k for k in range(n) if kind[k] == key and k != first[key]), None) for key in first}
     for a, b in itertools.combinations_with_replacement(types, 2):

@@ -59,7 +59,7 @@ from .inputs import bound_system, check_private_chains
 from .private import PrivateChain, build_private_chain, chain_key, private_bound, private_lower_bound_at, search_multipliers
 from .result import BoundResult, GroupTables
 
-__all__ = ["grouped_bound", "choose_pairs", "group_table", "RELAXATION", "EXACT_MATCHING_MAX"]
+__all__ = ["grouped_bound", "choose_pairs", "group_table", "PrivateChains", "RELAXATION", "EXACT_MATCHING_MAX"]
 
 #: Name of this relaxation in :class:`BoundResult`.
 RELAXATION = "grouped-private-servers"
@@ -68,7 +68,7 @@ RELAXATION = "grouped-private-servers"
 EXACT_MATCHING_MAX = 16
 
 
-class _Chains:
+class PrivateChains:
     """The private chains of groups, built once per distinct group system (identical groups share one)."""
 
     def __init__(self, model: Model):
@@ -84,7 +84,7 @@ class _Chains:
         return self.by_key[key]
 
 
-def _priced_gain(chains: _Chains, chain: PrivateChain, lam: np.ndarray, tol: float) -> float:
+def _priced_gain(chains: PrivateChains, chain: PrivateChain, lam: np.ndarray, tol: float) -> float:
     """The certified lower end of the chain's optimal gain at the multipliers lam (its policy kept
     to start the multiplier search)."""
     lb, solves = private_lower_bound_at([chain], np.ones(1), lam, tol)
@@ -93,7 +93,7 @@ def _priced_gain(chains: _Chains, chain: PrivateChain, lam: np.ndarray, tol: flo
 
 
 def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float], *, solve_tol: float = 1e-10,
-                 chains: _Chains | None = None, progress: Any = False,
+                 chains: PrivateChains | None = None, progress: Any = False,
                  expired: Any = None) -> tuple[tuple[tuple[int, ...], ...], dict]:
     """Pairs of processes of largest total interaction at the multipliers ``lam``.
 
@@ -119,7 +119,7 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
         The partition (pairs, and processes alone), and ``{(k, l): w_kl}`` of the pairs measured.
     """
     n = system.n_processes
-    chains = chains if chains is not None else _Chains(system.model)
+    chains = chains if chains is not None else PrivateChains(system.model)
     prog = as_progress(progress)
     # a pair's gain does not depend on the order of its processes: one solve per multiset of processes
     kind = [chain_key(chains.model.private_scenario(k)) for k in range(n)]
@@ -267,7 +267,7 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
         return time.perf_counter() >= deadline or time.process_time() >= cpu_end
 
     lam1 = np.asarray(r1.multipliers, float)
-    chains = _Chains(model)
+    chains = PrivateChains(model)
     stats: dict[str, Any] = {"relaxation_1_bound": r1.lower_bound, "capacity": r1.stats["capacity"]}
     if groups == "pairs":
         prog.phase(f"grouped bound: the interaction of every pair of {n} processes at relaxation 1's multipliers")
