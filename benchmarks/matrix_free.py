@@ -561,6 +561,8 @@ def capmass(instances, threads, folder, repeats):
     rows = []
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    small = System.from_scenario(scenario("paper_p12", 6))
+    matrix_free_cap_mass(small, make_policy("greedy", small), threads=threads)  # compile the kernels first
     for name, cap in instances:
         system = System.from_scenario(scenario(name, cap))
         path = folder / f"{name}_{cap}.npz"
@@ -570,8 +572,6 @@ def capmass(instances, threads, folder, repeats):
             print(f"capmass: solving {name} cap {cap} (load {load1()}) ...", flush=True)
             sol = matrix_free_value_iteration(system, threads=threads)
             sol.save(path)
-        small = System.from_scenario(scenario("paper_p12", 6))
-        matrix_free_cap_mass(small, make_policy("greedy", small), threads=threads)  # compile the kernels first
         for rep in range(repeats):
             ref = None
             for label, opts in CAPMASS_VARIANTS.items():
