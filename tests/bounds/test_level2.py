@@ -11,16 +11,15 @@ maximum of a sum is at most the sum of the maxima), equal to it at the LP's dual
 and equal to g* when one pair is the whole system."""
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 import pytest
+from scipy.optimize import linprog
 
 from wncs_lp import solve
 from wncs_lp.bounds import lower_bound
 from wncs_lp.bounds.joint_chains import JointData
-from wncs_lp.bounds.level2 import (Level2Tables, certify_level2, level2_bound, level2_layout, level2_lp,
-                                   level2_tables)
+from wncs_lp.bounds.level2 import (Level2Tables, certify_level2, independent_rows, level2_bound, level2_layout,
+                                   level2_lp, level2_tables)
 from wncs_lp.errors import ArgumentError
 from wncs_lp.models import build
 from wncs_lp.models.system import System
@@ -28,7 +27,7 @@ from wncs_lp.scenario import scenario_from_dict
 
 pytestmark = pytest.mark.filterwarnings("ignore::wncs_lp.errors.ScenarioWarning")
 
-A = (1.05, 1.1, 1.15)
+A = (1.05, 1.1, 1.15, 1.2)
 SERVERS = {"edge": {"uplink_delay": 0, "downlink_delay": 0, "slots_per_dimension": 2},
            "cloud": {"uplink_delay": 1, "downlink_delay": 1, "slots_per_dimension": 1}}
 #: (servers, sensors, cap)
@@ -128,6 +127,22 @@ def test_the_layout_counts_what_the_builder_builds():
             lo, hi = lay.balance[i], lay.consistency[i][0]
             cols = A[lo:hi, lay.y[i]:lay.y[i] + (hi - lo) // lay.n_configs * lay.n_pairs_ca]
             assert np.abs(np.asarray(cols.sum(axis=0))).max() < 1e-12
+
+
+@pytest.mark.parametrize("servers,n,cap,lump", [(("edge",), 3, 6, None), (("edge",), 4, 4, None), (("edge",), 3, 6, 4),
+                                                (("edge",), 4, 5, (5, 3, 5, 2)), (("cloud",), 3, 2, None),
+                                                (("cloud",), 3, 3, 2)])
+def test_the_dropped_rows_are_implied_and_the_kept_ones_independent(servers, n, cap, lump):
+    data = JointData.from_system(system_of(servers, n, cap))
+    lay = level2_layout(data, lump)
+    A, b, c = level2_lp(data, lay)
+    keep = independent_rows(lay)
+    dense = A.toarray()
+    rank = np.linalg.matrix_rank(dense)
+    assert np.linalg.matrix_rank(dense[keep]) == rank == keep.sum()  # full rank, and nothing lost
+    whole = linprog(c, A_eq=A, b_eq=b, bounds=(0, None), method="highs").fun
+    kept = linprog(c, A_eq=A[keep], b_eq=b[keep], bounds=(0, None), method="highs").fun
+    assert kept == pytest.approx(whole, rel=1e-9)
 
 
 def test_bad_input_names_the_argument():

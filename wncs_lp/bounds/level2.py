@@ -76,7 +76,7 @@ from ..solvers.iteration import gamma
 from .joint_chains import JointData
 
 __all__ = ["Level2Layout", "Level2Tables", "Level2Certificate", "Level2Result", "level2_layout", "level2_lp",
-           "level2_tables", "certify_level2", "level2_bound", "LEVEL2_SOLVERS"]
+           "level2_tables", "independent_rows", "certify_level2", "level2_bound", "LEVEL2_SOLVERS"]
 
 #: HiGHS's ``presolve_rule_off`` bit of its dependent-equations rule (HiGHS 1.16's rule 10), off as
 #: for relaxation 2's interior point (:mod:`wncs_lp.bounds.joint_ipm`): each pair's balance rows sum to
@@ -258,6 +258,54 @@ def level2_lp(data: JointData, lay: Level2Layout | None = None):
     return A, b, cost
 
 
+def independent_rows(lay: Level2Layout) -> np.ndarray:
+    """(rows,) bool: the rows of :func:`level2_lp` kept for the solver, the others implied by them.
+
+    The LP's equations are dependent, and an interior point pays for it (IPX builds its
+    preconditioning basis around the deficiency: minutes of factorizations at 60k rows). The
+    relations, each of whose last-named row is dropped:
+
+    * **a pair's k-side consistency** summed over t_k plus z_k's (C, a) marginal row equals the
+      l-side's summed plus z_l's, for each (C, a): the l-side row t_l = 0 is dropped;
+    * **a pair's marginal balance**: pair (k, l)'s balance rows at (t_k, ., C) summed over t_l are,
+      through the k-side consistency rows, the balance of z_k on (class t_k, C) -- the same form as
+      for k's first partner (the lowest other index), or z_k's own balance rows summed over the
+      class when k has them: for every pair but k's first (and for every pair when k is lumped)
+      the rows (t_k, c_l - 1, C) are dropped; likewise the rows (c_k - 1, t_l, C) for l;
+    * **a pair's balance rows sum to zero** (each column leaves one state and enters with
+      probability one): for a pair that is both members' first partner (no family dropped) the row
+      (c_k - 1, c_l - 1, C_0) is dropped;
+    * **z_k's balance rows** (lumped k) sum to zero: row (tau_hat_k - 1, C_0) of the first lumped
+      process is dropped; for the other lumped processes the rows (tau_hat_k - 1, C) for every C
+      (their configuration balance is the first one's through the consistency and marginal rows).
+
+    The tests check on small instances that the kept rows have full rank and the dropped ones are
+    in their span (the LP's optimum unchanged). Nothing here enters the bound: the certificate
+    takes any duals (a dropped row's dual is 0), so a row dropped wrongly could only loosen it.
+    """
+    keep = np.ones(lay.rows, dtype=bool)
+    nC, P, N = lay.n_configs, lay.n_pairs_ca, len(lay.caps)
+    first = [1 if k == 0 else 0 for k in range(N)]
+    C = np.arange(nC)
+    for i, (k, l) in enumerate(lay.pairs):
+        a, b = lay.lumps[k], lay.lumps[l]
+        base = lay.balance[i]
+        k_family = first[k] != l or lay.lumped(k)
+        l_family = first[l] != k or lay.lumped(l)
+        if k_family:
+            keep[(base + (np.arange(a)[:, None] * b + b - 1) * nC + C[None, :]).ravel()] = False
+        if l_family:
+            keep[(base + ((a - 1) * b + np.arange(b)[:, None]) * nC + C[None, :]).ravel()] = False
+        if not (k_family or l_family):
+            keep[base + ((a - 1) * b + b - 1) * nC] = False
+        keep[lay.consistency[i][1] + np.arange(P)] = False
+    lumped = [k for k in range(N) if lay.single[k] >= 0]
+    for j, k in enumerate(lumped):
+        last = lay.single[k] + (lay.caps[k] - 1) * nC
+        keep[last if j == 0 else last + C] = False
+    return keep
+
+
 @dataclass(frozen=True, eq=False)
 class Level2Tables:
     """Tables and prices for :func:`certify_level2` (any values give a valid bound).
@@ -408,7 +456,7 @@ class Level2Result:
     tables : Level2Tables or None
     layout : Level2Layout
     rows, cols, nnz : int
-        The LP handed over (nonzeros after duplicates merge).
+        The LP handed over (:func:`independent_rows` only; nonzeros after duplicates merge).
     build_cpu, solve_cpu, certify_cpu : float
         CPU seconds of this process.
     iterations : int
@@ -488,6 +536,8 @@ def level2_bound(system: System | JointData, *, lump=None, solver: str = "ipx", 
     data = system if isinstance(system, JointData) else JointData.from_system(system)
     lay = level2_layout(data, lump)
     A, b, c = level2_lp(data, lay)
+    keep = independent_rows(lay)
+    A, b = A[keep], b[keep]
     build = time.process_time() - c0
     c0 = time.process_time()
     if solver == "clarabel":
@@ -506,7 +556,9 @@ def level2_bound(system: System | JointData, *, lump=None, solver: str = "ipx", 
     tables = cert = None
     bound = -np.inf
     if np.isfinite(z).all():
-        tables = level2_tables(lay, -z)  # solve_highs returns z = -row_dual
+        duals = np.zeros(lay.rows)
+        duals[keep] = -z  # solve_highs returns z = -row_dual; a dropped row's dual is 0
+        tables = level2_tables(lay, duals)
         cert = certify_level2(data, lay, tables)
         bound = cert.lower_bound
     return Level2Result(lower_bound=bound, lp_value=float(stats["obj_scaled"]), status=str(stats["solver_status"]),
