@@ -151,6 +151,32 @@ def test_greedy_policy_on_group_tables(three):
     assert g_star * (1 - 1e-9) <= gain <= g_star * (1 + 1e-4)
 
 
+def test_overlapping_groups_act_as_the_sum_they_hold(three):
+    """Group tables may overlap (the level-2 relaxation's every pair): with h_kl = (h_k + h_l) / (N - 1)
+    over all pairs, sum_kl h_kl = sum_k h_k, so the greedy policy on the cover takes relaxation 2's
+    separable policy's action in every state of the box (BoundPolicy computes it independently)."""
+    from dataclasses import replace
+    from itertools import combinations
+
+    from wncs_lp.bounds import GroupTables
+
+    system, _, r2, _ = three
+    N = system.n_processes
+    sep = [np.asarray(h) for h in r2.tables.h]  # (|C|, tau_hat_k) each
+    pairs = tuple(combinations(range(N), 2))
+    h = tuple((sep[k][:, :, None] + sep[l][:, None, :]) / (N - 1) for k, l in pairs)
+    cover = GroupTables(pairs, h, tuple(np.arange(system.n_configs) for _ in pairs))
+    assert cover.n_processes == N
+    pol = bound_policy(replace(r2, tables=cover), system)
+    assert isinstance(pol, GroupBoundPolicy)
+    tau = np.array(list(product(*[range(1, int(c) + 1) for c in system.caps])), dtype=np.int64)
+    for c in range(system.n_configs):
+        cfg = np.full(tau.shape[0], c)
+        np.testing.assert_allclose(cover.value(tau, cfg), r2.tables.value(tau, cfg), rtol=1e-12, atol=1e-9)
+        v_cover, v_sep = pol.values(tau, cfg), bound_policy(r2, system).values(tau, cfg)
+        np.testing.assert_allclose(v_cover, v_sep, rtol=1e-12, atol=1e-9)
+
+
 def test_names_groups_and_candidates():
     assert parse_relaxation(4) == parse_relaxation("joint-pairs") == "joint-pairs"
     # interchangeable processes pair with each other; four others every way

@@ -54,7 +54,9 @@ class GroupTables:
     Attributes
     ----------
     groups : tuple of tuples of int
-        The partition of the processes (0-based, increasing in each group).
+        The groups (0-based, increasing in each group): a partition of the processes for
+        relaxations 3 and 4, or a cover whose groups overlap (the level-2 relaxation's every pair);
+        the value function is the sum over the groups either way.
     h : tuple of arrays
         ``h[i][col, tau_{G[0]} - 1, tau_{G[1]} - 1, ...]``, shape (n_cols_i, tau_hat of each member).
     column : tuple of int arrays
@@ -68,7 +70,8 @@ class GroupTables:
 
     @property
     def n_processes(self) -> int:
-        return sum(len(g) for g in self.groups)
+        """The number of distinct processes the groups hold (a process in several groups counts once)."""
+        return len({int(k) for g in self.groups for k in g})
 
     def value(self, tau: np.ndarray, config_ids: np.ndarray) -> np.ndarray:
         """sum_G h_G(tau_G, column_G(C)) for an (R, N) array of AoI vectors and (R,) configuration ids."""
