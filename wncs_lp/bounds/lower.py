@@ -15,6 +15,7 @@ from ..errors import ArgumentError, WncsError
 from ..models.guard import require_memory
 from ..models.system import System
 from ..scenario import Scenario
+from .all_pairs import all_pairs_bound, all_pairs_size
 from .grouped import grouped_bound
 from .inputs import bound_system
 from .joint import ipm_plan, joint_bound, joint_reach, joint_size
@@ -30,8 +31,10 @@ __all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "AUTO_ASCENT
            "lower_bound", "parse_relaxation", "auto_pick", "runs_grouped"]
 
 #: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
-RELAXATIONS = ("auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs")
-_SHORT = {"1": "private-servers", "2": "joint-configuration", "3": "grouped-private-servers", "4": "joint-pairs"}
+RELAXATIONS = ("auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs",
+               "joint-all-pairs")
+_SHORT = {"1": "private-servers", "2": "joint-configuration", "3": "grouped-private-servers", "4": "joint-pairs",
+          "5": "joint-all-pairs"}
 
 
 #: Relaxation 2's search under ``"auto"`` unless given: ``max_iter`` bundle steps (a count, so the
@@ -100,7 +103,7 @@ def parse_relaxation(name: str | int) -> str:
     """
     text = _SHORT.get(str(name).strip(), str(name).strip())
     if text not in RELAXATIONS:
-        raise WncsError(f"unknown relaxation {name!r}; expected one of 1, 2, 3, 4, {', '.join(RELAXATIONS)}")
+        raise WncsError(f"unknown relaxation {name!r}; expected one of 1, 2, 3, 4, 5, {', '.join(RELAXATIONS)}")
     return text
 
 
@@ -110,8 +113,14 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
     Parameters
     ----------
     scenario_or_system : Scenario or System
-    relaxation : {"auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs"}
-        or 1 / 2 / 3 / 4.
+    relaxation : {"auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs", \
+"joint-all-pairs"}
+        or 1 / 2 / 3 / 4 / 5.
+        ``"joint-all-pairs"`` (relaxation 5, :mod:`~wncs_lp.bounds.all_pairs`): every pair's ages
+        kept jointly with the joint configuration, all pairs at once (the level-2 LP of
+        :mod:`~wncs_lp.bounds.level2`, solved whole, its duals certified); at least as tight as
+        relaxation 4 with any pairing; its LP's size is checked against the memory before it is
+        built; not run by ``"auto"`` (its time is not yet predicted).
         ``"joint-pairs"`` (relaxation 4, :mod:`~wncs_lp.bounds.pairs`): relaxation 2 solved, then
         its tables and prices carried to pairs of processes whose ages are kept jointly; never
         looser than relaxation 2; run by ``"auto"`` after relaxation 2's interior point where
@@ -150,6 +159,17 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         return private_bound(scenario_or_system, **options)
     if name == "grouped-private-servers":
         return grouped_bound(scenario_or_system, **options)
+    if name == "joint-all-pairs":
+        system = _as_system(scenario_or_system)
+        if system.is_lazy:
+            raise WncsError(f"relaxation {name} asked for, but {LAZY_NOTE}")
+        size = all_pairs_size(system, options.get("lump"))
+        require_memory(size["memory_bytes"], f"relaxation 5 on {system.n_processes} processes (the level-2 LP: "
+                       f"{size['pairs']:,} pairs, {size['cols']:,} columns, {size['nnz']:,} nonzeros)",
+                       ["relaxation 4 (--relaxation 4: pairs of one partition)",
+                        "relaxation 5 with lumped ages (lower_bound(x, 5, lump=c))",
+                        "relaxation 1 (--relaxation 1: seconds at any size)"])
+        return all_pairs_bound(system, **options)
     if name in ("joint-configuration", "joint-pairs"):
         system = _as_system(scenario_or_system)
         if system.is_lazy:
@@ -219,6 +239,7 @@ def _check_options(name: str, options: dict) -> None:
     ``time_limit`` or ``max_iter`` out of range, before any work."""
     fns = {"private-servers": [private_bound], "grouped-private-servers": [grouped_bound],
            "joint-configuration": [joint_bound], "joint-pairs": [pairs_bound, joint_bound],
+           "joint-all-pairs": [all_pairs_bound],
            "auto": [joint_bound]}[name]
     import inspect
 

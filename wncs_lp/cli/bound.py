@@ -138,11 +138,13 @@ def _print(scenario, res, report, lazy: bool = False, tables_note: str = "") -> 
 
 def _configure(p: argparse.ArgumentParser) -> None:
     add_scenario_args(p)
-    p.add_argument("--relaxation", default="auto", metavar="1|2|3|4|auto",
+    p.add_argument("--relaxation", default="auto", metavar="1|2|3|4|5|auto",
                    help="1 = private servers with averaged capacity (seconds at any number of processes), "
                         "2 = joint configuration with separable value functions (tighter, when installed), "
                         "3 = private servers shared by pairs of processes (relaxation 1 on groups), "
                         "4 = relaxation 2 with pairs of processes' ages kept jointly (tighter than 2, slower), "
+                        "5 = every pair's ages kept jointly at once, its LP solved whole (tighter than 4; "
+                        "small systems: its size is checked first), "
                         "auto = the largest certified bound of those that apply (default)")
     p.add_argument("--groups", default=None, metavar="1,5;2,6;...",
                    help="--relaxation 3 or 4: the groups of processes (1-based, ';' between groups; default: the "

@@ -1,0 +1,123 @@
+r"""Relaxation 5 (``"joint-all-pairs"``): the level-2 relaxation as a bound of
+:func:`~wncs_lp.bounds.lower_bound`, with tables for the bound's policies.
+
+The maths -- every pair's ages kept jointly with the joint configuration, all pairs at once and
+consistent through each process's measure; why the LP is at most g*; the certificate of the LP's
+size -- is :mod:`wncs_lp.bounds.level2`'s. This module packs its result the way the other
+relaxations do: a :class:`~wncs_lp.bounds.result.BoundResult` whose ``lower_bound`` is the
+certified value and whose ``tables`` are the value function the certificate checked,
+
+.. math:: V(\tau, C) = \sum_{k<l} h_{kl}(\mathrm{class}(\tau_k), \mathrm{class}(\tau_l), C)
+          + \sum_k h_k(\tau_k, C),
+
+as :class:`~wncs_lp.bounds.result.GroupTables` over a *cover* (every pair, and each process whose
+own table is not zero), so the greedy policy, the lookahead and the rollout of
+:func:`~wncs_lp.bounds.gaps.policy_gaps` read it as they read relaxation 4's pair tables.
+
+The LP is solved whole (:func:`~wncs_lp.bounds.level2.level2_bound`): its size is checked against
+the memory this process may use before it is built (:func:`all_pairs_size`). ``"auto"`` does not
+run it: its time is not yet predictable (one server's LPs take seconds at the calibration
+instances, two servers' take minutes an interior-point iteration; docs/bounds.md).
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from ..errors import SolverError
+from ..models.system import System
+from ..progress import as_progress
+from ..status import INACCURATE, OPTIMAL
+from .joint_chains import JointData
+from .level2 import Level2Layout, Level2Tables, level2_bound, level2_layout
+from .result import BoundResult, GroupTables
+
+__all__ = ["all_pairs_bound", "all_pairs_size", "cover_tables", "ALL_PAIRS_BYTES_PER_NNZ"]
+
+#: Peak bytes of the whole solve per nonzero of the LP (the matrix, the solver's copy and its
+#: factorisation), the memory guard's estimate; measured on the calibration instances
+#: (docs/bounds.md, "Relaxation 5").
+ALL_PAIRS_BYTES_PER_NNZ = 2_000
+
+
+def all_pairs_size(system: System | JointData, lump=None) -> dict:
+    """The level-2 LP's size without building it: ``rows``, ``cols``, ``nnz`` (an upper bound) and
+    ``memory_bytes`` (:data:`ALL_PAIRS_BYTES_PER_NNZ` a nonzero), Python integers."""
+    data = system if isinstance(system, JointData) else JointData.from_system(system)
+    lay = level2_layout(data, lump)
+    return {"rows": int(lay.rows), "cols": int(lay.cols), "nnz": int(lay.nnz),
+            "pairs": len(lay.pairs), "memory_bytes": int(lay.nnz) * ALL_PAIRS_BYTES_PER_NNZ}
+
+
+def cover_tables(lay: Level2Layout, tables: Level2Tables) -> GroupTables:
+    """The level-2 tables as one value function over a cover: each pair's table spread from its
+    lumped ages to every age (an age t of process k reads class min(t, c_k - 1)), then each
+    process's own table where it has one."""
+    groups, h = [], []
+    for i, (k, l) in enumerate(lay.pairs):
+        a, b = lay.lumps[k], lay.lumps[l]
+        cls = (np.minimum(np.arange(lay.caps[k]), a - 1)[:, None] * b
+               + np.minimum(np.arange(lay.caps[l]), b - 1)[None, :])
+        groups.append((k, l))
+        h.append(np.ascontiguousarray(np.asarray(tables.pair[i], float)[:, cls]))
+    for k, own in enumerate(tables.single):
+        if own is not None:
+            groups.append((k,))
+            h.append(np.asarray(own, float))
+    column = np.arange(lay.n_configs, dtype=np.int64)
+    return GroupTables(tuple(groups), tuple(h), tuple(column for _ in groups))
+
+
+def all_pairs_bound(system: System, *, lump=None, solver: str = "ipx", tol: float = 1e-8,
+                    time_limit: float | None = None, cpu_limit: float | None = None,
+                    verbose: bool = False, progress: Any = False) -> BoundResult:
+    """Relaxation 5's certified lower bound on g* (the level-2 LP solved whole, its duals certified).
+
+    Parameters
+    ----------
+    system : System
+        An enumerated system (the tables live on every joint configuration).
+    lump, solver, tol, time_limit, cpu_limit, verbose
+        As :func:`~wncs_lp.bounds.level2.level2_bound`.
+    progress : bool or Progress
+        A line before the solve and one with the bound.
+
+    Returns
+    -------
+    BoundResult
+        ``relaxation="joint-all-pairs"``; ``status`` ``"optimal"`` when the solver reported its
+        optimum, else ``"inaccurate"`` (the bound holds either way: any duals are certified);
+        ``tables`` a :class:`~wncs_lp.bounds.result.GroupTables` cover; ``stats`` the LP's size,
+        the solver's status and objective (not a bound) and the CPU of each phase.
+
+    Raises
+    ------
+    SolverError
+        The solver returned no duals (nothing to certify), e.g. stopped by ``cpu_limit``.
+    """
+    t0 = time.monotonic()
+    prog = as_progress(progress)
+    data = JointData.from_system(system)
+    size = all_pairs_size(data, lump)
+    prog.phase(f"relaxation 5: the level-2 LP ({size['pairs']:,} pairs, {size['cols']:,} columns) by {solver}")
+    res = level2_bound(data, lump=lump, solver=solver, tol=tol, time_limit=time_limit, cpu_limit=cpu_limit,
+                       verbose=verbose)
+    if res.tables is None or not np.isfinite(res.lower_bound):
+        raise SolverError(f"relaxation 5: the {solver} solve of the level-2 LP ({res.rows:,} x {res.cols:,}, "
+                          f"{res.nnz:,} nonzeros) returned no usable duals (status {res.status}, "
+                          f"{res.solve_cpu:.0f} s of CPU): nothing certified; relaxation 4 or 2 is the cheaper route")
+    status = OPTIMAL if res.status in ("kOptimal", "Solved") else INACCURATE
+    cert = res.certificate
+    stats = {"lp_rows": res.rows, "lp_cols": res.cols, "lp_nnz": res.nnz, "lp_value": res.lp_value,
+             "solver": solver, "solver_status": res.status, "solver_iterations": res.iterations,
+             "lumps": list(res.layout.lumps), "build_cpu": res.build_cpu, "solve_cpu": res.solve_cpu,
+             "certify_cpu": res.certify_cpu, "roundoff": cert.roundoff}
+    how = (f"the level-2 LP's duals ({len(res.layout.pairs)} pair tables on (tau_k, tau_l, C) and their "
+           f"consistency prices) checked on every (C, a): g = -max U(C, a) less round-off {cert.roundoff:.2g}")
+    prog.done(f"relaxation 5: certified lower bound {res.lower_bound:.10g} ({status})")
+    return BoundResult(relaxation="joint-all-pairs", lower_bound=float(res.lower_bound),
+                       relaxation_upper=float("inf"), status=status, certified_by=how, multipliers=np.empty(0),
+                       process_gains=np.empty(0), tables=cover_tables(res.layout, res.tables),
+                       seconds=time.monotonic() - t0, iterations=int(res.iterations), stats=stats)
