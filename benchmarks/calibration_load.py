@@ -78,6 +78,9 @@ DEFAULT = [("edge", 2, 30), ("edge", 3, 30), ("edge", 4, 40), ("edge", 5, 25), (
 SLOTS_PER_DELIVERY = {"edge": 1.8 / 0.64, "cloud": 1 / 0.64, "both": 1 / (0.64 / 1.8 + 0.64)}
 RELAXATIONS = ((1, "private-servers", {}), (2, "joint-configuration", {"method": "ipm"}),
                (3, "grouped-private-servers", {}), (4, "joint-pairs", {}))
+#: Relaxation 5 (every pair's ages on the joint configuration, its LP solved whole): only where asked
+#: (``--tables ... --relaxations 2,4,5``); its LP on two servers takes minutes an iteration.
+ALL_PAIRS = (5, "joint-all-pairs", {})
 
 
 def system_for(server: str, sensors: int, cap: int) -> System:
@@ -166,15 +169,22 @@ def compare_optimum(server: str, sensors: int, cap: int, slots: int = 200_000, s
              "mean ages": path.tau.mean(axis=0).round(2).tolist()}] + rows
 
 
-def policies_on_tables(server: str, sensors: int, cap: int, names=("bound", "lookahead", "lookahead3", "rollout")) -> list[dict]:
-    """The policies ``names`` on relaxation 2's tables (its interior point) and on relaxation 4's pair
-    tables, each evaluated exactly, against g*: whether the tighter relaxation's tables, or a deeper
-    search on them, make the better policy."""
+def policies_on_tables(server: str, sensors: int, cap: int, names=("bound", "lookahead", "lookahead3", "rollout"),
+                       relaxations=(2, 4)) -> list[dict]:
+    """The policies ``names`` on the tables of ``relaxations`` (2: its interior point; 4: the pair
+    tables; 5: every pair's tables), each evaluated exactly, against g*: whether the tighter
+    relaxation's tables, or a deeper search on them, make the better policy. Each row also gives
+    the relaxation's certified bound."""
     system = system_for(server, sensors, cap)
     g = float(matrix_free_value_iteration(system, tol=1e-9).gain)
     rows = []
-    for number, _, kw in (RELAXATIONS[1], RELAXATIONS[3]):
+    known = {number: (number, name, kw) for number, name, kw in (*RELAXATIONS, ALL_PAIRS)}
+    for number, _, kw in (known[int(r)] for r in relaxations):
+        c0 = time.process_time()
         bound = lower_bound(system, number, **kw)
+        rows.append({"instance": f"{server}:{sensors}:{cap}", "tables": bound.relaxation, "policy": "(the bound)",
+                     "gain": float(bound.lower_bound), "loss": (float(bound.lower_bound) - g) / g,
+                     "cpu_seconds": round(time.process_time() - c0, 1)})
         for name in names:
             c0 = time.process_time()
             r = policy_gaps(bound, system, [name], exact=True).rows[0]
@@ -233,13 +243,14 @@ def main(argv=None) -> int:
     ap.add_argument("--compare-optimum", default=None, metavar="SERVER:SENSORS:CAP",
                     help="where relaxation 2's greedy policy acts otherwise than the optimum, on the optimum's path")
     ap.add_argument("--tables", default=None, metavar="SERVER:SENSORS:CAP",
-                    help="the greedy policy, the lookahead (depth 2, 3) and the rollout on relaxation 2's and 4's tables")
+                    help="the greedy policy, the lookahead (depth 2, 3) and the rollout on the tables of --relaxations")
+    ap.add_argument("--relaxations", default="2,4", help="with --tables: whose tables (2, 4, 5; default %(default)s)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     if args.tables:
         server, n, cap = args.tables.split(":")
-        for row in policies_on_tables(server, int(n), int(cap)):
+        for row in policies_on_tables(server, int(n), int(cap), relaxations=args.relaxations.split(",")):
             print(json.dumps(row))
         return 0
     if args.compare_optimum:
