@@ -52,7 +52,7 @@ def test_greedy_policy_on_the_cover_is_optimal_here(three):
 
 def test_memory_guard_refuses_before_building(three, monkeypatch):
     _, system, _, _, _ = three
-    monkeypatch.setattr(all_pairs_module, "ALL_PAIRS_BYTES_PER_NNZ", 10**15)
+    monkeypatch.setattr(all_pairs_module, "ALL_PAIRS_BYTES_PER_NNZ", {"ipx": 10**15})
     monkeypatch.setattr(all_pairs_module, "level2_bound", lambda *a, **k: pytest.fail("built despite the guard"))
     with pytest.raises(SizeLimitError, match=r"relaxation 5 .*level-2 LP.*relaxation 4"):
         lower_bound(system, 5)

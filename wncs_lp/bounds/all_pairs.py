@@ -37,18 +37,21 @@ from .result import BoundResult, GroupTables
 __all__ = ["all_pairs_bound", "all_pairs_size", "cover_tables", "ALL_PAIRS_BYTES_PER_NNZ"]
 
 #: Peak bytes of the whole solve per nonzero of the LP (the matrix, the solver's copy and its
-#: factorisation), the memory guard's estimate; measured on the calibration instances
-#: (docs/bounds.md, "Relaxation 5").
-ALL_PAIRS_BYTES_PER_NNZ = 2_000
+#: factorisation) by solver, the memory guard's estimate. Measured (docs/bounds.md, "Relaxation
+#: 5"): IPX 485-566 bytes on one server (edge 4 sensors cap 40, 5 sensors cap 25: 357k and 282k
+#: nonzeros), Clarabel 6.2 kB on two (three sensors, cap 16: 7.4 GB at 1.19M); IPX is given 4x
+#: its one-server figure, the two servers' factorisation being denser.
+ALL_PAIRS_BYTES_PER_NNZ = {"ipx": 2_000, "pdlp": 1_000, "clarabel": 8_000}
 
 
-def all_pairs_size(system: System | JointData, lump=None) -> dict:
+def all_pairs_size(system: System | JointData, lump=None, solver: str = "ipx") -> dict:
     """The level-2 LP's size without building it: ``rows``, ``cols``, ``nnz`` (an upper bound) and
-    ``memory_bytes`` (:data:`ALL_PAIRS_BYTES_PER_NNZ` a nonzero), Python integers."""
+    ``memory_bytes`` (:data:`ALL_PAIRS_BYTES_PER_NNZ` of ``solver`` a nonzero), Python integers."""
     data = system if isinstance(system, JointData) else JointData.from_system(system)
     lay = level2_layout(data, lump)
+    per = ALL_PAIRS_BYTES_PER_NNZ.get(solver, max(ALL_PAIRS_BYTES_PER_NNZ.values()))
     return {"rows": int(lay.rows), "cols": int(lay.cols), "nnz": int(lay.nnz),
-            "pairs": len(lay.pairs), "memory_bytes": int(lay.nnz) * ALL_PAIRS_BYTES_PER_NNZ}
+            "pairs": len(lay.pairs), "memory_bytes": int(lay.nnz) * per}
 
 
 def cover_tables(lay: Level2Layout, tables: Level2Tables) -> GroupTables:
@@ -100,7 +103,7 @@ def all_pairs_bound(system: System, *, lump=None, solver: str = "ipx", tol: floa
     t0 = time.monotonic()
     prog = as_progress(progress)
     data = JointData.from_system(system)
-    size = all_pairs_size(data, lump)
+    size = all_pairs_size(data, lump, solver)
     prog.phase(f"relaxation 5: the level-2 LP ({size['pairs']:,} pairs, {size['cols']:,} columns) by {solver}")
     res = level2_bound(data, lump=lump, solver=solver, tol=tol, time_limit=time_limit, cpu_limit=cpu_limit,
                        verbose=verbose)

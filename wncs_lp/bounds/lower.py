@@ -163,7 +163,7 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         system = _as_system(scenario_or_system)
         if system.is_lazy:
             raise WncsError(f"relaxation {name} asked for, but {LAZY_NOTE}")
-        size = all_pairs_size(system, options.get("lump"))
+        size = all_pairs_size(system, options.get("lump"), options.get("solver", "ipx"))
         require_memory(size["memory_bytes"], f"relaxation 5 on {system.n_processes} processes (the level-2 LP: "
                        f"{size['pairs']:,} pairs, {size['cols']:,} columns, {size['nnz']:,} nonzeros)",
                        ["relaxation 4 (--relaxation 4: pairs of one partition)",
