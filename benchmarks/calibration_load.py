@@ -244,12 +244,15 @@ def main(argv=None) -> int:
     ap.add_argument("--tables", default=None, metavar="SERVER:SENSORS:CAP",
                     help="the greedy policy, the lookahead (depth 2, 3) and the rollout on the tables of --relaxations")
     ap.add_argument("--relaxations", default="2,4", help="with --tables: whose tables (2, 4, 5; default %(default)s)")
+    ap.add_argument("--policies", default="bound,lookahead,lookahead3,rollout",
+                    help="with --tables: the policies (default %(default)s)")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     if args.tables:
         server, n, cap = args.tables.split(":")
-        for row in policies_on_tables(server, int(n), int(cap), relaxations=args.relaxations.split(",")):
+        for row in policies_on_tables(server, int(n), int(cap), relaxations=args.relaxations.split(","),
+                                      names=tuple(args.policies.split(","))):
             print(json.dumps(row), flush=True)
         return 0
     if args.compare_optimum:
