@@ -14,6 +14,8 @@ __all__ = ["MatrixFreeOptions", "SCHEMES", "TILE_ORDERS"]
 SCHEMES = ("auto", "mpi", "gs", "jacobi")
 #: ``tile_order`` values.
 TILE_ORDERS = ("forward", "reverse")
+#: ``candidates`` values: the candidate actions' bit set per configuration or per row.
+CANDIDATES = ("config", "row")
 
 
 @dataclass(frozen=True)
@@ -95,6 +97,8 @@ class MatrixFreeOptions(IterationOptions):
     tile_order: str = "forward"
     extrapolate: bool = True
     candidates_rel: float = 1e-3
+    candidates: str = "config"
+    candidates_near: float = 0.0
     aggregate: bool = False
     aggregate_rel: float = 1e-2
     warm_start: bool | None = None
@@ -107,10 +111,13 @@ class MatrixFreeOptions(IterationOptions):
         _choice("scheme", self.scheme, SCHEMES)
         _choice("domain", self.domain, DOMAINS)
         _choice("tile_order", self.tile_order, TILE_ORDERS)
+        _choice("candidates", self.candidates, CANDIDATES)
         if not (is_real(self.relax) and 0.0 < self.relax <= 1.0):
             raise SolverError(f"relax must be in (0, 1], got {self.relax!r}")
         if not (is_real(self.candidates_rel) and math.isfinite(self.candidates_rel) and self.candidates_rel >= 0):
             raise SolverError(f"candidates_rel must be a finite number >= 0, got {self.candidates_rel!r}")
+        if not (is_real(self.candidates_near) and math.isfinite(self.candidates_near) and self.candidates_near >= 0):
+            raise SolverError(f"candidates_near must be a finite number >= 0, got {self.candidates_near!r}")
         if not (is_real(self.warm_rel) and math.isfinite(self.warm_rel) and self.warm_rel > 0):
             raise SolverError(f"warm_rel must be a finite number > 0, got {self.warm_rel!r}")
         for name in ("eval_sweeps", "warm_max"):
