@@ -182,15 +182,20 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                         for i in range(L):
                             arg[i] = j
                         nb |= uint64(1) << uint64(min(j, 63))
+                    elif near >= 0.0:
+                        # the select, and whether the action is within ``near`` of the minimum so far
+                        # somewhere on the row (a superset of those within ``near`` of the final one)
+                        hit = 0
+                        for i in range(L):
+                            xa = acc[i]
+                            yb = best[i]
+                            hit += 1 if xa <= yb + near else 0
+                            better = xa < yb
+                            best[i] = xa if better else yb
+                            arg[i] = j if better else arg[i]
+                        if hit > 0:
+                            nb |= uint64(1) << uint64(min(j, 63))
                     else:
-                        if near >= 0.0:
-                            # within ``near`` of the minimum so far somewhere on the row (a superset
-                            # of the actions within ``near`` of the row's final minimum)
-                            hit = 0
-                            for i in range(L):
-                                hit += 1 if acc[i] <= best[i] + near else 0
-                            if hit > 0:
-                                nb |= uint64(1) << uint64(min(j, 63))
                         for i in range(L):
                             xa = acc[i]
                             yb = best[i]
