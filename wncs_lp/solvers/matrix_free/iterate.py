@@ -252,7 +252,7 @@ class _Improve(BoxSweeps):
         # cost most of an improvement sweep's work and are rarely chosen near the fixed point).
         # The certificate is unaffected: it always takes the minimum over every action.
         prev = self.bracket[1] - self.bracket[0]
-        if self.cand_rows and self.near_rel > 0 and np.isfinite(prev):
+        if self.cand_rows and self.near_rel > 0 and np.isfinite(prev) and self.in_place:
             # the certificate marks, per row, the actions within near_rel x the last width of the
             # minimum somewhere on the row: those the policy may switch to before the next one
             if self._nbits is None:

@@ -39,12 +39,17 @@ as ``*_serial``, for one: :func:`wncs_lp.solvers.threads.twins`):
   ``h += relax (T h - h - shift)``; such a pass computes no bracket, as its d(s) are taken on a
   moving h: it returns (inf, -inf), and its update is one fused loop), ``OUT`` writes ``h_out``
   (Jacobi); ``write_pol`` stores the minimiser in ``pol`` (uint8). With ``use_cand`` only the
-  actions whose bit is set in ``cand[c]`` are tried (in-place improvement sweeps only: a
-  certificate always takes the minimum over every action).
+  actions whose bit is set in ``cand[c]`` (:data:`CAND_CONFIG`) or in ``cand[row]``
+  (:data:`CAND_ROW`, rows numbered by ``row_off``) are tried (in-place improvement sweeps only: a
+  certificate always takes the minimum over every action). With ``near >= 0`` (a certificate
+  pass of the minimum) each row's bit set of the actions within ``near`` of the running minimum
+  somewhere on the row goes into ``nbits[row]`` (a superset of those within ``near`` of the
+  final minimum, the minimiser included; read only, the bracket is unchanged).
 * :func:`fixed_policy` -- the same for one action per state (``pol``), which must be in range
   for its configuration (checked by the callers: :func:`.layout.check_local_actions`).
 * :func:`used_actions` -- per configuration, the bit set of the actions a policy takes in its box
-  (the candidates of the improvement sweeps).
+  (the candidates of the improvement sweeps, ``candidates="config"``).
+* :func:`row_actions` -- the same per row.
 * :func:`reach_all` -- marks the successors of the marked states to a fixed point.
 
 With threads, a Gauss-Seidel sweep is asynchronous across the chunks (a plane may
