@@ -405,9 +405,14 @@ def pass_profile(sol, threads, bw, repeats=2):
         cand = sw.used_actions(pol, np.zeros(sol.layout.n_configs, np.uint64))
         kinds.insert(1, ("improvement, candidates", 17, lambda: sw.all_actions(
             h, None, pol, None, Reduce.MIN, Write.IN_PLACE, True, 0.8, 0.0, cand)))
+    if hasattr(sw, "row_actions"):  # per-row candidates (the greedy policy's actions on each row)
+        rcand = sw.row_actions(pol, np.zeros(sw.n_rows, np.uint64))
+        kinds.insert(2, ("improvement, row candidates", 17, lambda: sw.all_actions(
+            h, None, pol, None, Reduce.MIN, Write.IN_PLACE, True, 0.8, 0.0, rcand, True)))
     floor = work_floor(op, pol, cand)
+    # a row's candidates are the actions the policy takes on it: the evaluation sweep's terms
     terms_of = {"improvement": "all actions", "improvement, candidates": "candidates", "certificate": "all actions",
-                "evaluation": "evaluation"}
+                "evaluation": "evaluation", "improvement, row candidates": "evaluation"}
     out = {}
     for label, per_state, fn in kinds:
         wall = cpu = float("inf")

@@ -1,4 +1,5 @@
-"""Candidate actions of the matrix-free improvement sweeps (``candidates_rel``).
+"""Candidate actions of the matrix-free improvement sweeps (``candidates_rel``), per configuration
+(``candidates="config"``; the per-row sets are tested in test_matrix_free_row_candidates.py).
 
 Once the bracket is narrow, the in-place improvement sweeps try, per configuration, only the
 actions the last certificate's greedy policy takes in its box; the certificate passes always try
@@ -50,7 +51,7 @@ def sweeper():
 @pytest.mark.parametrize("rel", [1e-2, 1e6])
 def test_candidates_keep_the_certified_gain(case, rel):
     system, ref = case
-    sol = matrix_free_value_iteration(system, candidates_rel=rel)
+    sol = matrix_free_value_iteration(system, candidates_rel=rel, candidates="config")
     assert sol.status == "optimal" and inside(sol, ref)
 
 
@@ -59,7 +60,7 @@ def test_candidates_from_a_random_start_still_certify(case):
     n = BoxLayout.from_system(system).n_states
     h0 = np.random.default_rng(3).normal(scale=10 * ref.gain, size=n)
     # on from the first certificate, whose greedy policy is that of a random h
-    sol = matrix_free_value_iteration(system, h0=h0, candidates_rel=1e6)
+    sol = matrix_free_value_iteration(system, h0=h0, candidates_rel=1e6, candidates="config")
     assert sol.status == "optimal" and inside(sol, ref)
 
 

@@ -286,7 +286,9 @@ def _master(cuts: list, mult: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tup
     res = linprog(c, A_ub=A, b_ub=b, bounds=bounds, method="highs")
     if res.status != 0:
         raise SolverError(f"the multiplier master LP failed: {res.message}")
-    return float(-res.fun), np.asarray(res.x[:M])
+    # HiGHS may return a bound violated by round-off (lambda = -6e-14 where lambda >= 0); the chains
+    # are priced at the lambda proposed, so it is put back inside the box before it is used
+    return float(-res.fun), np.clip(np.asarray(res.x[:M], float), lo, hi)
 
 
 def _on_boundary(lam: np.ndarray, lo: np.ndarray, hi: np.ndarray, free_below: bool) -> bool:

@@ -233,12 +233,17 @@ class _Improve(BoxSweeps):
         self.pol = np.zeros(st.n, np.uint8)
         self.n_eval = opts.eval_sweeps if main == "mpi" else 0
         self.candidates_rel = opts.candidates_rel
+        self.cand_rows = opts.candidates == "row"
+        self.near_rel = opts.candidates_near
+        self._near, self._nbits = -1.0, None
         self.cand: np.ndarray | None = None  # the candidate actions of the improvement sweeps, when on
 
     def pass_(self, h, h_out, write, relax, shift):
         write_pol = write != Write.IN_PLACE or self.n_eval > 0
         cand = self.cand if write == Write.IN_PLACE else None
-        return self.sw.all_actions(h, h_out, self.pol, None, Reduce.MIN, write, write_pol, relax, shift, cand)
+        near = self._near if write == Write.NONE else -1.0
+        return self.sw.all_actions(h, h_out, self.pol, None, Reduce.MIN, write, write_pol, relax, shift, cand,
+                                   self.cand_rows, near, self._nbits if near >= 0 else None)
 
     def certify(self, shift: float) -> tuple[float, float]:
         # A certificate pass tries every action and leaves the greedy policy of its h in pol; once
@@ -246,12 +251,29 @@ class _Improve(BoxSweeps):
         # only the actions that policy takes somewhere in the configuration's box (the others
         # cost most of an improvement sweep's work and are rarely chosen near the fixed point).
         # The certificate is unaffected: it always takes the minimum over every action.
+        prev = self.bracket[1] - self.bracket[0]
+        if self.cand_rows and self.near_rel > 0 and np.isfinite(prev) and self.in_place:
+            # the certificate marks, per row, the actions within near_rel x the last width of the
+            # minimum somewhere on the row: those the policy may switch to before the next one
+            if self._nbits is None:
+                self._nbits = np.zeros(self.sw.n_rows, np.uint64)
+            self._near = self.near_rel * prev
+        else:
+            self._near = -1.0
         lo, hi = super().certify(shift)
         mid = 0.5 * (lo + hi)
         if self.candidates_rel > 0 and np.isfinite(hi - lo) and hi - lo <= self.candidates_rel * abs(mid):
-            if self.cand is None:
-                self.cand = np.zeros(self.st.layout.n_configs, np.uint64)
-            self.sw.used_actions(self.pol, self.cand)
+            if self.cand_rows:
+                if self._near >= 0:
+                    self.cand = self._nbits
+                else:
+                    if self.cand is None or self.cand is self._nbits:
+                        self.cand = np.zeros(self.sw.n_rows, np.uint64)
+                    self.sw.row_actions(self.pol, self.cand)
+            else:
+                if self.cand is None:
+                    self.cand = np.zeros(self.st.layout.n_configs, np.uint64)
+                self.sw.used_actions(self.pol, self.cand)
         else:
             self.cand = None
         return lo, hi

@@ -39,12 +39,17 @@ as ``*_serial``, for one: :func:`wncs_lp.solvers.threads.twins`):
   ``h += relax (T h - h - shift)``; such a pass computes no bracket, as its d(s) are taken on a
   moving h: it returns (inf, -inf), and its update is one fused loop), ``OUT`` writes ``h_out``
   (Jacobi); ``write_pol`` stores the minimiser in ``pol`` (uint8). With ``use_cand`` only the
-  actions whose bit is set in ``cand[c]`` are tried (in-place improvement sweeps only: a
-  certificate always takes the minimum over every action).
+  actions whose bit is set in ``cand[c]`` (:data:`CAND_CONFIG`) or in ``cand[row]``
+  (:data:`CAND_ROW`, rows numbered by ``row_off``) are tried (in-place improvement sweeps only: a
+  certificate always takes the minimum over every action). With ``near >= 0`` (a certificate
+  pass of the minimum) each row's bit set of the actions within ``near`` of the running minimum
+  somewhere on the row goes into ``nbits[row]`` (a superset of those within ``near`` of the
+  final minimum, the minimiser included; read only, the bracket is unchanged).
 * :func:`fixed_policy` -- the same for one action per state (``pol``), which must be in range
   for its configuration (checked by the callers: :func:`.layout.check_local_actions`).
 * :func:`used_actions` -- per configuration, the bit set of the actions a policy takes in its box
-  (the candidates of the improvement sweeps).
+  (the candidates of the improvement sweeps, ``candidates="config"``).
+* :func:`row_actions` -- the same per row.
 * :func:`reach_all` -- marks the successors of the marked states to a fixed point.
 
 With threads, a Gauss-Seidel sweep is asynchronous across the chunks (a plane may
@@ -62,6 +67,10 @@ from numba import njit, prange, uint64
 
 from ..threads import twins
 from .operator import Reduce, Write
+
+#: ``use_cand`` of :func:`all_actions`: every action; the configuration's bit set ``cand[c]``; the
+#: row's ``cand[row]`` (rows numbered by ``row_off``).
+CAND_NONE, CAND_CONFIG, CAND_ROW = 0, 1, 2
 
 
 # The plane setup is inlined into both chunk kernels by numba (``inline="always"``, at the level of
@@ -112,7 +121,7 @@ def _plane(c, tc, N, lo_, dims, strides, off, act_ptr, out_ptr, e_m, e_base, e_s
 @njit(cache=True, nogil=True, boundscheck=False, fastmath={"contract"})
 def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m, e_base,
                e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask, cand, use_cand,
-               iscr, fscr, los, his):
+               row_off, near, nbits, iscr, fscr, los, his):
     P, split, sat, A, rs, rm, arg = iscr[0], iscr[1], iscr[2], iscr[3], iscr[4], iscr[5], iscr[6]
     acc, best, dd = fscr[0], fscr[1], fscr[2]
     lo = np.inf
@@ -125,6 +134,9 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
         na = act_ptr[c + 1] - a0
         qN = q[N - 1]
         qu = uint64(loN)
+        # the global index of the plane's first row (per-row candidates: one bit set a row)
+        row = row_off[c] + (s0 - off[c]) // L
+        bits = cand[c] if use_cand == CAND_CONFIG else uint64(0)
         # ---- rows
         for r in range(nrows):
             qo = qo0
@@ -134,11 +146,16 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
             for o in range(nO):
                 m = rm[o]
                 P[o] = A[o] + rs[o] * (t1 if t1 < m else m)
+            if use_cand == CAND_ROW:
+                bits = cand[row]
+            rid = row
+            row += 1
+            nb = uint64(0)  # the row's near-minimal actions (``near``)
             first = True
             for j in range(na):
-                # an improvement sweep may try only the configuration's candidate actions (bit j of
-                # cand[c]; actions past 63 are always tried)
-                if use_cand and j < 64 and (cand[c] >> uint64(j)) & uint64(1) == uint64(0):
+                # an improvement sweep may try only the candidate actions of the configuration or
+                # of the row (bit j of ``bits``; actions past 63 are always tried)
+                if use_cand != CAND_NONE and j < 64 and (bits >> uint64(j)) & uint64(1) == uint64(0):
                     continue
                 w = 1.0
                 if mode == Reduce.WEIGHTED:
@@ -169,6 +186,20 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
                     if first:
                         for i in range(L):
                             arg[i] = j
+                        nb |= uint64(1) << uint64(min(j, 63))
+                    elif near >= 0.0:
+                        # the select, and whether the action is within ``near`` of the minimum so far
+                        # somewhere on the row (a superset of those within ``near`` of the final one)
+                        hit = 0
+                        for i in range(L):
+                            xa = acc[i]
+                            yb = best[i]
+                            hit += 1 if xa <= yb + near else 0
+                            better = xa < yb
+                            best[i] = xa if better else yb
+                            arg[i] = j if better else arg[i]
+                        if hit > 0:
+                            nb |= uint64(1) << uint64(min(j, 63))
                     else:
                         for i in range(L):
                             xa = acc[i]
@@ -216,6 +247,8 @@ def _all_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, ou
             if write_pol:
                 for i in range(L):
                     pol[su + uint64(i)] = arg[i]
+            if near >= 0.0:
+                nbits[rid] = nb
             s0 += L
             tr += 1
     if lo < los[ci]:
@@ -324,7 +357,7 @@ def _fixed_chunk(ci, tc, tile_cfg, x0, x1, N, lo_, dims, strides, off, act_ptr, 
 
 def _all_actions_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
                       e_base, e_stride, q, h, h_out, pol, W, mode, write, write_pol, relax, shift, mask, use_mask,
-                      cand, use_cand, maxO, maxL, los, his):
+                      cand, use_cand, row_off, near, nbits, maxO, maxL, los, his):
     for ci in prange(ip.size - 1):
         los[ci] = np.inf
         his[ci] = -np.inf
@@ -333,7 +366,8 @@ def _all_actions_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, 
         for it in range(ip[ci], ip[ci + 1]):
             _all_chunk(ci, tile_tc[items[it, 0]], tile_cfg, items[it, 1], items[it, 2], N, lo_, dims, strides,
                        off, act_ptr, out_ptr, e_prob, e_m, e_base, e_stride, q, h, h_out, pol, W, mode, write,
-                       write_pol, relax, shift, mask, use_mask, cand, use_cand, iscr, fscr, los, his)
+                       write_pol, relax, shift, mask, use_mask, cand, use_cand, row_off, near, nbits, iscr, fscr,
+                       los, his)
 
 
 def _fixed_policy_body(items, ip, tile_tc, tile_cfg, N, lo_, dims, strides, off, act_ptr, out_ptr, e_prob, e_m,
@@ -365,6 +399,23 @@ def _used_actions_body(pol, off, cand):
 
 #: Per configuration, the bit set of the actions ``pol`` takes somewhere in its box.
 used_actions, used_actions_serial = twins(_used_actions_body, "used_actions")
+
+
+def _row_actions_body(pol, off, dims, row_off, cand):
+    N = dims.shape[1]
+    for c in prange(off.size - 1):
+        L = dims[c, N - 1]
+        r = row_off[c]
+        for s0 in range(off[c], off[c + 1], L):
+            bits = uint64(0)
+            for i in range(L):
+                bits |= uint64(1) << uint64(min(pol[s0 + i], 63))
+            cand[r] = bits
+            r += 1
+
+
+#: Per row (the last AoI axis of a configuration's box), the bit set of the actions ``pol`` takes on it.
+row_actions, row_actions_serial = twins(_row_actions_body, "row_actions")
 
 
 # ----------------------------------------------------------------------------- reachability

@@ -52,6 +52,9 @@ class Sweeper:
         self._dummy_h = np.zeros(1)
         self._dummy_W = np.zeros((1, 1))
         self._no_cand = np.zeros(1, np.uint64)
+        N = op.N
+        #: global index of each configuration's first row (a row: the last AoI axis of its box)
+        self.row_off = np.r_[0, np.cumsum(np.diff(op.off) // op.dims[:, N - 1])].astype(np.int64)
 
     def _run(self, fn_par, fn_ser, *args) -> tuple[float, float]:
         run_twins(fn_par, fn_ser, self.threads, *args, chunksize=1)
@@ -59,14 +62,23 @@ class Sweeper:
 
     def all_actions(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, W: np.ndarray | None,
                     reduce: Reduce, write: Write, write_pol: bool, relax: float, shift: float,
-                    cand: np.ndarray | None = None) -> tuple[float, float]:
+                    cand: np.ndarray | None = None, cand_rows: bool = False, near: float = -1.0,
+                    nbits: np.ndarray | None = None) -> tuple[float, float]:
         """A pass of every action: the Bellman operator (``Reduce.MIN``, its minimiser into ``pol``
         with ``write_pol``) or the weights ``W`` (``Reduce.WEIGHTED``); returns min / max of T h - h
         (``(inf, -inf)`` for an in-place pass, which computes no bracket). With ``cand`` (one uint64
-        bit set of actions per configuration, :meth:`used_actions`) only those actions are tried:
-        for in-place improvement sweeps only, never for a pass whose bracket is a certificate."""
+        bit set of actions per configuration, :meth:`used_actions`; with ``cand_rows`` one per row,
+        :meth:`row_actions`) only those actions are tried: for in-place improvement sweeps only,
+        never for a pass whose bracket is a certificate."""
         if cand is not None and write != Write.IN_PLACE:
             raise SolverError("candidate actions are for in-place improvement sweeps only (a certificate tries all)")
+        K = self.K
+        use = K.CAND_NONE if cand is None else K.CAND_ROW if cand_rows else K.CAND_CONFIG
+        if near >= 0 and (write == Write.IN_PLACE or reduce != Reduce.MIN or nbits is None
+                          or nbits.size != self.row_off[-1]):
+            raise SolverError("near-minimal actions: a certificate pass of the minimum, one bit set a row")
+        if cand is not None and cand.size != (self.row_off[-1] if cand_rows else self.op.off.size - 1):
+            raise SolverError("candidate bit sets: one per row (cand_rows) or one per configuration")
         o = self.op
         return self._run(
             self.K.all_actions, self.K.all_actions_serial,
@@ -74,13 +86,26 @@ class Sweeper:
             o.act_ptr, o.out_ptr, o.e_prob, o.e_m, o.e_base, o.e_stride, o.q, h,
             self._dummy_h if h_out is None else h_out, pol, self._dummy_W if W is None else W, int(reduce),
             int(write), bool(write_pol), float(relax), float(shift), self.mask, self.use_mask,
-            self._no_cand if cand is None else cand, cand is not None, o.max_out, o.max_row, self.los, self.his,
+            self._no_cand if cand is None else cand, use, self.row_off, float(near),
+            self._no_cand if nbits is None else nbits, o.max_out, o.max_row, self.los, self.his,
         )
 
     def used_actions(self, pol: np.ndarray, cand: np.ndarray) -> np.ndarray:
         """Into ``cand`` (uint64, one per configuration): the bit set of the actions ``pol`` takes
         somewhere in the configuration's box (actions past 63 as bit 63)."""
         run_twins(self.K.used_actions, self.K.used_actions_serial, self.threads, pol, self.op.off, cand)
+        return cand
+
+    @property
+    def n_rows(self) -> int:
+        """Rows of the layout (the last AoI axis of each configuration's box)."""
+        return int(self.row_off[-1])
+
+    def row_actions(self, pol: np.ndarray, cand: np.ndarray) -> np.ndarray:
+        """Into ``cand`` (uint64, one per row, :attr:`n_rows`): the bit set of the actions ``pol``
+        takes on the row (actions past 63 as bit 63)."""
+        o = self.op
+        run_twins(self.K.row_actions, self.K.row_actions_serial, self.threads, pol, o.off, o.dims, self.row_off, cand)
         return cand
 
     def fixed(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, write: Write, relax: float,
