@@ -18,7 +18,7 @@ from scipy.optimize import linprog
 from wncs_lp import solve
 from wncs_lp.bounds import lower_bound
 from wncs_lp.bounds.joint_chains import JointData
-from wncs_lp.bounds.level2 import (Level2Tables, certify_level2, independent_rows, level2_bound, level2_layout,
+from wncs_lp.bounds.level2 import (LEVEL2_SOLVERS, Level2Tables, certify_level2, independent_rows, level2_bound, level2_layout,
                                    level2_lp, level2_tables)
 from wncs_lp.errors import ArgumentError
 from wncs_lp.models import build
@@ -113,6 +113,21 @@ def test_lumping_is_between_relaxation_2_and_the_whole_pairs(case):
     for v in values:
         assert rel2 <= v * (1 + 1e-6)  # relaxation 2's LP is a subset of the lumped constraints
         assert v <= full * (1 + 1e-7) <= g_star * (1 + 1e-7)  # and the lumped ones of the whole pairs'
+
+
+@pytest.fixture(scope="module")
+def edge3():
+    system = system_of(("edge",), 3, 8)
+    data = JointData.from_system(system)
+    return data, solve(build(system.scenario)).gain_upper, level2_bound(data).lower_bound
+
+
+@pytest.mark.parametrize("solver", LEVEL2_SOLVERS)
+def test_every_solver_gives_a_certified_bound(edge3, solver):
+    data, g_star, ipx = edge3
+    r = level2_bound(data, solver=solver, tol=1e-7)
+    assert r.lower_bound <= g_star
+    assert r.lower_bound == pytest.approx(ipx, rel=1e-5)
 
 
 def test_the_layout_counts_what_the_builder_builds():

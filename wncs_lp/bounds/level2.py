@@ -57,7 +57,7 @@ changes the inequality only by the outcome tables' defect from stochastic, accou
 bound on the round-off (Higham's gamma, :func:`wncs_lp.solvers.iteration.gamma`) is subtracted.
 
 The LP (:func:`level2_lp`, :class:`Level2Layout`) is solved whole by HiGHS (:func:`level2_bound`;
-IPX without crossover, or PDLP): a research instrument for small and medium instances, not wired
+IPX without crossover, Clarabel or PDLP): a research instrument for small and medium instances, not wired
 into :func:`~wncs_lp.bounds.lower_bound`.
 """
 from __future__ import annotations
@@ -517,10 +517,11 @@ def level2_bound(system: System | JointData, *, lump=None, solver: str = "ipx", 
     tol : float
         The solver's optimality / feasibility tolerance.
     time_limit : float, optional
-        Wall-clock seconds for HiGHS.
+        Wall-clock seconds for the solver. HiGHS 1.16 holds no duals after its time limit (IPX and
+        PDLP alike, measured): such a run certifies nothing (``lower_bound`` = -inf).
     cpu_limit : float, optional
-        CPU seconds of this process for the interior point (HiGHS's interrupt callback; an
-        interrupted run holds no duals and certifies nothing).
+        CPU seconds of this process for IPX (HiGHS's interrupt callback; an interrupted run holds no
+        duals and certifies nothing); not used by Clarabel or PDLP.
     verbose : bool
         HiGHS's log on stdout.
 
