@@ -57,8 +57,8 @@ changes the inequality only by the outcome tables' defect from stochastic, accou
 bound on the round-off (Higham's gamma, :func:`wncs_lp.solvers.iteration.gamma`) is subtracted.
 
 The LP (:func:`level2_lp`, :class:`Level2Layout`) is solved whole by HiGHS (:func:`level2_bound`;
-IPX without crossover, Clarabel or PDLP): a research instrument for small and medium instances, not wired
-into :func:`~wncs_lp.bounds.lower_bound`.
+IPX without crossover, Clarabel or PDLP), for small and medium instances; ``lower_bound(x, 5)``
+(:mod:`~wncs_lp.bounds.all_pairs`) packs it as relaxation 5, with its tables for the policies.
 """
 from __future__ import annotations
 
