@@ -62,8 +62,8 @@ def test_preemption_is_refused_with_exit_2(capsys):
 
 
 def test_unknown_relaxation_exit_2(capsys):
-    rc, out = _json(capsys, "bound", P12, "--relaxation", "5", "--json")
-    assert rc == 2 and "expected one of 1, 2, 3" in out["error"]
+    rc, out = _json(capsys, "bound", P12, "--relaxation", "6", "--json")
+    assert rc == 2 and "expected one of 1, 2, 3, 4, 5" in out["error"]
 
 
 def test_a_search_stopped_at_its_budget_exits_0(capsys):
