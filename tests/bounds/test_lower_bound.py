@@ -32,8 +32,8 @@ def test_names_and_short_names():
     assert parse_relaxation(1) == "private-servers" and parse_relaxation("2") == "joint-configuration"
     assert parse_relaxation(3) == "grouped-private-servers"
     assert [parse_relaxation(r) for r in RELAXATIONS] == list(RELAXATIONS)
-    with pytest.raises(WncsError, match="expected one of 1, 2, 3"):
-        parse_relaxation("5")
+    with pytest.raises(WncsError, match="expected one of 1, 2, 3, 4, 5"):
+        parse_relaxation("6")
 
 
 def test_auto_is_a_valid_bound_and_says_which_fired(p12):
