@@ -23,22 +23,10 @@ from wncs_lp.solvers.matrix_free import BoxLayout, matrix_free_value_iteration  
 from wncs_lp.solvers.matrix_free.operator import Operator, Reduce, Write  # noqa: E402
 from wncs_lp.solvers.matrix_free.sweeper import Sweeper  # noqa: E402
 
-
-def paper(name, cap):
-    return wncs_lp.load_scenario(wncs_lp.scenario_path(name), [f"tau_cap={cap}"])
-
-
-def inside(sol, ref, rel=1e-9):
-    """The stored-matrix gain inside the matrix-free certificate and the other way round."""
-    s = rel * abs(ref.gain)
-    return (sol.gain_lower - s <= ref.gain <= sol.gain_upper + s
-            and ref.gain_lower - s <= sol.gain <= ref.gain_upper + s)
+# the same two small cases and gain check as the per-configuration candidates' tests
+from test_matrix_free_candidates import case, inside, paper  # noqa: E402,F401
 
 
-@pytest.fixture(scope="module", params=[("paper_p1234", 7), ("paper_preemption_p12", 8)], ids=["wncs", "preemption"])
-def case(request):
-    sc = paper(*request.param)
-    return System.from_scenario(sc), wncs_lp.solve(wncs_lp.build(sc), "vi")
 
 
 @pytest.mark.parametrize("near", [0.0, 1.0])

@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .pairs_kernels import pair_expect  # the pair chains' expectation, the same loops
+
 
 @njit(cache=True)
 def residuals(h, lam1, lam2, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, u):
@@ -27,20 +29,7 @@ def residuals(h, lam1, lam2, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2
         for p in range(act_ptr[c], act_ptr[c + 1]):
             for t in range(n_t):
                 acc[t] = 0.0
-            for o in range(out_ptr[p], out_ptr[p + 1]):
-                pr = out_prob[o]
-                cn = out_nxt[o]
-                m1 = s1[o]
-                m2 = s2[o]
-                for t1 in range(c1):
-                    n1 = t1 + 1 if t1 < m1 else m1
-                    base = n1 * c2
-                    row = t1 * c2
-                    for t2 in range(m2):
-                        acc[row + t2] += pr * h[cn, base + t2 + 1]
-                    v = pr * h[cn, base + m2]
-                    for t2 in range(m2, c2):
-                        acc[row + t2] += v
+            pair_expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
             m = -np.inf
             for t1 in range(c1):
                 a = lam1[p, t1]

@@ -17,7 +17,7 @@ from ..solvers.threads import twins
 
 
 @njit(inline="always")
-def _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
+def pair_expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
     """acc[T] += sum_o P(o|p) h[C'_o, T'_o(T)]."""
     for o in range(out_ptr[p], out_ptr[p + 1]):
         pr = out_prob[o]
@@ -37,8 +37,8 @@ def _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
 
 @njit(inline="always")
 def _expect_upper(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc):
-    """:func:`_expect` only where t2 >= t1 (a pair's fixed configuration; the rest mirrored). A copy
-    rather than a flag of :func:`_expect`, so that the plain chains' innermost loops stay as they were."""
+    """:func:`pair_expect` only where t2 >= t1 (a pair's fixed configuration; the rest mirrored). A copy
+    rather than a flag of :func:`pair_expect`, so that the plain chains' innermost loops stay as they were."""
     for o in range(out_ptr[p], out_ptr[p + 1]):
         pr = out_prob[o]
         cn = out_nxt[o]
@@ -68,7 +68,7 @@ def _bellman_config(c, h, q, price, c1, c2, act_ptr, out_ptr, out_nxt, out_prob,
         if upper:
             _expect_upper(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
         else:
-            _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
+            pair_expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
         for t in range(n_t):
             if acc[t] < best[t]:
                 best[t] = acc[t]
@@ -105,7 +105,7 @@ def residuals(h, q, c1, c2, act_ptr, out_ptr, out_nxt, out_prob, s1, s2, u):
         for p in range(act_ptr[c], act_ptr[c + 1]):
             for t in range(n_t):
                 acc[t] = 0.0
-            _expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
+            pair_expect(p, h, c1, c2, out_ptr, out_nxt, out_prob, s1, s2, acc)
             m = -np.inf
             for t in range(n_t):
                 r = h[c, t] - q[t] - acc[t]
