@@ -4,7 +4,7 @@ the enumerated MDP).
 
 * :func:`lower_bound` -- the entry point: a :class:`BoundResult` from the relaxation asked for
   (``"private-servers"`` = 1, ``"joint-configuration"`` = 2, ``"grouped-private-servers"`` = 3,
-  ``"joint-pairs"`` = 4, or ``"auto"``);
+  ``"joint-pairs"`` = 4, ``"joint-all-pairs"`` = 5, or ``"auto"``);
 * :func:`~wncs_lp.bounds.private.private_bound` -- relaxation 1, private servers with averaged
   capacity (:mod:`wncs_lp.bounds.private`);
 * :func:`~wncs_lp.bounds.grouped.grouped_bound` -- relaxation 3, relaxation 1 with groups of
@@ -17,6 +17,10 @@ the enumerated MDP).
 * relaxation 4 (``"joint-pairs"``), relaxation 2 with pairs of processes' ages kept jointly in
   its tables (tighter, never looser than relaxation 2): :func:`~wncs_lp.bounds.pairs.pairs_bound`
   (:mod:`wncs_lp.bounds.pairs`), greedy and lookahead policies on its :class:`GroupTables`;
+* relaxation 5 (``"joint-all-pairs"``), every pair's ages kept jointly at once (the level-2 LP of
+  :mod:`wncs_lp.bounds.level2`, solved whole, certified by a check of its size):
+  :func:`~wncs_lp.bounds.all_pairs.all_pairs_bound` (:mod:`wncs_lp.bounds.all_pairs`), its tables a
+  :class:`GroupTables` cover of every pair; small systems only (its size is checked first);
 * :func:`bound_policy` / :class:`BoundPolicy` / :class:`GroupBoundPolicy` -- the greedy policy on a
   bound's value tables; for relaxations 1 and 3 :class:`ProjectedBoundPolicy`, the same lookahead
   read through the projections on the private systems (:mod:`wncs_lp.bounds.projected`: memory
@@ -32,9 +36,9 @@ the enumerated MDP).
 * :func:`~wncs_lp.bounds.gaps.policy_gaps` -- policies evaluated against a bound: the certified
   optimality gap of each.
 
-Every bound is certified by the Bellman brackets of the chains it solves, never by an LP
-solver's status; the result type of every relaxation is :class:`BoundResult`, whose value
-tables (:class:`ValueTables`, or :class:`GroupTables` for relaxations 3 and 4) drive the greedy policy
+Every bound is certified by the Bellman brackets of the chains it solves (relaxation 5: by its
+tables' and prices' residuals on every (C, a)), never by an LP solver's status; the result type of every relaxation is :class:`BoundResult`, whose value
+tables (:class:`ValueTables`, or :class:`GroupTables` for relaxations 3, 4 and 5) drive the greedy policy
 of the bound.
 """
 from __future__ import annotations
