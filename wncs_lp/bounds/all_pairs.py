@@ -14,10 +14,11 @@ as :class:`~wncs_lp.bounds.result.GroupTables` over a *cover* (every pair, and e
 own table is not zero), so the greedy policy, the lookahead and the rollout of
 :func:`~wncs_lp.bounds.gaps.policy_gaps` read it as they read relaxation 4's pair tables.
 
-The LP is solved whole (:func:`~wncs_lp.bounds.level2.level2_bound`): its size is checked against
-the memory this process may use before it is built (:func:`all_pairs_size`). ``"auto"`` does not
-run it: its time is not yet predictable (one server's LPs take seconds at the calibration
-instances, two servers' take minutes an interior-point iteration; docs/bounds.md).
+The LP is solved whole (:func:`~wncs_lp.bounds.level2.level2_bound`): :func:`all_pairs_bound`
+checks its size against the memory this process may use before it is built
+(:func:`all_pairs_size`). ``"auto"`` does not run it: its time is not yet predictable (one
+server's LPs take seconds at the calibration instances, two servers' take minutes an
+interior-point iteration; docs/bounds.md).
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SolverError
+from ..models.guard import require_memory
 from ..models.system import System
 from ..progress import as_progress
 from ..status import INACCURATE, OPTIMAL
@@ -97,6 +99,9 @@ def all_pairs_bound(system: System, *, lump=None, solver: str = "ipx", tol: floa
 
     Raises
     ------
+    SizeLimitError
+        The LP would not fit the memory this process may use (:func:`all_pairs_size`), before it
+        is built.
     SolverError
         The solver returned no duals (nothing to certify), e.g. stopped by ``cpu_limit``.
     """
@@ -104,6 +109,11 @@ def all_pairs_bound(system: System, *, lump=None, solver: str = "ipx", tol: floa
     prog = as_progress(progress)
     data = JointData.from_system(system)
     size = all_pairs_size(data, lump, solver)
+    require_memory(size["memory_bytes"], f"relaxation 5 on {system.n_processes} processes (the level-2 LP: "
+                   f"{size['pairs']:,} pairs, {size['cols']:,} columns, {size['nnz']:,} nonzeros)",
+                   ["relaxation 4 (--relaxation 4: pairs of one partition)",
+                    "relaxation 5 with lumped ages (lower_bound(x, 5, lump=c))",
+                    "relaxation 1 (--relaxation 1: seconds at any size)"])
     prog.phase(f"relaxation 5: the level-2 LP ({size['pairs']:,} pairs, {size['cols']:,} columns) by {solver}")
     res = level2_bound(data, lump=lump, solver=solver, tol=tol, time_limit=time_limit, cpu_limit=cpu_limit,
                        verbose=verbose)

@@ -15,7 +15,7 @@ from ..errors import ArgumentError, WncsError
 from ..models.guard import require_memory
 from ..models.system import System
 from ..scenario import Scenario
-from .all_pairs import all_pairs_bound, all_pairs_size
+from .all_pairs import all_pairs_bound
 from .grouped import grouped_bound
 from .inputs import bound_system
 from .joint import ipm_plan, joint_bound, joint_reach, joint_size
@@ -163,13 +163,7 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         system = _as_system(scenario_or_system)
         if system.is_lazy:
             raise WncsError(f"relaxation {name} asked for, but {LAZY_NOTE}")
-        size = all_pairs_size(system, options.get("lump"), options.get("solver", "ipx"))
-        require_memory(size["memory_bytes"], f"relaxation 5 on {system.n_processes} processes (the level-2 LP: "
-                       f"{size['pairs']:,} pairs, {size['cols']:,} columns, {size['nnz']:,} nonzeros)",
-                       ["relaxation 4 (--relaxation 4: pairs of one partition)",
-                        "relaxation 5 with lumped ages (lower_bound(x, 5, lump=c))",
-                        "relaxation 1 (--relaxation 1: seconds at any size)"])
-        return all_pairs_bound(system, **options)
+        return all_pairs_bound(system, **options)  # its LP's size checked against the memory first
     if name in ("joint-configuration", "joint-pairs"):
         system = _as_system(scenario_or_system)
         if system.is_lazy:

@@ -75,9 +75,9 @@ class Sweeper:
         K = self.K
         use = K.CAND_NONE if cand is None else K.CAND_ROW if cand_rows else K.CAND_CONFIG
         if near >= 0 and (write == Write.IN_PLACE or reduce != Reduce.MIN or nbits is None
-                          or nbits.size != self.row_off[-1]):
+                          or nbits.size != self.n_rows):
             raise SolverError("near-minimal actions: a certificate pass of the minimum, one bit set a row")
-        if cand is not None and cand.size != (self.row_off[-1] if cand_rows else self.op.off.size - 1):
+        if cand is not None and cand.size != (self.n_rows if cand_rows else self.op.off.size - 1):
             raise SolverError("candidate bit sets: one per row (cand_rows) or one per configuration")
         o = self.op
         return self._run(
