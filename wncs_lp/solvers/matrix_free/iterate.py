@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -13,14 +13,15 @@ from ...errors import PolicyError, SolverError
 from ...models.system import System
 from ...progress import Progress, as_progress
 from ...scenario import Scenario
+from ...status import INTERRUPTED, of
 from ..iteration import IterationOutcome, IterationScheme, certified_iteration, gamma, max_abs, options_from
 from .aggregate import Aggregator
 from .extrapolate import Extrapolator
-from .layout import BoxLayout, check_local_actions, resolve_domain
+from .layout import BoxLayout, check_local_actions, layout_states, resolve_domain
 from .operator import Operator, Reduce, Write, with_cost
 from .options import MatrixFreeOptions
 from .result import MatrixFreeEvaluation, MatrixFreeSolution, as_system
-from .start import start_vector
+from .start import clamped_values, start_vector
 from .sweeper import Sweeper, load_kernels, reachable_mask
 
 __all__ = ["matrix_free_value_iteration", "matrix_free_evaluate", "policy_table", "matrix_free_bytes",
@@ -112,6 +113,8 @@ class BoxSweeps(IterationScheme):
         self.agg_rel = opts.aggregate_rel
         self.agg_unseen = False  # a correction made since the last certificate
         self.bracket = (np.inf, -np.inf)  # the last certificate's
+        self.gain_hint, self.wide_shift, self.wide_rel = opts.gain_hint, opts.wide_shift, opts.wide_rel
+        self.best = (-np.inf, np.inf)  # the intersection of every certificate: g* lies in it
         self._out: np.ndarray | None = None  # where the last certificate pass wrote the next iterate
 
     def pass_(self, h: np.ndarray, h_out: np.ndarray | None, write: Write, relax: float, shift: float) -> tuple[float, float]:
@@ -159,6 +162,22 @@ class BoxSweeps(IterationScheme):
         self.ex.certified()
         self.bracket, self.agg_unseen = bracket, False
         return bracket
+
+    def next_shift(self, lo: float, hi: float) -> float:
+        b0, b1 = max(self.best[0], lo), min(self.best[1], hi)
+        self.best = (b0, b1)
+        mid = 0.5 * (lo + hi)
+        if not (hi - lo > self.wide_rel * abs(mid)):
+            return mid
+        if self.gain_hint is not None:
+            return min(max(self.gain_hint, b0), b1)
+        if self.wide_shift == "lo":
+            return lo
+        if self.wide_shift == "best":
+            return 0.5 * (b0 + b1)
+        if self.wide_shift == "geo" and b0 > 0:
+            return float(np.sqrt(b0 * b1))
+        return mid
 
     def advance(self) -> None:
         out, self._out = self._out, None
@@ -357,12 +376,32 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
         check_size(system.scenario, method="matrix-free", model=system.model)
     if int(system.n_actions.max()) > 255:  # pragma: no cover - the paper's models have <= 12
         raise SolverError("more than 255 actions in a configuration: the uint8 policy cannot hold them")
-    st = _setup(system, opts, h0)
     prog = as_progress(progress)
+    stopped = False
+    try:
+        coarse = _coarse_solve(system, opts, prog) if h0 is None else None
+    except KeyboardInterrupt:
+        if opts.on_interrupt == "raise":
+            raise
+        # Ctrl-C during the coarse solve: one certificate of the start, returned "interrupted"
+        coarse, stopped, opts = None, True, replace(opts, max_iter=1)
+    st = _setup(system, opts, h0)
+    coarse_stats = None
+    if coarse is not None:
+        clamped_values(coarse.layout, coarse.bias, st.layout, st.h)
+        st.h -= st.h[0]
+        coarse_stats = {"caps": [int(c) for c in coarse.system.caps], "sweeps": coarse.iterations,
+                        "eval_sweeps": coarse.stats["eval_sweeps"], "gain": coarse.gain,
+                        "gain_lower": coarse.gain_lower, "gain_upper": coarse.gain_upper, "seconds": coarse.seconds}
+        if opts.gain_hint is None:
+            opts = replace(opts, gain_hint=float(coarse.gain))
+        del coarse
     sweeps = _Improve(st, opts)
     t_setup = time.perf_counter() - t0
     _announce(prog, st, sweeps, t_setup)
     out = certified_iteration(sweeps, opts, cost_scale=st.op.cost_scale, progress=prog, label=sweeps.label, t0=t0)
+    if stopped and not out.converged:
+        out.status = of(INTERRUPTED)
     lo, hi, delta = _bracket(sweeps, out, prog, opts.tol)
     h = sweeps.h
     h -= h[0]
@@ -370,11 +409,39 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
              "n_reachable": int(st.mask.sum()) if st.mask is not None else None, "n_configs": st.layout.n_configs,
              "sweeps": out.used, "eval_sweeps": out.evals, "value_vectors": sweeps.vectors,
              "bytes": matrix_free_bytes(st.n, vectors=sweeps.vectors, mask=st.mask is not None),
+             "coarse": coarse_stats, "gain_hint": opts.gain_hint,
              **_common_stats(out, opts, sweeps, lo, hi, delta, t_setup)}
     return MatrixFreeSolution(method="matrix-free", status=out.status, gain=0.5 * (lo + hi), gain_lower=lo,
                               gain_upper=hi, bias=h, local_actions=sweeps.pol, iterations=out.used,
                               seconds=time.perf_counter() - t0, stats=stats, layout=st.layout, system=system,
                               mask=st.mask)
+
+
+def coarse_caps(caps: Any, ratio: float) -> np.ndarray:
+    """The caps of a coarse solve: ratio cap_k rounded to the nearest integer, at least 2 and at
+    most cap_k."""
+    caps = np.asarray(caps, dtype=np.int64)
+    return np.minimum(np.maximum(np.floor(ratio * caps + 0.5).astype(np.int64), 2), caps)
+
+
+def _coarse_solve(system: System, opts: MatrixFreeOptions, prog: Progress) -> MatrixFreeSolution | None:
+    """The solve at the smaller caps :func:`coarse_caps` (to ``coarse_tol``) whose bias, each AoI
+    clamped into its boxes, starts the solve and whose gain is its ``gain_hint``; None when
+    ``coarse_ratio`` is 0, the layout has fewer than ``coarse_states`` states, the caps would
+    not shrink, or the smaller caps' automaton has other configurations."""
+    if opts.coarse_ratio <= 0 or layout_states(system) < opts.coarse_states:
+        return None
+    caps = coarse_caps(system.caps, opts.coarse_ratio)
+    if np.array_equal(caps, system.caps):
+        return None
+    sc = system.scenario.with_overrides({f"process.{k + 1}.tau_cap": int(c) for k, c in enumerate(caps)})
+    small = System.from_scenario(sc)
+    if small.automaton.configs != system.automaton.configs:  # the preemption model's hold AoI values
+        return None
+    prog.phase(f"[matrix-free] a coarse solve first, at caps {tuple(int(c) for c in caps)} to {opts.coarse_tol:g}: "
+               "its bias starts the solve and its gain is the shift while the bracket is wide")
+    sub = replace(opts, tol=opts.coarse_tol, coarse_ratio=0.0, gain_hint=None, force=True, on_interrupt="raise")
+    return matrix_free_value_iteration(small, sub, progress=prog)
 
 
 def _announce(prog: Progress, st: Setup, sweeps: BoxSweeps, t_setup: float) -> None:

@@ -16,6 +16,8 @@ SCHEMES = ("auto", "mpi", "gs", "jacobi")
 TILE_ORDERS = ("forward", "reverse")
 #: ``candidates`` values: the candidate actions' bit set per configuration or per row.
 CANDIDATES = ("config", "row")
+#: ``wide_shift`` values: the in-place sweeps' shift while the certificate is wide.
+WIDE_SHIFTS = ("mid", "lo", "best", "geo")
 
 
 @dataclass(frozen=True)
@@ -111,6 +113,12 @@ class MatrixFreeOptions(IterationOptions):
     candidates_near: float = 1.0
     aggregate: bool = False
     aggregate_rel: float = 1e-2
+    gain_hint: float | None = None
+    wide_shift: str = "mid"
+    wide_rel: float = 1.0
+    coarse_ratio: float = 0.0
+    coarse_states: int = 100_000_000
+    coarse_tol: float = 1e-2
     warm_start: bool | None = None
     warm_rel: float = 0.05
     warm_max: int = 100
@@ -122,6 +130,17 @@ class MatrixFreeOptions(IterationOptions):
         _choice("domain", self.domain, DOMAINS)
         _choice("tile_order", self.tile_order, TILE_ORDERS)
         _choice("candidates", self.candidates, CANDIDATES)
+        _choice("wide_shift", self.wide_shift, WIDE_SHIFTS)
+        if self.gain_hint is not None and not (is_real(self.gain_hint) and math.isfinite(self.gain_hint)):
+            raise SolverError(f"gain_hint must be a finite number (or None), got {self.gain_hint!r}")
+        if not (is_real(self.wide_rel) and math.isfinite(self.wide_rel) and self.wide_rel > 0):
+            raise SolverError(f"wide_rel must be a finite number > 0, got {self.wide_rel!r}")
+        if not (is_real(self.coarse_ratio) and 0.0 <= self.coarse_ratio < 1.0):
+            raise SolverError(f"coarse_ratio must be in [0, 1) (0: no coarse start), got {self.coarse_ratio!r}")
+        if not (is_int(self.coarse_states) and self.coarse_states >= 0):
+            raise SolverError(f"coarse_states must be an integer >= 0, got {self.coarse_states!r}")
+        if not (is_real(self.coarse_tol) and math.isfinite(self.coarse_tol) and self.coarse_tol > 0):
+            raise SolverError(f"coarse_tol must be a finite number > 0, got {self.coarse_tol!r}")
         if not (is_real(self.relax) and 0.0 < self.relax <= 1.0):
             raise SolverError(f"relax must be in (0, 1], got {self.relax!r}")
         if not (is_real(self.candidates_rel) and math.isfinite(self.candidates_rel) and self.candidates_rel >= 0):
