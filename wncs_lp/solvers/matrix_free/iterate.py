@@ -164,6 +164,10 @@ class BoxSweeps(IterationScheme):
         return bracket
 
     def next_shift(self, lo: float, hi: float) -> float:
+        # While the bracket is wide its midpoint can be far off the gain (processes 1-4 at cap 30
+        # start with [10, 113074] around a gain of 1628), and the in-place sweeps then drift
+        # unevenly by about that error each sweep, which widens the next bracket; a hint (or a
+        # rule) holds the shift near the gain until the bracket is narrow enough to take over.
         b0, b1 = max(self.best[0], lo), min(self.best[1], hi)
         self.best = (b0, b1)
         mid = 0.5 * (lo + hi)
@@ -353,7 +357,9 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
         Warm start (:func:`~.start.start_vector`): one value per layout state, a solution's bias,
         or a separable value function sum_k h_k(tau_k, column_k(c)) such as the tables of
         :func:`wncs_lp.bounds.lower_bound` (written straight into the solve's value vector).
-        The certificate holds whatever the start; a good one saves sweeps.
+        The certificate holds whatever the start; a good one saves sweeps. Without one, a
+        layout of at least ``coarse_states`` states starts from a coarse solve at smaller caps
+        (``coarse_ratio``; :class:`~.options.MatrixFreeOptions`).
     progress : bool or Progress
         The setup, then the certificate passes (sweeps, bracket, relative width) on stderr.
 
@@ -363,8 +369,11 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
         ``method = "matrix-free"``; ``stats``: ``scheme``, ``final_scheme``, ``threads``,
         ``domain``, ``n_states`` (layout), ``n_reachable`` (with a mask), ``sweeps``,
         ``eval_sweeps``, ``checks``, ``rel_gap``, ``bytes`` (the solve's arrays),
-        ``seconds_setup``, ``fallback``, ``hull_closes``, ``roundoff_delta``, ``stop`` and
-        ``history``: one ``(sweeps, eval_sweeps, seconds, lo, hi)`` per certificate pass.
+        ``seconds_setup`` (the coarse solve included), ``fallback``, ``hull_closes``,
+        ``roundoff_delta``, ``stop``, ``gain_hint``, ``coarse`` (None, or the coarse solve's
+        ``caps``, ``sweeps``, ``eval_sweeps``, ``gain``, ``gain_lower``, ``gain_upper`` and
+        ``seconds``; its passes are not in ``sweeps``) and ``history``: one ``(sweeps,
+        eval_sweeps, seconds, lo, hi)`` per certificate pass.
     """
     opts = options_from(MatrixFreeOptions, options, fields, "matrix_free_value_iteration")
     t0 = time.perf_counter()

@@ -86,6 +86,35 @@ class MatrixFreeOptions(IterationOptions):
         optimum's modified policy iteration).
     aggregate_rel : float
         > 0 (1e-2).
+    gain_hint : float or None
+        Value iteration only: the in-place sweeps' shift (their estimate of the gain) while the
+        certificate's relative width exceeds ``wide_rel``, clipped into the intersection of
+        the certificates so far (g* lies in it); None: the bracket's midpoint (or
+        ``wide_shift``). A coarse start (``coarse_ratio``) sets it to the coarse gain when not
+        given. The certificate is unaffected; a hint only sets how far a shift off the gain
+        distorts the in-place sweeps (by about the error, 1/relax - the share of successors
+        already updated): processes 1-4 at cap 30 start with [min c, max c] = [10, 113074], whose
+        midpoint is 35x the gain, and a hint within 15% of it (relaxation 1's lower bound, the
+        gain at cap 20) took the bracket to 1e-2 in 31 + 50 passes against 49 + 80.
+    wide_shift : {"mid", "lo", "best", "geo"}
+        Without a hint, the shift while the width exceeds ``wide_rel``: the last bracket's
+        midpoint (default), its lower end, the midpoint of the intersection of the brackets so
+        far, or that intersection's geometric midpoint (when its lower end is > 0). Measured and
+        left off (docs/matrix-free.md): none beat the midpoint at every cap.
+    wide_rel : float
+        > 0 (1.0): the relative width above which the bracket counts as wide.
+    coarse_ratio : float
+        Value iteration only, in [0, 1) (2/3): solve first at the caps ``coarse_ratio`` x the caps
+        (rounded, :func:`~.iterate.coarse_caps`) to ``coarse_tol``, start from that bias with
+        each AoI clamped into the smaller boxes (:func:`~.start.clamped_values`) and take its
+        gain as ``gain_hint``; only for a layout of at least ``coarse_states`` states, without
+        an ``h0``, and where the configurations do not change with the caps (not the preemption
+        model's, which hold AoI values). 0: never. Processes 1-4 at cap 30: docs/matrix-free.md.
+    coarse_states : int
+        >= 0 (100,000,000): the layout size from which the coarse start is made (caps 12-20 of
+        processes 1-4, 2.9M-38M states, gain nothing from it: their first brackets do not widen).
+    coarse_tol : float
+        > 0 (1e-2): the relative width the coarse solve is taken to.
     warm_start : bool or None
         Jacobi sweeps first, until the bracket is within ``warm_rel`` (at most ``warm_max``
         sweeps); it shares the extrapolation's second vector. None: on for an evaluation, off for
@@ -116,7 +145,7 @@ class MatrixFreeOptions(IterationOptions):
     gain_hint: float | None = None
     wide_shift: str = "mid"
     wide_rel: float = 1.0
-    coarse_ratio: float = 0.0
+    coarse_ratio: float = 2 / 3
     coarse_states: int = 100_000_000
     coarse_tol: float = 1e-2
     warm_start: bool | None = None
