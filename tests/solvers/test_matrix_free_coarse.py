@@ -27,18 +27,35 @@ from test_matrix_free_candidates import case, inside, paper  # noqa: E402,F401
 
 def test_coarse_start_keeps_the_certified_gain(case):
     system, ref = case
-    sol = matrix_free_value_iteration(system, coarse_ratio=0.7, coarse_states=0)
+    sol = matrix_free_value_iteration(system, coarse_ratio=0.7, coarse_states=0, coarse_far=0.0)
     co = sol.stats["coarse"]
     if system.scenario.model.kind == "preemption":
         # its configurations hold AoI values (the pipeline's), so they change with the caps: no
         # layout of smaller caps to read a start from, and the solve goes on from zero
         assert co is None and sol.stats["gain_hint"] is None
     else:
-        assert co is not None and co["caps"] == [int(c) for c in coarse_caps(system.caps, 0.7)]
+        assert co is not None and co["used"] and co["caps"] == [int(c) for c in coarse_caps(system.caps, 0.7)]
         assert all(c < int(k) for c, k in zip(co["caps"], system.caps))
         # the optimal gain grows with the caps: the coarse one is below the certified bracket
         assert sol.stats["gain_hint"] == co["gain"] and co["gain_upper"] < sol.gain_lower
     assert sol.status == "optimal" and inside(sol, ref)
+
+
+def test_a_coarse_start_near_the_midpoint_is_dropped(case):
+    # processes 1-4 at cap 7: the first midpoint (min c + max c) / 2 = 250.1 is below 10x the
+    # cap-5 gain, so the solve is the plain one (one thread: the same passes and bits)
+    system, ref = case
+    if system.scenario.model.kind == "preemption":
+        return
+    q = [np.asarray(t)[:int(c)] for t, c in zip(system.q, system.caps)]
+    assert 0.5 * (sum(x.min() for x in q) + sum(x.max() for x in q)) < 10 * ref.gain
+    plain = matrix_free_value_iteration(system, coarse_ratio=0.0)
+    sol = matrix_free_value_iteration(system, coarse_ratio=0.7, coarse_states=0)
+    co = sol.stats["coarse"]
+    assert co is not None and not co["used"] and sol.stats["gain_hint"] is None
+    assert co["first_midpoint_over_gain"] < 10
+    assert (sol.gain, sol.gain_lower, sol.gain_upper, sol.iterations) == \
+        (plain.gain, plain.gain_lower, plain.gain_upper, plain.iterations)
 
 
 @pytest.mark.parametrize("hint", [0.0, 0.5, 30.0])
@@ -61,7 +78,8 @@ def test_the_coarse_start_is_off_below_its_size_and_with_a_start_given(case):
     system, _ = case
     assert matrix_free_value_iteration(system, coarse_ratio=0.7, tol=1e-3).stats["coarse"] is None
     n = BoxLayout.from_system(system).n_states
-    sol = matrix_free_value_iteration(system, coarse_ratio=0.7, coarse_states=0, h0=np.zeros(n), tol=1e-3)
+    sol = matrix_free_value_iteration(system, coarse_ratio=0.7, coarse_states=0, coarse_far=0.0, h0=np.zeros(n),
+                                      tol=1e-3)
     assert sol.stats["coarse"] is None and sol.stats["gain_hint"] is None
 
 
@@ -82,6 +100,6 @@ def test_coarse_caps_and_bad_options():
     assert coarse_caps([30, 25, 12, 3], 0.6667).tolist() == [20, 17, 8, 2]
     assert coarse_caps([2, 1], 0.5).tolist() == [2, 1]
     for bad in ({"coarse_ratio": 1.0}, {"coarse_ratio": -0.1}, {"coarse_states": -1}, {"coarse_tol": 0.0},
-                {"gain_hint": float("nan")}, {"wide_rel": 0.0}, {"wide_shift": "median"}):
+                {"gain_hint": float("nan")}, {"wide_rel": 0.0}, {"wide_shift": "median"}, {"coarse_far": -1.0}):
         with pytest.raises(SolverError, match=next(iter(bad))):
             matrix_free_value_iteration(paper("paper_p12", 4), **bad)

@@ -371,8 +371,9 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
         ``eval_sweeps``, ``checks``, ``rel_gap``, ``bytes`` (the solve's arrays),
         ``seconds_setup`` (the coarse solve included), ``fallback``, ``hull_closes``,
         ``roundoff_delta``, ``stop``, ``gain_hint``, ``coarse`` (None, or the coarse solve's
-        ``caps``, ``sweeps``, ``eval_sweeps``, ``gain``, ``gain_lower``, ``gain_upper`` and
-        ``seconds``; its passes are not in ``sweeps``) and ``history``: one ``(sweeps,
+        ``caps``, ``sweeps``, ``eval_sweeps``, ``gain``, ``gain_lower``, ``gain_upper``,
+        ``seconds``, ``first_midpoint_over_gain`` and whether it was ``used``; its passes are not
+        in ``sweeps``) and ``history``: one ``(sweeps,
         eval_sweeps, seconds, lo, hi)`` per certificate pass.
     """
     opts = options_from(MatrixFreeOptions, options, fields, "matrix_free_value_iteration")
@@ -397,13 +398,16 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
     st = _setup(system, opts, h0)
     coarse_stats = None
     if coarse is not None:
-        clamped_values(coarse.layout, coarse.bias, st.layout, st.h)
-        st.h -= st.h[0]
+        used = not coarse.stats.get("dropped", False)
         coarse_stats = {"caps": [int(c) for c in coarse.system.caps], "sweeps": coarse.iterations,
                         "eval_sweeps": coarse.stats["eval_sweeps"], "gain": coarse.gain,
-                        "gain_lower": coarse.gain_lower, "gain_upper": coarse.gain_upper, "seconds": coarse.seconds}
-        if opts.gain_hint is None:
-            opts = replace(opts, gain_hint=float(coarse.gain))
+                        "gain_lower": coarse.gain_lower, "gain_upper": coarse.gain_upper, "seconds": coarse.seconds,
+                        "first_midpoint_over_gain": coarse.stats["far"], "used": used}
+        if used:
+            clamped_values(coarse.layout, coarse.bias, st.layout, st.h)
+            st.h -= st.h[0]
+            if opts.gain_hint is None:
+                opts = replace(opts, gain_hint=float(coarse.gain))
         del coarse
     sweeps = _Improve(st, opts)
     t_setup = time.perf_counter() - t0
@@ -450,7 +454,26 @@ def _coarse_solve(system: System, opts: MatrixFreeOptions, prog: Progress) -> Ma
     prog.phase(f"[matrix-free] a coarse solve first, at caps {tuple(int(c) for c in caps)} to {opts.coarse_tol:g}: "
                "its bias starts the solve and its gain is the shift while the bracket is wide")
     sub = replace(opts, tol=opts.coarse_tol, coarse_ratio=0.0, gain_hint=None, force=True, on_interrupt="raise")
-    return matrix_free_value_iteration(small, sub, progress=prog)
+    sol = matrix_free_value_iteration(small, sub, progress=prog)
+    # what the start cures is a first shift far above the gain: the midpoint of [min c, max c]
+    # (processes 1-4 at cap 30: 36x the cap-20 gain); where it is near (the six-process mix at
+    # cap 10: 2.0x the cap-7 gain of 494, itself 0.42x the gain) that gain is a hint far below
+    # g*, and the clamped bias no better a start than zero
+    far = first_midpoint(system) / max(abs(sol.gain), 1e-300)
+    sol.stats["far"] = far
+    if not far >= opts.coarse_far:
+        prog.phase(f"[matrix-free] the coarse start is dropped: the first midpoint is {far:.3g}x its gain "
+                   f"(< coarse_far = {opts.coarse_far:g}); starting from zero")
+        sol.stats["dropped"] = True
+    return sol
+
+
+def first_midpoint(system: System) -> float:
+    """(min c + max c) / 2 over the AoI box, c(tau) = sum_k q_k(tau_k): the midpoint of the
+    first certificate from h = 0 (on the box; the hull's is within it)."""
+    lo = sum(float(np.min(np.asarray(q)[:int(c)])) for q, c in zip(system.q, system.caps))
+    hi = sum(float(np.max(np.asarray(q)[:int(c)])) for q, c in zip(system.q, system.caps))
+    return 0.5 * (lo + hi)
 
 
 def _announce(prog: Progress, st: Setup, sweeps: BoxSweeps, t_setup: float) -> None:

@@ -115,6 +115,13 @@ class MatrixFreeOptions(IterationOptions):
         processes 1-4, 2.9M-38M states, gain nothing from it: their first brackets do not widen).
     coarse_tol : float
         > 0 (1e-2): the relative width the coarse solve is taken to.
+    coarse_far : float
+        >= 0 (10): the coarse start is used only when the first bracket's midpoint from h = 0,
+        (min c + max c) / 2 over the AoI box (:func:`~.iterate.first_midpoint`), is at least this
+        multiple of the coarse gain (a lower bound on g*, which grows with the caps): the
+        distortion that start cures (processes 1-4 at cap 30: 36x); otherwise the solve starts
+        from zero with the midpoints, as without it (the six-process mix at cap 10: 2.0x, the cap-7
+        gain 0.42x g*, a hint that cost passes).
     warm_start : bool or None
         Jacobi sweeps first, until the bracket is within ``warm_rel`` (at most ``warm_max``
         sweeps); it shares the extrapolation's second vector. None: on for an evaluation, off for
@@ -148,6 +155,7 @@ class MatrixFreeOptions(IterationOptions):
     coarse_ratio: float = 2 / 3
     coarse_states: int = 100_000_000
     coarse_tol: float = 1e-2
+    coarse_far: float = 10.0
     warm_start: bool | None = None
     warm_rel: float = 0.05
     warm_max: int = 100
@@ -170,6 +178,8 @@ class MatrixFreeOptions(IterationOptions):
             raise SolverError(f"coarse_states must be an integer >= 0, got {self.coarse_states!r}")
         if not (is_real(self.coarse_tol) and math.isfinite(self.coarse_tol) and self.coarse_tol > 0):
             raise SolverError(f"coarse_tol must be a finite number > 0, got {self.coarse_tol!r}")
+        if not (is_real(self.coarse_far) and math.isfinite(self.coarse_far) and self.coarse_far >= 0):
+            raise SolverError(f"coarse_far must be a finite number >= 0, got {self.coarse_far!r}")
         if not (is_real(self.relax) and 0.0 < self.relax <= 1.0):
             raise SolverError(f"relax must be in (0, 1], got {self.relax!r}")
         if not (is_real(self.candidates_rel) and math.isfinite(self.candidates_rel) and self.candidates_rel >= 0):
