@@ -51,7 +51,11 @@ Sections (one CSV row per measurement, a table on stdout):
   core at the layout's mean row length and the kind's outcomes a row (``term_rate``; on rows of
   1,024 states too, its per-row costs amortised). ``--variants '{"label": {options}, ...}'`` runs this tree
   once per variant instead (each with its options on top of ``--options``; the ratios against the
-  first), e.g. the coarse correction (``{"aggregate": true}``) against the defaults.
+  first), e.g. the coarse correction (``{"aggregate": true}``) against the defaults; ``--repeats``
+  alternates them that many rounds, ``--no-profile`` skips the one-pass timings (e.g. a phase to
+  ``{"tol": 0.01}``), and ``{"gain_hint": "relaxation1"}`` passes relaxation 1's lower bound
+  (computed in the worker, its CPU counted) as the solve's ``gain_hint``. The row's note gives the
+  relative width at each of the first certificates and a coarse start's solve (``coarse_ratio``).
 
 * ``capmass`` -- ``--instances`` (scenario:cap): the optimal policy (read from ``--solutions``
   / NAME_CAP.npz, or solved with the defaults and saved there), then
