@@ -51,7 +51,11 @@ Sections (one CSV row per measurement, a table on stdout):
   core at the layout's mean row length and the kind's outcomes a row (``term_rate``; on rows of
   1,024 states too, its per-row costs amortised). ``--variants '{"label": {options}, ...}'`` runs this tree
   once per variant instead (each with its options on top of ``--options``; the ratios against the
-  first), e.g. the coarse correction (``{"aggregate": true}``) against the defaults.
+  first), e.g. the coarse correction (``{"aggregate": true}``) against the defaults; ``--repeats``
+  alternates them that many rounds, ``--no-profile`` skips the one-pass timings (e.g. a phase to
+  ``{"tol": 0.01}``), and ``{"gain_hint": "relaxation1"}`` passes relaxation 1's lower bound
+  (computed in the worker, its CPU counted) as the solve's ``gain_hint``. The row's note gives the
+  relative width at each of the first certificates and a coarse start's solve (``coarse_ratio``).
 
 * ``capmass`` -- ``--instances`` (scenario:cap): the optimal policy (read from ``--solutions``
   / NAME_CAP.npz, or solved with the defaults and saved there), then
@@ -475,7 +479,7 @@ def pass_times_note(log) -> str:
     return "; ".join(parts)
 
 
-def sweeps_worker(name, cap, threads, options):
+def sweeps_worker(name, cap, threads, options, profile=True):
     import numpy as np  # noqa: F401  (the worker's own tree is the one imported)
 
     from wncs_lp.solvers.matrix_free import matrix_free_value_iteration as mfvi
@@ -487,6 +491,13 @@ def sweeps_worker(name, cap, threads, options):
     log, unwrap = timed_passes()
     m0 = machine_cpu()
     c0 = time.process_time()
+    hint_note = ""
+    if options.get("gain_hint") == "relaxation1":  # the solve's first shifts from relaxation 1's bound
+        from wncs_lp.bounds import lower_bound
+
+        b = lower_bound(System.from_scenario(sc), 1)
+        options = {**options, "gain_hint": float(b.lower_bound)}
+        hint_note = f"; gain_hint = relaxation 1's bound {b.lower_bound:.6g} ({time.process_time() - c0:.2f} s of CPU)"
     sol = mfvi(sc, threads=threads, progress=True, **options)
     cpu = time.process_time() - c0
     others = None if m0 is None else machine_cpu() - m0 - cpu
@@ -505,9 +516,18 @@ def sweeps_worker(name, cap, threads, options):
               floor_ratio=round(per / (nbytes / (bw * 1e9)), 2),
               note=f"setup {st['seconds_setup']:.1f} s; {st.get('value_vectors')} value vector(s); "
                    f"{st.get('extrapolations')} extrapolation(s); {st.get('aggregations', 0)} aggregation(s); options {options or 'defaults'}; "
-                   f"package {Path(wncs_lp.__file__).parent.parent}")
+                   f"package {Path(wncs_lp.__file__).parent.parent}{hint_note}")
+    co = st.get("coarse")
+    if co:
+        out["note"] += (f"; coarse solve at caps {co['caps']}: {co['sweeps']} + {co['eval_sweeps']} passes, "
+                        f"{co['seconds']:.1f} s, gain {co['gain']:.6f} (passes above: the fine solve's)")
+    out["note"] += "; relative widths " + " ".join(
+        f"{u}:{(hi - lo) / abs(0.5 * (lo + hi)):.3g}" for u, _, _, lo, hi in st["history"][:12])
     out["note"] += (f"; in the solve: {pass_times_note(log)}; other processes' CPU during the solve "
                     f"{'?' if others is None else f'{others:.1f}'} s")
+    if not profile:
+        print(json.dumps(out), flush=True)
+        return
     prof = pass_profile(sol, st["threads"], bw)
     floor = prof.pop("floor")
     out["note"] += "; one pass of each kind (wall s, CPU s, CPU ns a state, x floor): " + "; ".join(
@@ -521,7 +541,7 @@ def sweeps_worker(name, cap, threads, options):
     print(json.dumps(out), flush=True)
 
 
-def sweeps(instances, threads, options, baseline, variants=None):
+def sweeps(instances, threads, options, baseline, variants=None, profile=True, repeats=1):
     """Each instance by each run in turn: this tree with ``options`` (or, with ``variants``, this
     tree with each variant's options, the first the reference), then the ``baseline`` tree."""
     runs = ([(label, ROOT, {**options, **opt}) for label, opt in variants.items()] if variants
@@ -530,12 +550,12 @@ def sweeps(instances, threads, options, baseline, variants=None):
     rows = []
     for name, cap in instances:
         mine = None
-        for label, tree, opts in runs:
+        for rep, (label, tree, opts) in [(r, x) for r in range(repeats) for x in runs]:
             env = dict(os.environ)
             env["WNCS_LP_BENCH_TREE"] = str(tree)
             cmd = [sys.executable, str(ROOT / "benchmarks" / "matrix_free.py"), "--sweeps-worker", f"{name}:{cap}",
-                   "--threads", str(threads), "--options", json.dumps(opts)]
-            print(f"sweeps: {name} cap {cap}, {label} (load {load1()}) ...", flush=True)
+                   "--threads", str(threads), "--options", json.dumps(opts)] + ([] if profile else ["--no-profile"])
+            print(f"sweeps: {name} cap {cap}, {label}, round {rep + 1} (load {load1()}) ...", flush=True)
             for r in worker_rows(cmd, cwd=tree, env=env):
                 r["tree"] = label
                 if mine is None:
@@ -623,7 +643,10 @@ def main(argv=None):
                          'e.g. \'{"plain": {}, "aggregate": {"aggregate": true}}\'')
     ap.add_argument("--solutions", default="/tmp/wncs_mf_solutions",
                     help="folder of the optimal policies the capmass section reads (or solves and saves)")
-    ap.add_argument("--repeats", type=int, default=1, help="rounds of the capmass section's settings")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="rounds of the capmass section's settings, and of the sweeps section's variants (alternated)")
+    ap.add_argument("--no-profile", action="store_true",
+                    help="sweeps: no timing of one pass of each kind after the solve (e.g. a phase to tol 1e-2)")
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--sweeps-worker", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -633,7 +656,7 @@ def main(argv=None):
         return 0
     if a.sweeps_worker is not None:
         name, cap = a.sweeps_worker.split(":")
-        sweeps_worker(name, int(cap), a.threads, json.loads(a.options))
+        sweeps_worker(name, int(cap), a.threads, json.loads(a.options), not a.no_profile)
         return 0
     sections = a.sections.split(",")
     caps = [int(c) for c in a.caps.split(",")] if a.caps else ([16] if a.quick else [20, 25, 30])
@@ -646,7 +669,7 @@ def main(argv=None):
     if "sweeps" in sections:
         inst = [(x.split(":")[0], int(x.split(":")[1])) for x in a.instances.split(",") if x]
         rows += sweeps(inst, a.threads, json.loads(a.options), a.baseline,
-                       json.loads(a.variants) if a.variants else None)
+                       json.loads(a.variants) if a.variants else None, not a.no_profile, a.repeats)
     if "capmass" in sections:
         inst = [(x.split(":")[0], int(x.split(":")[1])) for x in a.instances.split(",") if x]
         rows += capmass(inst, a.threads, a.solutions, a.repeats)

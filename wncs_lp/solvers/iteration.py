@@ -214,6 +214,13 @@ class IterationScheme:
         """delta: a bound on the floating-point error of each computed (T h - h)(s) on the current h."""
         raise NotImplementedError
 
+    def next_shift(self, lo: float, hi: float) -> float:
+        """The shift (the gain's estimate) of the sweeps until the next certificate, from the
+        certificate (lo, hi) just computed: its midpoint, unless the scheme knows better (a
+        shift does not touch the certificate, which holds for any h; it sets how far the
+        in-place sweeps drift from the bias)."""
+        return 0.5 * (lo + hi)
+
     def after_check(self, width: float, progress: Progress) -> bool:
         """Called with each certificate's width outside warm-up; True when it moved h (then h is
         certified again before any sweep)."""
@@ -490,6 +497,6 @@ def _loop(scheme: IterationScheme, opts: IterationOptions, judge: _Judge, out: I
                 out.fallback = (f"{name} stalled at relative width {width / max(abs(mid), 1e-300):.3g} "
                                 f"after {out.used} sweeps{note}")
                 progress.phase(f"[{label}] {out.fallback}" + ("" if note else ": the Jacobi scheme takes over"))
-        shift = mid
+        shift = scheme.next_shift(lo, hi)
         if out.used < opts.max_iter:  # the budget's last pass keeps its (certified) h
             scheme.advance()

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -13,14 +13,15 @@ from ...errors import PolicyError, SolverError
 from ...models.system import System
 from ...progress import Progress, as_progress
 from ...scenario import Scenario
+from ...status import INTERRUPTED, of
 from ..iteration import IterationOutcome, IterationScheme, certified_iteration, gamma, max_abs, options_from
 from .aggregate import Aggregator
 from .extrapolate import Extrapolator
-from .layout import BoxLayout, check_local_actions, resolve_domain
+from .layout import BoxLayout, check_local_actions, layout_states, resolve_domain
 from .operator import Operator, Reduce, Write, with_cost
 from .options import MatrixFreeOptions
 from .result import MatrixFreeEvaluation, MatrixFreeSolution, as_system
-from .start import start_vector
+from .start import clamped_values, start_vector
 from .sweeper import Sweeper, load_kernels, reachable_mask
 
 __all__ = ["matrix_free_value_iteration", "matrix_free_evaluate", "policy_table", "matrix_free_bytes",
@@ -112,6 +113,8 @@ class BoxSweeps(IterationScheme):
         self.agg_rel = opts.aggregate_rel
         self.agg_unseen = False  # a correction made since the last certificate
         self.bracket = (np.inf, -np.inf)  # the last certificate's
+        self.gain_hint, self.wide_shift, self.wide_rel = opts.gain_hint, opts.wide_shift, opts.wide_rel
+        self.best = (-np.inf, np.inf)  # the intersection of every certificate: g* lies in it
         self._out: np.ndarray | None = None  # where the last certificate pass wrote the next iterate
 
     def pass_(self, h: np.ndarray, h_out: np.ndarray | None, write: Write, relax: float, shift: float) -> tuple[float, float]:
@@ -159,6 +162,26 @@ class BoxSweeps(IterationScheme):
         self.ex.certified()
         self.bracket, self.agg_unseen = bracket, False
         return bracket
+
+    def next_shift(self, lo: float, hi: float) -> float:
+        # While the bracket is wide its midpoint can be far off the gain (processes 1-4 at cap 30
+        # start with [10, 113074] around a gain of 1628), and the in-place sweeps then drift
+        # unevenly by about that error each sweep, which widens the next bracket; a hint (or a
+        # rule) holds the shift near the gain until the bracket is narrow enough to take over.
+        b0, b1 = max(self.best[0], lo), min(self.best[1], hi)
+        self.best = (b0, b1)
+        mid = 0.5 * (lo + hi)
+        if not (hi - lo > self.wide_rel * abs(mid)):
+            return mid
+        if self.gain_hint is not None:
+            return min(max(self.gain_hint, b0), b1)
+        if self.wide_shift == "lo":
+            return lo
+        if self.wide_shift == "best":
+            return 0.5 * (b0 + b1)
+        if self.wide_shift == "geo" and b0 > 0:
+            return float(np.sqrt(b0 * b1))
+        return mid
 
     def advance(self) -> None:
         out, self._out = self._out, None
@@ -334,7 +357,9 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
         Warm start (:func:`~.start.start_vector`): one value per layout state, a solution's bias,
         or a separable value function sum_k h_k(tau_k, column_k(c)) such as the tables of
         :func:`wncs_lp.bounds.lower_bound` (written straight into the solve's value vector).
-        The certificate holds whatever the start; a good one saves sweeps.
+        The certificate holds whatever the start; a good one saves sweeps. Without one, a
+        layout of at least ``coarse_states`` states starts from a coarse solve at smaller caps
+        (``coarse_ratio``; :class:`~.options.MatrixFreeOptions`).
     progress : bool or Progress
         The setup, then the certificate passes (sweeps, bracket, relative width) on stderr.
 
@@ -344,8 +369,12 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
         ``method = "matrix-free"``; ``stats``: ``scheme``, ``final_scheme``, ``threads``,
         ``domain``, ``n_states`` (layout), ``n_reachable`` (with a mask), ``sweeps``,
         ``eval_sweeps``, ``checks``, ``rel_gap``, ``bytes`` (the solve's arrays),
-        ``seconds_setup``, ``fallback``, ``hull_closes``, ``roundoff_delta``, ``stop`` and
-        ``history``: one ``(sweeps, eval_sweeps, seconds, lo, hi)`` per certificate pass.
+        ``seconds_setup`` (the coarse solve included), ``fallback``, ``hull_closes``,
+        ``roundoff_delta``, ``stop``, ``gain_hint``, ``coarse`` (None, or the coarse solve's
+        ``caps``, ``sweeps``, ``eval_sweeps``, ``gain``, ``gain_lower``, ``gain_upper``,
+        ``seconds``, ``first_midpoint_over_gain`` and whether it was ``used``; its passes are not
+        in ``sweeps``) and ``history``: one ``(sweeps,
+        eval_sweeps, seconds, lo, hi)`` per certificate pass.
     """
     opts = options_from(MatrixFreeOptions, options, fields, "matrix_free_value_iteration")
     t0 = time.perf_counter()
@@ -357,12 +386,35 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
         check_size(system.scenario, method="matrix-free", model=system.model)
     if int(system.n_actions.max()) > 255:  # pragma: no cover - the paper's models have <= 12
         raise SolverError("more than 255 actions in a configuration: the uint8 policy cannot hold them")
-    st = _setup(system, opts, h0)
     prog = as_progress(progress)
+    stopped = False
+    try:
+        coarse = _coarse_solve(system, opts, prog) if h0 is None else None
+    except KeyboardInterrupt:
+        if opts.on_interrupt == "raise":
+            raise
+        # Ctrl-C during the coarse solve: one certificate of the start, returned "interrupted"
+        coarse, stopped, opts = None, True, replace(opts, max_iter=1)
+    st = _setup(system, opts, h0)
+    coarse_stats = None
+    if coarse is not None:
+        used = not coarse.stats.get("dropped", False)
+        coarse_stats = {"caps": [int(c) for c in coarse.system.caps], "sweeps": coarse.iterations,
+                        "eval_sweeps": coarse.stats["eval_sweeps"], "gain": coarse.gain,
+                        "gain_lower": coarse.gain_lower, "gain_upper": coarse.gain_upper, "seconds": coarse.seconds,
+                        "first_midpoint_over_gain": coarse.stats["far"], "used": used}
+        if used:
+            clamped_values(coarse.layout, coarse.bias, st.layout, st.h)
+            st.h -= st.h[0]
+            if opts.gain_hint is None:
+                opts = replace(opts, gain_hint=float(coarse.gain))
+        del coarse
     sweeps = _Improve(st, opts)
     t_setup = time.perf_counter() - t0
     _announce(prog, st, sweeps, t_setup)
     out = certified_iteration(sweeps, opts, cost_scale=st.op.cost_scale, progress=prog, label=sweeps.label, t0=t0)
+    if stopped and not out.converged:
+        out.status = of(INTERRUPTED)
     lo, hi, delta = _bracket(sweeps, out, prog, opts.tol)
     h = sweeps.h
     h -= h[0]
@@ -370,11 +422,58 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
              "n_reachable": int(st.mask.sum()) if st.mask is not None else None, "n_configs": st.layout.n_configs,
              "sweeps": out.used, "eval_sweeps": out.evals, "value_vectors": sweeps.vectors,
              "bytes": matrix_free_bytes(st.n, vectors=sweeps.vectors, mask=st.mask is not None),
+             "coarse": coarse_stats, "gain_hint": opts.gain_hint,
              **_common_stats(out, opts, sweeps, lo, hi, delta, t_setup)}
     return MatrixFreeSolution(method="matrix-free", status=out.status, gain=0.5 * (lo + hi), gain_lower=lo,
                               gain_upper=hi, bias=h, local_actions=sweeps.pol, iterations=out.used,
                               seconds=time.perf_counter() - t0, stats=stats, layout=st.layout, system=system,
                               mask=st.mask)
+
+
+def coarse_caps(caps: Any, ratio: float) -> np.ndarray:
+    """The caps of a coarse solve: ratio cap_k rounded to the nearest integer, at least 2 and at
+    most cap_k."""
+    caps = np.asarray(caps, dtype=np.int64)
+    return np.minimum(np.maximum(np.floor(ratio * caps + 0.5).astype(np.int64), 2), caps)
+
+
+def _coarse_solve(system: System, opts: MatrixFreeOptions, prog: Progress) -> MatrixFreeSolution | None:
+    """The solve at the smaller caps :func:`coarse_caps` (to ``coarse_tol``) whose bias, each AoI
+    clamped into its boxes, starts the solve and whose gain is its ``gain_hint``; None when
+    ``coarse_ratio`` is 0, the layout has fewer than ``coarse_states`` states, the caps would
+    not shrink, or the smaller caps' automaton has other configurations."""
+    if opts.coarse_ratio <= 0 or layout_states(system) < opts.coarse_states:
+        return None
+    caps = coarse_caps(system.caps, opts.coarse_ratio)
+    if np.array_equal(caps, system.caps):
+        return None
+    sc = system.scenario.with_overrides({f"process.{k + 1}.tau_cap": int(c) for k, c in enumerate(caps)})
+    small = System.from_scenario(sc)
+    if small.automaton.configs != system.automaton.configs:  # the preemption model's hold AoI values
+        return None
+    prog.phase(f"[matrix-free] a coarse solve first, at caps {tuple(int(c) for c in caps)} to {opts.coarse_tol:g}: "
+               "its bias starts the solve and its gain is the shift while the bracket is wide")
+    sub = replace(opts, tol=opts.coarse_tol, coarse_ratio=0.0, gain_hint=None, force=True, on_interrupt="raise")
+    sol = matrix_free_value_iteration(small, sub, progress=prog)
+    # what the start cures is a first shift far above the gain: the midpoint of [min c, max c]
+    # (processes 1-4 at cap 30: 36x the cap-20 gain); where it is near (the six-process mix at
+    # cap 10: 2.0x the cap-7 gain of 494, itself 0.42x the gain) that gain is a hint far below
+    # g*, and the clamped bias no better a start than zero
+    far = first_midpoint(system) / max(abs(sol.gain), 1e-300)
+    sol.stats["far"] = far
+    if not far >= opts.coarse_far:
+        prog.phase(f"[matrix-free] the coarse start is dropped: the first midpoint is {far:.3g}x its gain "
+                   f"(< coarse_far = {opts.coarse_far:g}); starting from zero")
+        sol.stats["dropped"] = True
+    return sol
+
+
+def first_midpoint(system: System) -> float:
+    """(min c + max c) / 2 over the AoI box, c(tau) = sum_k q_k(tau_k): the midpoint of the
+    first certificate from h = 0 (on the box; the hull's is within it)."""
+    lo = sum(float(np.min(np.asarray(q)[:int(c)])) for q, c in zip(system.q, system.caps))
+    hi = sum(float(np.max(np.asarray(q)[:int(c)])) for q, c in zip(system.q, system.caps))
+    return 0.5 * (lo + hi)
 
 
 def _announce(prog: Progress, st: Setup, sweeps: BoxSweeps, t_setup: float) -> None:

@@ -16,6 +16,8 @@ SCHEMES = ("auto", "mpi", "gs", "jacobi")
 TILE_ORDERS = ("forward", "reverse")
 #: ``candidates`` values: the candidate actions' bit set per configuration or per row.
 CANDIDATES = ("config", "row")
+#: ``wide_shift`` values: the in-place sweeps' shift while the certificate is wide.
+WIDE_SHIFTS = ("mid", "lo", "best", "geo")
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,42 @@ class MatrixFreeOptions(IterationOptions):
         optimum's modified policy iteration).
     aggregate_rel : float
         > 0 (1e-2).
+    gain_hint : float or None
+        Value iteration only: the in-place sweeps' shift (their estimate of the gain) while the
+        certificate's relative width exceeds ``wide_rel``, clipped into the intersection of
+        the certificates so far (g* lies in it); None: the bracket's midpoint (or
+        ``wide_shift``). A coarse start (``coarse_ratio``) sets it to the coarse gain when not
+        given. The certificate is unaffected; a hint only sets how far a shift off the gain
+        distorts the in-place sweeps (by about the error, 1/relax - the share of successors
+        already updated): processes 1-4 at cap 30 start with [min c, max c] = [10, 113074], whose
+        midpoint is 35x the gain, and a hint within 15% of it (relaxation 1's lower bound, the
+        gain at cap 20) took the bracket to 1e-2 in 31 + 50 passes against 49 + 80.
+    wide_shift : {"mid", "lo", "best", "geo"}
+        Without a hint, the shift while the width exceeds ``wide_rel``: the last bracket's
+        midpoint (default), its lower end, the midpoint of the intersection of the brackets so
+        far, or that intersection's geometric midpoint (when its lower end is > 0). Measured and
+        left off (docs/matrix-free.md): none beat the midpoint at every cap.
+    wide_rel : float
+        > 0 (1.0): the relative width above which the bracket counts as wide.
+    coarse_ratio : float
+        Value iteration only, in [0, 1) (2/3): solve first at the caps ``coarse_ratio`` x the caps
+        (rounded, :func:`~.iterate.coarse_caps`) to ``coarse_tol``, start from that bias with
+        each AoI clamped into the smaller boxes (:func:`~.start.clamped_values`) and take its
+        gain as ``gain_hint``; only for a layout of at least ``coarse_states`` states, without
+        an ``h0``, and where the configurations do not change with the caps (not the preemption
+        model's, which hold AoI values). 0: never. Processes 1-4 at cap 30: docs/matrix-free.md.
+    coarse_states : int
+        >= 0 (100,000,000): the layout size from which the coarse start is made (caps 12-20 of
+        processes 1-4, 2.9M-38M states, gain nothing from it: their first brackets do not widen).
+    coarse_tol : float
+        > 0 (1e-2): the relative width the coarse solve is taken to.
+    coarse_far : float
+        >= 0 (10): the coarse start is used only when the first bracket's midpoint from h = 0,
+        (min c + max c) / 2 over the AoI box (:func:`~.iterate.first_midpoint`), is at least this
+        multiple of the coarse gain (a lower bound on g*, which grows with the caps): the
+        distortion that start cures (processes 1-4 at cap 30: 36x); otherwise the solve starts
+        from zero with the midpoints, as without it (the six-process mix at cap 10: 2.0x, the cap-7
+        gain 0.42x g*, a hint that cost passes).
     warm_start : bool or None
         Jacobi sweeps first, until the bracket is within ``warm_rel`` (at most ``warm_max``
         sweeps); it shares the extrapolation's second vector. None: on for an evaluation, off for
@@ -111,6 +149,13 @@ class MatrixFreeOptions(IterationOptions):
     candidates_near: float = 1.0
     aggregate: bool = False
     aggregate_rel: float = 1e-2
+    gain_hint: float | None = None
+    wide_shift: str = "mid"
+    wide_rel: float = 1.0
+    coarse_ratio: float = 2 / 3
+    coarse_states: int = 100_000_000
+    coarse_tol: float = 1e-2
+    coarse_far: float = 10.0
     warm_start: bool | None = None
     warm_rel: float = 0.05
     warm_max: int = 100
@@ -122,6 +167,19 @@ class MatrixFreeOptions(IterationOptions):
         _choice("domain", self.domain, DOMAINS)
         _choice("tile_order", self.tile_order, TILE_ORDERS)
         _choice("candidates", self.candidates, CANDIDATES)
+        _choice("wide_shift", self.wide_shift, WIDE_SHIFTS)
+        if self.gain_hint is not None and not (is_real(self.gain_hint) and math.isfinite(self.gain_hint)):
+            raise SolverError(f"gain_hint must be a finite number (or None), got {self.gain_hint!r}")
+        if not (is_real(self.wide_rel) and math.isfinite(self.wide_rel) and self.wide_rel > 0):
+            raise SolverError(f"wide_rel must be a finite number > 0, got {self.wide_rel!r}")
+        if not (is_real(self.coarse_ratio) and 0.0 <= self.coarse_ratio < 1.0):
+            raise SolverError(f"coarse_ratio must be in [0, 1) (0: no coarse start), got {self.coarse_ratio!r}")
+        if not (is_int(self.coarse_states) and self.coarse_states >= 0):
+            raise SolverError(f"coarse_states must be an integer >= 0, got {self.coarse_states!r}")
+        if not (is_real(self.coarse_tol) and math.isfinite(self.coarse_tol) and self.coarse_tol > 0):
+            raise SolverError(f"coarse_tol must be a finite number > 0, got {self.coarse_tol!r}")
+        if not (is_real(self.coarse_far) and math.isfinite(self.coarse_far) and self.coarse_far >= 0):
+            raise SolverError(f"coarse_far must be a finite number >= 0, got {self.coarse_far!r}")
         if not (is_real(self.relax) and 0.0 < self.relax <= 1.0):
             raise SolverError(f"relax must be in (0, 1], got {self.relax!r}")
         if not (is_real(self.candidates_rel) and math.isfinite(self.candidates_rel) and self.candidates_rel >= 0):
