@@ -93,9 +93,8 @@ class MatrixFreeOptions(IterationOptions):
         ``wide_shift``). A coarse start (``coarse_ratio``) sets it to the coarse gain when not
         given. The certificate is unaffected; a hint only sets how far a shift off the gain
         distorts the in-place sweeps (by about the error, 1/relax - the share of successors
-        already updated): processes 1-4 at cap 30 start with [min c, max c] = [10, 113074], whose
-        midpoint is 35x the gain, and a hint within 15% of it (relaxation 1's lower bound, the
-        gain at cap 20) took the bracket to 1e-2 in 31 + 50 passes against 49 + 80.
+        already updated): from h = 0 the first bracket is [min c, max c], whose midpoint can be
+        many times the gain (measured: docs/matrix-free.md).
     wide_shift : {"mid", "lo", "best", "geo"}
         Without a hint, the shift while the width exceeds ``wide_rel``: the last bracket's
         midpoint (default), its lower end, the midpoint of the intersection of the brackets so
@@ -111,17 +110,16 @@ class MatrixFreeOptions(IterationOptions):
         an ``h0``, and where the configurations do not change with the caps (not the preemption
         model's, which hold AoI values). 0: never. Processes 1-4 at cap 30: docs/matrix-free.md.
     coarse_states : int
-        >= 0 (100,000,000): the layout size from which the coarse start is made (caps 12-20 of
-        processes 1-4, 2.9M-38M states, gain nothing from it: their first brackets do not widen).
+        >= 0 (100,000,000): the layout size from which the coarse start is made (below it the
+        first brackets of the measured models do not widen, and the start gains nothing).
     coarse_tol : float
         > 0 (1e-2): the relative width the coarse solve is taken to.
     coarse_far : float
         >= 0 (10): the coarse start is used only when the first bracket's midpoint from h = 0,
         (min c + max c) / 2 over the AoI box (:func:`~.iterate.first_midpoint`), is at least this
         multiple of the coarse gain (a lower bound on g*, which grows with the caps): the
-        distortion that start cures (processes 1-4 at cap 30: 36x); otherwise the solve starts
-        from zero with the midpoints, as without it (the six-process mix at cap 10: 2.0x, the cap-7
-        gain 0.42x g*, a hint that cost passes).
+        distortion that start cures; otherwise the solve starts from zero with the midpoints, as
+        without it (a coarse gain far below g* is a hint that costs passes).
     warm_start : bool or None
         Jacobi sweeps first, until the bracket is within ``warm_rel`` (at most ``warm_max``
         sweeps); it shares the extrapolation's second vector. None: on for an evaluation, off for
