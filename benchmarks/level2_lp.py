@@ -144,8 +144,9 @@ def _mean_lump(row: dict) -> float:
 
 
 def fit(path: str) -> None:
-    """The least-squares fit in logs of IPX's CPU seconds on the scan's finished rows, and each row's
-    prediction by the fit on the others (leave one out)."""
+    """The least-squares fit in logs of IPX's CPU seconds on the scan's finished rows of the calibration
+    systems (``SERVER:...``), each of them predicted by the fit without it (leave one out), and the
+    rows of shipped scenarios (``SCENARIO@CAP``) held out: predicted by the fit on the others."""
     from wncs_lp.bounds.all_pairs import time_features
 
     with open(path, newline="") as f:
@@ -154,14 +155,15 @@ def fit(path: str) -> None:
     X = np.array([[1.0, *np.log(time_features({**{k: float(r[k]) for k in ("nnz", "pairs_ca", "outcomes")},
                                                 "mean_lump": _mean_lump(r)}))] for r in rows])
     y = np.log([float(r["lp_cpu_seconds"]) for r in rows])
-    beta = np.linalg.lstsq(X, y, rcond=None)[0]
-    print(f"fit on {len(rows)} rows: coef {np.exp(beta[0]):.4g}, exponents {', '.join(f'{b:.3f}' for b in beta[1:])}")
+    cal = np.array([r["instance"].split(":")[0] in ("edge", "cloud", "both") for r in rows])
+    beta = np.linalg.lstsq(X[cal], y[cal], rcond=None)[0]
+    print(f"fit on {int(cal.sum())} rows: coef {np.exp(beta[0]):.4g}, exponents {', '.join(f'{b:.3f}' for b in beta[1:])}")
     for i, r in enumerate(rows):
-        keep = np.arange(len(rows)) != i
-        b = np.linalg.lstsq(X[keep], y[keep], rcond=None)[0]
-        pred = float(np.exp(X[i] @ b))
-        print(f"  {r['instance']:12s} lump {r['lump']:5s} nnz {int(r['nnz']):>9,}  measured {float(r['lp_cpu_seconds']):7.1f} s"
-              f"  fit {float(np.exp(X[i] @ beta)):7.1f} s  left out {pred:7.1f} s  (x{pred / float(r['lp_cpu_seconds']):.2f})")
+        keep = cal & (np.arange(len(rows)) != i)
+        pred = float(np.exp(X[i] @ np.linalg.lstsq(X[keep], y[keep], rcond=None)[0]))
+        print(f"  {r['instance']:22s} lump {r['lump']:5s} nnz {int(r['nnz']):>9,} P {int(r['pairs_ca']):>5}  measured "
+              f"{float(r['lp_cpu_seconds']):7.1f} s  predicted {pred:7.1f} s (x{pred / float(r['lp_cpu_seconds']):.2f}, "
+              f"{'left out' if cal[i] else 'held out'})")
 
 
 def _swap(sym, i: int, j: int) -> tuple:

@@ -48,7 +48,19 @@ def test_auto_runs_relaxation_5_where_predicted_to_fit(three):
     assert auto.lower_bound >= g_star * (1 - 1e-6) > bounds["joint-configuration"] * (1 + 1e-2)
     reason = auto.stats["auto_reason"]
     assert "relaxation 5, its whole LP" in reason and "predicted" in reason
-    assert "relaxation 4 not run" in reason and "joint-pairs" not in bounds  # dominated: not computed
+    # relaxation 4's start is the probe (its bundle not run: relaxation 5's LP contains its constraints)
+    assert "relaxation 4's start only" in reason and bounds["joint-pairs"] <= auto.lower_bound
+
+
+def test_not_run_where_relaxation_4s_start_sees_no_gap(three, monkeypatch):
+    """Where the pairs' start does not raise relaxation 2's bound (forced: a gain of 100% asked),
+    relaxation 5 is not run either, and auto says so with its prediction."""
+    _, system, g_star, _ = three
+    monkeypatch.setattr(lower, "AUTO_PAIRS_MIN_GAIN", 1.0)
+    monkeypatch.setattr(lower, "all_pairs_bound", lambda *a, **k: pytest.fail("relaxation 5 run without a gap"))
+    res = lower_bound(system, "auto")
+    assert "joint-all-pairs" not in res.stats["auto_bounds"] and res.lower_bound <= g_star
+    assert "relaxation 5 not run: relaxation 4's start saw no gap" in res.stats["auto_reason"]
 
 
 def test_auto_policies_read_relaxation_5s_tables(three):
@@ -79,8 +91,8 @@ def test_skipped_beyond_the_budget_with_the_prediction(three, monkeypatch):
 
 def test_lumped_where_the_whole_lp_does_not_fit(three, monkeypatch):
     """A budget between the LP lumped at 4 and the whole LP: auto lumps at 4 (the largest threshold
-    that fits), still at least relaxation 2's interior point and at most g*; relaxation 4 then runs
-    too (the lumped LP does not contain its constraints)."""
+    that fits, and the least it takes), still at least relaxation 2's interior point and at most g*;
+    relaxation 4 then runs its bundle too (the lumped LP does not contain its constraints)."""
     _, system, g_star, _ = three
     at4, whole = all_pairs_size(system, 4)["predicted_seconds"], all_pairs_size(system)["predicted_seconds"]
     assert at4 < whole
@@ -91,7 +103,7 @@ def test_lumped_where_the_whole_lp_does_not_fit(three, monkeypatch):
     bounds = res.stats["auto_bounds"]
     assert "lumped from 4" in res.stats["auto_reason"]
     assert bounds["joint-configuration"] - 1e-6 * g_star <= bounds["joint-all-pairs"] <= g_star
-    assert "relaxation 4 not run" not in res.stats["auto_reason"]
+    assert "relaxation 4 from relaxation 2's optimum" in res.stats["auto_reason"]
 
 
 def test_a_solve_beyond_its_guard_is_stopped_and_said(three, monkeypatch):

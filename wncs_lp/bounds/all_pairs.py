@@ -49,30 +49,30 @@ ALL_PAIRS_BYTES_PER_NNZ = {"ipx": 2_000, "pdlp": 1_000, "clarabel": 8_000}
 
 
 #: IPX's CPU seconds on the level-2 LP (HiGHS, no crossover, the implied rows dropped, tolerance
-#: 1e-8) as a power law of its size, ``coef * (nnz / 1e6) ** a * (c / 10) ** b * (E / P / 2) ** c``:
-#: nnz :func:`all_pairs_size`'s count, c the pair chains' mean length (the ages kept apart, the cap
-#: or the lumping threshold: longer chains take IPX more iterations and denser basis factors) and
-#: E / P the automaton's outcomes per (configuration, action) pair -- 2 on one edge server, 3.3-3.7
-#: on the cloud server (its pipeline), 6.3-7.0 on both servers, where the same nonzeros cost IPX
-#: several times more. Fitted (least squares in logs) on ``python benchmarks/level2_lp.py --scan``'s
-#: runs (benchmarks/level2_time.csv; docs/bounds.md, "Relaxation 5"). CPU time: IPX is serial, so
-#: the load of the machine does not enter.
-ALL_PAIRS_TIME_MODEL = {"coef": 26.0, "a": 1.58, "b": 0.71, "c": 1.25}
+#: 1e-8) as a power law of its size, ``coef * (nnz / 1e6) ** a * (c / 10) ** b * (P / 100) ** d``:
+#: nnz :func:`all_pairs_size`'s count, c the pair chains' mean length (the ages kept apart: the cap
+#: or the lumping threshold; longer chains take IPX more iterations and denser basis factors) and
+#: P = |C x A|, the (configuration, action) pairs (4-10 on one edge server, 18-100 on the cloud
+#: server with its pipeline, 42-620 on both servers), where the same nonzeros cost IPX several
+#: times more. Fitted (least squares in logs) on ``python benchmarks/level2_lp.py --scan``'s runs on
+#: the calibration systems (benchmarks/level2_time.csv; docs/bounds.md, "Relaxation 5", with its
+#: fit on held-out points). CPU time: IPX is serial, so the load of the machine does not enter.
+ALL_PAIRS_TIME_MODEL = {"coef": 124.9, "a": 1.778, "b": 1.607, "d": 0.923}
 
 
 def time_features(size: dict) -> tuple:
     """The positive quantities whose logs :data:`ALL_PAIRS_TIME_MODEL` is linear in: nonzeros in
-    millions, the pair chains' mean length (the lumped ages kept apart, c_k) over 10, and outcomes per
-    (C, a) pair over 2 (the edge server's)."""
-    return (size["nnz"] / 1e6, size["mean_lump"] / 10.0, size["outcomes"] / size["pairs_ca"] / 2.0)
+    millions, the pair chains' mean length (the lumped ages kept apart, c_k) over 10, and the
+    (configuration, action) pairs over 100."""
+    return (size["nnz"] / 1e6, size["mean_lump"] / 10.0, size["pairs_ca"] / 100.0)
 
 
 def all_pairs_seconds(size: dict) -> float:
     """Predicted CPU seconds of IPX on the level-2 LP of :func:`all_pairs_size`'s ``size``
     (:data:`ALL_PAIRS_TIME_MODEL`)."""
     m = ALL_PAIRS_TIME_MODEL
-    nnz, length, per = time_features(size)
-    return float(m["coef"] * nnz ** m["a"] * length ** m["b"] * per ** m["c"])
+    nnz, length, pairs = time_features(size)
+    return float(m["coef"] * nnz ** m["a"] * length ** m["b"] * pairs ** m["d"])
 
 
 def all_pairs_size(system: System | JointData, lump=None, solver: str = "ipx") -> dict:

@@ -102,6 +102,8 @@ AUTO_PAIRS_IPM_FROM = 200.0
 #: :data:`AUTO_ALL_PAIRS_GUARD` (``factor`` times the prediction plus ``slack`` seconds of CPU), so a
 #: solve far beyond its prediction costs a bounded time and certifies nothing (said in
 #: ``auto_reason``). Counted, never built, where it is skipped: milliseconds at sixteen processes.
+#: Where relaxation 2 was solved by its interior point and relaxation 4's start runs, that start is
+#: the probe: relaxation 5 runs only where it raised relaxation 2's bound (the pairs see a gap).
 AUTO_ALL_PAIRS_BUDGET = 120.0
 AUTO_ALL_PAIRS_GUARD = {"factor": 3.0, "slack": 30.0}
 AUTO_ALL_PAIRS_MAX_BYTES = 3 * 2**30
@@ -152,10 +154,11 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         point (where it was, it was the tighter: processes 1-4, cap 20, 1547.6 against 1441.2);
         relaxation 4 (pairs) after relaxation 2's interior point where it fits and its start pays
         (:data:`AUTO_PAIRS_STEPS`; the interior point then stops at :data:`AUTO_PAIRS_IPM_TOL`
-        where it is slow, :data:`AUTO_PAIRS_IPM_FROM`) and relaxation 5 does not run whole (whose
-        LP contains relaxation 4's); relaxation 5 where its LP, whole or lumped, is predicted to
-        fit (:func:`all_pairs_plan`, :data:`AUTO_ALL_PAIRS_BUDGET`); on a tie the first of 5, 2,
-        4, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
+        where it is slow, :data:`AUTO_PAIRS_IPM_FROM`), its start alone where relaxation 5 runs
+        whole (whose LP contains relaxation 4's); relaxation 5 where its LP, whole or lumped, is
+        predicted to fit (:func:`all_pairs_plan`, :data:`AUTO_ALL_PAIRS_BUDGET`), unless relaxation
+        4's start, run, saw no gap beyond relaxation 2 (a heuristic: the pairs at relaxation 2's
+        prices add nothing); on a tie the first of 5, 2, 4, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
         ``stats["auto_bounds"]`` say which was taken, why, and what each gave. Relaxation 2's
         search then stops as :data:`AUTO_SEARCH` says unless ``max_iter`` / ``time_limit`` are given.
     **options
@@ -206,23 +209,26 @@ def _auto(system: System, options: dict) -> BoundResult:
     found: list[BoundResult] = []
     notes: list[str] = []
     plan5 = all_pairs_plan(system)
-    res5, note = _try_all_pairs(system, plan5, options)
-    if res5 is not None:
-        found.append(res5)
-    if note:
-        notes.append(note)
     res2, note = _try_joint(system, {**({} if plan5["whole"] else _pairs_ipm_tol(system)), **options})
     if res2 is not None:
         found.append(res2)
     if note:
         notes.append(note)
-    if res5 is not None and plan5["lump"] is None:
-        if res2 is not None and res2.stats.get("ipm_tables") is True and system.n_processes >= 3:
-            notes.append("relaxation 4 not run: relaxation 5's whole LP contains its constraints for any pairing")
+    # relaxation 4's start (relaxation 2's tables carried to pairs) is the probe of a gap the pairs see;
+    # where relaxation 5 runs whole its LP contains relaxation 4's, so the start alone is taken
+    res4, note = _try_pairs(system, res2, options, steps=0 if plan5["whole"] else AUTO_PAIRS_STEPS)
+    if res4 is not None:
+        found.append(res4)
+    if note:
+        notes.append(note)
+    probed = (res2 is not None and res2.stats.get("ipm_tables") is True and system.n_processes >= 3
+              and _pairs_fit(*_pairs_prediction(system)))
+    if plan5["runs"] and probed and res4 is None:
+        notes.append(f"relaxation 5 not run: relaxation 4's start saw no gap beyond relaxation 2 ({plan5['rule']})")
     else:
-        res4, note = _try_pairs(system, res2, options)
-        if res4 is not None:
-            found.append(res4)
+        res5, note = _try_all_pairs(system, plan5, options)
+        if res5 is not None:
+            found.insert(0, res5)
         if note:
             notes.append(note)
     res1 = _try(private_bound, system, _private_options(options))
@@ -368,12 +374,12 @@ def _pairs_ipm_tol(system: System) -> dict:
     return {"ipm_tol": AUTO_PAIRS_IPM_TOL}
 
 
-def _try_pairs(system: System, res2: BoundResult | None, options: dict) -> tuple[BoundResult | None, str]:
-    """Relaxation 4 from relaxation 2's result where :data:`AUTO_PAIRS_STEPS`' rule takes it:
-    (its result, why) or (None, why not; "" where it does not apply)."""
+def _try_pairs(system: System, res2: BoundResult | None, options: dict,
+               steps: int = AUTO_PAIRS_STEPS) -> tuple[BoundResult | None, str]:
+    """Relaxation 4 from relaxation 2's result where :data:`AUTO_PAIRS_STEPS`' rule takes it, its
+    start and ``steps`` bundle steps: (its result, why) or (None, why not; "" where it does not apply)."""
     if res2 is None or res2.stats.get("ipm_tables") is not True or system.n_processes < 3:
         return None, ""
-    steps = AUTO_PAIRS_STEPS
     predicted, size = _pairs_prediction(system)
     if not _pairs_fit(predicted, size):
         return None, (f"relaxation 4 not run: predicted {predicted:.0f} s of CPU (budget {AUTO_PAIRS_BUDGET:.0f}), "
@@ -386,6 +392,8 @@ def _try_pairs(system: System, res2: BoundResult | None, options: dict) -> tuple
     if not res.stats.get("start_pays"):
         return None, (f"relaxation 4's start {res.lower_bound:.10g} raised relaxation 2's bound by at most "
                       f"{AUTO_PAIRS_MIN_GAIN:g} of it: not kept")
+    if steps == 0:
+        return res, "relaxation 4's start only (relaxation 5's whole LP, which contains its constraints, follows)"
     return res, f"relaxation 4 from relaxation 2's optimum: {steps} bundle steps (predicted {predicted:.0f} s of CPU)"
 
 
@@ -417,7 +425,7 @@ def all_pairs_plan(system: System) -> dict:
         return {"runs": True, "lump": None, "whole": True, "size": whole, "predicted": whole["predicted_seconds"],
                 "rule": f"relaxation 5, its whole LP: {words(whole)} {limits}"}
     top = int(max(system.caps))
-    floor = max(2, int(-(-AUTO_ALL_PAIRS_MIN_LUMP * top // 1)))
+    floor = max(4, int(-(-AUTO_ALL_PAIRS_MIN_LUMP * top // 1)))  # fewer ages apart keep next to nothing
     for c in range(top - 1, floor - 1, -1):  # sizes only grow with c: the first that fits is the largest
         z = all_pairs_size(system, c)
         if fits(z):
