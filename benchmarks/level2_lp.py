@@ -150,20 +150,21 @@ def fit(path: str) -> None:
     from wncs_lp.bounds.all_pairs import time_features
 
     with open(path, newline="") as f:
-        rows = [r for r in csv.DictReader(f) if np.isfinite(float(r["lower_bound"] or "nan"))
-                and float(r["lp_cpu_seconds"]) >= 0.5]  # certified (IPX's status aside), and timed above noise
+        rows = [r for r in csv.DictReader(f) if np.isfinite(float(r["lower_bound"] or "nan"))]  # certified
+    cal = np.array([r["instance"].split(":")[0] in ("edge", "cloud", "both") for r in rows])
+    cal &= np.array([float(r["lp_cpu_seconds"]) >= 0.5 for r in rows])  # fitted where timed above noise
     X = np.array([[1.0, *np.log(time_features({**{k: float(r[k]) for k in ("nnz", "pairs_ca", "outcomes")},
                                                 "mean_lump": _mean_lump(r)}))] for r in rows])
     y = np.log([float(r["lp_cpu_seconds"]) for r in rows])
-    cal = np.array([r["instance"].split(":")[0] in ("edge", "cloud", "both") for r in rows])
     beta = np.linalg.lstsq(X[cal], y[cal], rcond=None)[0]
     print(f"fit on {int(cal.sum())} rows: coef {np.exp(beta[0]):.4g}, exponents {', '.join(f'{b:.3f}' for b in beta[1:])}")
     for i, r in enumerate(rows):
         keep = cal & (np.arange(len(rows)) != i)
         pred = float(np.exp(X[i] @ np.linalg.lstsq(X[keep], y[keep], rcond=None)[0]))
+        how = "left out" if cal[i] else ("held out" if r["instance"].split(":")[0] not in ("edge", "cloud", "both")
+                                         else "not fitted: under 0.5 s")
         print(f"  {r['instance']:22s} lump {r['lump']:5s} nnz {int(r['nnz']):>9,} P {int(r['pairs_ca']):>5}  measured "
-              f"{float(r['lp_cpu_seconds']):7.1f} s  predicted {pred:7.1f} s (x{pred / float(r['lp_cpu_seconds']):.2f}, "
-              f"{'left out' if cal[i] else 'held out'})")
+              f"{float(r['lp_cpu_seconds']):7.2f} s  predicted {pred:7.1f} s (x{pred / float(r['lp_cpu_seconds']):.2f}, {how})")
 
 
 def _swap(sym, i: int, j: int) -> tuple:

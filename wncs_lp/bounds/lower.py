@@ -409,8 +409,9 @@ def all_pairs_plan(system: System) -> dict:
         ``rule`` (the rule in words, with the prediction).
     """
     def words(z: dict) -> str:
-        return (f"{z['cols']:,} columns, {z['nnz']:,} nonzeros, {z['outcomes'] / z['pairs_ca']:.1f} outcomes a "
-                f"(C, a): predicted {z['predicted_seconds']:.3g} s of CPU, {z['memory_bytes'] / 2**30:.2f} GiB")
+        return (f"{z['cols']:,} columns, {z['nnz']:,} nonzeros, |C x A| = {z['pairs_ca']:,}, chains of "
+                f"{z['mean_lump']:.3g} ages: predicted {z['predicted_seconds']:.3g} s of CPU, "
+                f"{z['memory_bytes'] / 2**30:.2f} GiB")
 
     def fits(z: dict) -> bool:
         return z["predicted_seconds"] <= AUTO_ALL_PAIRS_BUDGET and z["memory_bytes"] <= AUTO_ALL_PAIRS_MAX_BYTES
