@@ -7,6 +7,8 @@ measured against g* -- its LP solved whole, its duals certified by the LP-sized 
     python benchmarks/level2_lp.py --instances edge:4:30 --lump none,20,15,10        # the lumping trade-off
     python benchmarks/level2_lp.py --instances both:3:16 --solver clarabel           # another LP solver
     python benchmarks/level2_lp.py --count bounds_lab16,bounds_p1234_twice --lump none,10,5   # sizes only
+    python benchmarks/level2_lp.py --scan edge:5:30:none,both:3:12:none --out benchmarks/level2_time.csv
+                                                                    # IPX's CPU time only (the time model)
 
 The relaxation and its certificate are :mod:`wncs_lp.bounds.level2` (:func:`level2_bound`). An
 instance is ``SERVER:SENSORS:CAP`` (``calibration_load.system_for``: the lab's scalar sensors on the
@@ -21,6 +23,14 @@ the solve and the certificate, the looseness (g* - LB) / g* against the best rel
 symmetry of interchangeable processes: one pair measure per orbit of pairs, on the orbits of (C, a)
 pairs under the permutations that fix both members (:func:`symmetric_estimate`; the LP itself is not
 reduced by the library).
+
+``--scan`` times the solve alone (no g*, no other relaxation): per ``SERVER:SENSORS:CAP:LUMP`` (or
+``SCENARIO@CAP:LUMP``, a shipped scenario) the
+LP's size as :func:`~wncs_lp.bounds.all_pairs.all_pairs_size` counts it before anything is built,
+the configurations, (C, a) pairs and outcomes, IPX's CPU seconds and iterations (stopped at
+``--cpu-limit`` seconds of CPU: such a row certifies nothing and says so); the rows
+:data:`~wncs_lp.bounds.all_pairs.ALL_PAIRS_TIME_MODEL` is fitted on (``--fit``: the least-squares fit
+in logs on the CSV's finished rows, and each row's prediction by the fit without it).
 """
 from __future__ import annotations
 
@@ -95,6 +105,68 @@ def run(item: str, lump, solver: str, known: str, time_limit: float | None) -> d
             "iterations": res.iterations, "status": res.status, "load1": l0, "peak_gib": peak_gib()}
 
 
+SCAN_COLUMNS = ["instance", "lump", "configurations", "pairs_ca", "outcomes", "rows", "cols", "nnz", "lp_rows",
+                "lp_nnz", "predicted_cpu_seconds", "build_cpu_seconds", "lp_cpu_seconds", "iterations", "status",
+                "lower_bound", "load1", "peak_gib"]
+
+
+def scan(item: str, cpu_limit: float | None) -> dict:
+    """One timed solve of the level-2 LP for the time model: ``SERVER:SENSORS:CAP:LUMP`` (a calibration
+    system) or ``SCENARIO@CAP:LUMP`` (a shipped scenario at that cap)."""
+    from wncs_lp.bounds.all_pairs import all_pairs_seconds, all_pairs_size
+
+    if "@" in item:  # a shipped scenario at a cap: SCENARIO@CAP:LUMP
+        name, rest = item.split("@")
+        cap, lump = rest.split(":")
+        system = System.from_scenario(wncs_lp.load_scenario(wncs_lp.scenario_path(name), [f"tau_cap={cap}"]))
+        label = f"{name}:{system.n_processes}:{cap}"
+    else:
+        server, sensors, cap, lump = item.split(":")
+        system = system_for(server, int(sensors), int(cap))
+        label = f"{server}:{sensors}:{cap}"
+    lump = _lump(lump)
+    size = all_pairs_size(system, lump)
+    l0 = load1()
+    res = level2_bound(system, lump=lump, cpu_limit=cpu_limit)
+    return {"instance": label, "lump": "none" if lump is None else lump,
+            "configurations": size["configurations"], "pairs_ca": size["pairs_ca"], "outcomes": size["outcomes"],
+            "rows": size["rows"], "cols": size["cols"], "nnz": size["nnz"], "lp_rows": res.rows, "lp_nnz": res.nnz,
+            "predicted_cpu_seconds": round(all_pairs_seconds(size), 2), "build_cpu_seconds": round(res.build_cpu, 2),
+            "lp_cpu_seconds": round(res.solve_cpu, 2), "iterations": res.iterations, "status": res.status,
+            "lower_bound": res.lower_bound, "load1": l0, "peak_gib": peak_gib()}
+
+
+def _mean_lump(row: dict) -> float:
+    """The mean lumping threshold of a scan row (its instance's cap where nothing is lumped; the
+    calibration systems have one cap for every sensor)."""
+    cap = int(row["instance"].split(":")[2])
+    return float(cap if row["lump"] == "none" else min(int(row["lump"]), cap))
+
+
+def fit(path: str) -> None:
+    """The least-squares fit in logs of IPX's CPU seconds on the scan's finished rows of the calibration
+    systems (``SERVER:...``), each of them predicted by the fit without it (leave one out), and the
+    rows of shipped scenarios (``SCENARIO@CAP``) held out: predicted by the fit on the others."""
+    from wncs_lp.bounds.all_pairs import time_features
+
+    with open(path, newline="") as f:
+        rows = [r for r in csv.DictReader(f) if np.isfinite(float(r["lower_bound"] or "nan"))]  # certified
+    cal = np.array([r["instance"].split(":")[0] in ("edge", "cloud", "both") for r in rows])
+    cal &= np.array([float(r["lp_cpu_seconds"]) >= 0.5 for r in rows])  # fitted where timed above noise
+    X = np.array([[1.0, *np.log(time_features({**{k: float(r[k]) for k in ("nnz", "pairs_ca", "outcomes")},
+                                                "mean_lump": _mean_lump(r)}))] for r in rows])
+    y = np.log([float(r["lp_cpu_seconds"]) for r in rows])
+    beta = np.linalg.lstsq(X[cal], y[cal], rcond=None)[0]
+    print(f"fit on {int(cal.sum())} rows: coef {np.exp(beta[0]):.4g}, exponents {', '.join(f'{b:.3f}' for b in beta[1:])}")
+    for i, r in enumerate(rows):
+        keep = cal & (np.arange(len(rows)) != i)
+        pred = float(np.exp(X[i] @ np.linalg.lstsq(X[keep], y[keep], rcond=None)[0]))
+        how = "left out" if cal[i] else ("held out" if r["instance"].split(":")[0] not in ("edge", "cloud", "both")
+                                         else "not fitted: under 0.5 s")
+        print(f"  {r['instance']:22s} lump {r['lump']:5s} nnz {int(r['nnz']):>9,} P {int(r['pairs_ca']):>5}  measured "
+              f"{float(r['lp_cpu_seconds']):7.2f} s  predicted {pred:7.1f} s (x{pred / float(r['lp_cpu_seconds']):.2f}, {how})")
+
+
 def _swap(sym, i: int, j: int) -> tuple:
     """(configuration map, pair map) of the transposition (i j) of one class, composed from the
     adjacent ones the symmetry keeps: (a c) = (a b)(b c)(a b)."""
@@ -158,7 +230,10 @@ def main(argv=None) -> int:
     ap.add_argument("--known", default="", help="calibration_load.csv: g* and relaxations 1-4 read, not computed")
     ap.add_argument("--time-limit", type=float, default=None, help="seconds of wall clock for the LP solver")
     ap.add_argument("--count", default="", help="shipped scenarios: print the LP's size, build nothing")
-    ap.add_argument("--out", default="", help="CSV to write")
+    ap.add_argument("--scan", default="", help="SERVER:SENSORS:CAP:LUMP,...: time IPX on the level-2 LP alone")
+    ap.add_argument("--cpu-limit", type=float, default=600.0, help="--scan: CPU seconds of IPX at most (%(default)s)")
+    ap.add_argument("--fit", default="", help="a --scan CSV: fit the time model, each row predicted without it")
+    ap.add_argument("--out", default="", help="CSV to write (--scan: rows are appended to it when it exists)")
     ap.add_argument("--one", default="", help=argparse.SUPPRESS)  # INSTANCE/LUMP: one row as JSON (the subprocess)
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
@@ -166,6 +241,11 @@ def main(argv=None) -> int:
     if args.count:
         count(args.count, lumps)
         return 0
+    if args.fit:
+        fit(args.fit)
+        return 0
+    if args.scan:
+        return _scan_all(args)
     if args.one:
         item, lump = args.one.split("/")
         print(json.dumps(run(item, _lump(lump), args.solver, args.known, args.time_limit)))
@@ -190,6 +270,30 @@ def main(argv=None) -> int:
             rows.append(r)
             if args.out:
                 atomic_write_csv(args.out, rows, COLUMNS)
+    return 0
+
+
+def _scan_all(args) -> int:
+    if args.one:
+        print(json.dumps(scan(args.one, args.cpu_limit)))
+        return 0
+    rows = []
+    if args.out and Path(args.out).exists():
+        with open(args.out, newline="") as f:
+            rows = list(csv.DictReader(f))
+    for item in args.scan.split(","):
+        out = subprocess.run([sys.executable, __file__, "--scan", item, "--one", item, "--cpu-limit", str(args.cpu_limit)],
+                             capture_output=True, text=True)
+        if out.returncode != 0:
+            print(f"{item}: failed\n{out.stderr[-2000:]}", flush=True)
+            continue
+        r = json.loads(out.stdout.strip().splitlines()[-1])
+        print(f"{item:18s} {r['configurations']:>4} configurations, {r['rows']:,} x {r['cols']:,}, {r['nnz']:,} nnz: "
+              f"{r['lp_cpu_seconds']} s CPU (predicted {r['predicted_cpu_seconds']}), {r['iterations']} iterations, "
+              f"{r['status']}, {r['peak_gib']} GiB, load {r['load1']}", flush=True)
+        rows.append(r)
+        if args.out:
+            atomic_write_csv(args.out, rows, SCAN_COLUMNS)
     return 0
 
 

@@ -20,7 +20,8 @@ the enumerated MDP).
 * relaxation 5 (``"joint-all-pairs"``), every pair's ages kept jointly at once (the level-2 LP of
   :mod:`wncs_lp.bounds.level2`, solved whole, certified by a check of its size):
   :func:`~wncs_lp.bounds.all_pairs.all_pairs_bound` (:mod:`wncs_lp.bounds.all_pairs`), its tables a
-  :class:`GroupTables` cover of every pair; small systems only (its size is checked first);
+  :class:`GroupTables` cover of every pair; small systems only (its size is checked first; ``"auto"``
+  runs it where its LP is predicted to fit a CPU budget: :func:`~wncs_lp.bounds.lower.all_pairs_plan`);
 * :func:`bound_policy` / :class:`BoundPolicy` / :class:`GroupBoundPolicy` -- the greedy policy on a
   bound's value tables; for relaxations 1 and 3 :class:`ProjectedBoundPolicy`, the same lookahead
   read through the projections on the private systems (:mod:`wncs_lp.bounds.projected`: memory

@@ -16,9 +16,10 @@ own table is not zero), so the greedy policy, the lookahead and the rollout of
 
 The LP is solved whole (:func:`~wncs_lp.bounds.level2.level2_bound`): :func:`all_pairs_bound`
 checks its size against the memory this process may use before it is built
-(:func:`all_pairs_size`). ``"auto"`` does not run it: its time is not yet predictable (one
-server's LPs take seconds at the calibration instances, two servers' take minutes an
-interior-point iteration; docs/bounds.md).
+(:func:`all_pairs_size`). ``"auto"`` runs it where IPX's CPU time, predicted from that count
+(:func:`all_pairs_seconds`, a measured model: the same nonzeros cost several times more where the
+automaton has more outcomes per (configuration, action), on two servers than on one), fits its
+budget (:data:`~wncs_lp.bounds.lower.AUTO_ALL_PAIRS_BUDGET`).
 """
 from __future__ import annotations
 
@@ -33,10 +34,11 @@ from ..models.system import System
 from ..progress import as_progress
 from ..status import INACCURATE, OPTIMAL
 from .joint_chains import JointData
-from .level2 import Level2Layout, Level2Tables, level2_bound, level2_layout
+from .level2 import Level2Layout, Level2Tables, level2_bound, level2_shape
 from .result import BoundResult, GroupTables
 
-__all__ = ["all_pairs_bound", "all_pairs_size", "cover_tables", "ALL_PAIRS_BYTES_PER_NNZ"]
+__all__ = ["all_pairs_bound", "all_pairs_size", "all_pairs_seconds", "time_features", "cover_tables",
+           "ALL_PAIRS_BYTES_PER_NNZ", "ALL_PAIRS_TIME_MODEL"]
 
 #: Peak bytes of the whole solve per nonzero of the LP (the matrix, the solver's copy and its
 #: factorisation) by solver, the memory guard's estimate. Measured (docs/bounds.md, "Relaxation
@@ -46,14 +48,59 @@ __all__ = ["all_pairs_bound", "all_pairs_size", "cover_tables", "ALL_PAIRS_BYTES
 ALL_PAIRS_BYTES_PER_NNZ = {"ipx": 2_000, "pdlp": 1_000, "clarabel": 8_000}
 
 
+#: IPX's CPU seconds on the level-2 LP (HiGHS, no crossover, the implied rows dropped, tolerance
+#: 1e-8) as a power law of its size, ``coef * (nnz / 1e6) ** a * (c / 10) ** b * (P / 100) ** d``:
+#: nnz :func:`all_pairs_size`'s count, c the pair chains' mean length (the ages kept apart: the cap
+#: or the lumping threshold; longer chains take IPX more iterations and denser basis factors) and
+#: P = |C x A|, the (configuration, action) pairs (4-10 on one edge server, 18-100 on the cloud
+#: server with its pipeline, 42-620 on both servers), where the same nonzeros cost IPX several
+#: times more. Fitted (least squares in logs) on ``python benchmarks/level2_lp.py --scan``'s runs on
+#: the calibration systems (benchmarks/level2_time.csv; docs/bounds.md, "Relaxation 5", with its
+#: fit on held-out points). CPU time: IPX is serial, so the load of the machine does not enter.
+ALL_PAIRS_TIME_MODEL = {"coef": 124.9, "a": 1.778, "b": 1.607, "d": 0.923}
+
+
+def time_features(size: dict) -> tuple:
+    """The positive quantities whose logs :data:`ALL_PAIRS_TIME_MODEL` is linear in: nonzeros in
+    millions, the pair chains' mean length (the lumped ages kept apart, c_k) over 10, and the
+    (configuration, action) pairs over 100."""
+    return (size["nnz"] / 1e6, size["mean_lump"] / 10.0, size["pairs_ca"] / 100.0)
+
+
+def all_pairs_seconds(size: dict) -> float:
+    """Predicted CPU seconds of IPX on the level-2 LP of :func:`all_pairs_size`'s ``size``
+    (:data:`ALL_PAIRS_TIME_MODEL`)."""
+    m = ALL_PAIRS_TIME_MODEL
+    nnz, length, pairs = time_features(size)
+    return float(m["coef"] * nnz ** m["a"] * length ** m["b"] * pairs ** m["d"])
+
+
 def all_pairs_size(system: System | JointData, lump=None, solver: str = "ipx") -> dict:
-    """The level-2 LP's size without building it: ``rows``, ``cols``, ``nnz`` (an upper bound) and
-    ``memory_bytes`` (:data:`ALL_PAIRS_BYTES_PER_NNZ` of ``solver`` a nonzero), Python integers."""
-    data = system if isinstance(system, JointData) else JointData.from_system(system)
-    lay = level2_layout(data, lump)
+    """The level-2 LP's size without building it.
+
+    Counted from the caps, |C|, |C x A| and the automaton's outcomes alone
+    (:func:`~wncs_lp.bounds.level2.level2_shape`): for a ``System`` from its flat automaton, which
+    its construction already holds, so the count costs milliseconds at sixteen processes.
+
+    Returns
+    -------
+    dict
+        ``rows``, ``cols``, ``nnz`` (an upper bound), ``pairs`` (of processes), ``configurations``,
+        ``pairs_ca`` (|C x A|), ``outcomes``, ``memory_bytes`` (:data:`ALL_PAIRS_BYTES_PER_NNZ` of
+        ``solver`` a nonzero), Python integers, and ``predicted_seconds`` (IPX's CPU,
+        :func:`all_pairs_seconds`).
+    """
+    if isinstance(system, JointData):
+        caps, n_c, n_p, n_e = system.caps, system.n_configs, int(system.act_ptr[-1]), system.n_outcomes
+    else:
+        fl = system.automaton.flat(system.n_processes)
+        caps, n_c, n_p, n_e = system.caps, int(fl.act_ptr.size - 1), int(fl.act_ptr[-1]), int(fl.out_nxt.size)
+    lay = level2_shape(caps, n_c, n_p, n_e, lump)
     per = ALL_PAIRS_BYTES_PER_NNZ.get(solver, max(ALL_PAIRS_BYTES_PER_NNZ.values()))
-    return {"rows": int(lay.rows), "cols": int(lay.cols), "nnz": int(lay.nnz),
-            "pairs": len(lay.pairs), "memory_bytes": int(lay.nnz) * per}
+    size = {"rows": int(lay.rows), "cols": int(lay.cols), "nnz": int(lay.nnz), "pairs": len(lay.pairs),
+            "configurations": n_c, "pairs_ca": n_p, "outcomes": n_e, "mean_lump": float(np.mean(lay.lumps)),
+            "memory_bytes": int(lay.nnz) * per}
+    return {**size, "predicted_seconds": all_pairs_seconds(size)}
 
 
 def cover_tables(lay: Level2Layout, tables: Level2Tables) -> GroupTables:

@@ -75,7 +75,8 @@ from ..solvers.highs import solve_highs
 from ..solvers.iteration import gamma
 from .joint_chains import JointData
 
-__all__ = ["Level2Layout", "Level2Tables", "Level2Certificate", "Level2Result", "level2_layout", "level2_lp",
+__all__ = ["Level2Layout", "Level2Tables", "Level2Certificate", "Level2Result", "level2_layout", "level2_shape",
+           "level2_lp",
            "level2_tables", "independent_rows", "certify_level2", "level2_bound", "LEVEL2_SOLVERS"]
 
 #: HiGHS's ``presolve_rule_off`` bit of its dependent-equations rule (HiGHS 1.16's rule 10), off as
@@ -156,10 +157,15 @@ def level2_layout(data: JointData, lump=None) -> Level2Layout:
         The pair measures keep process k's AoI indices below c_k - 1 apart and lump the rest,
         c_k = min(lump_k, tau_hat_k) (module docstring); None: no lumping.
     """
-    N, P, nC = data.n_processes, int(data.act_ptr[-1]), data.n_configs
-    caps = tuple(int(c) for c in data.caps)
+    return level2_shape(data.caps, data.n_configs, int(data.act_ptr[-1]), data.n_outcomes, lump)
+
+
+def level2_shape(caps, n_configs: int, n_pairs_ca: int, n_outcomes: int, lump=None) -> Level2Layout:
+    """:func:`level2_layout` from the counts alone: the caps tau_hat_k, |C|, |C x A| and the
+    automaton's outcomes (what a size check needs, without the joint data's arrays)."""
+    caps = tuple(int(c) for c in caps)
+    N, P, nC, E = len(caps), int(n_pairs_ca), int(n_configs), int(n_outcomes)
     lumps = _lumps(caps, lump)
-    E = data.n_outcomes
     pairs = tuple(itertools.combinations(range(N), 2))
     y, bal, cons = [], [], []
     cols = row = nnz = 0

@@ -15,7 +15,7 @@ from ..errors import ArgumentError, WncsError
 from ..models.guard import require_memory
 from ..models.system import System
 from ..scenario import Scenario
-from .all_pairs import all_pairs_bound
+from .all_pairs import all_pairs_bound, all_pairs_size
 from .grouped import grouped_bound
 from .inputs import bound_system
 from .joint import ipm_plan, joint_bound, joint_reach, joint_size
@@ -28,7 +28,8 @@ from .result import BoundResult
 __all__ = ["RELAXATIONS", "AUTO_SEARCH", "AUTO_GROUPED_TIME_LIMIT", "AUTO_ASCENT_STEPS",
            "AUTO_ASCENT_MAX_BYTES", "AUTO_PAIRS_STEPS", "AUTO_PAIRS_BUDGET", "AUTO_PAIRS_CPU_PER_WORK",
            "AUTO_PAIRS_MAX_BYTES", "AUTO_PAIRS_MIN_GAIN", "AUTO_PAIRS_IPM_TOL", "AUTO_PAIRS_IPM_FROM",
-           "lower_bound", "parse_relaxation", "auto_pick", "runs_grouped"]
+           "AUTO_ALL_PAIRS_BUDGET", "AUTO_ALL_PAIRS_GUARD", "AUTO_ALL_PAIRS_MAX_BYTES", "AUTO_ALL_PAIRS_MIN_LUMP",
+           "lower_bound", "parse_relaxation", "auto_pick", "runs_grouped", "all_pairs_plan"]
 
 #: The relaxations :func:`lower_bound` knows, and their short names (the command line's 1 / 2).
 RELAXATIONS = ("auto", "private-servers", "joint-configuration", "grouped-private-servers", "joint-pairs",
@@ -88,6 +89,26 @@ AUTO_PAIRS_MIN_GAIN = 1e-4
 AUTO_PAIRS_IPM_TOL = 1e-2
 AUTO_PAIRS_IPM_FROM = 200.0
 
+#: Relaxation 5 (every pair's ages at once, its LP solved whole by IPX) under ``"auto"``: from two
+#: processes on, where its LP is predicted to take at most :data:`AUTO_ALL_PAIRS_BUDGET` seconds of
+#: CPU (:func:`~wncs_lp.bounds.all_pairs.all_pairs_size`'s count and
+#: :data:`~wncs_lp.bounds.all_pairs.ALL_PAIRS_TIME_MODEL`, measured: docs/bounds.md, "Relaxation 5")
+#: and its memory estimate is at most :data:`AUTO_ALL_PAIRS_MAX_BYTES`; where the whole LP does not
+#: fit, with the ages lumped at the largest threshold that does, but not below
+#: :data:`AUTO_ALL_PAIRS_MIN_LUMP` of the largest cap (lumped at 0.3-0.4 of the cap it still
+#: halved relaxation 4's looseness on the cloud and both servers; at half of cap 12 on the edge it
+#: gave no more than relaxation 2, whose LP the lumped one contains: docs/bounds.md, "The lumping
+#: trade-off"). IPX is stopped at
+#: :data:`AUTO_ALL_PAIRS_GUARD` (``factor`` times the prediction plus ``slack`` seconds of CPU), so a
+#: solve far beyond its prediction costs a bounded time and certifies nothing (said in
+#: ``auto_reason``). Counted, never built, where it is skipped: milliseconds at sixteen processes.
+#: Where relaxation 2 was solved by its interior point and relaxation 4's start runs, that start is
+#: the probe: relaxation 5 runs only where it raised relaxation 2's bound (the pairs see a gap).
+AUTO_ALL_PAIRS_BUDGET = 120.0
+AUTO_ALL_PAIRS_GUARD = {"factor": 3.0, "slack": 30.0}
+AUTO_ALL_PAIRS_MAX_BYTES = 3 * 2**30
+AUTO_ALL_PAIRS_MIN_LUMP = 1 / 3
+
 #: Why relaxation 2 does not run on a lazily explored system.
 LAZY_NOTE = ("the system's configuration automaton is explored lazily (too large to enumerate), and relaxation 2's "
              "tables live on every joint configuration; relaxations 1 and 3 need only the private ones")
@@ -119,8 +140,9 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         ``"joint-all-pairs"`` (relaxation 5, :mod:`~wncs_lp.bounds.all_pairs`): every pair's ages
         kept jointly with the joint configuration, all pairs at once (the level-2 LP of
         :mod:`~wncs_lp.bounds.level2`, solved whole, its duals certified); at least as tight as
-        relaxation 4 with any pairing; its LP's size is checked against the memory before it is
-        built; not run by ``"auto"`` (its time is not yet predicted).
+        relaxation 4 with any pairing and as relaxation 2's LP; its LP's size is checked against
+        the memory before it is built; run by ``"auto"`` where its LP is predicted to fit
+        :data:`AUTO_ALL_PAIRS_BUDGET` (whole, else with lumped ages).
         ``"joint-pairs"`` (relaxation 4, :mod:`~wncs_lp.bounds.pairs`): relaxation 2 solved, then
         its tables and prices carried to pairs of processes whose ages are kept jointly; never
         looser than relaxation 2; run by ``"auto"`` after relaxation 2's interior point where
@@ -132,7 +154,11 @@ def lower_bound(scenario_or_system: Scenario | System, relaxation: str | int = "
         point (where it was, it was the tighter: processes 1-4, cap 20, 1547.6 against 1441.2);
         relaxation 4 (pairs) after relaxation 2's interior point where it fits and its start pays
         (:data:`AUTO_PAIRS_STEPS`; the interior point then stops at :data:`AUTO_PAIRS_IPM_TOL`
-        where it is slow, :data:`AUTO_PAIRS_IPM_FROM`); on a tie the first of 2, 4, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
+        where it is slow, :data:`AUTO_PAIRS_IPM_FROM`), its start alone where relaxation 5 runs
+        whole (whose LP contains relaxation 4's); relaxation 5 where its LP, whole or lumped, is
+        predicted to fit (:func:`all_pairs_plan`, :data:`AUTO_ALL_PAIRS_BUDGET`), unless relaxation
+        4's start, run, saw no gap beyond relaxation 2 (a heuristic: the pairs at relaxation 2's
+        prices add nothing); on a tie the first of 5, 2, 4, 3, 1. ``stats["auto_choice"]``, ``stats["auto_reason"]`` and
         ``stats["auto_bounds"]`` say which was taken, why, and what each gave. Relaxation 2's
         search then stops as :data:`AUTO_SEARCH` says unless ``max_iter`` / ``time_limit`` are given.
     **options
@@ -182,16 +208,29 @@ def _auto(system: System, options: dict) -> BoundResult:
     """``"auto"``: every relaxation that applies, the largest certified bound returned."""
     found: list[BoundResult] = []
     notes: list[str] = []
-    res2, note = _try_joint(system, {**_pairs_ipm_tol(system), **options})
+    plan5 = all_pairs_plan(system)
+    res2, note = _try_joint(system, {**({} if plan5["whole"] else _pairs_ipm_tol(system)), **options})
     if res2 is not None:
         found.append(res2)
     if note:
         notes.append(note)
-    res4, note = _try_pairs(system, res2, options)
+    # relaxation 4's start (relaxation 2's tables carried to pairs) is the probe of a gap the pairs see;
+    # where relaxation 5 runs whole its LP contains relaxation 4's, so the start alone is taken
+    res4, note = _try_pairs(system, res2, options, steps=0 if plan5["whole"] else AUTO_PAIRS_STEPS)
     if res4 is not None:
         found.append(res4)
     if note:
         notes.append(note)
+    probed = (res2 is not None and res2.stats.get("ipm_tables") is True and system.n_processes >= 3
+              and _pairs_fit(*_pairs_prediction(system)))
+    if plan5["runs"] and probed and res4 is None:
+        notes.append(f"relaxation 5 not run: relaxation 4's start saw no gap beyond relaxation 2 ({plan5['rule']})")
+    else:
+        res5, note = _try_all_pairs(system, plan5, options)
+        if res5 is not None:
+            found.insert(0, res5)
+        if note:
+            notes.append(note)
     res1 = _try(private_bound, system, _private_options(options))
     if res1 is not None and runs_grouped(system, res2):
         limit = options.get("time_limit")
@@ -214,10 +253,10 @@ def runs_grouped(system: System, joint_result: BoundResult | None) -> bool:
 
 
 def auto_pick(found: list[BoundResult], notes: list[str] = ()) -> BoundResult:
-    """``"auto"``'s choice among certified bounds listed in the order 2, 4, 3, 1: the largest (the
+    """``"auto"``'s choice among certified bounds listed in the order 5, 2, 4, 3, 1: the largest (the
     first of equals), with ``stats["auto_choice"]``, ``"auto_reason"`` and ``"auto_bounds"``, and the
     others as ``alternatives`` (their tables may make the better policy: :func:`~wncs_lp.bounds.gaps.policy_source`)."""
-    best = max(found, key=lambda r: r.lower_bound)  # max keeps the first of equals: 2, 4, 3, 1
+    best = max(found, key=lambda r: r.lower_bound)  # max keeps the first of equals: 5, 2, 4, 3, 1
     bounds = {r.relaxation: r.lower_bound for r in found}
     reason = "; ".join([f"the largest certified bound of {', '.join(f'{k} {v:.10g}' for k, v in bounds.items())}"]
                        + list(notes))
@@ -335,12 +374,12 @@ def _pairs_ipm_tol(system: System) -> dict:
     return {"ipm_tol": AUTO_PAIRS_IPM_TOL}
 
 
-def _try_pairs(system: System, res2: BoundResult | None, options: dict) -> tuple[BoundResult | None, str]:
-    """Relaxation 4 from relaxation 2's result where :data:`AUTO_PAIRS_STEPS`' rule takes it:
-    (its result, why) or (None, why not; "" where it does not apply)."""
+def _try_pairs(system: System, res2: BoundResult | None, options: dict,
+               steps: int = AUTO_PAIRS_STEPS) -> tuple[BoundResult | None, str]:
+    """Relaxation 4 from relaxation 2's result where :data:`AUTO_PAIRS_STEPS`' rule takes it, its
+    start and ``steps`` bundle steps: (its result, why) or (None, why not; "" where it does not apply)."""
     if res2 is None or res2.stats.get("ipm_tables") is not True or system.n_processes < 3:
         return None, ""
-    steps = AUTO_PAIRS_STEPS
     predicted, size = _pairs_prediction(system)
     if not _pairs_fit(predicted, size):
         return None, (f"relaxation 4 not run: predicted {predicted:.0f} s of CPU (budget {AUTO_PAIRS_BUDGET:.0f}), "
@@ -353,7 +392,64 @@ def _try_pairs(system: System, res2: BoundResult | None, options: dict) -> tuple
     if not res.stats.get("start_pays"):
         return None, (f"relaxation 4's start {res.lower_bound:.10g} raised relaxation 2's bound by at most "
                       f"{AUTO_PAIRS_MIN_GAIN:g} of it: not kept")
+    if steps == 0:
+        return res, "relaxation 4's start only (relaxation 5's whole LP, which contains its constraints, follows)"
     return res, f"relaxation 4 from relaxation 2's optimum: {steps} bundle steps (predicted {predicted:.0f} s of CPU)"
+
+
+def all_pairs_plan(system: System) -> dict:
+    """``"auto"``'s rule for relaxation 5 (:data:`AUTO_ALL_PAIRS_BUDGET`), counted, nothing built.
+
+    Returns
+    -------
+    dict
+        ``runs`` (bool), ``lump`` (None: the whole LP; else the threshold), ``whole`` (runs
+        without lumping), ``size`` (:func:`~wncs_lp.bounds.all_pairs.all_pairs_size` of the LP
+        that runs, or of the whole LP where nothing does), ``predicted`` (its CPU seconds) and
+        ``rule`` (the rule in words, with the prediction).
+    """
+    def words(z: dict) -> str:
+        return (f"{z['cols']:,} columns, {z['nnz']:,} nonzeros, |C x A| = {z['pairs_ca']:,}, chains of "
+                f"{z['mean_lump']:.3g} ages: predicted {z['predicted_seconds']:.3g} s of CPU, "
+                f"{z['memory_bytes'] / 2**30:.2f} GiB")
+
+    def fits(z: dict) -> bool:
+        return z["predicted_seconds"] <= AUTO_ALL_PAIRS_BUDGET and z["memory_bytes"] <= AUTO_ALL_PAIRS_MAX_BYTES
+
+    limits = f"(budget {AUTO_ALL_PAIRS_BUDGET:.0f} s, {AUTO_ALL_PAIRS_MAX_BYTES / 2**30:.0f} GiB)"
+    if system.is_lazy or system.n_processes < 2:
+        why = LAZY_NOTE if system.is_lazy else "one process: relaxation 1 is exact"
+        return {"runs": False, "lump": None, "whole": False, "size": None, "predicted": float("inf"),
+                "rule": f"relaxation 5 not run: {why}"}
+    whole = all_pairs_size(system)
+    if fits(whole):
+        return {"runs": True, "lump": None, "whole": True, "size": whole, "predicted": whole["predicted_seconds"],
+                "rule": f"relaxation 5, its whole LP: {words(whole)} {limits}"}
+    top = int(max(system.caps))
+    floor = max(4, int(-(-AUTO_ALL_PAIRS_MIN_LUMP * top // 1)))  # fewer ages apart keep next to nothing
+    for c in range(top - 1, floor - 1, -1):  # sizes only grow with c: the first that fits is the largest
+        z = all_pairs_size(system, c)
+        if fits(z):
+            return {"runs": True, "lump": c, "whole": False, "size": z, "predicted": z["predicted_seconds"],
+                    "rule": (f"relaxation 5 with ages lumped from {c} on: {words(z)} {limits}; its whole LP "
+                             f"{words(whole)}")}
+    return {"runs": False, "lump": None, "whole": False, "size": whole, "predicted": whole["predicted_seconds"],
+            "rule": (f"relaxation 5 not run: its whole LP {words(whole)} {limits}, and with its ages lumped at "
+                     f"any threshold down to {floor} it does not fit either")}
+
+
+def _try_all_pairs(system: System, plan: dict, options: dict) -> tuple[BoundResult | None, str]:
+    """Relaxation 5 where :func:`all_pairs_plan` takes it: (its result, why) or (None, why not)."""
+    if not plan["runs"]:
+        return None, plan["rule"] if plan["size"] is not None else ""
+    g = AUTO_ALL_PAIRS_GUARD
+    guard = g["factor"] * plan["predicted"] + g["slack"]
+    keep = {k: v for k, v in options.items() if k in ("progress",)}
+    try:
+        res = all_pairs_bound(system, lump=plan["lump"], cpu_limit=guard, **keep)
+    except WncsError as exc:
+        return None, f"{plan['rule']}: it could not run ({exc})"
+    return res, f"{plan['rule']}; it took {res.stats['solve_cpu']:.3g} s of CPU"
 
 
 def _as_system(obj: Scenario | System) -> System:
