@@ -18,6 +18,7 @@ pytest.importorskip("numba")
 from wncs_lp.errors import SolverError  # noqa: E402
 from wncs_lp.models.system import System  # noqa: E402
 from wncs_lp.solvers.matrix_free import BoxLayout, matrix_free_value_iteration  # noqa: E402
+from wncs_lp.cli.common import solution_json  # noqa: E402
 from wncs_lp.solvers.matrix_free.iterate import coarse_caps  # noqa: E402
 from wncs_lp.solvers.matrix_free.start import clamped_values  # noqa: E402
 
@@ -38,6 +39,10 @@ def test_coarse_start_keeps_the_certified_gain(case):
         assert all(c < int(k) for c, k in zip(co["caps"], system.caps))
         # the optimal gain grows with the caps: the coarse one is below the certified bracket
         assert sol.stats["gain_hint"] == co["gain"] and co["gain_upper"] < sol.gain_lower
+        # --json keeps scalars only: the coarse solve's passes and time must reach it as such
+        shown = solution_json(sol)["stats"]
+        assert shown["coarse_used"] is True and shown["coarse_sweeps"] == co["sweeps"] > 0
+        assert shown["coarse_eval_sweeps"] == co["eval_sweeps"] and shown["coarse_seconds"] == co["seconds"]
     assert sol.status == "optimal" and inside(sol, ref)
 
 

@@ -373,7 +373,8 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
         ``roundoff_delta``, ``stop``, ``gain_hint``, ``coarse`` (None, or the coarse solve's
         ``caps``, ``sweeps``, ``eval_sweeps``, ``gain``, ``gain_lower``, ``gain_upper``,
         ``seconds``, ``first_midpoint_over_gain`` and whether it was ``used``; its passes are not
-        in ``sweeps``) and ``history``: one ``(sweeps,
+        in ``sweeps``; ``coarse_used``, ``coarse_sweeps``, ``coarse_eval_sweeps`` and
+        ``coarse_seconds`` repeat them as scalars, None without one) and ``history``: one ``(sweeps,
         eval_sweeps, seconds, lo, hi)`` per certificate pass.
     """
     opts = options_from(MatrixFreeOptions, options, fields, "matrix_free_value_iteration")
@@ -423,6 +424,11 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
              "sweeps": out.used, "eval_sweeps": out.evals, "value_vectors": sweeps.vectors,
              "bytes": matrix_free_bytes(st.n, vectors=sweeps.vectors, mask=st.mask is not None),
              "coarse": coarse_stats, "gain_hint": opts.gain_hint,
+             # the same as scalars, which is what --json keeps: the passes above are at these caps only
+             "coarse_used": None if coarse_stats is None else coarse_stats["used"],
+             "coarse_sweeps": None if coarse_stats is None else coarse_stats["sweeps"],
+             "coarse_eval_sweeps": None if coarse_stats is None else coarse_stats["eval_sweeps"],
+             "coarse_seconds": None if coarse_stats is None else coarse_stats["seconds"],
              **_common_stats(out, opts, sweeps, lo, hi, delta, t_setup)}
     return MatrixFreeSolution(method="matrix-free", status=out.status, gain=0.5 * (lo + hi), gain_lower=lo,
                               gain_upper=hi, bias=h, local_actions=sweeps.pol, iterations=out.used,
