@@ -216,15 +216,14 @@ def _auto(system: System, options: dict) -> BoundResult:
         notes.append(note)
     # relaxation 4's start (relaxation 2's tables carried to pairs) is the probe of a gap the pairs see;
     # where relaxation 5 runs whole its LP contains relaxation 4's, so the start alone is taken
-    res4, note = _try_pairs(system, res2, options, steps=0 if plan5["whole"] else AUTO_PAIRS_STEPS)
+    res4, note, probe = _try_pairs(system, res2, options, steps=0 if plan5["whole"] else AUTO_PAIRS_STEPS)
     if res4 is not None:
         found.append(res4)
     if note:
         notes.append(note)
-    probed = (res2 is not None and res2.stats.get("ipm_tables") is True and system.n_processes >= 3
-              and _pairs_fit(*_pairs_prediction(system)))
-    if plan5["runs"] and probed and res4 is None:
-        notes.append(f"relaxation 5 not run: relaxation 4's start saw no gap beyond relaxation 2 ({plan5['rule']})")
+    if plan5["runs"] and probe in ("no gap", "failed"):
+        why = "saw no gap beyond relaxation 2" if probe == "no gap" else "could not run"
+        notes.append(f"relaxation 5 not run: relaxation 4's start {why} ({plan5['rule']})")
     else:
         res5, note = _try_all_pairs(system, plan5, options)
         if res5 is not None:
@@ -375,26 +374,29 @@ def _pairs_ipm_tol(system: System) -> dict:
 
 
 def _try_pairs(system: System, res2: BoundResult | None, options: dict,
-               steps: int = AUTO_PAIRS_STEPS) -> tuple[BoundResult | None, str]:
+               steps: int = AUTO_PAIRS_STEPS) -> tuple[BoundResult | None, str, str]:
     """Relaxation 4 from relaxation 2's result where :data:`AUTO_PAIRS_STEPS`' rule takes it, its
-    start and ``steps`` bundle steps: (its result, why) or (None, why not; "" where it does not apply)."""
+    start and ``steps`` bundle steps: (its result, why, the probe) or (None, why not; "" where it
+    does not apply, the probe). The probe -- what its start, run, says of a gap beyond relaxation 2
+    (relaxation 5's rule) -- is ``"gap"``, ``"no gap"``, ``"failed"``, or ``""`` where it was not run."""
     if res2 is None or res2.stats.get("ipm_tables") is not True or system.n_processes < 3:
-        return None, ""
+        return None, "", ""
     predicted, size = _pairs_prediction(system)
     if not _pairs_fit(predicted, size):
         return None, (f"relaxation 4 not run: predicted {predicted:.0f} s of CPU (budget {AUTO_PAIRS_BUDGET:.0f}), "
-                      f"{size['memory_bytes'] / 2**30:.2f} GiB (at most {AUTO_PAIRS_MAX_BYTES / 2**30:.0f})")
+                      f"{size['memory_bytes'] / 2**30:.2f} GiB (at most {AUTO_PAIRS_MAX_BYTES / 2**30:.0f})"), ""
     keep = {k: v for k, v in options.items() if k in ("tol", "progress", "threads")}
     try:
         res = pairs_bound(system, start=res2, max_iter=steps, time_limit=None, min_gain=AUTO_PAIRS_MIN_GAIN, **keep)
     except WncsError as exc:
-        return None, f"relaxation 4 could not run: {exc}"
+        return None, f"relaxation 4 could not run: {exc}", "failed"
     if not res.stats.get("start_pays"):
         return None, (f"relaxation 4's start {res.lower_bound:.10g} raised relaxation 2's bound by at most "
-                      f"{AUTO_PAIRS_MIN_GAIN:g} of it: not kept")
+                      f"{AUTO_PAIRS_MIN_GAIN:g} of it: not kept"), "no gap"
     if steps == 0:
-        return res, "relaxation 4's start only (relaxation 5's whole LP, which contains its constraints, follows)"
-    return res, f"relaxation 4 from relaxation 2's optimum: {steps} bundle steps (predicted {predicted:.0f} s of CPU)"
+        return res, "relaxation 4's start only (relaxation 5's whole LP, which contains its constraints, follows)", "gap"
+    return res, (f"relaxation 4 from relaxation 2's optimum: {steps} bundle steps (predicted {predicted:.0f} s "
+                 "of CPU)"), "gap"
 
 
 def all_pairs_plan(system: System) -> dict:
