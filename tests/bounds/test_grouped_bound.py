@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 import pytest
-from bounds_reference import brute_lookahead, shape
+from bounds_reference import EDGE, REMOTE, brute_lookahead, shape
 from joint_reference import three_processes
 
 from wncs_lp import scenario_path
@@ -178,3 +178,32 @@ def test_command_line_groups(capsys):
     assert rc == 2 and "--relaxation 3" in json.loads(capsys.readouterr().out)["error"]
     rc = main(["bound", "paper_p123", "--set", "tau_cap=8", "--relaxation", "3", "--groups", "0,1;2", "--json"])
     assert rc == 2 and "1-based" in json.loads(capsys.readouterr().out)["error"]
+
+
+def test_trust_region_search_reaches_the_plain_box_optimum():
+    """The multiplier search in a trust region around relaxation 1's multipliers (the default) and
+    Kelley's plain box (``radius=None``) are two routes to one concave maximum: both converge, to the
+    same bound within the search's tolerance, and the trust region's converged model value is a
+    valid upper end of the relaxation (at least the bound, at most the plain box's model + tol)."""
+    system = System.from_scenario(load_scenario(scenario_path("paper_p123"), ["tau_cap=12"]))
+    tr = grouped_bound(system, [(1, 2), (0,)])
+    plain = grouped_bound(system, [(1, 2), (0,)], radius=None)
+    assert tr.status == plain.status == "optimal"
+    assert tr.lower_bound == pytest.approx(plain.lower_bound, rel=2e-6)
+    assert tr.lower_bound <= tr.relaxation_upper <= plain.relaxation_upper * (1 + 2e-6)
+
+
+def test_pairs_of_interchangeable_processes_are_measured_first():
+    """Under a time limit that stops the pair choice after one pair, the pair measured is two
+    copies of one process type (processes 1 and 3 of scalar, double, scalar, double), not the
+    first pair in index order (1, 2)."""
+    from wncs_lp.bounds.grouped import choose_pairs
+
+    raw = {"model": {"kind": "wncs", "tau_cap": 4}, "channel": {"success_probability": 0.9},
+           "process": [{"A": [[1.02]]}, {"A": [[1.02, 1], [0, 1]]}, {"A": [[1.02]]}, {"A": [[1.02, 1], [0, 1]]}],
+           "server": [REMOTE, EDGE]}
+    system = System.from_scenario(scenario_from_dict(raw, source="<copies>"))
+    r1 = private_bound(system)
+    calls = iter([False] + [True] * 10)
+    _, weights = choose_pairs(system, r1.multipliers, r1.process_gains, expired=lambda: next(calls))
+    assert list(weights) == [(0, 2)]
