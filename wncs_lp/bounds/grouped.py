@@ -59,24 +59,13 @@ from .inputs import bound_system, check_private_chains
 from .private import PrivateChain, build_private_chain, chain_key, private_bound, private_lower_bound_at, search_multipliers
 from .result import BoundResult, GroupTables
 
-__all__ = ["grouped_bound", "choose_pairs", "group_table", "PrivateChains", "RELAXATION", "EXACT_MATCHING_MAX",
-           "SEARCH_RADIUS", "CHOOSE_SHARE"]
+__all__ = ["grouped_bound", "choose_pairs", "group_table", "PrivateChains", "RELAXATION", "EXACT_MATCHING_MAX"]
 
 #: Name of this relaxation in :class:`BoundResult`.
 RELAXATION = "grouped-private-servers"
 #: ``groups="pairs"`` finds the best pairing exactly (a dynamic programme over 2^N subsets) up to
 #: this many processes, greedily (largest interaction first) beyond.
 EXACT_MATCHING_MAX = 16
-#: The multiplier search's trust region, relative to relaxation 1's multipliers (its start). Those
-#: are near the groups' optimum (relaxation 3 refines relaxation 1 inside each group), and Kelley's
-#: plain box spent its first points at the box's corners -- at the paper's types four times, cap 40,
-#: points of -1.8e7 and -1.1e6 against the start's 122,483, ~40 s of CPU each on chains of 88k-259k
-#: states, so that under ``auto``'s CPU limit the search never passed its first point
-#: (docs/bounds.md, "Sixteen processes: relaxation 3's search").
-SEARCH_RADIUS = 0.05
-#: Under a time limit, the share of it that choosing the pairs may take (the pairs of
-#: interchangeable copies measured first); the multiplier search has the rest.
-CHOOSE_SHARE = 0.5
 
 
 class PrivateChains:
@@ -86,7 +75,6 @@ class PrivateChains:
         self.model = model
         self.by_key: dict[str, PrivateChain] = {}
         self.policies: dict[int, np.ndarray] = {}  # id(chain) -> its last computed policy
-        self.solves: dict[int, tuple] = {}  # id(chain) -> (lambda, its priced solve there)
 
     def of(self, group: tuple) -> PrivateChain:
         sc = self.model.group_scenario(group)
@@ -101,7 +89,6 @@ def _priced_gain(chains: PrivateChains, chain: PrivateChain, lam: np.ndarray, to
     to start the multiplier search)."""
     lb, solves = private_lower_bound_at([chain], np.ones(1), lam, tol)
     chains.policies[id(chain)] = solves[0].policy
-    chains.solves[id(chain)] = (np.array(lam, float), solves[0])
     return lb + float(np.sum(lam))
 
 
@@ -123,9 +110,9 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
         The cache of group chains to build into (the caller's, so the chosen pairs are not built twice).
     progress : bool or Progress
     expired : callable, optional
-        ``expired()`` True (a time limit passed): no more pair chains are solved (the pairs not
-        measured by then count as not interacting). The pairs of interchangeable processes are
-        measured first.
+        ``expired()`` True (a time limit passed): no more pair chains are solved; a pair whose two
+        kinds of process were measured together before still gets that weight, the others count as
+        not interacting.
 
     Returns
     -------
@@ -138,15 +125,10 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
     # a pair's gain does not depend on the order of its processes: one solve per multiset of processes
     kind = [chain_key(chains.model.private_scenario(k)) for k in range(n)]
     weights, seen = {}, {}
-    # pairs of interchangeable copies first: they compete for the same servers at the same ages, and
-    # where measured they held nearly all the interaction (the paper's types four times, cap 40: 388
-    # for two copies of type 1, at most 7.4 for any pair of two types), so that a time limit cuts the
-    # pairs least likely to be chosen
-    order = sorted(itertools.combinations(range(n), 2), key=lambda p: kind[p[0]] != kind[p[1]])
-    for k, l in order:
-        if expired is not None and expired():
-            break
+    for k, l in itertools.combinations(range(n), 2):
         key = tuple(sorted((kind[k], kind[l])))
+        if key not in seen and expired is not None and expired():
+            continue  # no new pair chains; the pairs of kinds already measured still get their weight
         if key not in seen:
             ch = chains.of((k, l))
             seen[key] = _priced_gain(chains, ch, lam, solve_tol)
@@ -224,7 +206,7 @@ def group_table(chain: PrivateChain, bias: np.ndarray) -> np.ndarray:
 def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[Sequence[int]] = "pairs", *,
                   tol: float = 1e-6, max_iter: int = 80, solve_tol: float = 1e-10, time_limit: float | None = None,
                   cpu_limit: float | None = None, relaxation_1: BoundResult | None = None,
-                  radius: float | None = SEARCH_RADIUS, progress: Any = False) -> BoundResult:
+                  progress: Any = False) -> BoundResult:
     """The grouped private-servers lower bound on g* (relaxation 3), certified.
 
     Parameters
@@ -245,10 +227,6 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
         a quiet one (``lower_bound(x, "auto")`` uses it).
     relaxation_1 : BoundResult, optional
         Relaxation 1's result on this system, to start from (computed when not given).
-    radius : float or None
-        The multiplier search's trust region, relative to relaxation 1's multipliers where it starts
-        (:func:`~wncs_lp.bounds.private.search_multipliers`; default :data:`SEARCH_RADIUS`); None:
-        Kelley's plain box.
     progress : bool or Progress
 
     Returns
@@ -289,20 +267,13 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     def expired() -> bool:  # either limit, wall clock or CPU time
         return time.perf_counter() >= deadline or time.process_time() >= cpu_end
 
-    # the pair choice gets CHOOSE_SHARE of the limits, so that the multiplier search has the rest
-    wall0, cpu0 = time.perf_counter(), time.process_time()
-
-    def choice_expired() -> bool:
-        return (time.perf_counter() >= wall0 + CHOOSE_SHARE * (deadline - wall0)
-                or time.process_time() >= cpu0 + CHOOSE_SHARE * (cpu_end - cpu0))
-
     lam1 = np.asarray(r1.multipliers, float)
     chains = PrivateChains(model)
     stats: dict[str, Any] = {"relaxation_1_bound": r1.lower_bound, "capacity": r1.stats["capacity"]}
     if groups == "pairs":
         prog.phase(f"grouped bound: the interaction of every pair of {n} processes at relaxation 1's multipliers")
         groups, weights = choose_pairs(system, lam1, r1.process_gains, solve_tol=solve_tol, chains=chains,
-                                       progress=prog, expired=choice_expired)
+                                       progress=prog, expired=expired)
         stats["pair_interaction"] = {f"{k + 1},{l + 1}": round(float(v), 9) for (k, l), v in weights.items()}
     group_chains = [chains.of(g) for g in groups]
     columns = tuple(_columns(system, model, c, g) for c, g in zip(group_chains, groups))
@@ -311,11 +282,9 @@ def grouped_bound(scenario_or_system: Scenario | System, groups: str | Sequence[
     which = np.array([next(i for i, c in enumerate(distinct) if c is gc) for gc in group_chains])
     prog.phase(f"grouped bound: groups {[tuple(k + 1 for k in g) for g in groups]}, "
                f"{len(distinct)} distinct private chains of {[c.mdp.n_states for c in distinct]} states")
-    made = [chains.solves.get(id(c)) for c in distinct]  # the pair choice's solves at lam1: the first point
     search = search_multipliers(system, distinct, which, r1.stats["capacity"], tol, max_iter, solve_tol, prog,
-                                lam0=lam1, expired=expired, radius=radius,
-                                policies0=[chains.policies.get(id(c)) for c in distinct],
-                                first=[m[1] if m is not None and np.array_equal(m[0], lam1) else None for m in made])
+                                lam0=lam1, expired=expired,
+                                policies0=[chains.policies.get(id(c)) for c in distinct])
     solves = search["solves"]
     tables = GroupTables(groups=groups,
                          h=tuple(group_table(distinct[which[i]], solves[which[i]].bias) for i in range(len(groups))),

@@ -383,26 +383,12 @@ def private_bound(
 
 def search_multipliers(system: System, chains: list, which: np.ndarray, sense: str, tol: float, max_iter: int,
                        solve_tol: float, prog, lam0: np.ndarray | None = None, policies0: list | None = None,
-                       expired: Any = None, radius: float | None = None, first: tuple | None = None) -> dict:
+                       expired: Any = None) -> dict:
     """Kelley's cutting planes on the multipliers, inside a box that doubles while the answer
     touches it. ``which[i]`` is the chain of the i-th member (a process, or a group of them);
     the first point is ``lam0`` (default 0; the box grows to hold it); the search also stops when
     ``expired()`` (optional: a time limit, after at least one point) is True; ``policies0[j]`` (or None)
-    starts chain j's first policy iteration.
-
-    ``radius`` (optional) adds a **trust region**: each master is solved on the box intersected
-    with [best - d, best + d], d = ``radius`` |lam0| per server at first (at least 1e-6 of the cost
-    scale), doubled after a point that improved on the best while on the region's edge and halved
-    after a point that did not improve. Kelley's plain box sends the first steps to its corners
-    (at the paper's types four times, points of -1.8e7 against a bound of 1.2e5), each a costly
-    solve of chains far from their optimum; the region keeps the points near the best, where a
-    warm-started policy iteration is cheap. The cut model is concave, so a master optimum strictly
-    inside the region is its optimum over the whole box: convergence is judged, and the model's
-    value reported as the relaxation's upper end, only there.
-
-    ``first`` (optional): chain j's solve already made at ``lam0`` (the caller's, e.g. relaxation 3's
-    pair choice), or None, used at the first point instead of solving again.
-    """
+    starts chain j's first policy iteration."""
     mult = np.bincount(which, minlength=len(chains)).astype(float)
     M = system.n_servers
     half = float(sum(q[-1] for q in system.q))  # the cost scale: every AoI at its cap
@@ -413,55 +399,27 @@ def search_multipliers(system: System, chains: list, which: np.ndarray, sense: s
         hi = np.maximum(hi, 2 * np.abs(lam0))
         lo = np.minimum(lo, -2 * np.abs(lam0)) if free else lo
     lam = np.zeros(M) if lam0 is None else np.clip(lam0, lo, hi)
-    region = None if radius is None else np.maximum(float(radius) * np.abs(lam), 1e-6 * half)
     best = {"lb": -np.inf, "lambda": lam, "solves": None}
     cuts: list = []
     policies = policies0
-    upper, upper_valid, converged, it, on_edge = np.inf, False, False, 0, False
-
-    def master() -> tuple[float, np.ndarray, bool, bool]:
-        """(model value, its lambda, whether it is the model's optimum over the whole box, whether
-        that lambda is on the trust region's edge inside the box)."""
-        if region is None:
-            val, x = _master(cuts, mult, lo, hi)
-            return val, x, True, False
-        rlo, rhi = np.maximum(lo, best["lambda"] - region), np.minimum(hi, best["lambda"] + region)
-        val, x = _master(cuts, mult, rlo, rhi)
-        tight = 1e-9 * np.maximum(1.0, np.abs(rhi))
-        edge = bool(np.any((x >= rhi - tight) & (rhi < hi)) or np.any((x <= rlo + tight) & (rlo > lo)))
-        return val, x, not edge, edge
-
+    upper, converged, it = np.inf, False, 0
     for it in range(1, max_iter + 1):
-        if it == 1 and first is not None:  # the caller's solves at lam0, the missing ones made here
-            solves = [s if s is not None else _solve_priced(ch, lam, None if policies is None else policies[j],
-                                                            solve_tol) for j, (s, ch) in enumerate(zip(first, chains))]
-            lb = float(sum(w * s.lower for w, s in zip(mult, solves)) - np.sum(lam))
-        else:
-            lb, solves = private_lower_bound_at(chains, mult, lam, solve_tol, policies)
+        lb, solves = private_lower_bound_at(chains, mult, lam, solve_tol, policies)
         policies = [s.policy for s in solves]
-        improved = lb > best["lb"]
-        if improved:
+        if lb > best["lb"]:
             best = {"lb": lb, "lambda": lam.copy(), "solves": solves}
-        if region is not None and it > 1:
-            region = region * 2.0 if (improved and on_edge) else (region if improved else region * 0.5)
-            region = np.maximum(region, 1e-9 * half)
         cuts += [(j, s.aoi, s.rate) for j, s in enumerate(solves)]
-        upper, lam, upper_valid, on_edge = master()
+        upper, lam = _master(cuts, mult, lo, hi)
         prog.tick(f"[bound] point {it}: LB {lb:.10g}, best {best['lb']:.10g}, model {upper:.10g}", force=True)
-        close = lambda: upper - best["lb"] <= tol * max(abs(best["lb"]), 1e-300)  # noqa: E731
-        while region is not None and on_edge and close():  # flat within the region: look wider first
-            region = region * 2.0
-            upper, lam, upper_valid, on_edge = master()
-        if close():
+        if upper - best["lb"] <= tol * max(abs(best["lb"]), 1e-300):
             if not _on_boundary(best["lambda"], lo, hi, free):
                 converged = True
                 break
             lo, hi = (2 * lo if free else lo), 2 * hi
-            upper, lam, upper_valid, on_edge = master()
+            upper, lam = _master(cuts, mult, lo, hi)
         if expired is not None and expired():
             break
-    interior = converged or (upper_valid and not _on_boundary(lam, lo, hi, free))
+    interior = converged or not _on_boundary(lam, lo, hi, free)
     return {"lb": best["lb"], "lambda": best["lambda"], "solves": best["solves"], "converged": converged,
             "upper": float(upper) if interior else float("inf"), "iterations": it, "cuts": len(cuts),
-            "solves_done": it * len(chains) - (sum(x is not None for x in first) if first is not None else 0),
-            "box": [lo.tolist(), hi.tolist()]}
+            "solves_done": it * len(chains), "box": [lo.tolist(), hi.tolist()]}
