@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 import pytest
-from bounds_reference import brute_lookahead, shape
+from bounds_reference import EDGE, REMOTE, brute_lookahead, shape
 from joint_reference import three_processes
 
 from wncs_lp import scenario_path
@@ -178,3 +178,23 @@ def test_command_line_groups(capsys):
     assert rc == 2 and "--relaxation 3" in json.loads(capsys.readouterr().out)["error"]
     rc = main(["bound", "paper_p123", "--set", "tau_cap=8", "--relaxation", "3", "--groups", "0,1;2", "--json"])
     assert rc == 2 and "1-based" in json.loads(capsys.readouterr().out)["error"]
+
+
+def test_a_time_limit_keeps_the_weights_of_pairs_already_measured():
+    """Under a time limit that stops the pair choice after its first pair chain, every other pair of
+    the same two kinds of process still gets that chain's weight (processes scalar, double, scalar,
+    double: the first chain measured is (1, 2); (1, 4), (2, 3), (3, 4) are the same pair of kinds,
+    and no chain of another kind is solved). Before, the choice stopped at the limit and the later
+    copies of a measured pair counted as not interacting -- so a limit that fell after a pair of
+    copies had been measured left the other copies of that type unpaired."""
+    from wncs_lp.bounds.grouped import choose_pairs
+
+    raw = {"model": {"kind": "wncs", "tau_cap": 4}, "channel": {"success_probability": 0.9},
+           "process": [{"A": [[1.02]]}, {"A": [[1.02, 1], [0, 1]]}, {"A": [[1.02]]}, {"A": [[1.02, 1], [0, 1]]}],
+           "server": [REMOTE, EDGE]}
+    system = System.from_scenario(scenario_from_dict(raw, source="<copies>"))
+    r1 = private_bound(system)
+    calls = iter([False] + [True] * 10)
+    _, weights = choose_pairs(system, r1.multipliers, r1.process_gains, expired=lambda: next(calls))
+    assert sorted(weights) == [(0, 1), (0, 3), (1, 2), (2, 3)]
+    assert len({round(w, 12) for w in weights.values()}) == 1

@@ -110,8 +110,9 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
         The cache of group chains to build into (the caller's, so the chosen pairs are not built twice).
     progress : bool or Progress
     expired : callable, optional
-        ``expired()`` True (a time limit passed): no more pair chains are solved (the pairs not
-        measured by then count as not interacting).
+        ``expired()`` True (a time limit passed): no more pair chains are solved; a pair whose two
+        kinds of process were measured together before still gets that weight, the others count as
+        not interacting.
 
     Returns
     -------
@@ -125,9 +126,9 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
     kind = [chain_key(chains.model.private_scenario(k)) for k in range(n)]
     weights, seen = {}, {}
     for k, l in itertools.combinations(range(n), 2):
-        if expired is not None and expired():
-            break
         key = tuple(sorted((kind[k], kind[l])))
+        if key not in seen and expired is not None and expired():
+            continue  # no new pair chains; the pairs of kinds already measured still get their weight
         if key not in seen:
             ch = chains.of((k, l))
             seen[key] = _priced_gain(chains, ch, lam, solve_tol)
