@@ -207,6 +207,12 @@ class IterationScheme:
         its next iterate aside, for :meth:`advance`)."""
         raise NotImplementedError
 
+    def h_range(self) -> tuple[float, float]:
+        """(min, max) of h (NaN if an entry is): two streaming numpy passes, no temporary; a
+        scheme with a faster reduction (one parallel pass) overrides it."""
+        h = self.h
+        return (float(np.min(h)), float(np.max(h))) if h.size else (0.0, 0.0)
+
     def advance(self) -> None:
         """Take the next iterate written by the last :meth:`certify`, if it wrote one."""
 
@@ -396,13 +402,13 @@ class _Judge:
         return of(INACCURATE, START_DEPENDENT)
 
 
-def _finite(lo: float, hi: float, h: np.ndarray) -> bool:
-    """Whether the bracket, its width and midpoint, and every entry of h are finite (h by its max
-    and min, two streaming passes without a temporary; either is NaN if an entry is)."""
+def _finite(lo: float, hi: float, scheme: IterationScheme) -> bool:
+    """Whether the bracket, its width and midpoint, and every entry of the scheme's h are finite
+    (h by its min and max, :meth:`IterationScheme.h_range`; either is NaN if an entry is)."""
     lo, hi = float(lo), float(hi)
     if not all(math.isfinite(x) for x in (lo, hi, hi - lo, lo + hi)):
         return False
-    return h.size == 0 or (math.isfinite(float(np.max(h))) and math.isfinite(float(np.min(h))))
+    return all(math.isfinite(x) for x in scheme.h_range())
 
 
 def certified_iteration(scheme: IterationScheme, opts: IterationOptions, *, cost_scale: float,
@@ -441,7 +447,7 @@ def certified_iteration(scheme: IterationScheme, opts: IterationOptions, *, cost
         progress.phase(f"[{label}] interrupted: certifying the current iterate")
         out.lo, out.hi = scheme.certify(0.0)
         out.checks += 1
-        if not _finite(out.lo, out.hi, scheme.h):
+        if not _finite(out.lo, out.hi, scheme):
             raise scheme.overflow(out.lo, out.hi, out.used) from None
         verdict = judge(out.lo, out.hi, out.used)
         out.status = of(OPTIMAL) if verdict is not None and verdict.code is OPTIMAL else of(INTERRUPTED)
@@ -468,7 +474,7 @@ def _loop(scheme: IterationScheme, opts: IterationOptions, judge: _Judge, out: I
         out.checks += 1
         out.lo, out.hi = lo, hi
         out.history.append((out.used, out.evals, time.perf_counter() - t0, lo, hi))
-        if not _finite(lo, hi, scheme.h):
+        if not _finite(lo, hi, scheme):
             raise scheme.overflow(lo, hi, out.used)
         if progress.enabled and progress.due():
             progress.tick(cert_line(f"{label}:{scheme.name}", out.used, lo, hi, opts.tol)

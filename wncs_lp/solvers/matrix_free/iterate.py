@@ -14,7 +14,8 @@ from ...models.system import System
 from ...progress import Progress, as_progress
 from ...scenario import Scenario
 from ...status import INTERRUPTED, of
-from ..iteration import IterationOutcome, IterationScheme, certified_iteration, gamma, max_abs, options_from
+from ..iteration import IterationOutcome, IterationScheme, certified_iteration, gamma, options_from
+from ..threads import run_twins
 from .aggregate import Aggregator
 from .extrapolate import Extrapolator
 from .layout import BoxLayout, check_local_actions, layout_states, resolve_domain
@@ -238,8 +239,16 @@ class BoxSweeps(IterationScheme):
             self.agg_unseen = False
         self.ex.settle(self.h)
 
+    def h_range(self) -> tuple[float, float]:
+        # one pass on the solve's threads: at cap 30 the loop's two numpy passes over h took
+        # 0.1-0.2 s a certificate on one core while the other waited
+        sw = self.sw
+        run_twins(sw.K.value_range, sw.K.value_range_serial, sw.threads, self.h, sw.nchunk, sw.los, sw.his)
+        return float(np.min(sw.los)), float(np.max(sw.his))
+
     def roundoff(self) -> float:
-        return gamma(self.st.op.roundoff_terms) * (self.st.op.cost_scale + 2.0 * max_abs(self.h))
+        lo, hi = self.h_range()
+        return gamma(self.st.op.roundoff_terms) * (self.st.op.cost_scale + 2.0 * max(hi, -lo))
 
     def cost_note(self) -> str:
         return (f"the costs (up to {self.st.op.cost_scale:.3g} a slot) are too large for float64 arithmetic: lower "
@@ -405,7 +414,7 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
                         "gain_lower": coarse.gain_lower, "gain_upper": coarse.gain_upper, "seconds": coarse.seconds,
                         "first_midpoint_over_gain": coarse.stats["far"], "used": used}
         if used:
-            clamped_values(coarse.layout, coarse.bias, st.layout, st.h)
+            clamped_values(coarse.layout, coarse.bias, st.layout, st.h, st.sw.threads)
             st.h -= st.h[0]
             if opts.gain_hint is None:
                 opts = replace(opts, gain_hint=float(coarse.gain))

@@ -51,6 +51,11 @@ as ``*_serial``, for one: :func:`wncs_lp.solvers.threads.twins`):
   (the candidates of the improvement sweeps, ``candidates="config"``).
 * :func:`row_actions` -- the same per row.
 * :func:`reach_all` -- marks the successors of the marked states to a fixed point.
+* :func:`clamped` -- a coarse solution read at each state's AoI clamped into the smaller boxes
+  (:func:`.start.clamped_values`), and :func:`value_range` -- min / max of a value vector in one
+  pass (the loop's finiteness check and the round-off bound's max |h|): the parts of a solve
+  outside its passes, on the solve's threads (as numpy, on one core, they were ~5% of the cap-30
+  solve's wall clock while the other core waited).
 
 With threads, a Gauss-Seidel sweep is asynchronous across the chunks (a plane may
 read another's values before or after their update): still a valid value-iteration scheme,
@@ -416,6 +421,62 @@ def _row_actions_body(pol, off, dims, row_off, cand):
 
 #: Per row (the last AoI axis of a configuration's box), the bit set of the actions ``pol`` takes on it.
 row_actions, row_actions_serial = twins(_row_actions_body, "row_actions")
+
+
+# ----------------------------------------------------------------------------- starts and checks
+def _clamped_body(N, s_off, s_lo, s_dims, s_strides, b_off, b_lo, b_dims, h_small, out):
+    """out(c, t) = h_small(c, t clamped into the small box of c), per configuration (C order,
+    a row of the last axis at a time)."""
+    for c in prange(b_off.size - 1):
+        t = np.zeros(max(N, 1), np.int64)  # the row's indices in the big box (first N - 1 axes)
+        L = b_dims[c, N - 1]
+        nrows = (b_off[c + 1] - b_off[c]) // L
+        s = b_off[c]
+        lN = s_lo[c, N - 1]
+        hN = lN + s_dims[c, N - 1] - 1
+        for r in range(nrows):
+            base = s_off[c]
+            for k in range(N - 1):
+                a = min(max(b_lo[c, k] + t[k], s_lo[c, k]), s_lo[c, k] + s_dims[c, k] - 1) - s_lo[c, k]
+                base += a * s_strides[c, k]
+            for i in range(L):
+                a = min(max(b_lo[c, N - 1] + i, lN), hN) - lN
+                out[s + i] = h_small[base + a * s_strides[c, N - 1]]
+            s += L
+            k = N - 2
+            while k >= 0:
+                t[k] += 1
+                if t[k] < b_dims[c, k]:
+                    break
+                t[k] = 0
+                k -= 1
+
+
+def _value_range_body(h, nchunk, los, his):
+    """min and max of h (NaN if an entry is), in one pass by ``nchunk`` contiguous chunks."""
+    n = h.size
+    for ci in prange(nchunk):
+        a = n * ci // nchunk
+        b = n * (ci + 1) // nchunk
+        lo = np.inf
+        hi = -np.inf
+        nan = False
+        for i in range(a, b):
+            x = h[i]
+            lo = min(lo, x)
+            hi = max(hi, x)
+            nan |= x != x
+        if nan:
+            lo = np.nan
+            hi = np.nan
+        los[ci] = lo
+        his[ci] = hi
+
+
+#: A start at larger caps from a solution at smaller ones (:func:`.start.clamped_values`).
+clamped, clamped_serial = twins(_clamped_body, "clamped")
+#: min / max of a value vector by chunks (the loop's finiteness check, :meth:`.iterate.BoxSweeps.h_range`).
+value_range, value_range_serial = twins(_value_range_body, "value_range")
 
 
 # ----------------------------------------------------------------------------- reachability
