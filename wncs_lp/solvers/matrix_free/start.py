@@ -96,8 +96,8 @@ def clamped_values(small: BoxLayout, h_small: np.ndarray, big: BoxLayout, out: n
 
     The two layouts must be of the same configurations (the same automaton at other caps);
     a start for a solve at larger caps from a solution at smaller ones (the values past the old
-    caps are those at them). One numba pass over ``out`` on ``threads`` threads (a numpy gather
-    took 3-12 s at cap 30, on one thread, inside the timed solve).
+    caps are those at them). One numba pass over ``out`` on ``threads`` threads: it runs inside the
+    timed solve, where a one-core gather left the other core idle.
     """
     if small.n_configs != big.n_configs or small.n_processes != big.n_processes:
         raise SolverError(f"clamped start: the layouts differ in configurations ({small.n_configs} against "
