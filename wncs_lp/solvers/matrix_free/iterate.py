@@ -15,7 +15,6 @@ from ...progress import Progress, as_progress
 from ...scenario import Scenario
 from ...status import INTERRUPTED, of
 from ..iteration import IterationOutcome, IterationScheme, certified_iteration, gamma, options_from
-from ..threads import run_twins
 from .aggregate import Aggregator
 from .extrapolate import Extrapolator
 from .layout import BoxLayout, check_local_actions, layout_states, resolve_domain
@@ -240,11 +239,8 @@ class BoxSweeps(IterationScheme):
         self.ex.settle(self.h)
 
     def h_range(self) -> tuple[float, float]:
-        # one pass on the solve's threads: at cap 30 the loop's two numpy passes over h took
-        # 0.1-0.2 s a certificate on one core while the other waited
-        sw = self.sw
-        run_twins(sw.K.value_range, sw.K.value_range_serial, sw.threads, self.h, sw.nchunk, sw.los, sw.his)
-        return float(np.min(sw.los)), float(np.max(sw.his))
+        # one pass on the solve's threads, where two numpy passes left the other core idle
+        return self.sw.value_range(self.h)
 
     def roundoff(self) -> float:
         lo, hi = self.h_range()
@@ -434,10 +430,8 @@ def matrix_free_value_iteration(system_or_scenario: Scenario | System, options: 
              "bytes": matrix_free_bytes(st.n, vectors=sweeps.vectors, mask=st.mask is not None),
              "coarse": coarse_stats, "gain_hint": opts.gain_hint,
              # the same as scalars, which is what --json keeps: the passes above are at these caps only
-             "coarse_used": None if coarse_stats is None else coarse_stats["used"],
-             "coarse_sweeps": None if coarse_stats is None else coarse_stats["sweeps"],
-             "coarse_eval_sweeps": None if coarse_stats is None else coarse_stats["eval_sweeps"],
-             "coarse_seconds": None if coarse_stats is None else coarse_stats["seconds"],
+             **{f"coarse_{k}": None if coarse_stats is None else coarse_stats[k]
+                for k in ("used", "sweeps", "eval_sweeps", "seconds")},
              **_common_stats(out, opts, sweeps, lo, hi, delta, t_setup)}
     return MatrixFreeSolution(method="matrix-free", status=out.status, gain=0.5 * (lo + hi), gain_lower=lo,
                               gain_upper=hi, bias=h, local_actions=sweeps.pol, iterations=out.used,

@@ -9,7 +9,9 @@ from typing import Any
 import numpy as np
 
 from ...errors import SolverError
+from ..threads import run_twins
 from .layout import BoxLayout
+from .sweeper import load_kernels
 
 __all__ = ["start_vector", "separable_values", "clamped_values"]
 
@@ -104,9 +106,6 @@ def clamped_values(small: BoxLayout, h_small: np.ndarray, big: BoxLayout, out: n
                           f"{big.n_configs}) or processes")
     if h_small.shape != (small.n_states,) or out.shape != (big.n_states,):
         raise SolverError("clamped start: a vector does not match its layout")
-    from ..threads import run_twins
-    from .sweeper import load_kernels
-
     K = load_kernels()
     i64 = lambda a: np.ascontiguousarray(a, dtype=np.int64)  # noqa: E731
     run_twins(K.clamped, K.clamped_serial, int(threads), int(big.n_processes), i64(small.off), i64(small.lo),

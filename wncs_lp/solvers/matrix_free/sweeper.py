@@ -60,6 +60,10 @@ class Sweeper:
         run_twins(fn_par, fn_ser, self.threads, *args, chunksize=1)
         return float(self.los.min()), float(self.his.max())
 
+    def value_range(self, h: np.ndarray) -> tuple[float, float]:
+        """(min, max) of ``h`` (NaN if an entry is), in one pass on the sweeps' threads."""
+        return self._run(self.K.value_range, self.K.value_range_serial, h, self.nchunk, self.los, self.his)
+
     def all_actions(self, h: np.ndarray, h_out: np.ndarray | None, pol: np.ndarray, W: np.ndarray | None,
                     reduce: Reduce, write: Write, write_pol: bool, relax: float, shift: float,
                     cand: np.ndarray | None = None, cand_rows: bool = False, near: float = -1.0,
