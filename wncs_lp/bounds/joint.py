@@ -460,7 +460,7 @@ def joint_bound(system: System, *, tol: float = 1e-4, time_limit: float | None =
     symmetry : bool
         Reduce the interior point's LP by the symmetry of interchangeable processes
         (:mod:`~wncs_lp.bounds.joint_symmetry`; checked on the automaton, found in a few seconds;
-        the paper's four process types twice at cap 20: 12.5M -> 1.3M nonzeros). The reduced LP
+        the paper's four process types twice at cap 20: 12.5M -> 1.86M nonzeros). The reduced LP
         has the same optimum; its tables are certified on the whole system like any others.
     ascent_cpu_limit : float, optional
         Seconds of this process's CPU time after which the lumped searches (``"ascent"``,

@@ -83,8 +83,8 @@ AUTO_PAIRS_MIN_GAIN = 1e-4
 #: Where relaxation 4 follows (its rule above) and relaxation 2's interior point is predicted to take
 #: at least :data:`AUTO_PAIRS_IPM_FROM` seconds of CPU, IPX stops at this tolerance instead of
 #: ``tol``: the pairs start from the coupling duals repaired by the chains, and at eight processes,
-#: cap 20 the looser duals gave the pairs a *higher* start (9048.16 against 9045.38 at 1e-4) at about
-#: 60% of IPX's CPU (36 iterations against 58), relaxation 2's own bound 0.037% lower (docs/bounds.md,
+#: cap 20 the looser duals gave the pairs a *higher* start (9048.16 against 9045.38 from the duals at
+#: 1e-6) at about 60% of IPX's CPU (36 iterations against 58), relaxation 2's own bound 0.037% lower (docs/bounds.md,
 #: "Relaxation 4"). Where IPX is quicker (processes 1-4: 23-87 s) ``tol`` stays.
 AUTO_PAIRS_IPM_TOL = 1e-2
 AUTO_PAIRS_IPM_FROM = 200.0

@@ -593,7 +593,7 @@ def pairs_bound(system: System, *, groups="auto", start=None, tol: float = 1e-4,
         prices); default: ``joint_bound(system, **joint_options)``.
     tol : float
         The chains' relative accuracy is ``0.02 tol``; the bundle stops when its model predicts
-        less than ``tol |L|`` more.
+        less than ``STOP_PREDICTED tol |L|`` more.
     max_iter : int
         Bundle steps after the start (each: every group's chain solved, warm-started, and the
         certificate); 0: the start only.

@@ -159,7 +159,8 @@ def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-limit", type=real_option(0.0), default=None, metavar="SECONDS",
                    help="seconds of relaxation 2's search at most (default: none under auto, whose interior point "
                         "runs only where predicted to fit and stops at a multiple of that prediction in CPU time; "
-                        "600 for --relaxation 2)")
+                        "600 for --relaxation 2); under auto it also replaces relaxation 3's guard (300 s of CPU) "
+                        "by that many seconds of wall clock")
     p.add_argument("--policy", action="store_true",
                    help="also evaluate the bound's greedy policy and the --compare policies, with the certified "
                         "optimality gap of each")
