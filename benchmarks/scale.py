@@ -6,6 +6,7 @@
     python benchmarks/scale.py --search ascent,smooth --steps 40 --instances bounds_lab16 --out /tmp/r2.csv
     python benchmarks/scale.py --levers pdlp,warm,prices,pairs,tables --instances bounds_p1234_x4 --out /tmp/l.csv
     python benchmarks/scale.py --levers ipm --ipm-tol 1e-2 --instances bounds_lab16 --out /tmp/ipm.csv
+    python benchmarks/scale.py --levers pairs-ipm --compare bound --instances bounds_lab16 --out /tmp/p.csv
     python benchmarks/scale.py --levers clarabel --clarabel-time-limit 300 --instances bounds_p1234_x4 --out /tmp/c.csv
 
 Every instance runs as ``wncs-lp bound INSTANCE --policy --json`` in its own process (so its peak
@@ -38,7 +39,9 @@ at its coupling duals certified; ``warm`` the reduced LP at cap ``--warm-cap`` b
 its coupling duals (prices on orbits of (C, a), the same at every cap) priced into the full cap's
 lumped chains; ``prices`` relaxation 2's lumped Lagrangian along relaxation 1's own family of prices
 mu(lambda) = lambda . claims, lambda scaled per server; ``pairs`` relaxation 4's predicted CPU and
-memory (``pairs_size`` and ``auto``'s rule); ``tables`` the ``--compare`` policies on the tables of
+memory (``pairs_size`` and ``auto``'s rule); ``pairs-ipm`` relaxation 4 run (not predicted) from relaxation 2
+by IPX at ``--ipm-tol``, ``--pair-steps`` bundle steps, and the ``--compare`` policies on its pair tables;
+``tables`` the ``--compare`` policies on the tables of
 relaxation 2's lumped start (what ``auto`` computes beyond the LP's reach), 20 x 40,000 slots.
 
 One CSV row per policy (and one for the bound) with the seconds of the whole command, its CPU
@@ -173,7 +176,7 @@ def levers(instance: str, which: list[str], args, folder: Path) -> list[dict]:
     from wncs_lp.bounds.joint_symmetry import (coupling_prices, lumped_chains, process_symmetry, spread_tables,
                                                symmetric_lp)
     from wncs_lp.bounds.lower import AUTO_PAIRS_CPU_PER_WORK, AUTO_PAIRS_STEPS
-    from wncs_lp.bounds.pairs import pairs_size
+    from wncs_lp.bounds.pairs import pairs_bound, pairs_size
     from wncs_lp.bounds.private import private_bound
     from wncs_lp.solvers.highs import solve_highs
 
@@ -264,6 +267,29 @@ def levers(instance: str, which: list[str], args, folder: Path) -> list[dict]:
         row("pairs", "relaxation 4's start: predicted CPU seconds", cpu, time.process_time() - c0,
             f"{AUTO_PAIRS_STEPS} steps: {cpu * (1 + AUTO_PAIRS_STEPS / z['candidates']):.0f} s; "
             f"{z['memory_bytes'] / 2**30:.2f} GiB of tables; {z['candidates']} candidate partitions", reference="")
+    if "pairs-ipm" in which:  # relaxation 4 run, not predicted: from IPX's relaxation 2, beyond auto's budget
+        threads = os.cpu_count() or 1
+        c0 = time.process_time()
+        r2 = joint_bound(system, method="ipm", ipm_tol=float(args.ipm_tol), time_limit=None, threads=threads)
+        row("pairs-ipm", f"relaxation 2 by IPX at {args.ipm_tol}, its chains' repair", r2.lower_bound,
+            time.process_time() - c0)
+        c0 = time.process_time()
+        r4 = pairs_bound(system, start=r2, max_iter=args.pair_steps, time_limit=None, threads=threads)
+        cpu = time.process_time() - c0
+        starts = r4.stats["candidates"]
+        row("pairs-ipm", "relaxation 4's start, the best partition", max(starts.values()), cpu,
+            "; ".join(f"{g}: {v:.10g}" for g, v in starts.items()), reference=r2.lower_bound)
+        row("pairs-ipm", f"relaxation 4 after {r4.stats.get('bundle_steps', 0)} bundle steps", r4.lower_bound, cpu,
+            f"status {r4.status}", reference=r2.lower_bound)
+        for name in args.compare.split(","):
+            c0 = time.process_time()
+            rep = policy_gaps(r4, system, [name], slots=args.slots, reps=args.reps)
+            for g in rep.rows:
+                row("pairs-ipm", f"{g.policy} on its tables: mean", g.gain, time.process_time() - c0,
+                    f"95% upper limit {g.gain_upper:.8g}", reference=r4.lower_bound)
+            for name_, why in rep.skipped:
+                row("pairs-ipm", f"{name_} on its tables", "", time.process_time() - c0, f"not evaluated: {why}",
+                    reference=r4.lower_bound)
     if "tables" in which:
         c0 = time.process_time()
         r2 = joint_bound(system, method="ascent", max_iter=1, time_limit=None)
@@ -288,7 +314,8 @@ def main() -> int:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--search", default="", help="relaxation 2's lumped searches to compare (e.g. ascent,smooth)")
     ap.add_argument("--steps", type=int, default=40, help="steps (smoothed evaluations) of each --search method")
-    ap.add_argument("--levers", default="", help="ipm,clarabel,pdlp,warm,prices,pairs,tables (module docstring)")
+    ap.add_argument("--levers", default="", help="ipm,clarabel,pdlp,warm,prices,pairs,pairs-ipm,tables (module docstring)")
+    ap.add_argument("--pair-steps", type=int, default=8, help="relaxation 4's bundle steps in --levers pairs-ipm")
     ap.add_argument("--pdlp-iterations", type=int, default=8000, help="PDLP's iterations in --levers pdlp")
     ap.add_argument("--warm-cap", type=int, default=10, help="the smaller cap of --levers warm")
     ap.add_argument("--ipm-tol", type=float, default=1e-2, help="IPX's tolerance in --levers ipm")
