@@ -29,7 +29,6 @@ in the run), the looseness, the LP's size and CPU seconds.
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 from pathlib import Path
@@ -41,6 +40,7 @@ from scipy.optimize import linprog
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import wncs_lp  # noqa: E402
 from calibration_load import system_for  # noqa: E402
+from wncs_lp.files import atomic_write_csv  # noqa: E402
 from wncs_lp.solvers.matrix_free import matrix_free_value_iteration  # noqa: E402
 
 KINDS = ("sep", "count", "rank", "pairs")
@@ -109,10 +109,7 @@ def main() -> int:
             rows.append(row)
             print(f"  {row['features']:18s} {row['value']:.6f}  looseness {100 * row['looseness']:.3f}%  "
                   f"({row['lp_columns']:,} columns, {row['cpu_seconds']} s, {row['method']})", flush=True)
-    with args.out.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    atomic_write_csv(args.out, rows, list(rows[0]))
     return 0
 
 
