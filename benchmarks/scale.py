@@ -179,6 +179,7 @@ def levers(instance: str, which: list[str], args, folder: Path) -> list[dict]:
     from wncs_lp.bounds.pairs import pairs_bound, pairs_size
     from wncs_lp.bounds.private import private_bound
     from wncs_lp.solvers.highs import solve_highs
+    from wncs_lp.solvers.threads import resolve_threads
 
     path = _generated(instance, folder) if ":" in instance else scenario_path(instance)
     system = bound_system(load_scenario(path))
@@ -268,7 +269,7 @@ def levers(instance: str, which: list[str], args, folder: Path) -> list[dict]:
             f"{AUTO_PAIRS_STEPS} steps: {cpu * (1 + AUTO_PAIRS_STEPS / z['candidates']):.0f} s; "
             f"{z['memory_bytes'] / 2**30:.2f} GiB of tables; {z['candidates']} candidate partitions", reference="")
     if "pairs-ipm" in which:  # relaxation 4 run, not predicted: from IPX's relaxation 2, beyond auto's budget
-        threads = os.cpu_count() or 1
+        threads = resolve_threads(None)  # the machine's usable cores, as the command's default
         c0 = time.process_time()
         r2 = joint_bound(system, method="ipm", ipm_tol=float(args.ipm_tol), time_limit=None, threads=threads)
         row("pairs-ipm", f"relaxation 2 by IPX at {args.ipm_tol}, its chains' repair", r2.lower_bound,

@@ -127,9 +127,9 @@ def choose_pairs(system: System, lam: np.ndarray, single_gains: Sequence[float],
     weights, seen = {}, {}
     for k, l in itertools.combinations(range(n), 2):
         key = tuple(sorted((kind[k], kind[l])))
-        if key not in seen and expired is not None and expired():
-            continue  # no new pair chains; the pairs of kinds already measured still get their weight
         if key not in seen:
+            if expired is not None and expired():
+                continue  # no new pair chains; the pairs of kinds already measured still get their weight
             ch = chains.of((k, l))
             seen[key] = _priced_gain(chains, ch, lam, solve_tol)
             prog.tick(f"[grouped] pair ({k + 1}, {l + 1}): {ch.mdp.n_states:,} states, gain {seen[key]:.8g}")

@@ -363,8 +363,8 @@ class _Judge:
         return self._settled(lo, hi)
 
     def _in_band(self, width: float, used: int) -> bool:
-        """width <= 2 delta on the current h. delta costs a pass over h (two at the matrix-free
-        scale), so a width far above the last delta computed (3x, within 1,000 sweeps) is let go
+        """width <= 2 delta on the current h. delta costs a pass or two over h (the scheme's max |h|),
+        so a width far above the last delta computed (3x, within 1,000 sweeps) is let go
         without one."""
         if self.delta > 0 and width > 6.0 * self.delta and used - self._delta_at < 1_000:
             return False
